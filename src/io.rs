@@ -81,6 +81,22 @@ pub fn exit_code(err: &(dyn std::error::Error + 'static)) -> u8 {
     EXIT_BAD_INPUT
 }
 
+/// The one-line text of an error and its causes, `: `-separated, leaving out a cause whose
+/// text the message before it already contains.
+pub fn error_text(err: &(dyn std::error::Error + 'static)) -> String {
+    let mut text = err.to_string();
+    let mut cur = err.source();
+    while let Some(e) = cur {
+        let part = e.to_string();
+        if !text.contains(&part) {
+            text.push_str(": ");
+            text.push_str(&part);
+        }
+        cur = e.source();
+    }
+    text
+}
+
 /// True when `path` means standard input/output (`None` or `-`).
 pub fn is_std(path: Option<&Path>) -> bool {
     path.is_none_or(|p| p.as_os_str() == "-")
@@ -320,5 +336,14 @@ mod tests {
         assert_eq!(exit_code(&pipe), EXIT_OK);
         assert_eq!(exit_code(&CheckFailed("x".into())), EXIT_CHECK_FAILED);
         assert_eq!(exit_code(&IoError::Terminal), EXIT_BAD_INPUT);
+    }
+
+    #[test]
+    fn error_text_skips_repeated_causes() {
+        let err = IoError::Open {
+            path: "x.bin".into(),
+            source: io::Error::from(io::ErrorKind::NotFound),
+        };
+        assert_eq!(error_text(&err), "x.bin: cannot open: entity not found");
     }
 }

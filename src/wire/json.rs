@@ -437,6 +437,92 @@ pub fn to_line(repr: &MessageRepr) -> String {
     Value::Object(map).to_string()
 }
 
+/// The columns of the CSV form: every field of every message type, flattened (an order's
+/// `type` becomes the `order` column), plus `offset`, `t_s` and `error` that dumps add.
+pub const CSV_COLUMNS: [&str; 48] = [
+    "offset",
+    "t_s",
+    "type",
+    "src",
+    "dst",
+    "ft",
+    "lt",
+    "st",
+    "isn",
+    "ci",
+    "itsn",
+    "rd",
+    "eoid",
+    "loc",
+    "hh",
+    "arm",
+    "nav",
+    "x_cm",
+    "y_cm",
+    "z_cm",
+    "roll_deg",
+    "pitch_deg",
+    "yaw_deg",
+    "trunk",
+    "status_raw",
+    "oid",
+    "clo",
+    "eisn",
+    "ic",
+    "rit",
+    "order",
+    "vx",
+    "vy",
+    "vz",
+    "vyaw",
+    "disarm",
+    "heading_deg",
+    "roi",
+    "roi_shift",
+    "gray",
+    "scale",
+    "size_bytes",
+    "trunk_bytes",
+    "enable",
+    "ot",
+    "body",
+    "payload",
+    "error",
+];
+
+/// Flattens a JSON object of [`write_fields`] (plus any extra fields) into one CSV record in
+/// [`CSV_COLUMNS`] order; absent fields are empty, arrays are space-separated.
+pub fn csv_record(map: &Map<String, Value>) -> Vec<String> {
+    let mut flat: Map<String, Value> = Map::new();
+    for (key, value) in map {
+        match (key.as_str(), value) {
+            ("order", Value::Object(order)) => {
+                for (k, v) in order {
+                    let k = if k == "type" { "order" } else { k.as_str() };
+                    flat.insert(k.to_string(), v.clone());
+                }
+            }
+            _ => {
+                flat.insert(key.clone(), value.clone());
+            }
+        }
+    }
+    let cell = |v: &Value| match v {
+        Value::String(s) => s.clone(),
+        Value::Array(items) => items
+            .iter()
+            .map(|i| i.to_string())
+            .collect::<Vec<_>>()
+            .join(" "),
+        Value::Null => String::new(),
+        other => other.to_string(),
+    };
+    CSV_COLUMNS
+        .iter()
+        .map(|c| flat.get(*c).map(cell).unwrap_or_default())
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -161,6 +161,131 @@ impl MessageRepr {
     }
 }
 
+/// The one-line human form `rcp-dump --format text` prints: addresses, type, the flags that
+/// are set, then the fields (positions in metres, angles in degrees).
+impl core::fmt::Display for MessageRepr {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "{:>2}->{:<2} {:<8}",
+            self.src,
+            self.dst,
+            self.message.type_name()
+        )?;
+        let flag = |f: &mut core::fmt::Formatter<'_>, on: bool, name: &str| {
+            if on { write!(f, " {name}") } else { Ok(()) }
+        };
+        match &self.message {
+            Message::Rov(r) => {
+                write!(f, " isn={} itsn={:<2}", u8::from(r.isn), r.itsn)?;
+                flag(f, r.ft, "FT")?;
+                flag(f, r.lt, "LT")?;
+                flag(f, r.ci, "CI")?;
+                match &r.status {
+                    rov::Status::Basic(s) => {
+                        write!(f, " | eoid={} nav={}", u8::from(s.eoid), s.nav)?;
+                        flag(f, s.rd, "RD")?;
+                        flag(f, s.loc, "LOC")?;
+                        flag(f, s.hh, "HH")?;
+                        flag(f, s.arm, "ARM")?;
+                        write!(
+                            f,
+                            " ned=({:.2},{:.2},{:.2})m rpy=({},{},{})deg | trunk {} B",
+                            f64::from(s.x_cm) / 100.0,
+                            f64::from(s.y_cm) / 100.0,
+                            f64::from(s.z_cm) / 100.0,
+                            s.roll_deg,
+                            s.pitch_deg,
+                            s.yaw_deg,
+                            r.trunk.len()
+                        )
+                    }
+                    rov::Status::Unknown { st, raw } => {
+                        write!(f, " | status type {st} ({} B raw)", raw.len())
+                    }
+                }
+            }
+            Message::Operator(o) => {
+                write!(
+                    f,
+                    " oid={} eisn={} rit={:<2}",
+                    u8::from(o.oid),
+                    u8::from(o.eisn),
+                    o.rit
+                )?;
+                flag(f, o.clo, "CLO")?;
+                flag(f, o.ic, "IC")?;
+                write!(f, " | {}", o.order.name())?;
+                match o.order {
+                    operator::Order::Velocity {
+                        vx,
+                        vy,
+                        vz,
+                        vyaw,
+                        arm,
+                        disarm,
+                        nav,
+                    } => {
+                        write!(f, " vx={vx} vy={vy} vz={vz} vyaw={vyaw} nav={nav}")?;
+                        flag(f, arm, "ARM")?;
+                        flag(f, disarm, "DISARM")
+                    }
+                    operator::Order::GoTo {
+                        x_cm,
+                        y_cm,
+                        z_cm,
+                        heading_deg,
+                    } => write!(
+                        f,
+                        " ned=({:.2},{:.2},{:.2})m heading={heading_deg}deg",
+                        f64::from(x_cm) / 100.0,
+                        f64::from(y_cm) / 100.0,
+                        f64::from(z_cm) / 100.0
+                    ),
+                    operator::Order::ImageSettings {
+                        roi,
+                        roi_shift,
+                        gray,
+                        scale,
+                        size_bytes,
+                        trunk_bytes,
+                    } => {
+                        if roi.is_none() {
+                            write!(f, " roi=none")?;
+                        } else {
+                            write!(
+                                f,
+                                " roi=({},{})-({},{}) shift={roi_shift}",
+                                roi.x0, roi.y0, roi.x1, roi.y1
+                            )?;
+                        }
+                        write!(
+                            f,
+                            " scale=1/{} size={size_bytes}B trunk={trunk_bytes}B",
+                            1u8 << scale
+                        )?;
+                        flag(f, gray, "GRAY")
+                    }
+                    operator::Order::HoldHeading {
+                        heading_deg,
+                        enable,
+                    } => {
+                        write!(
+                            f,
+                            " heading={heading_deg}deg {}",
+                            if enable { "on" } else { "off" }
+                        )
+                    }
+                    operator::Order::Unknown { ot, body } => {
+                        write!(f, " ot={ot} body={}", super::json::encode_hex(&body))
+                    }
+                }
+            }
+            Message::Raw(p) => write!(f, " {} B: {}", p.len(), super::json::encode_hex(p)),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
