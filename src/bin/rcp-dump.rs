@@ -249,6 +249,12 @@ fn read_port(
         .timeout(Duration::from_millis(100))
         .open()
         .with_context(|| format!("{dev}: cannot open serial port"))?;
+    if !args.quiet {
+        eprintln!(
+            "rcp-dump: reading {dev} at {} baud until it closes or Ctrl-C",
+            args.baud
+        );
+    }
     let mut buf = [0u8; 4096];
     while !stop.load(Ordering::SeqCst) {
         match port.read(&mut buf) {

@@ -1,0 +1,79 @@
+#!/usr/bin/env bash
+# Recreates the seed corpora of the fuzz targets in fuzz/corpus/<target>/ (git-ignored) from
+# wire.md's five test vectors, plus a few forms the vectors do not cover. Safe to rerun: it only
+# adds or overwrites its own seed-* files and leaves what the fuzzers added alone.
+#
+# Usage: fuzz/seed.sh   (from any directory)
+set -euo pipefail
+
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+corpus="$here/corpus"
+
+# Writes the bytes of a hex string to a file.
+hex_to_file() {
+    local hex="$1" out="$2" esc="" i
+    for ((i = 0; i < ${#hex}; i += 2)); do
+        esc+="\\x${hex:i:2}"
+    done
+    printf '%b' "$esc" >"$out"
+}
+
+# wire.md's five frames (the same bytes as testdata/wire-vectors.hex).
+frames=(
+    5510118080dcff0604b001c702d00367000102032fde # rov: src 1 -> 0, 4-byte trunk
+    55010b800564ec008181000000000ccb             # operator: velocity
+    55020b44ffff0604b00136016700de57             # operator: goto
+    55010b8880190506912c3907d027ffca             # operator: image_settings
+    55030b0c0c010e800000000000001bee             # operator: hold_heading
+)
+
+# wire.md's five JSON lines (the same text as testdata/wire-vectors.jsonl).
+lines=(
+    '{"type":"rov","src":1,"dst":0,"ft":true,"lt":false,"st":0,"isn":1,"ci":false,"itsn":0,"rd":true,"eoid":1,"loc":false,"hh":true,"arm":true,"nav":"guided","x_cm":-250,"y_cm":1200,"z_cm":455,"roll_deg":359,"pitch_deg":1,"yaw_deg":180,"trunk":"00010203"}'
+    '{"type":"operator","src":0,"dst":1,"oid":1,"clo":false,"eisn":0,"ic":false,"rit":5,"order":{"type":"velocity","vx":100,"vy":-20,"vz":0,"vyaw":-127,"arm":true,"disarm":false,"nav":"stabilize"}}'
+    '{"type":"operator","src":0,"dst":2,"oid":0,"clo":true,"eisn":1,"ic":true,"rit":63,"order":{"type":"goto","x_cm":-250,"y_cm":1200,"z_cm":310,"heading_deg":359}}'
+    '{"type":"operator","src":0,"dst":1,"oid":1,"clo":false,"eisn":1,"ic":false,"rit":0,"order":{"type":"image_settings","roi":[100,80,420,300],"roi_shift":3,"gray":true,"scale":1,"size_bytes":2000,"trunk_bytes":39}}'
+    '{"type":"operator","src":0,"dst":3,"oid":0,"clo":false,"eisn":0,"ic":false,"rit":12,"order":{"type":"hold_heading","heading_deg":270,"enable":true}}'
+)
+# The forms beyond wire.md that the JSON reader also takes (see src/wire/json.rs).
+extra_lines=(
+    '{"type":"rov","src":2,"dst":0,"ft":false,"lt":false,"st":5,"isn":0,"ci":true,"itsn":7,"status_raw":"010203"}'
+    '{"type":"operator","src":0,"dst":15,"oid":0,"clo":false,"eisn":0,"ic":false,"rit":0,"order":{"type":"unknown","ot":7,"body":"000102030405060708"}}'
+    '{"type":"raw","src":1,"dst":0,"payload":"deadbeef"}'
+)
+
+mkdir -p "$corpus"/{deframe,frame,rov,operator,json_line}
+
+all=""
+for i in "${!frames[@]}"; do
+    f="${frames[$i]}"
+    all+="$f"
+    # frame: the whole frame.
+    hex_to_file "$f" "$corpus/frame/seed-vector$((i + 1))"
+    # deframe: byte 0 = 0 chunk lengths (one push), then the frame.
+    hex_to_file "00$f" "$corpus/deframe/seed-vector$((i + 1))"
+    # rov / operator: the payload, bytes 3 .. len-2. Source 0 sends operator messages.
+    payload="${f:6:${#f}-10}"
+    if [[ "${f:2:1}" == 0 ]]; then
+        hex_to_file "$payload" "$corpus/operator/seed-vector$((i + 1))"
+    else
+        hex_to_file "$payload" "$corpus/rov/seed-vector$((i + 1))"
+    fi
+done
+# deframe: all five back to back in one push, and again with garbage, a false preamble, a
+# corrupted copy and a cut-off tail, pushed in chunks of 1, 7 and 3 bytes.
+hex_to_file "00$all" "$corpus/deframe/seed-all"
+hex_to_file "03010703""0013559900""$all""55010b800564ec108181000000000ccb""5510118080dc" \
+    "$corpus/deframe/seed-noisy"
+# A ROV message of a reserved status type, and an order of a reserved type.
+hex_to_file "0547010203" "$corpus/rov/seed-unknown-status"
+hex_to_file "9c00000102030405060708" "$corpus/operator/seed-unknown-order"
+
+for i in "${!lines[@]}"; do
+    printf '%s' "${lines[$i]}" >"$corpus/json_line/seed-vector$((i + 1))"
+done
+for i in "${!extra_lines[@]}"; do
+    printf '%s' "${extra_lines[$i]}" >"$corpus/json_line/seed-extra$((i + 1))"
+done
+
+echo "seeded $(find "$corpus" -name 'seed-*' | wc -l) files in $corpus"

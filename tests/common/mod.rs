@@ -1,0 +1,76 @@
+//! Helpers shared by the process-level tests: run a built binary with stdin bytes, capture
+//! everything, compare against golden files.
+#![allow(dead_code)]
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+/// What a finished process left behind.
+pub struct Outcome {
+    pub code: i32,
+    pub stdout: Vec<u8>,
+    pub stderr: String,
+}
+
+impl Outcome {
+    pub fn stdout_text(&self) -> String {
+        String::from_utf8(self.stdout.clone()).expect("stdout is UTF-8")
+    }
+}
+
+/// Path of a file in the project's testdata/.
+pub fn testdata(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("testdata")
+        .join(name)
+}
+
+/// Runs `bin` (a path from `env!("CARGO_BIN_EXE_...")`) with arguments and standard input.
+pub fn run(bin: &str, args: &[&str], stdin: &[u8]) -> Outcome {
+    let mut child = Command::new(bin)
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("binary starts");
+    let mut input = child.stdin.take().expect("stdin");
+    let data = stdin.to_vec();
+    let writer = std::thread::spawn(move || {
+        let _ = input.write_all(&data);
+    });
+    let out = child.wait_with_output().expect("binary finishes");
+    writer.join().expect("stdin writer");
+    Outcome {
+        code: out.status.code().expect("exit code, not a signal"),
+        stdout: out.stdout,
+        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
+    }
+}
+
+/// Compares `actual` with testdata/golden/`name`; with UPDATE_GOLDEN=1 in the environment,
+/// rewrites the golden file instead.
+pub fn golden(name: &str, actual: &str) {
+    let path = testdata("golden").join(name);
+    if std::env::var_os("UPDATE_GOLDEN").is_some() {
+        std::fs::write(&path, actual).expect("write golden file");
+        return;
+    }
+    let expected = std::fs::read_to_string(&path).unwrap_or_else(|e| {
+        panic!(
+            "{}: {e} (run with UPDATE_GOLDEN=1 to create it)",
+            path.display()
+        )
+    });
+    assert_eq!(actual, expected, "output differs from {}", path.display());
+}
+
+/// The frames of testdata/wire-vectors.hex, as bytes.
+pub fn vector_frames() -> Vec<Vec<u8>> {
+    std::fs::read_to_string(testdata("wire-vectors.hex"))
+        .expect("vectors")
+        .lines()
+        .map(|l| rovlink::wire::json::decode_hex(l.trim()).expect("hex"))
+        .collect()
+}

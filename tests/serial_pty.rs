@@ -1,0 +1,85 @@
+//! rcp-dump on a real serial device: a pseudo-terminal pair stands in for a modem's port.
+//! The test writes frames (with garbage between them) into the master side, in small chunks with
+//! pauses as a modem would deliver them, then closes it; rcp-dump must print every frame and end
+//! on its own when the port closes.
+
+mod common;
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+use nix::fcntl::OFlag;
+use nix::pty::{PtyMaster, grantpt, posix_openpt, ptsname_r, unlockpt};
+
+/// Opens a pseudo-terminal master (close-on-exec, so the child does not inherit it and closing
+/// it here really hangs up the line) and returns it with the path of its slave side.
+fn open_pty() -> (PtyMaster, String) {
+    let master =
+        posix_openpt(OFlag::O_RDWR | OFlag::O_NOCTTY | OFlag::O_CLOEXEC).expect("posix_openpt");
+    grantpt(&master).expect("grantpt");
+    unlockpt(&master).expect("unlockpt");
+    let path = ptsname_r(&master).expect("ptsname");
+    (master, path)
+}
+
+const DUMP: &str = env!("CARGO_BIN_EXE_rcp-dump");
+
+#[test]
+fn dump_reads_frames_from_a_pseudo_terminal() {
+    let (mut master, path) = open_pty();
+    let mut child = Command::new(DUMP)
+        .args(["--port", &path, "--baud", "9600", "--format", "ndjson"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("rcp-dump starts");
+    let mut stderr = BufReader::new(child.stderr.take().unwrap());
+    let mut first = String::new();
+    stderr.read_line(&mut first).unwrap();
+    assert!(
+        first.contains(&format!("reading {path} at 9600 baud")),
+        "{first}"
+    );
+
+    let frames = common::vector_frames();
+    let mut stream = vec![0x00, 0x55, 0x02, 0xff];
+    for f in &frames {
+        stream.extend(f);
+        stream.extend([0x0d, 0x0a]); // the S100 driver's CR LF between frames: garbage here
+    }
+    for chunk in stream.chunks(45) {
+        master.write_all(chunk).unwrap();
+        master.flush().unwrap();
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    drop(master);
+
+    let mut out = String::new();
+    child
+        .stdout
+        .take()
+        .unwrap()
+        .read_to_string(&mut out)
+        .unwrap();
+    let mut rest = String::new();
+    stderr.read_to_string(&mut rest).unwrap();
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(0), "{rest}");
+
+    let lines: Vec<serde_json::Value> = out
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), frames.len(), "{out}\n{rest}");
+    for line in &lines {
+        assert!(line["t_s"].as_f64().unwrap() >= 0.0);
+    }
+    let types: Vec<&str> = lines.iter().map(|l| l["type"].as_str().unwrap()).collect();
+    assert_eq!(
+        types,
+        ["rov", "operator", "operator", "operator", "operator"]
+    );
+    assert!(rest.contains("5 frames ok (0 invalid messages)"), "{rest}");
+}
