@@ -17,28 +17,44 @@ fn nav() -> impl Strategy<Value = Nav> {
 
 fn basic_status() -> impl Strategy<Value = BasicStatus> {
     (
-        (any::<bool>(), any::<bool>(), any::<bool>(), any::<bool>(), any::<bool>(), nav()),
+        (
+            any::<bool>(),
+            any::<bool>(),
+            any::<bool>(),
+            any::<bool>(),
+            any::<bool>(),
+            nav(),
+        ),
         (any::<i16>(), any::<i16>(), any::<i16>()),
         (0u16..360, 0u16..360, 0u16..360),
     )
-        .prop_map(|((rd, eoid, loc, hh, arm, nav), (x_cm, y_cm, z_cm), (roll_deg, pitch_deg, yaw_deg))| BasicStatus {
-            rd,
-            eoid,
-            loc,
-            hh,
-            arm,
-            nav,
-            x_cm,
-            y_cm,
-            z_cm,
-            roll_deg,
-            pitch_deg,
-            yaw_deg,
-        })
+        .prop_map(
+            |(
+                (rd, eoid, loc, hh, arm, nav),
+                (x_cm, y_cm, z_cm),
+                (roll_deg, pitch_deg, yaw_deg),
+            )| BasicStatus {
+                rd,
+                eoid,
+                loc,
+                hh,
+                arm,
+                nav,
+                x_cm,
+                y_cm,
+                z_cm,
+                roll_deg,
+                pitch_deg,
+                yaw_deg,
+            },
+        )
 }
 
 fn rov_repr() -> impl Strategy<Value = rov::Repr> {
-    let basic = (basic_status(), proptest::collection::vec(any::<u8>(), 0..=rov::MAX_TRUNK_BYTES))
+    let basic = (
+        basic_status(),
+        proptest::collection::vec(any::<u8>(), 0..=rov::MAX_TRUNK_BYTES),
+    )
         .prop_map(|(s, trunk)| (Status::Basic(s), trunk));
     let unknown = (1u8..64, proptest::collection::vec(any::<u8>(), 0..=253))
         .prop_map(|(st, raw)| (Status::Unknown { st, raw }, Vec::new()));
@@ -50,7 +66,15 @@ fn rov_repr() -> impl Strategy<Value = rov::Repr> {
         0u8..64,
         prop_oneof![9 => basic, 1 => unknown],
     )
-        .prop_map(|(ft, lt, isn, ci, itsn, (status, trunk))| rov::Repr { ft, lt, isn, ci, itsn, status, trunk })
+        .prop_map(|(ft, lt, isn, ci, itsn, (status, trunk))| rov::Repr {
+            ft,
+            lt,
+            isn,
+            ci,
+            itsn,
+            status,
+            trunk,
+        })
 }
 
 fn thrust() -> impl Strategy<Value = i8> {
@@ -59,28 +83,75 @@ fn thrust() -> impl Strategy<Value = i8> {
 
 fn order() -> impl Strategy<Value = Order> {
     prop_oneof![
-        (thrust(), thrust(), thrust(), thrust(), any::<bool>(), any::<bool>(), nav()).prop_map(
-            |(vx, vy, vz, vyaw, arm, disarm, nav)| Order::Velocity { vx, vy, vz, vyaw, arm, disarm, nav }
-        ),
-        (any::<i16>(), any::<i16>(), any::<i16>(), 0u16..360)
-            .prop_map(|(x_cm, y_cm, z_cm, heading_deg)| Order::GoTo { x_cm, y_cm, z_cm, heading_deg }),
-        ([0u16..1024, 0u16..1024, 0u16..1024, 0u16..1024], 0u8..16, any::<bool>(), 0u8..4, any::<u16>(), any::<u8>())
-            .prop_map(|(roi, roi_shift, gray, scale, size_bytes, trunk_bytes)| Order::ImageSettings {
-                roi: Roi::from_array(roi),
-                roi_shift,
-                gray,
-                scale,
-                size_bytes,
-                trunk_bytes,
+        (
+            thrust(),
+            thrust(),
+            thrust(),
+            thrust(),
+            any::<bool>(),
+            any::<bool>(),
+            nav()
+        )
+            .prop_map(|(vx, vy, vz, vyaw, arm, disarm, nav)| Order::Velocity {
+                vx,
+                vy,
+                vz,
+                vyaw,
+                arm,
+                disarm,
+                nav
             }),
-        (0u16..360, any::<bool>()).prop_map(|(heading_deg, enable)| Order::HoldHeading { heading_deg, enable }),
+        (any::<i16>(), any::<i16>(), any::<i16>(), 0u16..360).prop_map(
+            |(x_cm, y_cm, z_cm, heading_deg)| Order::GoTo {
+                x_cm,
+                y_cm,
+                z_cm,
+                heading_deg
+            }
+        ),
+        (
+            [0u16..1024, 0u16..1024, 0u16..1024, 0u16..1024],
+            0u8..16,
+            any::<bool>(),
+            0u8..4,
+            any::<u16>(),
+            any::<u8>()
+        )
+            .prop_map(|(roi, roi_shift, gray, scale, size_bytes, trunk_bytes)| {
+                Order::ImageSettings {
+                    roi: Roi::from_array(roi),
+                    roi_shift,
+                    gray,
+                    scale,
+                    size_bytes,
+                    trunk_bytes,
+                }
+            }),
+        (0u16..360, any::<bool>()).prop_map(|(heading_deg, enable)| Order::HoldHeading {
+            heading_deg,
+            enable
+        }),
         (4u8..16, any::<[u8; 9]>()).prop_map(|(ot, body)| Order::Unknown { ot, body }),
     ]
 }
 
 fn operator_repr() -> impl Strategy<Value = operator::Repr> {
-    (any::<bool>(), any::<bool>(), any::<bool>(), any::<bool>(), 0u8..64, order())
-        .prop_map(|(oid, clo, eisn, ic, rit, order)| operator::Repr { oid, clo, eisn, ic, rit, order })
+    (
+        any::<bool>(),
+        any::<bool>(),
+        any::<bool>(),
+        any::<bool>(),
+        0u8..64,
+        order(),
+    )
+        .prop_map(|(oid, clo, eisn, ic, rit, order)| operator::Repr {
+            oid,
+            clo,
+            eisn,
+            ic,
+            rit,
+            order,
+        })
 }
 
 fn message_repr() -> impl Strategy<Value = MessageRepr> {
@@ -103,7 +174,7 @@ struct Bits {
 impl Bits {
     fn push(&mut self, value: u64, width: u32) {
         for i in (0..width).rev() {
-            if self.used % 8 == 0 {
+            if self.used.is_multiple_of(8) {
                 self.bytes.push(0);
             }
             let bit = ((value >> i) & 1) as u8;
@@ -158,7 +229,15 @@ fn reference_payload(message: &Message) -> Vec<u8> {
             w.flag(o.ic);
             w.push(o.rit.into(), 6);
             match o.order {
-                Order::Velocity { vx, vy, vz, vyaw, arm, disarm, nav } => {
+                Order::Velocity {
+                    vx,
+                    vy,
+                    vz,
+                    vyaw,
+                    arm,
+                    disarm,
+                    nav,
+                } => {
                     for v in [vx, vy, vz, vyaw] {
                         w.push(u64::from(v as u8), 8);
                     }
@@ -167,13 +246,25 @@ fn reference_payload(message: &Message) -> Vec<u8> {
                     w.push(0, 3);
                     w.push(nav.bits().into(), 3);
                 }
-                Order::GoTo { x_cm, y_cm, z_cm, heading_deg } => {
+                Order::GoTo {
+                    x_cm,
+                    y_cm,
+                    z_cm,
+                    heading_deg,
+                } => {
                     for v in [x_cm, y_cm, z_cm] {
                         w.push(u64::from(v as u16), 16);
                     }
                     w.push(heading_deg.into(), 16);
                 }
-                Order::ImageSettings { roi, roi_shift, gray, scale, size_bytes, trunk_bytes } => {
+                Order::ImageSettings {
+                    roi,
+                    roi_shift,
+                    gray,
+                    scale,
+                    size_bytes,
+                    trunk_bytes,
+                } => {
                     for c in roi.to_array() {
                         w.push(c.into(), 10);
                     }
@@ -184,7 +275,10 @@ fn reference_payload(message: &Message) -> Vec<u8> {
                     w.push(size_bytes.into(), 16);
                     w.push(trunk_bytes.into(), 8);
                 }
-                Order::HoldHeading { heading_deg, enable } => {
+                Order::HoldHeading {
+                    heading_deg,
+                    enable,
+                } => {
                     w.push(heading_deg.into(), 16);
                     w.flag(enable);
                     w.push(0, 7);
@@ -206,7 +300,11 @@ fn reference_crc(data: &[u8]) -> u16 {
     for &b in data {
         crc ^= u16::from(b) << 8;
         for _ in 0..8 {
-            crc = if crc & 0x8000 != 0 { (crc << 1) ^ 0x1021 } else { crc << 1 };
+            crc = if crc & 0x8000 != 0 {
+                (crc << 1) ^ 0x1021
+            } else {
+                crc << 1
+            };
         }
     }
     crc

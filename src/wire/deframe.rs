@@ -228,9 +228,12 @@ mod tests {
     use super::*;
     use crate::wire::frame::build;
 
+    /// Good frames with their offsets.
+    type Frames = Vec<(u64, Vec<u8>)>;
+
     /// Runs a whole stream through a deframer in chunks of `chunk` bytes; returns the good
     /// frames with offsets, the other events in a compact form, and the stats.
-    fn run(stream: &[u8], chunk: usize) -> (Vec<(u64, Vec<u8>)>, Vec<String>, DeframeStats) {
+    fn run(stream: &[u8], chunk: usize) -> (Frames, Vec<String>, DeframeStats) {
         let mut d = Deframer::new();
         let (mut frames, mut other) = (Vec::new(), Vec::new());
         let mut drain = |d: &mut Deframer| {
