@@ -53,16 +53,14 @@ fn dump_reads_frames_from_a_pseudo_terminal() {
         master.flush().unwrap();
         std::thread::sleep(Duration::from_millis(20));
     }
-    std::thread::sleep(Duration::from_millis(300));
-    drop(master);
-
+    // Wait until every frame was printed (rcp-dump flushes per read on a port), then hang up.
+    let mut stdout = BufReader::new(child.stdout.take().unwrap());
     let mut out = String::new();
-    child
-        .stdout
-        .take()
-        .unwrap()
-        .read_to_string(&mut out)
-        .unwrap();
+    for _ in 0..frames.len() {
+        stdout.read_line(&mut out).unwrap();
+    }
+    drop(master);
+    stdout.read_to_string(&mut out).unwrap();
     let mut rest = String::new();
     stderr.read_to_string(&mut rest).unwrap();
     let status = child.wait().unwrap();
@@ -82,4 +80,71 @@ fn dump_reads_frames_from_a_pseudo_terminal() {
         ["rov", "operator", "operator", "operator", "operator"]
     );
     assert!(rest.contains("5 frames ok (0 invalid messages)"), "{rest}");
+}
+
+#[test]
+fn dump_stops_cleanly_on_ctrl_c_with_its_summary() {
+    use nix::sys::signal::{Signal, kill};
+    use nix::unistd::Pid;
+
+    let (mut master, path) = open_pty();
+    let mut child = Command::new(DUMP)
+        .args(["--port", &path, "--format", "csv"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("rcp-dump starts");
+    let mut stderr = BufReader::new(child.stderr.take().unwrap());
+    let mut first = String::new();
+    stderr.read_line(&mut first).unwrap();
+    master.write_all(&common::vector_frames()[1]).unwrap();
+    let mut stdout = BufReader::new(child.stdout.take().unwrap());
+    let mut out = String::new();
+    stdout.read_line(&mut out).unwrap();
+    stdout.read_line(&mut out).unwrap();
+    kill(Pid::from_raw(child.id() as i32), Signal::SIGINT).unwrap();
+    stdout.read_to_string(&mut out).unwrap();
+    let mut rest = String::new();
+    stderr.read_to_string(&mut rest).unwrap();
+    assert_eq!(child.wait().unwrap().code(), Some(0), "{rest}");
+    // The CSV is complete: header plus the one frame, and the summary was printed.
+    assert_eq!(out.lines().count(), 2, "{out}");
+    assert!(
+        out.lines().nth(1).unwrap().contains(",operator,0,1,"),
+        "{out}"
+    );
+    assert!(rest.contains("1 frames ok"), "{rest}");
+    drop(master);
+}
+
+#[test]
+fn pack_refuses_binary_to_a_terminal() {
+    let (_master, path) = open_pty();
+    let tty = std::fs::OpenOptions::new()
+        .write(true)
+        .open(&path)
+        .expect("open the terminal side");
+    let out = Command::new(env!("CARGO_BIN_EXE_rcp-pack"))
+        .arg(common::testdata("wire-vectors.jsonl"))
+        .stdout(tty)
+        .stderr(Stdio::piped())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("refusing to write binary data to a terminal"),
+        "{stderr}"
+    );
+    // Hex is text: allowed on a terminal.
+    let tty = std::fs::OpenOptions::new().write(true).open(&path).unwrap();
+    let status = Command::new(env!("CARGO_BIN_EXE_rcp-pack"))
+        .args([
+            "--hex",
+            common::testdata("wire-vectors.jsonl").to_str().unwrap(),
+        ])
+        .stdout(tty)
+        .status()
+        .unwrap();
+    assert_eq!(status.code(), Some(0));
 }

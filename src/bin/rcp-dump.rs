@@ -59,6 +59,13 @@ struct Args {
     #[arg(long, default_value_t = 9600, requires = "port")]
     baud: u32,
 
+    /// On --port, give up on an incomplete frame after the line has been quiet this long
+    /// (0: wait forever). A false preamble in line noise can announce up to 260 bytes; this
+    /// keeps it from holding back the frames behind it. Set it above the longest pause your
+    /// modem makes inside one frame.
+    #[arg(long, value_name = "MS", default_value_t = 1000, requires = "port")]
+    idle_ms: u64,
+
     /// Output format.
     #[arg(long, short = 'f', value_enum, default_value_t = Format::Text)]
     format: Format,
@@ -209,10 +216,18 @@ impl Dumper {
                     offset,
                     expected,
                     found,
-                } if !self.quiet => eprintln!(
-                    "rcp-dump: {}: offset {offset}: frame truncated at end of stream (needs {expected} bytes, {found} left)",
-                    self.name
-                ),
+                    at_end,
+                } if !self.quiet => {
+                    let when = if at_end {
+                        "at end of stream"
+                    } else {
+                        "after the line went idle"
+                    };
+                    eprintln!(
+                        "rcp-dump: {}: offset {offset}: incomplete frame given up {when} (needs {expected} bytes, {found} there)",
+                        self.name
+                    )
+                }
                 _ => {}
             }
         }
@@ -256,10 +271,12 @@ fn read_port(
         );
     }
     let mut buf = [0u8; 4096];
+    let mut last_rx = Instant::now();
     while !stop.load(Ordering::SeqCst) {
         match port.read(&mut buf) {
             Ok(0) => break,
             Ok(n) => {
+                last_rx = Instant::now();
                 deframer.push(&buf[..n]);
                 dumper.drain(deframer, sink)?;
                 sink.flush()?;
@@ -268,7 +285,15 @@ fn read_port(
                 if matches!(
                     e.kind(),
                     std::io::ErrorKind::TimedOut | std::io::ErrorKind::Interrupted
-                ) => {}
+                ) =>
+            {
+                let idle = Duration::from_millis(args.idle_ms);
+                if args.idle_ms > 0 && deframer.pending_bytes() > 0 && last_rx.elapsed() >= idle {
+                    deframer.abandon_incomplete();
+                    dumper.drain(deframer, sink)?;
+                    sink.flush()?;
+                }
+            }
             // A pseudo-terminal whose other side closed reports EIO; a USB adapter unplugged
             // reports an error too: both end the capture like end of file.
             Err(e) => {

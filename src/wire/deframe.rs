@@ -65,7 +65,8 @@ pub enum DeframeEvent<'a> {
         /// Number of bytes.
         len: u64,
     },
-    /// At the end of the stream, a preamble whose frame is cut short.
+    /// A preamble whose frame never completed: the stream ended, or the caller gave up on it
+    /// with [`Deframer::abandon_incomplete`] because the line went quiet.
     Truncated {
         /// Stream offset of the preamble.
         offset: u64,
@@ -73,6 +74,8 @@ pub enum DeframeEvent<'a> {
         expected: usize,
         /// Bytes the stream still had.
         found: usize,
+        /// True at the end of the stream, false when abandoned on a quiet line.
+        at_end: bool,
     },
 }
 
@@ -103,6 +106,8 @@ pub struct Deframer {
     /// The skipped run being gathered: (stream offset, length).
     skipped: Option<(u64, u64)>,
     finished: bool,
+    /// Give up on incomplete frames until the pending bytes are examined.
+    abandon: bool,
     stats: DeframeStats,
 }
 
@@ -127,6 +132,14 @@ impl Deframer {
     /// last skipped run is flushed.
     pub fn finish(&mut self) {
         self.finished = true;
+    }
+
+    /// Gives up on an incomplete frame waiting at the head of the pending bytes: call it when
+    /// the line has been quiet for longer than any frame takes to arrive. A false preamble in
+    /// garbage can announce up to 255 payload bytes; without this, the frames after it are
+    /// only yielded once that many bytes have arrived. Then drain events as usual.
+    pub fn abandon_incomplete(&mut self) {
+        self.abandon = true;
     }
 
     /// The counters so far.
@@ -161,11 +174,10 @@ impl Deframer {
             let start = self.pos;
             let data = &self.buf[start..];
             if data.is_empty() {
-                return if self.finished {
-                    self.take_skipped()
-                } else {
-                    None
-                };
+                if self.finished || std::mem::take(&mut self.abandon) {
+                    return self.take_skipped();
+                }
+                return None;
             }
             if data[0] != PREAMBLE {
                 let garbage = data
@@ -181,7 +193,7 @@ impl Deframer {
                 None => HEADER_BYTES,
             };
             if data.len() < total {
-                if !self.finished {
+                if !(self.finished || self.abandon) {
                     return None;
                 }
                 let found = data.len();
@@ -193,6 +205,7 @@ impl Deframer {
                     offset,
                     expected: total.max(OVERHEAD_BYTES),
                     found,
+                    at_end: self.finished,
                 });
             }
             let end = total - 2;
@@ -323,6 +336,48 @@ mod tests {
         );
         assert_eq!(stats.truncated, 1);
         assert_eq!(stats.bytes_skipped, 10);
+    }
+
+    #[test]
+    fn abandoning_a_stalled_false_preamble_releases_the_frames_behind_it() {
+        let real = build(1, 0, &[4; 10]).unwrap();
+        let mut d = Deframer::new();
+        d.push(&[0x55, 0x02, 0xff]);
+        d.push(&real);
+        assert_eq!(
+            d.next_event(),
+            None,
+            "waits for the 260 bytes LEN announces"
+        );
+        d.abandon_incomplete();
+        assert_eq!(
+            d.next_event(),
+            Some(DeframeEvent::Truncated {
+                offset: 0,
+                expected: 260,
+                found: 18,
+                at_end: false
+            })
+        );
+        assert_eq!(
+            d.next_event(),
+            Some(DeframeEvent::Skipped { offset: 0, len: 3 })
+        );
+        match d.next_event() {
+            Some(DeframeEvent::Frame { offset: 3, frame }) => {
+                assert_eq!(frame.into_inner(), &real[..])
+            }
+            other => panic!("expected the frame, got {other:?}"),
+        }
+        assert_eq!(d.next_event(), None);
+        // The flag is spent: a new incomplete frame waits again.
+        d.push(&real[..5]);
+        assert_eq!(d.next_event(), None);
+        d.push(&real[5..]);
+        assert!(matches!(
+            d.next_event(),
+            Some(DeframeEvent::Frame { offset: 18, .. })
+        ));
     }
 
     #[test]
