@@ -6,7 +6,7 @@
 mod common;
 
 use std::io::{BufRead, BufReader, Read, Write};
-use std::process::{Command, Stdio};
+use std::process::{Child, ChildStderr, Command, Stdio};
 use std::time::Duration;
 
 use nix::fcntl::OFlag;
@@ -25,11 +25,10 @@ fn open_pty() -> (PtyMaster, String) {
 
 const DUMP: &str = env!("CARGO_BIN_EXE_rcp-dump");
 
-#[test]
-fn dump_reads_frames_from_a_pseudo_terminal() {
-    let (mut master, path) = open_pty();
+/// Starts `rcp-dump --port PATH --format FORMAT` and waits until it says it is reading.
+fn start_dump(path: &str, format: &str) -> (Child, BufReader<ChildStderr>) {
     let mut child = Command::new(DUMP)
-        .args(["--port", &path, "--baud", "9600", "--format", "ndjson"])
+        .args(["--port", path, "--baud", "9600", "--format", format])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -41,6 +40,13 @@ fn dump_reads_frames_from_a_pseudo_terminal() {
         first.contains(&format!("reading {path} at 9600 baud")),
         "{first}"
     );
+    (child, stderr)
+}
+
+#[test]
+fn dump_reads_frames_from_a_pseudo_terminal() {
+    let (mut master, path) = open_pty();
+    let (mut child, mut stderr) = start_dump(&path, "ndjson");
 
     let frames = common::vector_frames();
     let mut stream = vec![0x00, 0x55, 0x02, 0xff];
@@ -88,15 +94,7 @@ fn dump_stops_cleanly_on_ctrl_c_with_its_summary() {
     use nix::unistd::Pid;
 
     let (mut master, path) = open_pty();
-    let mut child = Command::new(DUMP)
-        .args(["--port", &path, "--format", "csv"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("rcp-dump starts");
-    let mut stderr = BufReader::new(child.stderr.take().unwrap());
-    let mut first = String::new();
-    stderr.read_line(&mut first).unwrap();
+    let (mut child, mut stderr) = start_dump(&path, "csv");
     master.write_all(&common::vector_frames()[1]).unwrap();
     let mut stdout = BufReader::new(child.stdout.take().unwrap());
     let mut out = String::new();
