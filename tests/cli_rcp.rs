@@ -83,6 +83,34 @@ fn dump_golden_outputs_of_a_noisy_stream() {
 }
 
 #[test]
+fn dump_writes_a_json_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let summary = dir.path().join("summary.json");
+    let noisy = testdata("noisy.bin");
+    let out = run(
+        DUMP,
+        &[
+            "-q",
+            "-f",
+            "ndjson",
+            noisy.to_str().unwrap(),
+            "--summary",
+            summary.to_str().unwrap(),
+        ],
+        b"",
+    );
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    assert_eq!(v["bytes_in"], 127);
+    assert_eq!(v["frames"], 6);
+    assert_eq!(v["crc_failures"], 2);
+    assert_eq!(v["truncated"], 3);
+    assert_eq!(v["bytes_skipped"], 33);
+    assert_eq!(v["invalid_messages"], 1);
+}
+
+#[test]
 fn dump_strict_fails_on_a_noisy_stream_only() {
     let noisy = std::fs::read(testdata("noisy.bin")).unwrap();
     let out = run(DUMP, &["--strict", "-q"], &noisy);

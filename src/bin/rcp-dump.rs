@@ -74,6 +74,10 @@ struct Args {
     #[arg(short, long, value_name = "FILE")]
     output: Option<PathBuf>,
 
+    /// Also write the run's counters (frames, CRC failures, bytes skipped, ...) as JSON here.
+    #[arg(long, value_name = "FILE")]
+    summary: Option<PathBuf>,
+
     /// Exit 1 unless every byte of the stream was part of a valid message.
     #[arg(long)]
     strict: bool,
@@ -307,6 +311,30 @@ fn read_port(
     Ok(())
 }
 
+/// The run's counters as JSON, for scripts.
+#[derive(serde::Serialize)]
+struct Summary<'a> {
+    input: &'a str,
+    #[serde(flatten)]
+    stats: &'a DeframeStats,
+    invalid_messages: u64,
+}
+
+fn write_summary(path: &std::path::Path, dumper: &Dumper, stats: &DeframeStats) -> Result<()> {
+    let summary = Summary {
+        input: &dumper.name,
+        stats,
+        invalid_messages: dumper.invalid,
+    };
+    let mut file = rovlink::io::AtomicFile::create(path)?;
+    let mut text = serde_json::to_string_pretty(&summary)?;
+    text.push('\n');
+    std::io::Write::write_all(&mut file, text.as_bytes())
+        .with_context(|| format!("{}: write failed", path.display()))?;
+    file.commit()?;
+    Ok(())
+}
+
 fn run(args: &Args) -> Result<u8> {
     let out = Output::open(args.output.as_deref(), false)?;
     let mut sink = Sink::new(args.format, out)?;
@@ -342,6 +370,9 @@ fn run(args: &Args) -> Result<u8> {
     sink.finish()?;
     let stats = deframer.stats();
     eprintln!("rcp-dump: {}", dumper.summary(&stats));
+    if let Some(path) = &args.summary {
+        write_summary(path, &dumper, &stats)?;
+    }
     let clean = stats.bytes_skipped == 0 && dumper.invalid == 0;
     if args.strict && !clean {
         return Err(CheckFailed(format!(

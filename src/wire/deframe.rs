@@ -80,7 +80,7 @@ pub enum DeframeEvent<'a> {
 }
 
 /// Counters over everything the deframer has seen.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 pub struct DeframeStats {
     /// Bytes pushed.
     pub bytes_in: u64,
