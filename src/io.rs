@@ -97,6 +97,25 @@ pub fn error_text(err: &(dyn std::error::Error + 'static)) -> String {
     text
 }
 
+/// Ends a tool's `main`: maps its outcome to an exit code (see [`exit_code`]) and prints the
+/// error, prefixed with the tool's name, unless it was a closed pipe downstream.
+pub fn finish_main<E>(tool: &str, outcome: Result<u8, E>) -> std::process::ExitCode
+where
+    E: AsRef<dyn std::error::Error + 'static>,
+{
+    match outcome {
+        Ok(code) => std::process::ExitCode::from(code),
+        Err(err) => {
+            let err = err.as_ref();
+            let code = exit_code(err);
+            if code != EXIT_OK {
+                eprintln!("{tool}: {}", error_text(err));
+            }
+            std::process::ExitCode::from(code)
+        }
+    }
+}
+
 /// True when `path` means standard input/output (`None` or `-`).
 pub fn is_std(path: Option<&Path>) -> bool {
     path.is_none_or(|p| p.as_os_str() == "-")

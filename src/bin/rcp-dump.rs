@@ -386,14 +386,5 @@ fn run(args: &Args) -> Result<u8> {
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    match run(&args) {
-        Ok(code) => ExitCode::from(code),
-        Err(err) => {
-            let code = rovlink::io::exit_code(err.as_ref());
-            if code != EXIT_OK {
-                eprintln!("rcp-dump: {}", rovlink::io::error_text(err.as_ref()));
-            }
-            ExitCode::from(code)
-        }
-    }
+    rovlink::io::finish_main("rcp-dump", run(&args))
 }
