@@ -61,10 +61,14 @@ for i in "${!frames[@]}"; do
     fi
 done
 # deframe: all five back to back in one push, and again with garbage, a false preamble, a
-# corrupted copy and a cut-off tail, pushed in chunks of 1, 7 and 3 bytes.
+# corrupted copy and a cut-off tail, pushed in chunks of 1, 7 and 3 bytes (length bytes: low 7
+# bits a length, top bit a flag that makes the deframe target call abandon_incomplete).
 hex_to_file "00$all" "$corpus/deframe/seed-all"
 hex_to_file "03010703""0013559900""$all""55010b800564ec108181000000000ccb""5510118080dc" \
     "$corpus/deframe/seed-noisy"
+# deframe: a false preamble announcing 255 bytes stalls the frames behind it until the deframer
+# is told to give up (chunks of 3 and 16 bytes, abandon_incomplete after the second, flag 0x80).
+hex_to_file "020390""5502ff""${frames[1]}""${frames[4]}""55010b80" "$corpus/deframe/seed-abandon"
 # A ROV message of a reserved status type, and an order of a reserved type.
 hex_to_file "0547010203" "$corpus/rov/seed-unknown-status"
 hex_to_file "9c00000102030405060708" "$corpus/operator/seed-unknown-order"

@@ -1,17 +1,26 @@
-//! The streaming deframer on any bytes in any chunking.
+//! The streaming deframer on any bytes in any chunking, with and without giving up on stalled
+//! frames (`abandon_incomplete`).
 //!
-//! Input: byte 0 gives a count `n` (its low 4 bits); the next `n` bytes are chunk lengths, used
-//! in turn and cyclically (0 pushes an empty chunk); the rest is the stream. The stream is pushed
-//! chunk by chunk with the events drained after each push, then `finish` and a last drain.
+//! Input: byte 0 gives a count `n` (its low 4 bits); the next `n` bytes each give a chunk length
+//! (low 7 bits; 0 pushes an empty chunk) and a flag (top bit), used in turn and cyclically; the
+//! rest is the stream. The stream is pushed chunk by chunk with the events drained after each
+//! push, then `finish` and a last drain. This runs in that chunking, then in one push, and, if
+//! any flag is set, in that chunking again calling `abandon_incomplete` and draining once more
+//! after each flagged chunk (as `rcp-dump --idle-ms` does when the line goes quiet).
 //!
-//! Checks:
+//! Checks, on every run:
 //! - every `Frame` event spans a frame that passes `Frame::new_checked(..).check()`, has exactly
-//!   the stream's bytes at its offset, and frame offsets strictly increase without overlap;
+//!   the stream's bytes at its offset, was wholly pushed already, and frame offsets strictly
+//!   increase without overlap;
 //! - good frames and `Skipped` runs tile the stream exactly, and after `finish`
 //!   `bytes_skipped + sum of frame lengths == stream length`; the other counters match the events;
 //! - every 0x55 byte outside a good frame gets exactly one `BadCrc` or `Truncated` event and
-//!   every such event is right about the stream (its CRCs, lengths), so no good frame is missed;
-//! - pushing the whole stream in one chunk gives the same events and counters.
+//!   every such event is right about the bytes pushed so far (its CRCs, lengths), so no frame
+//!   that was complete when it was examined is missed;
+//! - `Truncated` comes with `at_end` only after `finish`, and without it only in the drain that
+//!   follows `abandon_incomplete` (the flag does not outlive that drain), which examines every
+//!   pending byte;
+//! - without `abandon_incomplete`, the chunked run gives the same events and counters as one push.
 
 #![no_main]
 
@@ -40,13 +49,22 @@ enum Ev {
         offset: u64,
         expected: usize,
         found: usize,
+        at_end: bool,
     },
 }
 
+/// When an event came out: bytes pushed so far, and what the drain followed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct When {
+    pushed: usize,
+    after_abandon: bool,
+    finished: bool,
+}
+
 /// Drains every event; `limit` bounds the total so a deframer that loops is caught quickly.
-fn drain(d: &mut Deframer, out: &mut Vec<Ev>, limit: usize) {
+fn drain(d: &mut Deframer, out: &mut Vec<(Ev, When)>, when: When, limit: usize) {
     while let Some(event) = d.next_event() {
-        out.push(match event {
+        let ev = match event {
             DeframeEvent::Frame { offset, frame } => Ev::Frame {
                 offset,
                 bytes: frame.into_inner().to_vec(),
@@ -67,12 +85,15 @@ fn drain(d: &mut Deframer, out: &mut Vec<Ev>, limit: usize) {
                 offset,
                 expected,
                 found,
+                at_end,
             } => Ev::Truncated {
                 offset,
                 expected,
                 found,
+                at_end,
             },
-        });
+        };
+        out.push((ev, when));
         assert!(
             out.len() <= limit,
             "more than {limit} events: the deframer does not make progress"
@@ -80,45 +101,72 @@ fn drain(d: &mut Deframer, out: &mut Vec<Ev>, limit: usize) {
     }
 }
 
-/// Runs `stream` through a deframer in chunks of the given lengths (cyclically).
-fn run(stream: &[u8], lens: &[u8]) -> (Vec<Ev>, DeframeStats) {
+/// Runs `stream` through a deframer in chunks of the given lengths (low 7 bits, cyclically);
+/// with `abandon`, gives up on incomplete frames after each chunk whose length byte has its top
+/// bit set.
+fn run(stream: &[u8], lens: &[u8], abandon: bool) -> (Vec<(Ev, When)>, DeframeStats) {
     // Each BadCrc/Truncated consumes a byte, each Frame five, and a Skipped run precedes a
-    // frame or the end: fewer than 2 events per byte plus one.
+    // frame or ends a drain after finish or abandon_incomplete: at most 2 events per byte + 1.
     let limit = 2 * stream.len() + 1;
     let mut d = Deframer::new();
     let mut events = Vec::new();
-    if lens.iter().all(|&l| l == 0) {
-        for _ in lens {
-            d.push(&[]);
-            drain(&mut d, &mut events, limit);
+    let mut when = When {
+        pushed: 0,
+        after_abandon: false,
+        finished: false,
+    };
+    let mut push = |d: &mut Deframer, events: &mut Vec<_>, chunk: &[u8], len_byte: u8| {
+        d.push(chunk);
+        when.pushed += chunk.len();
+        drain(d, events, when, limit);
+        if abandon && len_byte & 0x80 != 0 {
+            d.abandon_incomplete();
+            let after = When {
+                after_abandon: true,
+                ..when
+            };
+            drain(d, events, after, limit);
+            assert_eq!(
+                d.pending_bytes(),
+                0,
+                "bytes left unexamined after abandon_incomplete and a drain"
+            );
         }
-        d.push(stream);
-        drain(&mut d, &mut events, limit);
+    };
+    if lens.iter().all(|&l| l & 0x7f == 0) {
+        for &len in lens {
+            push(&mut d, &mut events, &[], len);
+        }
+        push(&mut d, &mut events, stream, 0);
     } else {
         let mut pos = 0;
         for &len in lens.iter().cycle() {
             if pos >= stream.len() {
                 break;
             }
-            let end = (pos + usize::from(len)).min(stream.len());
-            d.push(&stream[pos..end]);
-            drain(&mut d, &mut events, limit);
+            let end = (pos + usize::from(len & 0x7f)).min(stream.len());
+            push(&mut d, &mut events, &stream[pos..end], len);
             pos = end;
         }
     }
+    assert_eq!(when.pushed, stream.len());
     d.finish();
-    drain(&mut d, &mut events, limit);
+    let at_end = When {
+        pushed: stream.len(),
+        after_abandon: false,
+        finished: true,
+    };
+    drain(&mut d, &mut events, at_end, limit);
     // A drained, finished deframer stays empty.
     assert!(d.next_event().is_none());
     assert_eq!(d.pending_bytes(), 0, "bytes left unexamined after finish");
     (events, d.stats())
 }
 
-fn check(stream: &[u8], events: &[Ev], stats: &DeframeStats) {
+fn check(stream: &[u8], events: &[(Ev, When)], stats: &DeframeStats, abandon: bool) {
     let n = stream.len() as u64;
     assert_eq!(stats.bytes_in, n);
 
-    // Good frames: valid, true to the stream, in order, not overlapping.
     let mut frame_bytes = 0u64;
     let mut frames = 0u64;
     let mut next_free = 0u64;
@@ -126,7 +174,7 @@ fn check(stream: &[u8], events: &[Ev], stats: &DeframeStats) {
     let mut tiles = Vec::new();
     let mut hunted = Vec::new();
     let (mut crc_failures, mut truncated, mut skipped) = (0u64, 0u64, 0u64);
-    for ev in events {
+    for (ev, when) in events {
         match ev {
             Ev::Frame { offset, bytes } => {
                 let frame = Frame::new_checked(&bytes[..]).expect("frame event fails new_checked");
@@ -137,7 +185,7 @@ fn check(stream: &[u8], events: &[Ev], stats: &DeframeStats) {
                     "frame event has extra bytes"
                 );
                 let (at, len) = (*offset as usize, bytes.len());
-                assert!(at + len <= stream.len(), "frame past the end of the stream");
+                assert!(at + len <= when.pushed, "frame past the bytes pushed");
                 assert_eq!(&stream[at..at + len], &bytes[..], "frame bytes differ");
                 assert!(
                     *offset >= next_free,
@@ -150,6 +198,10 @@ fn check(stream: &[u8], events: &[Ev], stats: &DeframeStats) {
             }
             Ev::Skipped { offset, len } => {
                 assert!(*len > 0, "empty skipped run at {offset}");
+                assert!(
+                    offset + len <= when.pushed as u64,
+                    "skipped run past the bytes pushed"
+                );
                 skipped += len;
                 tiles.push((*offset, *len, false));
             }
@@ -161,11 +213,10 @@ fn check(stream: &[u8], events: &[Ev], stats: &DeframeStats) {
             } => {
                 crc_failures += 1;
                 let at = *offset as usize;
-                assert!(at < stream.len());
                 let end = at + payload_len + OVERHEAD_BYTES;
                 assert!(
-                    end <= stream.len(),
-                    "BadCrc on a frame the stream does not hold"
+                    end <= when.pushed,
+                    "BadCrc on a frame not wholly pushed yet"
                 );
                 assert_eq!(stream[at], PREAMBLE, "BadCrc not at a preamble");
                 assert_eq!(usize::from(stream[at + 2]), *payload_len);
@@ -181,19 +232,28 @@ fn check(stream: &[u8], events: &[Ev], stats: &DeframeStats) {
                 offset,
                 expected,
                 found,
+                at_end,
             } => {
                 truncated += 1;
+                if *at_end {
+                    assert!(when.finished, "Truncated at_end before finish");
+                } else {
+                    assert!(
+                        when.after_abandon && !when.finished,
+                        "Truncated without at_end outside the drain after abandon_incomplete: {when:?}"
+                    );
+                }
                 let at = *offset as usize;
-                assert!(at < stream.len());
+                assert!(at < when.pushed, "Truncated past the bytes pushed");
                 assert_eq!(stream[at], PREAMBLE, "Truncated not at a preamble");
-                assert_eq!(*found, stream.len() - at, "Truncated: wrong byte count");
+                assert_eq!(*found, when.pushed - at, "Truncated: wrong byte count");
                 let want = if *found >= 3 {
                     usize::from(stream[at + 2]) + OVERHEAD_BYTES
                 } else {
                     OVERHEAD_BYTES
                 };
                 assert_eq!(*expected, want);
-                assert!(expected > found, "Truncated frame that the stream holds");
+                assert!(expected > found, "Truncated frame that was wholly pushed");
                 hunted.push(*offset);
             }
         }
@@ -211,7 +271,8 @@ fn check(stream: &[u8], events: &[Ev], stats: &DeframeStats) {
         "bytes_skipped + frame bytes != stream length"
     );
 
-    // Frames and skipped runs tile the stream; adjacent skipped runs would have been merged.
+    // Frames and skipped runs tile the stream. Without abandon_incomplete a skipped run only
+    // ends at a frame or at the end, so two are never adjacent.
     tiles.sort_unstable();
     let mut at = 0u64;
     let mut last_was_skip = false;
@@ -222,7 +283,7 @@ fn check(stream: &[u8], events: &[Ev], stats: &DeframeStats) {
             "gap or overlap at {at} in frames + skipped runs: {tiles:?}"
         );
         assert!(
-            is_frame || !last_was_skip,
+            abandon || is_frame || !last_was_skip,
             "two adjacent skipped runs at {offset}"
         );
         if is_frame {
@@ -255,16 +316,23 @@ fuzz_target!(|data: &[u8]| {
     };
     let (lens, stream) = rest.split_at(count.min(rest.len()));
 
-    let (events, stats) = run(stream, lens);
-    check(stream, &events, &stats);
+    let (events, stats) = run(stream, lens, false);
+    check(stream, &events, &stats, false);
 
-    let (whole_events, whole_stats) = run(stream, &[]);
+    let (whole_events, whole_stats) = run(stream, &[], false);
+    let strip = |evs: &[(Ev, When)]| evs.iter().map(|(e, _)| e.clone()).collect::<Vec<_>>();
     assert_eq!(
-        events, whole_events,
+        strip(&events),
+        strip(&whole_events),
         "events depend on the chunking {lens:?}"
     );
     assert_eq!(
         stats, whole_stats,
         "counters depend on the chunking {lens:?}"
     );
+
+    if lens.iter().any(|&l| l & 0x80 != 0) {
+        let (events, stats) = run(stream, lens, true);
+        check(stream, &events, &stats, true);
+    }
 });
