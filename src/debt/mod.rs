@@ -1,0 +1,2 @@
+//! DEBT: an embedded wavelet image codec for links of a few kbit/s (work in progress).
+pub mod rangecoder;
