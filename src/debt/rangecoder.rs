@@ -64,9 +64,7 @@ impl Context {
         };
         self.fast = step(self.fast, fast_shift);
         self.slow = step(self.slow, slow_shift);
-        if self.count < 255 {
-            self.count += 1;
-        }
+        self.count = self.count.saturating_add(1);
     }
 }
 
