@@ -1,2 +1,3 @@
 //! DEBT: an embedded wavelet image codec for links of a few kbit/s (work in progress).
 pub mod rangecoder;
+pub mod wavelet;
