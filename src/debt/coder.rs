@@ -1,0 +1,575 @@
+//! The block-tree bit-plane coder: the heart of DEBT.
+//!
+//! Every subband of every component is covered by a quadtree whose nodes know the largest
+//! coefficient magnitude beneath them. Bit-plane by bit-plane, from the most significant down:
+//!
+//! 1. **Significance** (per subband, coarse to fine, components interleaved): the insignificant
+//!    nodes of each quadtree level are tested, leaves first (coefficients next to significant
+//!    ones are the likeliest to become significant: the cheap, valuable bits come first). A node
+//!    that becomes significant is split at once, depth first, down to the coefficients; of four
+//!    children of a significant node, the last is known significant if the other three are not.
+//!    A coefficient that becomes significant sends its sign.
+//! 2. **Refinement**: every coefficient significant before this plane sends one more bit.
+//!
+//! Each decision is coded by the adaptive range coder in a context made of the subband class,
+//! the quadtree level, the significance of neighbours, and the significance of the parent (the
+//! same place one level coarser, already coded in this plane). Encoder and decoder run this
+//! same traversal: the encoder through a [`BitCoder`] that writes the true bits, the decoder
+//! through one that reads them, so the two cannot drift apart. Either stops at the first symbol
+//! its byte budget cannot hold ([`Stop`]).
+
+use super::rangecoder::{Context, MARGIN_BITS, RangeDecoder, RangeEncoder};
+
+/// The byte budget is spent: coding stops at this symbol.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Stop;
+
+/// One side of the coder: writes (encoder) or reads (decoder) binary decisions.
+pub trait BitCoder {
+    /// True for the encoder: decisions come from the data.
+    const ENCODER: bool;
+    /// Codes a decision in context `ctx`; the encoder passes the true `bit`, the decoder
+    /// ignores it and returns what it read.
+    fn bit(&mut self, ctx: usize, bit: bool) -> Result<bool, Stop>;
+    /// Codes `bits` bits of `value` at probability one half.
+    fn raw(&mut self, value: u32, bits: u32) -> Result<u32, Stop>;
+}
+
+/// Context counts and offsets.
+mod ctx {
+    pub const NODE: usize = 0; // class 3 x level 3 x parent 2 x neighbour 2 = 36
+    pub const COEF: usize = NODE + 36; // class 3 x neighbours 5 x parent 2 = 30
+    pub const SIGN: usize = COEF + 30; // class 3 x left 3 x up 3 = 27
+    pub const REFINE: usize = SIGN + 27; // class 3 x first 2 x neighbour 2 = 12
+    pub const COUNT: usize = REFINE + 12;
+}
+
+/// Zero bytes after a complete stream: enough for the decoder's margin.
+pub const COMPLETE_PADDING_BYTES: usize = (MARGIN_BITS as usize).div_ceil(8) + 1;
+
+/// The encoder side.
+pub struct Encoder {
+    rc: RangeEncoder,
+    contexts: Vec<Context>,
+    budget_bits: u64,
+}
+
+impl Encoder {
+    /// An encoder that stops before the symbol that would not fit in `budget_bytes`.
+    pub fn new(budget_bytes: usize) -> Encoder {
+        Encoder {
+            rc: RangeEncoder::new(),
+            contexts: vec![Context::default(); ctx::COUNT],
+            budget_bits: (budget_bytes as u64).saturating_mul(8),
+        }
+    }
+
+    /// Terminates the stream. A `complete` stream (every plane coded) gets zero bytes appended
+    /// so that the decoder's budget rule lets it decode the last symbols too.
+    pub fn finish(self, complete: bool) -> Vec<u8> {
+        let mut out = self.rc.finish();
+        if complete {
+            out.resize(out.len() + COMPLETE_PADDING_BYTES, 0);
+        }
+        out
+    }
+
+    fn room(&self) -> Result<(), Stop> {
+        if self.rc.tell_bits() + u64::from(MARGIN_BITS) > self.budget_bits {
+            Err(Stop)
+        } else {
+            Ok(())
+        }
+    }
+}
+
+impl BitCoder for Encoder {
+    const ENCODER: bool = true;
+    fn bit(&mut self, ctx: usize, bit: bool) -> Result<bool, Stop> {
+        self.room()?;
+        self.rc.encode(&mut self.contexts[ctx], bit);
+        Ok(bit)
+    }
+    fn raw(&mut self, value: u32, bits: u32) -> Result<u32, Stop> {
+        self.room()?;
+        self.rc.encode_raw(value, bits);
+        Ok(value)
+    }
+}
+
+/// The decoder side.
+pub struct Decoder<'a> {
+    rc: RangeDecoder<'a>,
+    contexts: Vec<Context>,
+    budget_bits: u64,
+}
+
+impl<'a> Decoder<'a> {
+    /// Decodes `data`, all of whose bytes count as budget.
+    pub fn new(data: &'a [u8]) -> Decoder<'a> {
+        Decoder {
+            rc: RangeDecoder::new(data),
+            contexts: vec![Context::default(); ctx::COUNT],
+            budget_bits: (data.len() as u64).saturating_mul(8),
+        }
+    }
+
+    fn room(&self) -> Result<(), Stop> {
+        if self.rc.tell_bits() + u64::from(MARGIN_BITS) > self.budget_bits {
+            Err(Stop)
+        } else {
+            Ok(())
+        }
+    }
+}
+
+impl BitCoder for Decoder<'_> {
+    const ENCODER: bool = false;
+    fn bit(&mut self, ctx: usize, _bit: bool) -> Result<bool, Stop> {
+        self.room()?;
+        Ok(self.rc.decode(&mut self.contexts[ctx]))
+    }
+    fn raw(&mut self, _value: u32, bits: u32) -> Result<u32, Stop> {
+        self.room()?;
+        Ok(self.rc.decode_raw(bits))
+    }
+}
+
+/// Subband class for contexts: 0 low-pass, 1 HL or LH, 2 HH.
+pub type Class = usize;
+
+/// One subband of one component as the coder sees it.
+pub struct Band {
+    /// Width in coefficients.
+    pub width: usize,
+    /// Height in coefficients.
+    pub height: usize,
+    class: Class,
+    /// Index of the parent band (same component and orientation, one level coarser).
+    parent: Option<usize>,
+    /// Quadtree level sizes; `dims[0]` is the coefficient grid.
+    dims: Vec<(usize, usize)>,
+    /// Significance per quadtree level.
+    sig: Vec<Vec<bool>>,
+    /// Encoder: the largest magnitude under each node.
+    max: Vec<Vec<u32>>,
+    /// Encoder: true magnitudes. Decoder: the bits decoded so far.
+    pub mag: Vec<u32>,
+    /// Sign of each coefficient (true = negative).
+    pub neg: Vec<bool>,
+    /// Decoder: lowest bit-plane known of each significant coefficient.
+    pub known: Vec<u8>,
+    lin: Vec<Vec<u32>>,
+    lsp: Vec<u32>,
+    refine_count: usize,
+}
+
+impl Band {
+    /// A band of `width` x `height` coefficients. `magnitudes` and `negative` are the data to
+    /// encode (the decoder passes `None`).
+    pub fn new(
+        width: usize,
+        height: usize,
+        class: Class,
+        parent: Option<usize>,
+        data: Option<(Vec<u32>, Vec<bool>)>,
+    ) -> Band {
+        let mut dims = vec![(width, height)];
+        while dims.last().is_some_and(|&(w, h)| w > 1 || h > 1) {
+            let (w, h) = *dims.last().unwrap_or(&(1, 1));
+            dims.push((w.div_ceil(2), h.div_ceil(2)));
+        }
+        let sig = dims.iter().map(|&(w, h)| vec![false; w * h]).collect();
+        let n = width * height;
+        let (mag, neg, max) = match data {
+            Some((mag, neg)) => {
+                let mut max: Vec<Vec<u32>> = vec![mag.clone()];
+                for l in 1..dims.len() {
+                    let (pw, ph) = dims[l - 1];
+                    let (w, h) = dims[l];
+                    let below = &max[l - 1];
+                    let mut level = vec![0u32; w * h];
+                    for y in 0..ph {
+                        for x in 0..pw {
+                            let at = (y / 2) * w + x / 2;
+                            level[at] = level[at].max(below[y * pw + x]);
+                        }
+                    }
+                    max.push(level);
+                }
+                (mag, neg, max)
+            }
+            None => (vec![0; n], vec![false; n], Vec::new()),
+        };
+        let top = dims.len() - 1;
+        let mut lin = vec![Vec::new(); dims.len()];
+        if n > 0 {
+            lin[top].push(0);
+        }
+        Band {
+            width,
+            height,
+            class,
+            parent,
+            dims,
+            sig,
+            max,
+            mag,
+            neg,
+            known: vec![u8::MAX; n],
+            lin,
+            lsp: Vec::new(),
+            refine_count: 0,
+        }
+    }
+
+    /// Largest magnitude in the band (encoder side).
+    pub fn max_magnitude(&self) -> u32 {
+        self.max
+            .last()
+            .and_then(|l| l.first())
+            .copied()
+            .unwrap_or(0)
+    }
+
+    /// True if coefficient `i` is significant.
+    pub fn is_significant(&self, i: usize) -> bool {
+        self.sig[0][i]
+    }
+
+    fn sig_at(&self, level: usize, x: isize, y: isize) -> bool {
+        let (w, h) = self.dims[level];
+        x >= 0
+            && y >= 0
+            && (x as usize) < w
+            && (y as usize) < h
+            && self.sig[level][y as usize * w + x as usize]
+    }
+}
+
+/// Significance of the parent of node (`level`, `x`, `y`): the parent band's node one quadtree
+/// level lower at the same index, or for a coefficient, the parent coefficient.
+fn parent_sig(bands: &[Band], band: usize, level: usize, x: usize, y: usize) -> bool {
+    let Some(p) = bands[band].parent else {
+        return false;
+    };
+    let parent = &bands[p];
+    if level == 0 {
+        parent.sig_at(0, (x / 2) as isize, (y / 2) as isize)
+    } else {
+        parent.sig_at(level - 1, x as isize, y as isize)
+    }
+}
+
+fn node_context(bands: &[Band], band: usize, level: usize, x: usize, y: usize) -> usize {
+    let b = &bands[band];
+    let (xi, yi) = (x as isize, y as isize);
+    if level == 0 {
+        let mut n = 0;
+        for (dx, dy) in [
+            (-1, -1),
+            (0, -1),
+            (1, -1),
+            (-1, 0),
+            (1, 0),
+            (-1, 1),
+            (0, 1),
+            (1, 1),
+        ] {
+            n += usize::from(b.sig_at(0, xi + dx, yi + dy));
+        }
+        let bucket = match n {
+            0 => 0,
+            1 => 1,
+            2 => 2,
+            3 | 4 => 3,
+            _ => 4,
+        };
+        let parent = usize::from(parent_sig(bands, band, 0, x, y));
+        ctx::COEF + (b.class * 5 + bucket) * 2 + parent
+    } else {
+        let neighbour = [(-1, 0), (1, 0), (0, -1), (0, 1)]
+            .iter()
+            .any(|&(dx, dy)| b.sig_at(level, xi + dx, yi + dy));
+        let parent = usize::from(parent_sig(bands, band, level, x, y));
+        let lev = (level - 1).min(2);
+        ctx::NODE + ((b.class * 3 + lev) * 2 + parent) * 2 + usize::from(neighbour)
+    }
+}
+
+fn sign_context(b: &Band, x: usize, y: usize) -> usize {
+    let s = |xx: isize, yy: isize| -> usize {
+        if b.sig_at(0, xx, yy) {
+            if b.neg[yy as usize * b.width + xx as usize] {
+                2
+            } else {
+                1
+            }
+        } else {
+            0
+        }
+    };
+    ctx::SIGN + (b.class * 3 + s(x as isize - 1, y as isize)) * 3 + s(x as isize, y as isize - 1)
+}
+
+/// A coefficient becomes significant at `plane`: code its sign, set its state.
+fn newly_significant<C: BitCoder>(
+    bands: &mut [Band],
+    band: usize,
+    i: usize,
+    plane: u32,
+    coder: &mut C,
+) -> Result<(), Stop> {
+    let (x, y) = (i % bands[band].width, i / bands[band].width);
+    let sctx = sign_context(&bands[band], x, y);
+    let neg = coder.bit(sctx, bands[band].neg[i])?;
+    let b = &mut bands[band];
+    b.neg[i] = neg;
+    if !C::ENCODER {
+        b.mag[i] = 1 << plane;
+        b.known[i] = plane as u8;
+    }
+    b.lsp.push(i as u32);
+    Ok(())
+}
+
+/// Node (`level`, `node`) was found significant: split it down to the coefficients.
+fn descend<C: BitCoder>(
+    bands: &mut [Band],
+    band: usize,
+    level: usize,
+    node: usize,
+    plane: u32,
+    coder: &mut C,
+) -> Result<(), Stop> {
+    let (w, _) = bands[band].dims[level];
+    let (x, y) = (node % w, node / w);
+    let child_level = level - 1;
+    let (cw, ch) = bands[band].dims[child_level];
+    let mut children = [0usize; 4];
+    let mut count = 0;
+    for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+        let (cx, cy) = (2 * x + dx, 2 * y + dy);
+        if cx < cw && cy < ch {
+            children[count] = cy * cw + cx;
+            count += 1;
+        }
+    }
+    let threshold = 1u32 << plane;
+    let mut any = false;
+    for (k, &child) in children[..count].iter().enumerate() {
+        let significant = if k == count - 1 && !any {
+            true
+        } else {
+            let truth = C::ENCODER && bands[band].max[child_level][child] >= threshold;
+            let c = node_context(bands, band, child_level, child % cw, child / cw);
+            coder.bit(c, truth)?
+        };
+        if significant {
+            any = true;
+            bands[band].sig[child_level][child] = true;
+            if child_level == 0 {
+                newly_significant(bands, band, child, plane, coder)?;
+            } else {
+                descend(bands, band, child_level, child, plane, coder)?;
+            }
+        } else {
+            bands[band].lin[child_level].push(child as u32);
+        }
+    }
+    Ok(())
+}
+
+fn significance_pass<C: BitCoder>(
+    bands: &mut [Band],
+    band: usize,
+    plane: u32,
+    coder: &mut C,
+) -> Result<(), Stop> {
+    let threshold = 1u32 << plane;
+    for level in 0..bands[band].dims.len() {
+        let list = std::mem::take(&mut bands[band].lin[level]);
+        let (w, _) = bands[band].dims[level];
+        let mut keep = Vec::with_capacity(list.len());
+        for (k, &node) in list.iter().enumerate() {
+            let node = node as usize;
+            let truth = C::ENCODER && bands[band].max[level][node] >= threshold;
+            let c = node_context(bands, band, level, node % w, node / w);
+            let significant = match coder.bit(c, truth) {
+                Ok(s) => s,
+                Err(stop) => {
+                    keep.extend_from_slice(&list[k..]);
+                    bands[band].lin[level] = keep;
+                    return Err(stop);
+                }
+            };
+            if significant {
+                bands[band].sig[level][node] = true;
+                if level == 0 {
+                    newly_significant(bands, band, node, plane, coder)?;
+                } else {
+                    descend(bands, band, level, node, plane, coder)?;
+                }
+            } else {
+                keep.push(node as u32);
+            }
+        }
+        // Children found insignificant while splitting higher levels were pushed to lower
+        // lists already processed in this plane; they wait for the next plane.
+        let mut pushed = std::mem::take(&mut bands[band].lin[level]);
+        keep.append(&mut pushed);
+        bands[band].lin[level] = keep;
+    }
+    Ok(())
+}
+
+fn refinement_pass<C: BitCoder>(
+    bands: &mut [Band],
+    band: usize,
+    plane: u32,
+    coder: &mut C,
+) -> Result<(), Stop> {
+    let b = &mut bands[band];
+    for k in 0..b.refine_count {
+        let i = b.lsp[k] as usize;
+        let (x, y) = ((i % b.width) as isize, (i / b.width) as isize);
+        let first = if C::ENCODER {
+            b.mag[i] >> (plane + 2) == 0
+        } else {
+            u32::from(b.known[i]) == plane + 1 && b.mag[i] >> (plane + 1) == 1
+        };
+        let neighbour = [(-1, 0), (1, 0), (0, -1), (0, 1)]
+            .iter()
+            .any(|&(dx, dy)| b.sig_at(0, x + dx, y + dy));
+        let c = ctx::REFINE + (b.class * 2 + usize::from(first)) * 2 + usize::from(neighbour);
+        let truth = C::ENCODER && (b.mag[i] >> plane) & 1 == 1;
+        let bit = coder.bit(c, truth)?;
+        if !C::ENCODER {
+            b.mag[i] |= u32::from(bit) << plane;
+            b.known[i] = plane as u8;
+        }
+    }
+    Ok(())
+}
+
+/// Codes bit-planes `planes - 1` down to 0 of every band, in coding order, until done or the
+/// budget stops it.
+pub fn code_planes<C: BitCoder>(
+    bands: &mut [Band],
+    planes: u32,
+    coder: &mut C,
+) -> Result<(), Stop> {
+    for plane in (0..planes).rev() {
+        for b in bands.iter_mut() {
+            b.refine_count = b.lsp.len();
+        }
+        for band in 0..bands.len() {
+            significance_pass(bands, band, plane, coder)?;
+        }
+        for band in 0..bands.len() {
+            refinement_pass(bands, band, plane, coder)?;
+        }
+    }
+    Ok(())
+}
+
+/// Builds a band list's parent links: `keys[i]` is (component, orientation code, level) of
+/// band `i`; the parent is the band of the same component and orientation one level up.
+pub fn parents(keys: &[(usize, u8, u32)]) -> Vec<Option<usize>> {
+    keys.iter()
+        .map(|&(c, o, l)| {
+            keys.iter()
+                .position(|&(c2, o2, l2)| c2 == c && o2 == o && l2 == l + 1 && o != 0)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lcg(seed: &mut u64) -> u32 {
+        *seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (*seed >> 33) as u32
+    }
+
+    fn random_bands(seed: u64) -> Vec<(usize, usize, Vec<u32>, Vec<bool>)> {
+        let mut s = seed;
+        [(5usize, 3usize), (5, 3), (9, 6), (1, 1), (17, 2)]
+            .iter()
+            .map(|&(w, h)| {
+                let mag: Vec<u32> = (0..w * h)
+                    .map(|_| {
+                        let r = lcg(&mut s);
+                        if r.is_multiple_of(3) { r % 1000 } else { r % 4 }
+                    })
+                    .collect();
+                let neg: Vec<bool> = (0..w * h)
+                    .map(|i| mag[i] != 0 && lcg(&mut s).is_multiple_of(2))
+                    .collect();
+                (w, h, mag, neg)
+            })
+            .collect()
+    }
+
+    fn make(data: &[(usize, usize, Vec<u32>, Vec<bool>)], encoder: bool) -> Vec<Band> {
+        data.iter()
+            .enumerate()
+            .map(|(i, (w, h, m, n))| {
+                let parent = if i == 2 { Some(1) } else { None };
+                Band::new(
+                    *w,
+                    *h,
+                    i.min(2),
+                    parent,
+                    encoder.then(|| (m.clone(), n.clone())),
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn lossless_round_trip_and_budget() {
+        let data = random_bands(5);
+        let planes = 10;
+        let mut enc_bands = make(&data, true);
+        let mut enc = Encoder::new(usize::MAX / 16);
+        code_planes(&mut enc_bands, planes, &mut enc).unwrap();
+        let bytes = enc.finish(true);
+        let mut dec_bands = make(&data, false);
+        let mut dec = Decoder::new(&bytes);
+        code_planes(&mut dec_bands, planes, &mut dec).unwrap();
+        for (b, (_, _, m, n)) in dec_bands.iter().zip(&data) {
+            assert_eq!(&b.mag, m);
+            for i in 0..m.len() {
+                if m[i] != 0 {
+                    assert_eq!(b.neg[i], n[i]);
+                }
+            }
+        }
+        // Any budget: the encoder fits it, the decoder agrees on what it got.
+        for budget in [0, 1, 5, 10, 20, 40, bytes.len() / 2] {
+            let mut enc_bands = make(&data, true);
+            let mut enc = Encoder::new(budget);
+            let complete = code_planes(&mut enc_bands, planes, &mut enc).is_ok();
+            let cut = enc.finish(complete);
+            assert!(cut.len() <= budget, "budget {budget}: {} bytes", cut.len());
+            let mut padded = cut.clone();
+            padded.resize(budget, 0);
+            let mut dec_bands = make(&data, false);
+            let _ = code_planes(&mut dec_bands, planes, &mut Decoder::new(&padded));
+            for (b, (_, _, m, _)) in dec_bands.iter().zip(&data) {
+                for ((&got, &known), &truth) in b.mag.iter().zip(&b.known).zip(m) {
+                    if known != u8::MAX {
+                        // What the decoder knows agrees with the truth down to its known plane.
+                        assert_eq!(got >> known, truth >> known);
+                    } else {
+                        assert_eq!(got, 0);
+                    }
+                }
+            }
+        }
+    }
+}
