@@ -109,11 +109,17 @@ where
             let err = err.as_ref();
             let code = exit_code(err);
             if code != EXIT_OK {
-                eprintln!("{tool}: {}", error_text(err));
+                warn(tool, &error_text(err));
             }
             std::process::ExitCode::from(code)
         }
     }
+}
+
+/// Prints one line on standard error, prefixed with the tool's name; a closed standard error
+/// is ignored (a tool never fails, let alone panics, for want of a place to complain).
+pub fn warn(tool: &str, message: &str) {
+    let _ = writeln!(io::stderr(), "{tool}: {message}");
 }
 
 /// True when `path` means standard input/output (`None` or `-`).
@@ -187,41 +193,89 @@ impl Input {
 }
 
 /// A file written beside its target and renamed into place by [`commit`](Self::commit); dropped
-/// without a commit, the temporary file is removed and the target left as it was.
+/// without a successful commit, the temporary file is removed and the target left as it was.
+///
+/// A symbolic link as target is kept: the file it points to is replaced. A target that exists
+/// and is not a regular file (a FIFO, a device such as `/dev/null`) is written directly, since
+/// replacing it would destroy it; a directory is refused.
 pub struct AtomicFile {
+    /// The path as the user gave it, for messages.
     target: PathBuf,
-    temp: PathBuf,
+    /// Where the rename goes: the target, or the file a symbolic link points to.
+    dest: PathBuf,
+    /// The temporary file, or `None` when writing directly to a special file.
+    temp: Option<PathBuf>,
     writer: Option<BufWriter<File>>,
+    committed: bool,
 }
 
+/// Distinguishes temporary files of one process.
+static TEMP_COUNTER: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+
 impl AtomicFile {
-    /// Creates the temporary file beside `target`.
+    /// Creates the temporary file beside `target` (or opens a special file directly).
     pub fn create(target: &Path) -> Result<AtomicFile, IoError> {
-        let file_name = target.file_name().map(|n| n.to_string_lossy().into_owned());
-        let file_name = file_name.unwrap_or_else(|| "output".into());
-        let temp = target.with_file_name(format!(".{file_name}.tmp-{}", std::process::id()));
-        let file = File::create(&temp).map_err(|source| IoError::Open {
+        let open_err = |source| IoError::Open {
             path: target.to_path_buf(),
             source,
-        })?;
+        };
+        if let Ok(meta) = std::fs::metadata(target) {
+            if meta.is_dir() {
+                return Err(open_err(io::Error::other("is a directory")));
+            }
+            if !meta.is_file() {
+                let file = File::options().write(true).open(target).map_err(open_err)?;
+                return Ok(AtomicFile {
+                    target: target.to_path_buf(),
+                    dest: target.to_path_buf(),
+                    temp: None,
+                    writer: Some(BufWriter::with_capacity(64 * 1024, file)),
+                    committed: false,
+                });
+            }
+        }
+        let is_link = std::fs::symlink_metadata(target).is_ok_and(|m| m.file_type().is_symlink());
+        let dest = if is_link {
+            std::fs::canonicalize(target).map_err(open_err)?
+        } else {
+            target.to_path_buf()
+        };
+        let file_name = dest.file_name().map(|n| n.to_string_lossy().into_owned());
+        let file_name = file_name.unwrap_or_else(|| "output".into());
+        let serial = TEMP_COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let temp = dest.with_file_name(format!(".{file_name}.tmp-{}-{serial}", std::process::id()));
+        let file = File::options()
+            .write(true)
+            .create_new(true)
+            .open(&temp)
+            .map_err(open_err)?;
         Ok(AtomicFile {
             target: target.to_path_buf(),
-            temp,
+            dest,
+            temp: Some(temp),
             writer: Some(BufWriter::with_capacity(64 * 1024, file)),
+            committed: false,
         })
     }
 
     /// Flushes, syncs and renames the file into place.
     pub fn commit(mut self) -> Result<(), IoError> {
+        let name = self.target.display().to_string();
         let write_err = |source| IoError::Write {
-            name: self.target.display().to_string(),
+            name: name.clone(),
             source,
         };
         if let Some(writer) = self.writer.take() {
             let file = writer.into_inner().map_err(|e| write_err(e.into_error()))?;
-            file.sync_all().map_err(write_err)?;
+            if self.temp.is_some() {
+                file.sync_all().map_err(write_err)?;
+            }
         }
-        std::fs::rename(&self.temp, &self.target).map_err(write_err)
+        if let Some(temp) = &self.temp {
+            std::fs::rename(temp, &self.dest).map_err(write_err)?;
+        }
+        self.committed = true;
+        Ok(())
     }
 }
 
@@ -243,9 +297,11 @@ impl Write for AtomicFile {
 
 impl Drop for AtomicFile {
     fn drop(&mut self) {
-        if self.writer.take().is_some() {
+        if !self.committed
+            && let Some(temp) = &self.temp
+        {
             // Best effort: the run failed, so the partial file goes.
-            let _ = std::fs::remove_file(&self.temp);
+            let _ = std::fs::remove_file(temp);
         }
     }
 }
@@ -344,6 +400,48 @@ mod tests {
         drop(g);
         assert_eq!(std::fs::read(&target).unwrap(), b"abc");
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn failed_commit_leaves_no_temporary_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("out.bin");
+        let f = AtomicFile::create(&target).unwrap();
+        // A directory appears where the file should go: the rename fails.
+        std::fs::create_dir(&target).unwrap();
+        assert!(f.commit().is_err());
+        let names: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, vec![std::ffi::OsString::from("out.bin")]);
+        assert!(matches!(
+            AtomicFile::create(dir.path()),
+            Err(IoError::Open { .. })
+        ));
+    }
+
+    #[test]
+    fn symlink_target_is_kept_and_special_files_written_in_place() {
+        let dir = tempfile::tempdir().unwrap();
+        let real = dir.path().join("real.bin");
+        let link = dir.path().join("link.bin");
+        std::fs::write(&real, b"old").unwrap();
+        std::os::unix::fs::symlink(&real, &link).unwrap();
+        let mut f = AtomicFile::create(&link).unwrap();
+        f.write_all(b"new").unwrap();
+        f.commit().unwrap();
+        assert!(
+            std::fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink()
+        );
+        assert_eq!(std::fs::read(&real).unwrap(), b"new");
+        let mut null = AtomicFile::create(Path::new("/dev/null")).unwrap();
+        null.write_all(b"gone").unwrap();
+        null.commit().unwrap();
+        assert!(!std::fs::metadata("/dev/null").unwrap().is_file());
     }
 
     #[test]

@@ -306,25 +306,134 @@ fn help_has_examples() {
 fn broken_pipe_downstream_is_success() {
     use std::io::{BufRead, BufReader, Write};
     use std::process::{Command, Stdio};
-    let frames = vector_frames().concat().repeat(20_000);
+    for format in ["text", "ndjson", "csv"] {
+        let frames = vector_frames().concat().repeat(20_000);
+        let mut child = Command::new(DUMP)
+            .args(["-q", "-f", format])
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let mut stdin = child.stdin.take().unwrap();
+        let writer = std::thread::spawn(move || {
+            let _ = stdin.write_all(&frames);
+        });
+        let mut first = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut first)
+            .unwrap();
+        assert!(!first.is_empty());
+        // stdout is dropped here: the reader has gone away, as with `| head -1`.
+        let status = child.wait().unwrap();
+        let _ = writer.join();
+        assert_eq!(status.code(), Some(0), "format {format}");
+    }
+}
+
+#[test]
+fn closed_stderr_is_no_panic() {
+    use std::io::Write;
+    use std::process::{Command, Stdio};
     let mut child = Command::new(DUMP)
-        .args(["-q", "-f", "ndjson"])
+        .args(["-f", "ndjson"])
         .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
         .spawn()
         .unwrap();
+    drop(child.stderr.take());
     let mut stdin = child.stdin.take().unwrap();
-    let writer = std::thread::spawn(move || {
-        let _ = stdin.write_all(&frames);
-    });
-    let mut first = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut first)
+    stdin
+        .write_all(&std::fs::read(testdata("noisy.bin")).unwrap())
         .unwrap();
-    assert!(first.starts_with("{\"offset\":0,"));
-    // stdout is dropped here: the reader has gone away, as with `| head -1`.
-    let status = child.wait().unwrap();
-    let _ = writer.join();
-    assert_eq!(status.code(), Some(0));
+    drop(stdin);
+    assert_eq!(child.wait().unwrap().code(), Some(0));
+}
+
+#[test]
+fn output_to_a_directory_fails_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(
+        PACK,
+        &[
+            testdata("wire-vectors.jsonl").to_str().unwrap(),
+            "-o",
+            dir.path().to_str().unwrap(),
+        ],
+        b"",
+    );
+    assert_eq!(out.code, 2);
+    assert!(
+        out.stderr.contains("cannot open: is a directory"),
+        "{}",
+        out.stderr
+    );
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+    let parent = dir.path().parent().unwrap();
+    let leftovers = std::fs::read_dir(parent)
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .file_name()
+                .to_string_lossy()
+                .contains(".tmp-")
+        })
+        .count();
+    assert_eq!(leftovers, 0);
+}
+
+#[test]
+fn options_that_need_another_are_refused_alone() {
+    let vectors = testdata("wire-vectors.jsonl");
+    let v = vectors.to_str().unwrap();
+    for args in [
+        vec!["--src", "3", v],
+        vec!["--trunk", "10", v],
+        vec!["--isn", "1", v],
+        vec!["--dst", "4", v],
+    ] {
+        let out = run(PACK, &args, b"");
+        assert_eq!(out.code, 2, "{args:?}");
+        assert!(out.stderr.contains("--image"), "{}", out.stderr);
+    }
+    let frames = testdata("noisy.bin");
+    for args in [
+        vec!["--baud", "9600", frames.to_str().unwrap()],
+        vec!["--idle-ms", "5", frames.to_str().unwrap()],
+    ] {
+        let out = run(DUMP, &args, b"");
+        assert_eq!(out.code, 2, "{args:?}");
+        assert!(out.stderr.contains("--port"), "{}", out.stderr);
+    }
+    assert_eq!(
+        run(DUMP, &["--port", "/dev/null", "--baud", "0"], b"").code,
+        2
+    );
+}
+
+#[test]
+fn bad_summary_path_fails_before_any_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_file = dir.path().join("out.txt");
+    let out = run(
+        DUMP,
+        &[
+            "-q",
+            "-o",
+            out_file.to_str().unwrap(),
+            "--summary",
+            "/nonexistent/dir/s.json",
+            testdata("noisy.bin").to_str().unwrap(),
+        ],
+        b"",
+    );
+    assert_eq!(out.code, 2);
+    assert!(
+        out.stderr.contains("/nonexistent/dir/s.json: cannot open"),
+        "{}",
+        out.stderr
+    );
+    assert!(!out_file.exists());
 }

@@ -49,7 +49,7 @@ fn dump_reads_frames_from_a_pseudo_terminal() {
     let (mut child, mut stderr) = start_dump(&path, "ndjson");
 
     let frames = common::vector_frames();
-    let mut stream = vec![0x00, 0x55, 0x02, 0xff];
+    let mut stream = vec![0x00, 0x13, 0x02, 0xff];
     for f in &frames {
         stream.extend(f);
         stream.extend([0x0d, 0x0a]); // the S100 driver's CR LF between frames: garbage here
@@ -86,6 +86,34 @@ fn dump_reads_frames_from_a_pseudo_terminal() {
         ["rov", "operator", "operator", "operator", "operator"]
     );
     assert!(rest.contains("5 frames ok (0 invalid messages)"), "{rest}");
+}
+
+#[test]
+fn false_preamble_is_given_up_when_the_line_goes_idle() {
+    let (mut master, path) = open_pty();
+    let (mut child, mut stderr) = start_dump(&path, "ndjson");
+    // 0x55 0x02 0xff announces a 255-byte payload; the real frame behind it is only 16 bytes.
+    let frame = &common::vector_frames()[1];
+    master.write_all(&[0x55, 0x02, 0xff]).unwrap();
+    master.write_all(frame).unwrap();
+    let started = std::time::Instant::now();
+    let mut stdout = BufReader::new(child.stdout.take().unwrap());
+    let mut line = String::new();
+    stdout.read_line(&mut line).unwrap();
+    // The frame comes out once the line has been idle for --idle-ms (1000 ms by default).
+    assert!(
+        started.elapsed() >= Duration::from_millis(900),
+        "{:?}",
+        started.elapsed()
+    );
+    let v: serde_json::Value = serde_json::from_str(&line).unwrap();
+    assert_eq!(v["offset"], 3);
+    assert_eq!(v["type"], "operator");
+    drop(master);
+    let mut rest = String::new();
+    stderr.read_to_string(&mut rest).unwrap();
+    assert_eq!(child.wait().unwrap().code(), Some(0));
+    assert!(rest.contains("offset 0: incomplete frame given up after the line went idle (needs 260 bytes, 19 there)"), "{rest}");
 }
 
 #[test]

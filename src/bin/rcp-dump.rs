@@ -9,10 +9,20 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use clap::{Parser, ValueEnum};
-use rovlink::io::{CheckFailed, EXIT_OK, Input, Output};
+use rovlink::io::{AtomicFile, CheckFailed, EXIT_OK, Input, IoError, Output};
 use rovlink::wire::frame::Frame;
 use rovlink::wire::{DeframeEvent, DeframeStats, Deframer, MessageRepr, json};
 use serde_json::{Map, Value};
+
+/// The tool's name, prefixed to everything it says on stderr.
+const TOOL: &str = "rcp-dump";
+
+/// Says something on stderr (never panics, even with stderr closed).
+macro_rules! say {
+    ($($arg:tt)*) => {
+        rovlink::io::warn(TOOL, &format!($($arg)*))
+    };
+}
 
 const EXAMPLES: &str = "\
 Examples:
@@ -55,16 +65,16 @@ struct Args {
     #[arg(long, value_name = "DEV")]
     port: Option<String>,
 
-    /// Baud rate of --port.
-    #[arg(long, default_value_t = 9600, requires = "port")]
-    baud: u32,
+    /// Baud rate of --port [default: 9600].
+    #[arg(long, requires = "port", value_parser = clap::value_parser!(u32).range(1..))]
+    baud: Option<u32>,
 
     /// On --port, give up on an incomplete frame after the line has been quiet this long
-    /// (0: wait forever). A false preamble in line noise can announce up to 260 bytes; this
+    /// (0: wait forever) [default: 1000]. A false preamble in line noise can announce up to 260 bytes; this
     /// keeps it from holding back the frames behind it. Set it above the longest pause your
     /// modem makes inside one frame.
-    #[arg(long, value_name = "MS", default_value_t = 1000, requires = "port")]
-    idle_ms: u64,
+    #[arg(long, value_name = "MS", requires = "port")]
+    idle_ms: Option<u64>,
 
     /// Output format.
     #[arg(long, short = 'f', value_enum, default_value_t = Format::Text)]
@@ -87,6 +97,19 @@ struct Args {
     quiet: bool,
 }
 
+/// A CSV writer's error as an I/O error naming the output, so that a closed pipe is seen as
+/// one (exit 0) and a full disk names the file.
+fn csv_error(name: &str, err: csv::Error) -> anyhow::Error {
+    match err.into_kind() {
+        csv::ErrorKind::Io(source) => IoError::Write {
+            name: name.to_string(),
+            source,
+        }
+        .into(),
+        other => anyhow::anyhow!("{name}: CSV error: {other:?}"),
+    }
+}
+
 /// Where frames are printed.
 enum Sink {
     Text(Output),
@@ -100,8 +123,10 @@ impl Sink {
             Format::Text => Sink::Text(out),
             Format::Ndjson => Sink::Ndjson(out),
             Format::Csv => {
+                let name = out.name();
                 let mut w = csv::Writer::from_writer(out);
-                w.write_record(json::CSV_COLUMNS)?;
+                w.write_record(json::CSV_COLUMNS)
+                    .map_err(|e| csv_error(&name, e))?;
                 Sink::Csv(Box::new(w))
             }
         })
@@ -142,7 +167,11 @@ impl Sink {
                         line.push('\n');
                         out.write_bytes(line.as_bytes())?;
                     }
-                    Sink::Csv(w) => w.write_record(json::csv_record(&map))?,
+                    Sink::Csv(w) => {
+                        let record = json::csv_record(&map);
+                        w.write_record(&record)
+                            .map_err(|e| csv_error(&w.get_ref().name(), e))?
+                    }
                     Sink::Text(_) => {}
                 }
             }
@@ -153,7 +182,11 @@ impl Sink {
     fn flush(&mut self) -> Result<()> {
         match self {
             Sink::Text(out) | Sink::Ndjson(out) => out.flush_named()?,
-            Sink::Csv(w) => w.flush()?,
+            Sink::Csv(w) => {
+                let name = w.get_ref().name();
+                w.flush()
+                    .map_err(|source| IoError::Write { name, source })?
+            }
         }
         Ok(())
     }
@@ -161,9 +194,13 @@ impl Sink {
     fn finish(self) -> Result<()> {
         let out = match self {
             Sink::Text(out) | Sink::Ndjson(out) => out,
-            Sink::Csv(w) => w
-                .into_inner()
-                .map_err(|e| anyhow::anyhow!("{}", e.error()))?,
+            Sink::Csv(w) => {
+                let name = w.get_ref().name();
+                w.into_inner().map_err(|e| IoError::Write {
+                    name,
+                    source: e.into_error(),
+                })?
+            }
         };
         out.finish()?;
         Ok(())
@@ -193,9 +230,10 @@ impl Dumper {
                     if let Some(e) = &error {
                         self.invalid += 1;
                         if !self.quiet {
-                            eprintln!(
-                                "rcp-dump: {}: offset {offset}: invalid message from {}: {e}",
-                                self.name, repr.src
+                            say!(
+                                "{}: offset {offset}: invalid message from {}: {e}",
+                                self.name,
+                                repr.src
                             );
                         }
                     }
@@ -206,15 +244,12 @@ impl Dumper {
                     payload_len,
                     computed,
                     carried,
-                } if !self.quiet => eprintln!(
-                    "rcp-dump: {}: offset {offset}: CRC failure (LEN {payload_len}, computed 0x{computed:04x}, carried 0x{carried:04x}), resyncing",
+                } if !self.quiet => say!(
+                    "{}: offset {offset}: CRC failure (LEN {payload_len}, computed 0x{computed:04x}, carried 0x{carried:04x}), resyncing",
                     self.name
                 ),
                 DeframeEvent::Skipped { offset, len } if !self.quiet => {
-                    eprintln!(
-                        "rcp-dump: {}: offset {offset}: skipped {len} bytes",
-                        self.name
-                    )
+                    say!("{}: offset {offset}: skipped {len} bytes", self.name)
                 }
                 DeframeEvent::Truncated {
                     offset,
@@ -227,8 +262,8 @@ impl Dumper {
                     } else {
                         "after the line went idle"
                     };
-                    eprintln!(
-                        "rcp-dump: {}: offset {offset}: incomplete frame given up {when} (needs {expected} bytes, {found} there)",
+                    say!(
+                        "{}: offset {offset}: incomplete frame given up {when} (needs {expected} bytes, {found} there)",
                         self.name
                     )
                 }
@@ -264,15 +299,14 @@ fn read_port(
     let flag = Arc::clone(&stop);
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
         .context("cannot install the Ctrl-C handler")?;
-    let mut port = serialport::new(dev, args.baud)
+    let baud = args.baud.unwrap_or(9600);
+    let idle_ms = args.idle_ms.unwrap_or(1000);
+    let mut port = serialport::new(dev, baud)
         .timeout(Duration::from_millis(100))
         .open()
         .with_context(|| format!("{dev}: cannot open serial port"))?;
     if !args.quiet {
-        eprintln!(
-            "rcp-dump: reading {dev} at {} baud until it closes or Ctrl-C",
-            args.baud
-        );
+        say!("reading {dev} at {} baud until it closes or Ctrl-C", baud);
     }
     let mut buf = [0u8; 4096];
     let mut last_rx = Instant::now();
@@ -291,8 +325,8 @@ fn read_port(
                     std::io::ErrorKind::TimedOut | std::io::ErrorKind::Interrupted
                 ) =>
             {
-                let idle = Duration::from_millis(args.idle_ms);
-                if args.idle_ms > 0 && deframer.pending_bytes() > 0 && last_rx.elapsed() >= idle {
+                let idle = Duration::from_millis(idle_ms);
+                if idle_ms > 0 && deframer.pending_bytes() > 0 && last_rx.elapsed() >= idle {
                     deframer.abandon_incomplete();
                     dumper.drain(deframer, sink)?;
                     sink.flush()?;
@@ -302,7 +336,7 @@ fn read_port(
             // reports an error too: both end the capture like end of file.
             Err(e) => {
                 if !args.quiet {
-                    eprintln!("rcp-dump: {dev}: port closed ({e})");
+                    say!("{dev}: port closed ({e})");
                 }
                 break;
             }
@@ -320,22 +354,56 @@ struct Summary<'a> {
     invalid_messages: u64,
 }
 
-fn write_summary(path: &std::path::Path, dumper: &Dumper, stats: &DeframeStats) -> Result<()> {
+/// Writes the summary into its (already created) file and commits it.
+fn write_summary(
+    mut file: AtomicFile,
+    path: &std::path::Path,
+    dumper: &Dumper,
+    stats: &DeframeStats,
+) -> Result<()> {
     let summary = Summary {
         input: &dumper.name,
         stats,
         invalid_messages: dumper.invalid,
     };
-    let mut file = rovlink::io::AtomicFile::create(path)?;
     let mut text = serde_json::to_string_pretty(&summary)?;
     text.push('\n');
-    std::io::Write::write_all(&mut file, text.as_bytes())
-        .with_context(|| format!("{}: write failed", path.display()))?;
+    std::io::Write::write_all(&mut file, text.as_bytes()).map_err(|source| IoError::Write {
+        name: path.display().to_string(),
+        source,
+    })?;
     file.commit()?;
     Ok(())
 }
 
+/// Reads the whole input (file, stdin or port) through the deframer into the sink.
+fn pump(args: &Args, dumper: &mut Dumper, deframer: &mut Deframer, sink: &mut Sink) -> Result<()> {
+    match &args.port {
+        Some(dev) => read_port(args, dev, dumper, deframer, sink)?,
+        None => {
+            let mut input = Input::open(args.input.as_deref())?;
+            let mut buf = vec![0u8; 64 * 1024];
+            loop {
+                let n = input.read_chunk(&mut buf)?;
+                if n == 0 {
+                    break;
+                }
+                deframer.push(&buf[..n]);
+                dumper.drain(deframer, sink)?;
+            }
+        }
+    }
+    deframer.finish();
+    dumper.drain(deframer, sink)
+}
+
 fn run(args: &Args) -> Result<u8> {
+    // Every output is opened before reading, so a bad path fails before a long capture.
+    let summary_file = args
+        .summary
+        .as_deref()
+        .map(AtomicFile::create)
+        .transpose()?;
     let out = Output::open(args.output.as_deref(), false)?;
     let mut sink = Sink::new(args.format, out)?;
     let mut deframer = Deframer::new();
@@ -350,28 +418,17 @@ fn run(args: &Args) -> Result<u8> {
         started: Instant::now(),
         timestamps: args.port.is_some(),
     };
-    match &args.port {
-        Some(dev) => read_port(args, dev, &mut dumper, &mut deframer, &mut sink)?,
-        None => {
-            let mut input = Input::open(args.input.as_deref())?;
-            let mut buf = vec![0u8; 64 * 1024];
-            loop {
-                let n = input.read_chunk(&mut buf)?;
-                if n == 0 {
-                    break;
-                }
-                deframer.push(&buf[..n]);
-                dumper.drain(&mut deframer, &mut sink)?;
-            }
-        }
-    }
-    deframer.finish();
-    dumper.drain(&mut deframer, &mut sink)?;
-    sink.finish()?;
+    let pumped = pump(args, &mut dumper, &mut deframer, &mut sink);
+    // The summary is said even when the run ends early (a closed pipe, a read error), once
+    // anything was read.
     let stats = deframer.stats();
-    eprintln!("rcp-dump: {}", dumper.summary(&stats));
-    if let Some(path) = &args.summary {
-        write_summary(path, &dumper, &stats)?;
+    if pumped.is_ok() || stats.bytes_in > 0 {
+        say!("{}", dumper.summary(&stats));
+    }
+    pumped?;
+    sink.finish()?;
+    if let (Some(file), Some(path)) = (summary_file, &args.summary) {
+        write_summary(file, path, &dumper, &stats)?;
     }
     let clean = stats.bytes_skipped == 0 && dumper.invalid == 0;
     if args.strict && !clean {
@@ -384,7 +441,28 @@ fn run(args: &Args) -> Result<u8> {
     Ok(EXIT_OK)
 }
 
+/// Refuses --port's options without --port (clap's `requires` is not enforced next to a
+/// positional input that conflicts with --port).
+fn check_usage(args: &Args) {
+    let port_only = [
+        ("--baud", args.baud.is_some()),
+        ("--idle-ms", args.idle_ms.is_some()),
+    ];
+    if args.port.is_none()
+        && let Some((flag, _)) = port_only.iter().find(|(_, given)| *given)
+    {
+        use clap::CommandFactory;
+        Args::command()
+            .error(
+                clap::error::ErrorKind::MissingRequiredArgument,
+                format!("{flag} only applies with --port DEV"),
+            )
+            .exit();
+    }
+}
+
 fn main() -> ExitCode {
     let args = Args::parse();
-    rovlink::io::finish_main("rcp-dump", run(&args))
+    check_usage(&args);
+    rovlink::io::finish_main(TOOL, run(&args))
 }

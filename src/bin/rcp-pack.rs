@@ -10,6 +10,16 @@ use clap::Parser;
 use rovlink::io::{EXIT_BAD_INPUT, EXIT_OK, Input, Output};
 use rovlink::wire::{Message, MessageRepr, frame, json, rov};
 
+/// The tool's name, prefixed to everything it says on stderr.
+const TOOL: &str = "rcp-pack";
+
+/// Says something on stderr (never panics, even with stderr closed).
+macro_rules! say {
+    ($($arg:tt)*) => {
+        rovlink::io::warn(TOOL, &format!($($arg)*))
+    };
+}
+
 const EXAMPLES: &str = "\
 Examples:
   rcp-pack messages.jsonl -o frames.bin      pack a file of messages
@@ -48,25 +58,25 @@ struct Args {
     #[arg(long, value_name = "FILE", conflicts_with_all = ["input", "keep_going"])]
     image: Option<PathBuf>,
 
-    /// Trunk size in bytes for --image (1..=242; the paper's 57-byte frame carries 39).
-    #[arg(long, value_name = "BYTES", default_value_t = 39, requires = "image",
+    /// Trunk size in bytes for --image (1..=242) [default: 39, the paper's 57-byte frame].
+    #[arg(long, value_name = "BYTES", requires = "image",
           value_parser = clap::value_parser!(u16).range(1..=rov::MAX_TRUNK_BYTES as i64))]
-    trunk: u16,
+    trunk: Option<u16>,
 
-    /// Source address of the ROV for --image (1..=15).
-    #[arg(long, default_value_t = 1, requires = "image",
+    /// Source address of the ROV for --image (1..=15) [default: 1].
+    #[arg(long, requires = "image",
           value_parser = clap::value_parser!(u8).range(1..=15))]
-    src: u8,
+    src: Option<u8>,
 
-    /// Destination address for --image (0..=15).
-    #[arg(long, default_value_t = 0, requires = "image",
+    /// Destination address for --image (0..=15) [default: 0].
+    #[arg(long, requires = "image",
           value_parser = clap::value_parser!(u8).range(0..=15))]
-    dst: u8,
+    dst: Option<u8>,
 
-    /// Image sequence number (ISN) for --image, 0 or 1.
-    #[arg(long, default_value_t = 0, requires = "image",
+    /// Image sequence number (ISN) for --image, 0 or 1 [default: 0].
+    #[arg(long, requires = "image",
           value_parser = clap::value_parser!(u8).range(0..=1))]
-    isn: u8,
+    isn: Option<u8>,
 }
 
 /// Writes one frame in the chosen form.
@@ -111,14 +121,14 @@ fn pack_lines(args: &Args, out: &mut Output) -> Result<u8> {
                 frames += 1;
             }
             Err(e) if args.keep_going => {
-                eprintln!("rcp-pack: {name}:{number}: {e} (line skipped)");
+                say!("{name}:{number}: {e} (line skipped)");
                 bad += 1;
             }
             Err(e) => bail!("{name}:{number}: {e}"),
         }
     }
     if bad > 0 {
-        eprintln!("rcp-pack: {name}: {frames} frames packed, {bad} bad lines skipped");
+        say!("{name}: {frames} frames packed, {bad} bad lines skipped");
         return Ok(EXIT_BAD_INPUT);
     }
     Ok(EXIT_OK)
@@ -127,7 +137,7 @@ fn pack_lines(args: &Args, out: &mut Output) -> Result<u8> {
 fn pack_image(args: &Args, path: &std::path::Path, out: &mut Output) -> Result<u8> {
     let mut input = Input::open(Some(path))?;
     let data = input.read_all()?;
-    let trunk = usize::from(args.trunk);
+    let trunk = usize::from(args.trunk.unwrap_or(39));
     if data.is_empty() {
         bail!("{}: empty file, nothing to cut into trunks", input.name);
     }
@@ -144,12 +154,12 @@ fn pack_image(args: &Args, path: &std::path::Path, out: &mut Output) -> Result<u
     let mut bytes = Vec::with_capacity(frame::MAX_FRAME_BYTES);
     for (itsn, piece) in data.chunks(trunk).enumerate() {
         let repr = MessageRepr {
-            src: args.src,
-            dst: args.dst,
+            src: args.src.unwrap_or(1),
+            dst: args.dst.unwrap_or(0),
             message: Message::Rov(rov::Repr {
                 ft: itsn == 0,
                 lt: itsn == count - 1,
-                isn: args.isn == 1,
+                isn: args.isn == Some(1),
                 ci: false,
                 itsn: itsn as u8,
                 status: rov::Status::Basic(rov::BasicStatus::default()),
@@ -173,7 +183,30 @@ fn run(args: &Args) -> Result<u8> {
     Ok(code)
 }
 
+/// Refuses --image's options without --image (clap's `requires` is not enforced next to a
+/// positional input that conflicts with --image).
+fn check_usage(args: &Args) {
+    let image_only = [
+        ("--trunk", args.trunk.is_some()),
+        ("--src", args.src.is_some()),
+        ("--dst", args.dst.is_some()),
+        ("--isn", args.isn.is_some()),
+    ];
+    if args.image.is_none()
+        && let Some((flag, _)) = image_only.iter().find(|(_, given)| *given)
+    {
+        use clap::CommandFactory;
+        Args::command()
+            .error(
+                clap::error::ErrorKind::MissingRequiredArgument,
+                format!("{flag} only applies with --image FILE"),
+            )
+            .exit();
+    }
+}
+
 fn main() -> ExitCode {
     let args = Args::parse();
-    rovlink::io::finish_main("rcp-pack", run(&args))
+    check_usage(&args);
+    rovlink::io::finish_main(TOOL, run(&args))
 }

@@ -212,6 +212,13 @@ fn parse_rov(f: &Fields<'_>) -> Result<rov::Repr, JsonError> {
         };
         (Status::Basic(status), f.hex("trunk")?)
     } else {
+        if let Some(trunk) = f.map.get("trunk").filter(|t| t.as_str() != Some("")) {
+            return Err(f.bad(
+                "trunk",
+                "no trunk with a reserved status type (st 1..=63): status_raw holds every byte",
+                trunk,
+            ));
+        }
         let raw = f.hex("status_raw")?;
         (Status::Unknown { st, raw }, Vec::new())
     };
@@ -591,6 +598,12 @@ mod tests {
             "field order.vyaw: expected an integer -127..=127, found -128"
         );
         assert!(err("{").starts_with("not valid JSON at column 1"));
+        let reserved = r#"{"type":"rov","src":1,"dst":0,"ft":false,"lt":false,"st":5,"isn":0,"ci":false,"itsn":0,"status_raw":"0102","trunk":"ffff"}"#;
+        assert_eq!(
+            err(reserved),
+            "field trunk: expected no trunk with a reserved status type (st 1..=63): status_raw holds every byte, found \"ffff\""
+        );
+        assert!(parse_line(&reserved.replace(r#","trunk":"ffff""#, "")).is_ok());
         assert_eq!(
             err("[1]"),
             "field (line): expected a JSON object, found [1]"

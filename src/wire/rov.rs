@@ -14,8 +14,9 @@
 //! Status types other than 0 are reserved: [`Repr::parse`] keeps them as
 //! [`Status::Unknown`] with every byte after the header, since their length is not known.
 //!
-//! No-panic contract: after [`Packet::new_checked`] the header getters, and for ST = 0 the status
-//! getters, stay in bounds; [`Repr::parse`] never panics and rejects out-of-range values (angles
+//! No-panic contract: after [`Packet::new_checked`] the header getters and `trunk`, and for
+//! ST = 0 the status getters, stay in bounds (the status getters of a short message of a
+//! reserved type do not: check `st()` first); [`Repr::parse`] never panics and rejects out-of-range values (angles
 //! over 359, reserved orientation bits) with an [`Error::BadField`] naming the field.
 
 use super::{Error, Nav, Result, check_range, get_bit, with_bit, with_bits};
@@ -210,9 +211,13 @@ impl<T: AsRef<[u8]>> Packet<T> {
         ((self.orientation() >> field::YAW_SHIFT) & field::ANGLE_MASK) as u16
     }
 
-    /// The image trunk (ST = 0): every byte after the status block.
+    /// The image trunk (ST = 0): every byte after the status block (empty when the buffer ends
+    /// before it, as a short message of a reserved status type may).
     pub fn trunk(&self) -> &[u8] {
-        &self.buffer.as_ref()[field::TRUNK_START..]
+        self.buffer
+            .as_ref()
+            .get(field::TRUNK_START..)
+            .unwrap_or(&[])
     }
 
     /// Every byte after the two header bytes (the status block of an unknown type, and more).
