@@ -122,6 +122,27 @@ pub fn warn(tool: &str, message: &str) {
     let _ = writeln!(io::stderr(), "{tool}: {message}");
 }
 
+/// Exits with a usage error (code 2) when an option that only applies together with `parent`
+/// was given without it. clap's own `requires` is not enforced next to a positional argument
+/// that conflicts with `parent`, hence this check.
+pub fn only_with<A: clap::CommandFactory>(
+    parent_given: bool,
+    parent: &str,
+    options: &[(&str, bool)],
+) {
+    if parent_given {
+        return;
+    }
+    if let Some((flag, _)) = options.iter().find(|(_, given)| *given) {
+        A::command()
+            .error(
+                clap::error::ErrorKind::MissingRequiredArgument,
+                format!("{flag} only applies with {parent}"),
+            )
+            .exit();
+    }
+}
+
 /// True when `path` means standard input/output (`None` or `-`).
 pub fn is_std(path: Option<&Path>) -> bool {
     path.is_none_or(|p| p.as_os_str() == "-")

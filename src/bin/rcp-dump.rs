@@ -441,28 +441,15 @@ fn run(args: &Args) -> Result<u8> {
     Ok(EXIT_OK)
 }
 
-/// Refuses --port's options without --port (clap's `requires` is not enforced next to a
-/// positional input that conflicts with --port).
-fn check_usage(args: &Args) {
-    let port_only = [
-        ("--baud", args.baud.is_some()),
-        ("--idle-ms", args.idle_ms.is_some()),
-    ];
-    if args.port.is_none()
-        && let Some((flag, _)) = port_only.iter().find(|(_, given)| *given)
-    {
-        use clap::CommandFactory;
-        Args::command()
-            .error(
-                clap::error::ErrorKind::MissingRequiredArgument,
-                format!("{flag} only applies with --port DEV"),
-            )
-            .exit();
-    }
-}
-
 fn main() -> ExitCode {
     let args = Args::parse();
-    check_usage(&args);
+    rovlink::io::only_with::<Args>(
+        args.port.is_some(),
+        "--port DEV",
+        &[
+            ("--baud", args.baud.is_some()),
+            ("--idle-ms", args.idle_ms.is_some()),
+        ],
+    );
     rovlink::io::finish_main(TOOL, run(&args))
 }

@@ -183,30 +183,17 @@ fn run(args: &Args) -> Result<u8> {
     Ok(code)
 }
 
-/// Refuses --image's options without --image (clap's `requires` is not enforced next to a
-/// positional input that conflicts with --image).
-fn check_usage(args: &Args) {
-    let image_only = [
-        ("--trunk", args.trunk.is_some()),
-        ("--src", args.src.is_some()),
-        ("--dst", args.dst.is_some()),
-        ("--isn", args.isn.is_some()),
-    ];
-    if args.image.is_none()
-        && let Some((flag, _)) = image_only.iter().find(|(_, given)| *given)
-    {
-        use clap::CommandFactory;
-        Args::command()
-            .error(
-                clap::error::ErrorKind::MissingRequiredArgument,
-                format!("{flag} only applies with --image FILE"),
-            )
-            .exit();
-    }
-}
-
 fn main() -> ExitCode {
     let args = Args::parse();
-    check_usage(&args);
+    rovlink::io::only_with::<Args>(
+        args.image.is_some(),
+        "--image FILE",
+        &[
+            ("--trunk", args.trunk.is_some()),
+            ("--src", args.src.is_some()),
+            ("--dst", args.dst.is_some()),
+            ("--isn", args.isn.is_some()),
+        ],
+    );
     rovlink::io::finish_main(TOOL, run(&args))
 }

@@ -16,8 +16,9 @@
 //!
 //! No-panic contract: after [`Packet::new_checked`] the header getters and `trunk`, and for
 //! ST = 0 the status getters, stay in bounds (the status getters of a short message of a
-//! reserved type do not: check `st()` first); [`Repr::parse`] never panics and rejects out-of-range values (angles
-//! over 359, reserved orientation bits) with an [`Error::BadField`] naming the field.
+//! reserved type do not: check `st()` first); [`Repr::parse`] never panics and rejects
+//! out-of-range values (angles over 359, reserved orientation bits) with an
+//! [`Error::BadField`] naming the field.
 
 use super::{Error, Nav, Result, check_range, get_bit, with_bit, with_bits};
 
