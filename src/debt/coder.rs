@@ -238,7 +238,9 @@ impl Band {
     }
 
     fn sig_at(&self, level: usize, x: isize, y: isize) -> bool {
-        let (w, h) = self.dims[level];
+        let Some(&(w, h)) = self.dims.get(level) else {
+            return false;
+        };
         x >= 0
             && y >= 0
             && (x as usize) < w

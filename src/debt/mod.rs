@@ -1,4 +1,999 @@
-//! DEBT: an embedded wavelet image codec for links of a few kbit/s (work in progress).
+//! DEBT (Depth Embedded Block Tree): an embedded wavelet image codec for links of a few kbit/s.
+//!
+//! An image becomes a few-byte header and one range-coded stream of bit-plane decisions (see
+//! [`coder`]). The stream is embedded: cut it after any byte and the prefix decodes to the best
+//! image those bytes can describe; the encoder stops at exactly the budget asked. A region of
+//! interest is coded first by scaling its coefficients up by `roi_shift` bit-planes.
+//!
+//! Pipeline: optional downscale by 2^scale -> colour transform (YCbCr for lossy, the reversible
+//! RCT for lossless) -> wavelet (9/7 lossy, 5/3 lossless, see [`wavelet`]) -> coefficients
+//! weighted so that a bit-plane is worth the same squared error in every subband and component
+//! (RGB error) -> block-tree bit-plane coding with adaptive contexts.
+//!
+//! Status: the codec core; the command-line tools, the loss-resilient segmenting and the
+//! comparison scripts are still to come (issue 3). The bitstream is described in
+//! `docs/debt-format.md`.
+//!
+//! No-panic contract: [`decode`] returns an [`Error`] for a stream that is not DEBT and decodes
+//! any other bytes, truncated or corrupt, to some image without panicking.
+
 pub mod coder;
 pub mod rangecoder;
 pub mod wavelet;
+
+use coder::{Band, BitCoder, Decoder, Encoder};
+use wavelet::Orientation;
+
+/// Codec errors.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum Error {
+    /// The stream is shorter than its header.
+    #[error("DEBT header: need {expected} bytes, found {found}")]
+    Truncated {
+        /// Bytes the header needs.
+        expected: usize,
+        /// Bytes available.
+        found: usize,
+    },
+    /// The first byte does not say DEBT.
+    #[error("not a DEBT stream: first byte 0x{found:02x}, expected 0xd1 (DEBT version 1)")]
+    NotDebt {
+        /// The byte found.
+        found: u8,
+    },
+    /// A DEBT stream of a version this build does not know.
+    #[error("DEBT version {found} is not supported (this build reads version {VERSION})")]
+    Version {
+        /// The version found.
+        found: u8,
+    },
+    /// An image this format cannot hold.
+    #[error("image {width}x{height}: DEBT holds 1x1 to {MAX_SIDE}x{MAX_SIDE} pixels")]
+    Size {
+        /// Width in pixels.
+        width: usize,
+        /// Height in pixels.
+        height: usize,
+    },
+    /// Pixel data that does not match the stated size.
+    #[error("image data: expected {expected} bytes for the size and channels, found {found}")]
+    Data {
+        /// Bytes expected.
+        expected: usize,
+        /// Bytes found.
+        found: usize,
+    },
+    /// A setting out of range.
+    #[error("{field}: expected {expected}, found {found}")]
+    Setting {
+        /// The setting.
+        field: &'static str,
+        /// What it takes.
+        expected: &'static str,
+        /// The value found.
+        found: u64,
+    },
+}
+
+/// The bitstream version this build writes and reads.
+pub const VERSION: u8 = 1;
+const MAGIC: u8 = 0xd0;
+/// The largest width or height.
+pub const MAX_SIDE: usize = 4096;
+/// Bits of fraction kept below the weighted coefficient's unit (finest quantiser step 1/4).
+const FRACTION_BITS: u32 = 2;
+/// Squared-error weight of Y, Cb, Cr errors in RGB (columns of the inverse ICT, averaged).
+const COMPONENT_MSE_WEIGHTS: [f32; 3] = [1.0, 1.086, 0.825];
+
+/// An 8-bit image, 1 (grey) or 3 (RGB) interleaved channels.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Image {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// 1 or 3.
+    pub channels: usize,
+    /// Row-major, interleaved samples.
+    pub data: Vec<u8>,
+}
+
+/// A rectangle of pixels, `x1`/`y1` exclusive.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Rect {
+    /// Left.
+    pub x0: usize,
+    /// Top.
+    pub y0: usize,
+    /// Right, exclusive.
+    pub x1: usize,
+    /// Bottom, exclusive.
+    pub y1: usize,
+}
+
+/// Encoder settings.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct EncodeOptions {
+    /// The byte budget: the stream is exactly this long unless the image codes completely in
+    /// fewer.
+    pub bytes: usize,
+    /// Wavelet levels (0..=7); `None` picks by image size.
+    pub levels: Option<u32>,
+    /// Code luma only.
+    pub gray: bool,
+    /// Reversible 5/3 transform and colour transform: with enough bytes, exact.
+    pub lossless: bool,
+    /// Encode at 1/2^scale of the size (0..=3); the decoder scales back up.
+    pub scale: u32,
+    /// Region of interest in pixels, coded first.
+    pub roi: Option<Rect>,
+    /// Bit-planes the region of interest is raised by (1..=15).
+    pub roi_shift: u32,
+}
+
+impl Default for EncodeOptions {
+    fn default() -> Self {
+        EncodeOptions {
+            bytes: 1000,
+            levels: None,
+            gray: false,
+            lossless: false,
+            scale: 0,
+            roi: None,
+            roi_shift: 3,
+        }
+    }
+}
+
+/// What the header says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Header {
+    /// Width of the image the decoder produces.
+    pub width: usize,
+    /// Height of the image the decoder produces.
+    pub height: usize,
+    /// One component (grey) or three.
+    pub gray: bool,
+    /// Reversible coding.
+    pub lossless: bool,
+    /// Wavelet levels.
+    pub levels: u32,
+    /// Downscale exponent.
+    pub scale: u32,
+    /// ROI as 1/32 cells: first and last column cell, first and last row cell; and its shift.
+    pub roi: Option<([u8; 4], u32)>,
+}
+
+/// ROI cells per image side in the header.
+const ROI_CELLS: usize = 32;
+
+impl Header {
+    /// Bytes the header takes: 5, or 8 with a region of interest.
+    pub fn len(&self) -> usize {
+        if self.roi.is_some() { 8 } else { 5 }
+    }
+
+    /// Always false: a header is never empty (for clippy's len-without-is-empty).
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    fn write(&self, out: &mut Vec<u8>) {
+        out.push(MAGIC | VERSION);
+        let size = ((self.width as u32 - 1) << 12) | (self.height as u32 - 1);
+        out.extend_from_slice(&size.to_be_bytes()[1..]);
+        out.push(
+            u8::from(self.gray) << 7
+                | u8::from(self.lossless) << 6
+                | (self.levels as u8) << 3
+                | (self.scale as u8) << 1
+                | u8::from(self.roi.is_some()),
+        );
+        if let Some((c, shift)) = self.roi {
+            let bits = (shift << 20)
+                | (u32::from(c[0]) << 15)
+                | (u32::from(c[1]) << 10)
+                | (u32::from(c[2]) << 5)
+                | u32::from(c[3]);
+            out.extend_from_slice(&bits.to_be_bytes()[1..]);
+        }
+    }
+
+    /// Reads a header from the start of a stream.
+    pub fn read(data: &[u8]) -> Result<Header, Error> {
+        let first = *data.first().ok_or(Error::Truncated {
+            expected: 5,
+            found: 0,
+        })?;
+        if first & 0xf0 != MAGIC {
+            return Err(Error::NotDebt { found: first });
+        }
+        if first & 0x0f != VERSION {
+            return Err(Error::Version {
+                found: first & 0x0f,
+            });
+        }
+        if data.len() < 5 {
+            return Err(Error::Truncated {
+                expected: 5,
+                found: data.len(),
+            });
+        }
+        let size = u32::from_be_bytes([0, data[1], data[2], data[3]]);
+        let flags = data[4];
+        let mut header = Header {
+            width: (size >> 12) as usize + 1,
+            height: (size & 0xfff) as usize + 1,
+            gray: flags & 0x80 != 0,
+            lossless: flags & 0x40 != 0,
+            levels: u32::from((flags >> 3) & 0x07),
+            scale: u32::from((flags >> 1) & 0x03),
+            roi: None,
+        };
+        if flags & 1 != 0 {
+            if data.len() < 8 {
+                return Err(Error::Truncated {
+                    expected: 8,
+                    found: data.len(),
+                });
+            }
+            let bits = u32::from_be_bytes([0, data[5], data[6], data[7]]);
+            let cell = |shift: u32| ((bits >> shift) & 0x1f) as u8;
+            let cells = [cell(15), cell(10), cell(5), cell(0)];
+            let shift = bits >> 20;
+            if cells[1] < cells[0] || cells[3] < cells[2] || shift == 0 {
+                return Err(Error::Setting {
+                    field: "ROI",
+                    expected: "first cell <= last cell, shift 1..=15",
+                    found: u64::from(bits),
+                });
+            }
+            header.roi = Some(([cells[0], cells[1], cells[2], cells[3]], shift));
+        }
+        Ok(header)
+    }
+
+    /// Size of the coded (downscaled) image.
+    pub fn coded_size(&self) -> (usize, usize) {
+        (
+            self.width.div_ceil(1 << self.scale),
+            self.height.div_ceil(1 << self.scale),
+        )
+    }
+
+    /// The ROI in coded-image pixels.
+    fn roi_rect(&self) -> Option<(Rect, u32)> {
+        let (cw, ch) = self.coded_size();
+        self.roi.map(|(c, shift)| {
+            let edge = |cell: usize, side: usize| cell * side / ROI_CELLS;
+            (
+                Rect {
+                    x0: edge(c[0].into(), cw),
+                    x1: edge(usize::from(c[1]) + 1, cw).max(edge(c[0].into(), cw) + 1),
+                    y0: edge(c[2].into(), ch),
+                    y1: edge(usize::from(c[3]) + 1, ch).max(edge(c[2].into(), ch) + 1),
+                },
+                shift,
+            )
+        })
+    }
+
+    fn components(&self) -> usize {
+        if self.gray { 1 } else { 3 }
+    }
+}
+
+/// Wavelet levels for a coded image: the low-pass band keeps at least 8 pixels a side, at most
+/// 7 levels.
+pub fn default_levels(width: usize, height: usize) -> u32 {
+    let side = width.min(height);
+    let mut levels = 0;
+    while levels < 7 && side >> (levels + 1) >= 8 {
+        levels += 1;
+    }
+    levels
+}
+
+fn orientation_code(o: Orientation) -> u8 {
+    match o {
+        Orientation::Ll => 0,
+        Orientation::Hl => 1,
+        Orientation::Lh => 2,
+        Orientation::Hh => 3,
+    }
+}
+
+fn class_of(o: Orientation) -> usize {
+    match o {
+        Orientation::Ll => 0,
+        Orientation::Hl | Orientation::Lh => 1,
+        Orientation::Hh => 2,
+    }
+}
+
+/// True if coefficient (`x`, `y`) of a subband at `level` touches the ROI (with one
+/// coefficient of margin for the filters' support).
+fn in_roi(roi: &Rect, level: u32, x: usize, y: usize) -> bool {
+    let x0 = (roi.x0 >> level).saturating_sub(1);
+    let y0 = (roi.y0 >> level).saturating_sub(1);
+    let x1 = roi.x1.div_ceil(1 << level) + 1;
+    let y1 = roi.y1.div_ceil(1 << level) + 1;
+    x >= x0 && x < x1 && y >= y0 && y < y1
+}
+
+/// Per-subband weights (one per subband in coding order).
+fn subband_weights(header: &Header, bands: &[wavelet::Subband]) -> Vec<f32> {
+    if header.lossless {
+        return vec![1.0; bands.len()];
+    }
+    let norms = wavelet::synthesis_norms_97(header.levels.max(1));
+    bands
+        .iter()
+        .map(|b| {
+            if header.levels == 0 {
+                return 1.0;
+            }
+            norms
+                .iter()
+                .find(|n| n.0 == b.level && n.1 == b.orientation)
+                .map_or(1.0, |n| n.2)
+        })
+        .collect()
+}
+
+/// Box-filter downscale by 2^scale.
+fn downscale(img: &Image, scale: u32) -> Image {
+    if scale == 0 {
+        return img.clone();
+    }
+    let f = 1usize << scale;
+    let (w, h) = (img.width.div_ceil(f), img.height.div_ceil(f));
+    let c = img.channels;
+    let mut data = vec![0u8; w * h * c];
+    for y in 0..h {
+        for x in 0..w {
+            for ch in 0..c {
+                let (mut sum, mut n) = (0u32, 0u32);
+                for yy in y * f..((y + 1) * f).min(img.height) {
+                    for xx in x * f..((x + 1) * f).min(img.width) {
+                        sum += u32::from(img.data[(yy * img.width + xx) * c + ch]);
+                        n += 1;
+                    }
+                }
+                data[(y * w + x) * c + ch] = ((sum + n / 2) / n) as u8;
+            }
+        }
+    }
+    Image {
+        width: w,
+        height: h,
+        channels: c,
+        data,
+    }
+}
+
+/// Bilinear upscale to `width` x `height`.
+fn upscale(img: &Image, width: usize, height: usize) -> Image {
+    if img.width == width && img.height == height {
+        return img.clone();
+    }
+    let c = img.channels;
+    let (sx, sy) = (
+        img.width as f32 / width as f32,
+        img.height as f32 / height as f32,
+    );
+    let mut data = vec![0u8; width * height * c];
+    for y in 0..height {
+        let fy = ((y as f32 + 0.5) * sy - 0.5).clamp(0.0, (img.height - 1) as f32);
+        let (y0, ty) = (fy.floor() as usize, fy - fy.floor());
+        let y1 = (y0 + 1).min(img.height - 1);
+        for x in 0..width {
+            let fx = ((x as f32 + 0.5) * sx - 0.5).clamp(0.0, (img.width - 1) as f32);
+            let (x0, tx) = (fx.floor() as usize, fx - fx.floor());
+            let x1 = (x0 + 1).min(img.width - 1);
+            for ch in 0..c {
+                let p = |xx: usize, yy: usize| f32::from(img.data[(yy * img.width + xx) * c + ch]);
+                let top = p(x0, y0) * (1.0 - tx) + p(x1, y0) * tx;
+                let bottom = p(x0, y1) * (1.0 - tx) + p(x1, y1) * tx;
+                data[(y * width + x) * c + ch] =
+                    (top * (1.0 - ty) + bottom * ty).round().clamp(0.0, 255.0) as u8;
+            }
+        }
+    }
+    Image {
+        width,
+        height,
+        channels: c,
+        data,
+    }
+}
+
+/// Component planes of an image, as `f32` (lossy: level-shifted YCbCr) or exact integers held
+/// in `f32` (lossless: RCT).
+fn to_components(img: &Image, gray: bool, lossless: bool) -> Vec<Vec<f32>> {
+    let n = img.width * img.height;
+    let px = |i: usize| -> (f32, f32, f32) {
+        if img.channels == 1 {
+            let v = f32::from(img.data[i]);
+            (v, v, v)
+        } else {
+            let p = &img.data[i * 3..i * 3 + 3];
+            (f32::from(p[0]), f32::from(p[1]), f32::from(p[2]))
+        }
+    };
+    if gray {
+        let y = (0..n)
+            .map(|i| {
+                let (r, g, b) = px(i);
+                if img.channels == 1 {
+                    r - 128.0
+                } else if lossless {
+                    ((r + 2.0 * g + b) / 4.0).floor() - 128.0
+                } else {
+                    0.299 * r + 0.587 * g + 0.114 * b - 128.0
+                }
+            })
+            .collect();
+        return vec![y];
+    }
+    let (mut ys, mut cbs, mut crs) = (
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+    );
+    for i in 0..n {
+        let (r, g, b) = px(i);
+        let (y, cb, cr) = if lossless {
+            (((r + 2.0 * g + b) / 4.0).floor() - 128.0, b - g, r - g)
+        } else {
+            (
+                0.299 * r + 0.587 * g + 0.114 * b - 128.0,
+                -0.168_736 * r - 0.331_264 * g + 0.5 * b,
+                0.5 * r - 0.418_688 * g - 0.081_312 * b,
+            )
+        };
+        ys.push(y);
+        cbs.push(cb);
+        crs.push(cr);
+    }
+    vec![ys, cbs, crs]
+}
+
+fn from_components(planes: &[Vec<f32>], width: usize, height: usize, lossless: bool) -> Image {
+    let n = width * height;
+    let clamp = |v: f32| v.round().clamp(0.0, 255.0) as u8;
+    if planes.len() == 1 {
+        let data = planes[0].iter().map(|&y| clamp(y + 128.0)).collect();
+        return Image {
+            width,
+            height,
+            channels: 1,
+            data,
+        };
+    }
+    let mut data = vec![0u8; n * 3];
+    for i in 0..n {
+        let (y, cb, cr) = (planes[0][i] + 128.0, planes[1][i], planes[2][i]);
+        let (r, g, b) = if lossless {
+            let g = y - ((cb + cr) / 4.0).floor();
+            (cr + g, g, cb + g)
+        } else {
+            (
+                y + 1.402 * cr,
+                y - 0.344_136 * cb - 0.714_136 * cr,
+                y + 1.772 * cb,
+            )
+        };
+        data[i * 3] = clamp(r);
+        data[i * 3 + 1] = clamp(g);
+        data[i * 3 + 2] = clamp(b);
+    }
+    Image {
+        width,
+        height,
+        channels: 3,
+        data,
+    }
+}
+
+/// Runs the forward (or inverse) transform of the header's kind on one component plane.
+fn transform(plane: &mut [f32], width: usize, height: usize, header: &Header, forward: bool) {
+    if header.lossless {
+        let mut ints: Vec<i32> = plane.iter().map(|&v| v.round() as i32).collect();
+        if forward {
+            wavelet::forward_53(&mut ints, width, height, header.levels);
+        } else {
+            wavelet::inverse_53(&mut ints, width, height, header.levels);
+        }
+        for (p, i) in plane.iter_mut().zip(ints) {
+            *p = i as f32;
+        }
+    } else if forward {
+        wavelet::forward_97(plane, width, height, header.levels);
+    } else {
+        wavelet::inverse_97(plane, width, height, header.levels);
+    }
+}
+
+/// The coder's band list for a header: (component, subband) pairs in coding order, with the
+/// quantised data when encoding.
+fn build_bands(
+    header: &Header,
+    planes: Option<&[Vec<f32>]>,
+) -> (Vec<Band>, Vec<(usize, wavelet::Subband, f32)>) {
+    let (w, h) = header.coded_size();
+    let subbands = wavelet::subbands(w, h, header.levels);
+    let weights = subband_weights(header, &subbands);
+    let roi = header.roi_rect();
+    let mut layout = Vec::new();
+    let mut keys = Vec::new();
+    for (sb, &weight) in subbands.iter().zip(&weights) {
+        for (comp, mse_weight) in COMPONENT_MSE_WEIGHTS
+            .iter()
+            .enumerate()
+            .take(header.components())
+        {
+            let comp_weight = if header.lossless || header.gray {
+                1.0
+            } else {
+                mse_weight.sqrt()
+            };
+            layout.push((comp, *sb, weight * comp_weight));
+            keys.push((comp, orientation_code(sb.orientation), sb.level));
+        }
+    }
+    let parents = coder::parents(&keys);
+    let bands = layout
+        .iter()
+        .zip(parents)
+        .map(|(&(comp, sb, weight), parent)| {
+            let data = planes.map(|planes| {
+                let plane = &planes[comp];
+                let n = sb.width * sb.height;
+                let (mut mag, mut neg) = (Vec::with_capacity(n), Vec::with_capacity(n));
+                let scale = if header.lossless {
+                    1.0
+                } else {
+                    weight * (1 << FRACTION_BITS) as f32
+                };
+                for y in 0..sb.height {
+                    for x in 0..sb.width {
+                        let c = plane[(sb.y0 + y) * w + sb.x0 + x];
+                        let mut m = (c.abs() * scale) as u32;
+                        if let Some((rect, shift)) = roi
+                            && in_roi(&rect, sb.level, x, y)
+                        {
+                            // Saturates (at 2^31 - 1) rather than wraps for extreme shifts.
+                            m = (u64::from(m) << shift).min(u64::from(u32::MAX >> 1)) as u32;
+                        }
+                        mag.push(m);
+                        neg.push(c < 0.0);
+                    }
+                }
+                (mag, neg)
+            });
+            Band::new(sb.width, sb.height, class_of(sb.orientation), parent, data)
+        })
+        .collect();
+    (bands, layout)
+}
+
+/// Encodes an image within `options.bytes` bytes.
+pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
+    if img.width == 0 || img.height == 0 || img.width > MAX_SIDE || img.height > MAX_SIDE {
+        return Err(Error::Size {
+            width: img.width,
+            height: img.height,
+        });
+    }
+    if img.channels != 1 && img.channels != 3 {
+        return Err(Error::Setting {
+            field: "channels",
+            expected: "1 or 3",
+            found: img.channels as u64,
+        });
+    }
+    let expected = img.width * img.height * img.channels;
+    if img.data.len() != expected {
+        return Err(Error::Data {
+            expected,
+            found: img.data.len(),
+        });
+    }
+    if options.scale > 3 {
+        return Err(Error::Setting {
+            field: "scale",
+            expected: "0..=3",
+            found: options.scale.into(),
+        });
+    }
+    let coded = downscale(img, options.scale);
+    let levels = options
+        .levels
+        .unwrap_or_else(|| default_levels(coded.width, coded.height));
+    if levels > 7 {
+        return Err(Error::Setting {
+            field: "levels",
+            expected: "0..=7",
+            found: levels.into(),
+        });
+    }
+    let roi = match options.roi {
+        None => None,
+        Some(r) => {
+            if !(1..=15).contains(&options.roi_shift) {
+                return Err(Error::Setting {
+                    field: "roi_shift",
+                    expected: "1..=15",
+                    found: options.roi_shift.into(),
+                });
+            }
+            if r.x0 >= r.x1 || r.y0 >= r.y1 || r.x1 > img.width || r.y1 > img.height {
+                return Err(Error::Setting {
+                    field: "ROI",
+                    expected: "x0 < x1 <= width, y0 < y1 <= height",
+                    found: 0,
+                });
+            }
+            let cell = |v: usize, side: usize| ((v * ROI_CELLS) / side).min(ROI_CELLS - 1) as u8;
+            let last = |v: usize, side: usize| {
+                ((v * ROI_CELLS).div_ceil(side) - 1).min(ROI_CELLS - 1) as u8
+            };
+            Some((
+                [
+                    cell(r.x0, img.width),
+                    last(r.x1, img.width),
+                    cell(r.y0, img.height),
+                    last(r.y1, img.height),
+                ],
+                options.roi_shift,
+            ))
+        }
+    };
+    let header = Header {
+        width: img.width,
+        height: img.height,
+        gray: options.gray || img.channels == 1,
+        lossless: options.lossless,
+        levels,
+        scale: options.scale,
+        roi,
+    };
+    let mut out = Vec::with_capacity(options.bytes);
+    header.write(&mut out);
+    if options.bytes < out.len() {
+        return Err(Error::Setting {
+            field: "bytes",
+            expected: "at least the header (5 bytes, 8 with a ROI)",
+            found: options.bytes as u64,
+        });
+    }
+    let (w, h) = header.coded_size();
+    let mut planes = to_components(&coded, header.gray, header.lossless);
+    for plane in &mut planes {
+        transform(plane, w, h, &header, true);
+    }
+    let (mut bands, _) = build_bands(&header, Some(&planes));
+    let max = bands.iter().map(Band::max_magnitude).max().unwrap_or(0);
+    let plane_count = 32 - max.leading_zeros();
+    let budget = options.bytes - out.len();
+    let mut enc = Encoder::new(budget);
+    let complete = enc.raw(plane_count, 5).is_ok()
+        && coder::code_planes(&mut bands, plane_count, &mut enc).is_ok();
+    let mut payload = enc.finish(complete);
+    if complete {
+        payload.truncate(budget);
+    } else {
+        payload.resize(budget, 0);
+    }
+    out.extend_from_slice(&payload);
+    Ok(out)
+}
+
+/// Decodes a stream (or any prefix of one).
+pub fn decode(data: &[u8]) -> Result<Image, Error> {
+    let header = Header::read(data)?;
+    let (w, h) = header.coded_size();
+    let payload = &data[header.len().min(data.len())..];
+    let (mut bands, layout) = build_bands(&header, None);
+    let mut dec = Decoder::new(payload);
+    if let Ok(planes) = dec.raw(0, 5) {
+        let _ = coder::code_planes(&mut bands, planes, &mut dec);
+    }
+    let roi = header.roi_rect();
+    let mut planes = vec![vec![0.0f32; w * h]; header.components()];
+    for (band, &(comp, sb, weight)) in bands.iter().zip(&layout) {
+        let scale = if header.lossless {
+            1.0
+        } else {
+            weight * (1 << FRACTION_BITS) as f32
+        };
+        for y in 0..sb.height {
+            for x in 0..sb.width {
+                let i = y * sb.width + x;
+                let known = band.known[i];
+                if known == u8::MAX {
+                    continue;
+                }
+                let mag = band.mag[i];
+                let mut value = if known == 0 {
+                    mag as f32 + if header.lossless { 0.0 } else { 0.5 }
+                } else {
+                    mag as f32 + 0.5 * (1u64 << known) as f32
+                };
+                if let Some((rect, shift)) = roi
+                    && in_roi(&rect, sb.level, x, y)
+                {
+                    value /= (1u64 << shift) as f32;
+                    if header.lossless {
+                        value = value.floor();
+                    }
+                }
+                let value = value / scale;
+                planes[comp][(sb.y0 + y) * w + sb.x0 + x] =
+                    if band.neg[i] { -value } else { value };
+            }
+        }
+    }
+    for plane in &mut planes {
+        transform(plane, w, h, &header, false);
+    }
+    let img = from_components(&planes, w, h, header.lossless);
+    Ok(upscale(&img, header.width, header.height))
+}
+
+/// Peak signal-to-noise ratio in dB between two images of the same shape (infinite when equal).
+pub fn psnr(a: &Image, b: &Image) -> f64 {
+    let sse: f64 = a
+        .data
+        .iter()
+        .zip(&b.data)
+        .map(|(&x, &y)| (f64::from(x) - f64::from(y)).powi(2))
+        .sum();
+    if sse == 0.0 {
+        return f64::INFINITY;
+    }
+    let mse = sse / a.data.len() as f64;
+    10.0 * (255.0f64 * 255.0 / mse).log10()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A smooth synthetic colour image with some edges and texture.
+    fn synthetic(width: usize, height: usize, channels: usize) -> Image {
+        let mut data = Vec::with_capacity(width * height * channels);
+        for y in 0..height {
+            for x in 0..width {
+                let fx = x as f32 / width as f32;
+                let fy = y as f32 / height as f32;
+                let base = 128.0 + 80.0 * (fx * 6.0).sin() * (fy * 4.0).cos();
+                let edge = if (x / 16 + y / 16) % 2 == 0 {
+                    30.0
+                } else {
+                    -30.0
+                };
+                for c in 0..channels {
+                    let v = base + edge * (c as f32 - 1.0) + ((x * 7 + y * 13 + c * 5) % 11) as f32;
+                    data.push(v.clamp(0.0, 255.0) as u8);
+                }
+            }
+        }
+        Image {
+            width,
+            height,
+            channels,
+            data,
+        }
+    }
+
+    #[test]
+    fn header_round_trip() {
+        let h = Header {
+            width: 640,
+            height: 360,
+            gray: false,
+            lossless: true,
+            levels: 5,
+            scale: 2,
+            roi: Some(([1, 30, 2, 29], 7)),
+        };
+        let mut out = Vec::new();
+        h.write(&mut out);
+        assert_eq!(out.len(), 8);
+        assert_eq!(Header::read(&out).unwrap(), h);
+        assert_eq!(
+            Header::read(&[0x55, 0, 0, 0, 0]),
+            Err(Error::NotDebt { found: 0x55 })
+        );
+        assert_eq!(
+            Header::read(&[0xd7, 0, 0, 0, 0]),
+            Err(Error::Version { found: 7 })
+        );
+        assert_eq!(
+            Header::read(&[0xd1, 0]),
+            Err(Error::Truncated {
+                expected: 5,
+                found: 2
+            })
+        );
+    }
+
+    #[test]
+    fn exact_budget_and_rising_quality() {
+        let img = synthetic(96, 64, 3);
+        let mut last = 0.0;
+        for bytes in [40, 100, 300, 1000, 3000] {
+            let stream = encode(
+                &img,
+                &EncodeOptions {
+                    bytes,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            assert_eq!(stream.len(), bytes);
+            let out = decode(&stream).unwrap();
+            assert_eq!((out.width, out.height, out.channels), (96, 64, 3));
+            let q = psnr(&img, &out);
+            assert!(q > last, "{bytes} bytes: {q:.2} dB after {last:.2} dB");
+            last = q;
+        }
+        assert!(last > 30.0, "3000 bytes give only {last:.2} dB");
+    }
+
+    #[test]
+    fn prefixes_decode_and_improve() {
+        let img = synthetic(64, 48, 3);
+        let stream = encode(
+            &img,
+            &EncodeOptions {
+                bytes: 2000,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let mut last = 0.0;
+        for cut in [5, 20, 60, 200, 600, 2000] {
+            let q = psnr(&img, &decode(&stream[..cut]).unwrap());
+            assert!(q >= last - 0.05, "{cut} bytes: {q:.2} dB after {last:.2}");
+            last = q;
+        }
+        // A prefix decodes like a stream encoded for that budget, give or take the margin.
+        let direct = encode(
+            &img,
+            &EncodeOptions {
+                bytes: 600,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let (a, b) = (
+            psnr(&img, &decode(&stream[..600]).unwrap()),
+            psnr(&img, &decode(&direct).unwrap()),
+        );
+        assert!((a - b).abs() < 0.5, "prefix {a:.2} dB, direct {b:.2} dB");
+    }
+
+    #[test]
+    fn lossless_is_exact() {
+        for (w, h, c) in [(33, 17, 3), (16, 16, 1), (1, 1, 3), (7, 1, 1)] {
+            let img = synthetic(w, h, c);
+            let stream = encode(
+                &img,
+                &EncodeOptions {
+                    bytes: 1 << 20,
+                    lossless: true,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            assert!(stream.len() < w * h * c + 64);
+            assert_eq!(decode(&stream).unwrap(), img, "{w}x{h}x{c}");
+        }
+    }
+
+    #[test]
+    fn gray_scale_and_roi() {
+        let img = synthetic(128, 96, 3);
+        let gray = decode(
+            &encode(
+                &img,
+                &EncodeOptions {
+                    bytes: 500,
+                    gray: true,
+                    ..Default::default()
+                },
+            )
+            .unwrap(),
+        )
+        .unwrap();
+        assert_eq!(gray.channels, 1);
+        let small = decode(
+            &encode(
+                &img,
+                &EncodeOptions {
+                    bytes: 500,
+                    scale: 1,
+                    ..Default::default()
+                },
+            )
+            .unwrap(),
+        )
+        .unwrap();
+        assert_eq!((small.width, small.height), (128, 96));
+        let roi = Rect {
+            x0: 32,
+            y0: 32,
+            x1: 64,
+            y1: 64,
+        };
+        let crop = |im: &Image| {
+            let mut data = Vec::new();
+            for y in roi.y0..roi.y1 {
+                data.extend_from_slice(
+                    &im.data[(y * im.width + roi.x0) * 3..(y * im.width + roi.x1) * 3],
+                );
+            }
+            Image {
+                width: roi.x1 - roi.x0,
+                height: roi.y1 - roi.y0,
+                channels: 3,
+                data,
+            }
+        };
+        let plain = decode(
+            &encode(
+                &img,
+                &EncodeOptions {
+                    bytes: 400,
+                    ..Default::default()
+                },
+            )
+            .unwrap(),
+        )
+        .unwrap();
+        let with_roi = decode(
+            &encode(
+                &img,
+                &EncodeOptions {
+                    bytes: 400,
+                    roi: Some(roi),
+                    roi_shift: 4,
+                    ..Default::default()
+                },
+            )
+            .unwrap(),
+        )
+        .unwrap();
+        let (p, r) = (
+            psnr(&crop(&img), &crop(&plain)),
+            psnr(&crop(&img), &crop(&with_roi)),
+        );
+        assert!(r > p + 1.0, "ROI {r:.2} dB vs plain {p:.2} dB");
+    }
+
+    #[test]
+    fn decoder_survives_garbage() {
+        let mut s = 1u64;
+        for len in [5usize, 6, 9, 40, 120] {
+            for _ in 0..5 {
+                let mut data: Vec<u8> = (0..len)
+                    .map(|_| {
+                        s = s
+                            .wrapping_mul(6364136223846793005)
+                            .wrapping_add(1442695040888963407);
+                        (s >> 33) as u8
+                    })
+                    .collect();
+                // A valid first byte and a small size (at most 17 x 64), the rest garbage.
+                data[0] = 0xd1;
+                data[1] = 0x01;
+                data[2] = 0x00;
+                data[3] &= 0x3f;
+                let _ = decode(&data);
+            }
+        }
+    }
+}

@@ -140,7 +140,7 @@ fn level<T: Copy + Default, K: Kernel<T>>(
     tmp: &mut Vec<T>,
 ) {
     tmp.clear();
-    tmp.resize(cw.max(ch) * cw.max(1), T::default());
+    tmp.resize(cw * ch, T::default());
     let rows = |buf: &mut [T], tmp: &mut Vec<T>, fwd: bool| {
         if cw < 2 {
             return;
