@@ -37,11 +37,11 @@ pub trait BitCoder {
 
 /// Context counts and offsets.
 mod ctx {
-    pub const NODE: usize = 0; // class 3 x level 3 x parent 2 x neighbour 2 = 36
-    pub const COEF: usize = NODE + 36; // class 3 x neighbours 5 x parent 2 = 30
-    pub const SIGN: usize = COEF + 30; // class 3 x left 3 x up 3 = 27
-    pub const REFINE: usize = SIGN + 27; // class 3 x first 2 x neighbour 2 = 12
-    pub const COUNT: usize = REFINE + 12;
+    pub const NODE: usize = 0; // class 4 x level 3 x parent 2 x neighbour 2 = 48
+    pub const COEF: usize = NODE + 48; // class 4 x neighbourhood 9 x parent 2 = 72
+    pub const SIGN: usize = COEF + 72; // class 4 x left 3 x up 3 = 36
+    pub const REFINE: usize = SIGN + 36; // class 4 x first 2 x neighbour 2 = 16
+    pub const COUNT: usize = REFINE + 16;
 }
 
 /// Zero bytes after a complete stream: enough for the decoder's margin.
@@ -135,7 +135,7 @@ impl BitCoder for Decoder<'_> {
     }
 }
 
-/// Subband class for contexts: 0 low-pass, 1 HL or LH, 2 HH.
+/// Subband class for contexts: 0 LL, 1 HL, 2 LH, 3 HH.
 pub type Class = usize;
 
 /// One subband of one component as the coder sees it.
@@ -267,28 +267,42 @@ fn node_context(bands: &[Band], band: usize, level: usize, x: usize, y: usize) -
     let b = &bands[band];
     let (xi, yi) = (x as isize, y as isize);
     if level == 0 {
-        let mut n = 0;
-        for (dx, dy) in [
-            (-1, -1),
-            (0, -1),
-            (1, -1),
-            (-1, 0),
-            (1, 0),
-            (-1, 1),
-            (0, 1),
-            (1, 1),
-        ] {
-            n += usize::from(b.sig_at(0, xi + dx, yi + dy));
+        // EBCOT's neighbourhood classes: horizontal, vertical and diagonal significant
+        // neighbours, read along the direction the subband's detail runs.
+        let at = |dx: isize, dy: isize| usize::from(b.sig_at(0, xi + dx, yi + dy));
+        let mut h = at(-1, 0) + at(1, 0);
+        let mut v = at(0, -1) + at(0, 1);
+        let d = at(-1, -1) + at(1, -1) + at(-1, 1) + at(1, 1);
+        if b.class == 1 {
+            std::mem::swap(&mut h, &mut v);
         }
-        let bucket = match n {
-            0 => 0,
-            1 => 1,
-            2 => 2,
-            3 | 4 => 3,
-            _ => 4,
+        let neighbourhood = if b.class == 3 {
+            match (d, h + v) {
+                (3.., _) => 8,
+                (2, 1..) => 7,
+                (2, 0) => 6,
+                (1, 2..) => 5,
+                (1, 1) => 4,
+                (1, 0) => 3,
+                (0, 2..) => 2,
+                (0, 1) => 1,
+                _ => 0,
+            }
+        } else {
+            match (h, v, d) {
+                (2, _, _) => 8,
+                (1, 1.., _) => 7,
+                (1, 0, 1..) => 6,
+                (1, 0, 0) => 5,
+                (0, 2, _) => 4,
+                (0, 1, _) => 3,
+                (0, 0, 2..) => 2,
+                (0, 0, 1) => 1,
+                _ => 0,
+            }
         };
         let parent = usize::from(parent_sig(bands, band, 0, x, y));
-        ctx::COEF + (b.class * 5 + bucket) * 2 + parent
+        ctx::COEF + (b.class * 9 + neighbourhood) * 2 + parent
     } else {
         let neighbour = [(-1, 0), (1, 0), (0, -1), (0, 1)]
             .iter()

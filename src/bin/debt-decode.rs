@@ -1,0 +1,76 @@
+//! debt-decode: a DEBT stream (or any prefix of one) -> an image file.
+#![forbid(unsafe_code)]
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+use clap::Parser;
+use rovlink::debt;
+use rovlink::io::{EXIT_OK, Input, Output};
+
+/// The tool's name, prefixed to everything it says on stderr.
+const TOOL: &str = "debt-decode";
+
+const EXAMPLES: &str = "\
+Examples:
+  debt-decode photo.debt -o photo.png             decode to PNG
+  debt-decode photo.debt --bytes 300 -o early.pgm what the first 300 bytes show
+  debt-encode in.png -b 800 | debt-decode -o out.ppm
+
+Exit codes: 0 ok, 2 bad usage or a stream that is not DEBT.";
+
+/// Decode a DEBT stream to an image.
+///
+/// Any prefix of a stream decodes; more bytes never give a worse image.
+#[derive(Parser, Debug)]
+#[command(version, after_help = EXAMPLES)]
+struct Args {
+    /// DEBT stream; `-` or nothing reads stdin.
+    input: Option<PathBuf>,
+
+    /// Output image: PNG, or PPM/PGM by extension; `-` or nothing writes PNG to stdout.
+    #[arg(short, long, value_name = "FILE")]
+    output: Option<PathBuf>,
+
+    /// Decode only the first N bytes of the stream.
+    #[arg(long, short = 'b', value_name = "N")]
+    bytes: Option<usize>,
+}
+
+/// Encodes the decoded image as PNG or, by the output's extension, PPM/PGM.
+fn write_image(img: &debt::Image, path: Option<&std::path::Path>) -> Result<Vec<u8>> {
+    let ext = path
+        .and_then(|p| p.extension())
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    let format = match ext.as_str() {
+        "ppm" | "pgm" | "pnm" => image::ImageFormat::Pnm,
+        _ => image::ImageFormat::Png,
+    };
+    let color = if img.channels == 1 { image::ExtendedColorType::L8 } else { image::ExtendedColorType::Rgb8 };
+    let mut bytes = Vec::new();
+    let mut cursor = std::io::Cursor::new(&mut bytes);
+    image::write_buffer_with_format(&mut cursor, &img.data, img.width as u32, img.height as u32, color, format)
+        .context("cannot encode the output image")?;
+    Ok(bytes)
+}
+
+fn run(args: &Args) -> Result<u8> {
+    let mut input = Input::open(args.input.as_deref())?;
+    let mut stream = input.read_all()?;
+    if let Some(n) = args.bytes {
+        stream.truncate(n);
+    }
+    let img = debt::decode(&stream).with_context(|| input.name.clone())?;
+    let bytes = write_image(&img, args.output.as_deref())?;
+    let mut out = Output::open(args.output.as_deref(), true)?;
+    out.write_bytes(&bytes)?;
+    out.finish()?;
+    Ok(EXIT_OK)
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    rovlink::io::finish_main(TOOL, run(&args))
+}
