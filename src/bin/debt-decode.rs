@@ -48,11 +48,22 @@ fn write_image(img: &debt::Image, path: Option<&std::path::Path>) -> Result<Vec<
         "ppm" | "pgm" | "pnm" => image::ImageFormat::Pnm,
         _ => image::ImageFormat::Png,
     };
-    let color = if img.channels == 1 { image::ExtendedColorType::L8 } else { image::ExtendedColorType::Rgb8 };
+    let color = if img.channels == 1 {
+        image::ExtendedColorType::L8
+    } else {
+        image::ExtendedColorType::Rgb8
+    };
     let mut bytes = Vec::new();
     let mut cursor = std::io::Cursor::new(&mut bytes);
-    image::write_buffer_with_format(&mut cursor, &img.data, img.width as u32, img.height as u32, color, format)
-        .context("cannot encode the output image")?;
+    image::write_buffer_with_format(
+        &mut cursor,
+        &img.data,
+        img.width as u32,
+        img.height as u32,
+        color,
+        format,
+    )
+    .context("cannot encode the output image")?;
     Ok(bytes)
 }
 

@@ -69,8 +69,15 @@ fn parse_rect(text: &str) -> Result<Rect, String> {
     let parts: Vec<&str> = text.split(',').collect();
     let nums: Result<Vec<usize>, _> = parts.iter().map(|p| p.trim().parse::<usize>()).collect();
     match nums {
-        Ok(n) if n.len() == 4 && n[0] < n[2] && n[1] < n[3] => Ok(Rect { x0: n[0], y0: n[1], x1: n[2], y1: n[3] }),
-        _ => Err(format!("expected x0,y0,x1,y1 with x0 < x1 and y0 < y1, found {text:?}")),
+        Ok(n) if n.len() == 4 && n[0] < n[2] && n[1] < n[3] => Ok(Rect {
+            x0: n[0],
+            y0: n[1],
+            x1: n[2],
+            y1: n[3],
+        }),
+        _ => Err(format!(
+            "expected x0,y0,x1,y1 with x0 < x1 and y0 < y1, found {text:?}"
+        )),
     }
 }
 
@@ -78,12 +85,23 @@ fn parse_rect(text: &str) -> Result<Rect, String> {
 fn read_image(input: Option<&std::path::Path>) -> Result<debt::Image> {
     let mut src = Input::open(input)?;
     let bytes = src.read_all()?;
-    let decoded = image::load_from_memory(&bytes).with_context(|| format!("{}: not a readable image", src.name))?;
+    let decoded = image::load_from_memory(&bytes)
+        .with_context(|| format!("{}: not a readable image", src.name))?;
     let (width, height) = (decoded.width() as usize, decoded.height() as usize);
     let img = if decoded.color().has_color() {
-        debt::Image { width, height, channels: 3, data: decoded.into_rgb8().into_raw() }
+        debt::Image {
+            width,
+            height,
+            channels: 3,
+            data: decoded.into_rgb8().into_raw(),
+        }
     } else {
-        debt::Image { width, height, channels: 1, data: decoded.into_luma8().into_raw() }
+        debt::Image {
+            width,
+            height,
+            channels: 1,
+            data: decoded.into_luma8().into_raw(),
+        }
     };
     Ok(img)
 }
@@ -94,7 +112,15 @@ fn run(args: &Args) -> Result<u8> {
     if let Some(r) = args.roi
         && (r.x1 > img.width || r.y1 > img.height)
     {
-        bail!("--roi {},{},{},{} reaches outside the {}x{} image {name}", r.x0, r.y0, r.x1, r.y1, img.width, img.height);
+        bail!(
+            "--roi {},{},{},{} reaches outside the {}x{} image {name}",
+            r.x0,
+            r.y0,
+            r.x1,
+            r.y1,
+            img.width,
+            img.height
+        );
     }
     let options = EncodeOptions {
         bytes: args.bytes,
