@@ -80,4 +80,16 @@ for i in "${!extra_lines[@]}"; do
     printf '%s' "${extra_lines[$i]}" >"$corpus/json_line/seed-extra$((i + 1))"
 done
 
+# debt_decode: streams of the small test images, coded by the release build of debt-encode.
+(cd "$here/.." && cargo build --release --quiet --bin debt-encode)
+enc="$here/../target/release/debt-encode"
+images="$here/../testdata"
+mkdir -p "$corpus/debt_decode"
+for bytes in 20 60 200 800; do
+    "$enc" "$images/kodim23-64x48.png" --bytes "$bytes" -o "$corpus/debt_decode/seed-rgb-$bytes"
+    "$enc" "$images/peppers-gray-64.png" --bytes "$bytes" -o "$corpus/debt_decode/seed-gray-$bytes"
+done
+"$enc" "$images/kodim23-64x48.png" --bytes 300 --roi 8,8,30,20 --roi-shift 4 --scale 1 -o "$corpus/debt_decode/seed-roi"
+"$enc" "$images/kodim23-64x48.png" --bytes 100000 --lossless -o "$corpus/debt_decode/seed-lossless"
+
 echo "seeded $(find "$corpus" -name 'seed-*' | wc -l) files in $corpus"

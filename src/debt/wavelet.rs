@@ -82,7 +82,8 @@ impl Kernel<f32> for Cdf97 {
     }
 }
 
-/// The LeGall 5/3 integer kernel.
+/// The LeGall 5/3 integer kernel. Wrapping arithmetic: exact for any image (no sum comes near
+/// 2^31), and garbage coefficients from a corrupt stream give garbage, not a panic.
 struct Legall53;
 
 impl Kernel<i32> for Legall53 {
@@ -91,13 +92,19 @@ impl Kernel<i32> for Legall53 {
         for i in 0..nd {
             let (a, b) = (i * lanes, next_low(i, ns) * lanes);
             for j in 0..lanes {
-                d[i * lanes + j] -= (s[a + j] + s[b + j]) >> 1;
+                d[i * lanes + j] =
+                    d[i * lanes + j].wrapping_sub(s[a + j].wrapping_add(s[b + j]) >> 1);
             }
         }
         for i in 0..ns {
             let (a, b) = high_pair(i, nd);
             for j in 0..lanes {
-                s[i * lanes + j] += (d[a * lanes + j] + d[b * lanes + j] + 2) >> 2;
+                s[i * lanes + j] = s[i * lanes + j].wrapping_add(
+                    d[a * lanes + j]
+                        .wrapping_add(d[b * lanes + j])
+                        .wrapping_add(2)
+                        >> 2,
+                );
             }
         }
     }
@@ -107,13 +114,19 @@ impl Kernel<i32> for Legall53 {
         for i in 0..ns {
             let (a, b) = high_pair(i, nd);
             for j in 0..lanes {
-                s[i * lanes + j] -= (d[a * lanes + j] + d[b * lanes + j] + 2) >> 2;
+                s[i * lanes + j] = s[i * lanes + j].wrapping_sub(
+                    d[a * lanes + j]
+                        .wrapping_add(d[b * lanes + j])
+                        .wrapping_add(2)
+                        >> 2,
+                );
             }
         }
         for i in 0..nd {
             let (a, b) = (i * lanes, next_low(i, ns) * lanes);
             for j in 0..lanes {
-                d[i * lanes + j] += (s[a + j] + s[b + j]) >> 1;
+                d[i * lanes + j] =
+                    d[i * lanes + j].wrapping_add(s[a + j].wrapping_add(s[b + j]) >> 1);
             }
         }
     }

@@ -1,0 +1,26 @@
+//! The DEBT decoder on arbitrary bytes: never panics; a stream it accepts decodes to an image of
+//! the size its header states, and every prefix of it decodes too.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+use rovlink::debt::{Header, decode};
+
+fuzz_target!(|data: &[u8]| {
+    // Keep each run fast: images up to 64 x 64 (the decoder's cost grows with the area).
+    let Ok(header) = Header::read(data) else {
+        assert!(decode(data).is_err());
+        return;
+    };
+    if header.width * header.height > 64 * 64 {
+        return;
+    }
+    let img = decode(data).expect("a stream with a valid header decodes");
+    assert_eq!((img.width, img.height), (header.width, header.height));
+    assert_eq!(img.channels, if header.gray { 1 } else { 3 });
+    assert_eq!(img.data.len(), img.width * img.height * img.channels);
+    for cut in [header.len(), (header.len() + data.len()) / 2] {
+        if cut <= data.len() {
+            assert!(decode(&data[..cut]).is_ok());
+        }
+    }
+});

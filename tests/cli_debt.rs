@@ -1,0 +1,199 @@
+//! Process-level tests of debt-encode and debt-decode: the built binaries through files and pipes.
+
+mod common;
+
+use common::{run, testdata};
+
+const ENCODE: &str = env!("CARGO_BIN_EXE_debt-encode");
+const DECODE: &str = env!("CARGO_BIN_EXE_debt-decode");
+
+fn load(bytes: &[u8]) -> image::DynamicImage {
+    image::load_from_memory(bytes).expect("decoder output is an image")
+}
+
+fn psnr(a: &[u8], b: &[u8]) -> f64 {
+    let mse = a
+        .iter()
+        .zip(b)
+        .map(|(&x, &y)| (f64::from(x) - f64::from(y)).powi(2))
+        .sum::<f64>()
+        / a.len() as f64;
+    if mse == 0.0 {
+        f64::INFINITY
+    } else {
+        10.0 * (255.0 * 255.0 / mse).log10()
+    }
+}
+
+#[test]
+fn streams_are_exactly_the_budget_and_better_with_more_bytes() {
+    let input = testdata("kodim23-64x48.png");
+    let reference = image::open(&input).unwrap().into_rgb8().into_raw();
+    let mut last = 0.0;
+    for bytes in [30usize, 100, 300, 1000, 3000] {
+        let enc = run(
+            ENCODE,
+            &[input.to_str().unwrap(), "--bytes", &bytes.to_string()],
+            b"",
+        );
+        assert_eq!(enc.code, 0, "{}", enc.stderr);
+        assert_eq!(enc.stdout.len(), bytes);
+        let dec = run(DECODE, &[], &enc.stdout);
+        assert_eq!(dec.code, 0, "{}", dec.stderr);
+        let img = load(&dec.stdout);
+        assert_eq!((img.width(), img.height()), (64, 48));
+        let q = psnr(&reference, &img.into_rgb8().into_raw());
+        assert!(
+            q > last,
+            "{bytes} bytes: {q:.2} dB, fewer bytes gave {last:.2} dB"
+        );
+        last = q;
+    }
+}
+
+#[test]
+fn any_prefix_decodes() {
+    let input = testdata("peppers-gray-64.png");
+    let enc = run(ENCODE, &[input.to_str().unwrap(), "-b", "1500"], b"");
+    assert_eq!(enc.code, 0, "{}", enc.stderr);
+    let dir = tempfile::tempdir().unwrap();
+    let stream = dir.path().join("p.debt");
+    std::fs::write(&stream, &enc.stdout).unwrap();
+    for cut in ["5", "6", "50", "700", "1500", "99999"] {
+        let out = dir.path().join(format!("p{cut}.pgm"));
+        let dec = run(
+            DECODE,
+            &[
+                stream.to_str().unwrap(),
+                "--bytes",
+                cut,
+                "-o",
+                out.to_str().unwrap(),
+            ],
+            b"",
+        );
+        assert_eq!(dec.code, 0, "cut {cut}: {}", dec.stderr);
+        let img = image::open(&out).unwrap();
+        assert_eq!(
+            (img.width(), img.height(), img.color()),
+            (64, 64, image::ColorType::L8)
+        );
+    }
+}
+
+#[test]
+fn lossless_round_trip_through_files() {
+    let input = testdata("kodim23-64x48.png");
+    let enc = run(
+        ENCODE,
+        &[input.to_str().unwrap(), "--lossless", "--bytes", "1000000"],
+        b"",
+    );
+    assert_eq!(enc.code, 0, "{}", enc.stderr);
+    assert!(enc.stdout.len() < 64 * 48 * 3, "{} bytes", enc.stdout.len());
+    let dec = run(DECODE, &[], &enc.stdout);
+    let reference = image::open(&input).unwrap().into_rgb8().into_raw();
+    assert_eq!(load(&dec.stdout).into_rgb8().into_raw(), reference);
+}
+
+#[test]
+fn bad_inputs_are_clear_errors_without_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let junk = dir.path().join("junk.png");
+    std::fs::write(&junk, b"this is not an image").unwrap();
+    let out = dir.path().join("out.debt");
+    let enc = run(
+        ENCODE,
+        &[
+            junk.to_str().unwrap(),
+            "--bytes",
+            "100",
+            "-o",
+            out.to_str().unwrap(),
+        ],
+        b"",
+    );
+    assert_eq!(enc.code, 2);
+    assert!(
+        enc.stderr.contains("junk.png: not a readable image"),
+        "{}",
+        enc.stderr
+    );
+    assert!(!out.exists());
+
+    let dec = run(
+        DECODE,
+        &["-o", out.to_str().unwrap()],
+        b"\x55\x10\x11 not debt",
+    );
+    assert_eq!(dec.code, 2);
+    assert!(
+        dec.stderr.contains("not a DEBT stream: first byte 0x55"),
+        "{}",
+        dec.stderr
+    );
+    assert!(!out.exists());
+    let version = run(DECODE, &[], b"\xd9\x00\x00\x00\x00");
+    assert!(
+        version.stderr.contains("DEBT version 9 is not supported"),
+        "{}",
+        version.stderr
+    );
+
+    let input = testdata("kodim23-64x48.png");
+    let roi = run(
+        ENCODE,
+        &[input.to_str().unwrap(), "-b", "100", "--roi", "0,0,65,10"],
+        b"",
+    );
+    assert_eq!(roi.code, 2);
+    assert!(
+        roi.stderr.contains("reaches outside the 64x48 image"),
+        "{}",
+        roi.stderr
+    );
+    let tiny = run(ENCODE, &[input.to_str().unwrap(), "-b", "4"], b"");
+    assert_eq!(tiny.code, 2);
+    assert!(
+        tiny.stderr.contains("bytes: expected at least the header"),
+        "{}",
+        tiny.stderr
+    );
+    assert_eq!(
+        run(
+            ENCODE,
+            &[input.to_str().unwrap(), "-b", "100", "--roi", "5,5,2,9"],
+            b""
+        )
+        .code,
+        2
+    );
+}
+
+#[test]
+fn roi_raises_quality_inside_the_region() {
+    let input = testdata("kodim23-64x48.png");
+    let reference = image::open(&input).unwrap().into_rgb8();
+    let region = |img: &image::RgbImage| -> Vec<u8> {
+        let mut v = Vec::new();
+        for y in 16..32 {
+            for x in 16..40 {
+                v.extend_from_slice(&img.get_pixel(x, y).0);
+            }
+        }
+        v
+    };
+    let decode = |extra: &[&str]| {
+        let mut args = vec![input.to_str().unwrap(), "-b", "200"];
+        args.extend_from_slice(extra);
+        let enc = run(ENCODE, &args, b"");
+        assert_eq!(enc.code, 0, "{}", enc.stderr);
+        load(&run(DECODE, &[], &enc.stdout).stdout).into_rgb8()
+    };
+    let plain = psnr(&region(&reference), &region(&decode(&[])));
+    let roi = psnr(
+        &region(&reference),
+        &region(&decode(&["--roi", "16,16,40,32", "--roi-shift", "4"])),
+    );
+    assert!(roi > plain + 1.0, "ROI {roi:.2} dB, plain {plain:.2} dB");
+}
