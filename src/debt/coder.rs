@@ -157,7 +157,7 @@ pub struct Band {
     pub mag: Vec<u32>,
     /// Sign of each coefficient (true = negative).
     pub neg: Vec<bool>,
-    /// Decoder: lowest bit-plane known of each significant coefficient.
+    /// Decoder: lowest bit-plane known of each significant coefficient (empty when encoding).
     pub known: Vec<u8>,
     lin: Vec<Vec<u32>>,
     lsp: Vec<u32>,
@@ -181,6 +181,7 @@ impl Band {
         }
         let sig = dims.iter().map(|&(w, h)| vec![false; w * h]).collect();
         let n = width * height;
+        let encoding = data.is_some();
         let (mag, neg, max) = match data {
             Some((mag, neg)) => {
                 let mut max: Vec<Vec<u32>> = vec![mag.clone()];
@@ -216,7 +217,11 @@ impl Band {
             max,
             mag,
             neg,
-            known: vec![u8::MAX; n],
+            known: if encoding {
+                Vec::new()
+            } else {
+                vec![u8::MAX; n]
+            },
             lin,
             lsp: Vec::new(),
             refine_count: 0,

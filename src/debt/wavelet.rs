@@ -29,6 +29,17 @@ fn high_pair(i: usize, nd: usize) -> (usize, usize) {
 
 fn predict_f32(d: &mut [f32], s: &[f32], lanes: usize, coef: f32) {
     let (ns, nd) = (s.len() / lanes, d.len() / lanes);
+    if lanes == 1 {
+        // One lane (a row): plain slices, so the loop vectorises.
+        let pairs = nd.min(ns - 1);
+        for ((x, &p), &q) in d[..pairs].iter_mut().zip(&s[..pairs]).zip(&s[1..=pairs]) {
+            *x += coef * (p + q);
+        }
+        for i in pairs..nd {
+            d[i] += coef * (s[i] + s[next_low(i, ns)]);
+        }
+        return;
+    }
     for i in 0..nd {
         let (a, b) = (i * lanes, next_low(i, ns) * lanes);
         let (sa, sb) = (&s[a..a + lanes], &s[b..b + lanes]);
@@ -40,6 +51,23 @@ fn predict_f32(d: &mut [f32], s: &[f32], lanes: usize, coef: f32) {
 
 fn update_f32(s: &mut [f32], d: &[f32], lanes: usize, coef: f32) {
     let (ns, nd) = (s.len() / lanes, d.len() / lanes);
+    if lanes == 1 {
+        // s[i] uses d[i-1] and d[i]; the first and (for odd lengths) last are mirrored.
+        s[0] += coef * (d[0] + d[0]);
+        let inner = ns.min(nd);
+        for ((x, &p), &q) in s[1..inner]
+            .iter_mut()
+            .zip(&d[..inner - 1])
+            .zip(&d[1..inner])
+        {
+            *x += coef * (p + q);
+        }
+        for i in inner.max(1)..ns {
+            let (a, b) = high_pair(i, nd);
+            s[i] += coef * (d[a] + d[b]);
+        }
+        return;
+    }
     for i in 0..ns {
         let (a, b) = high_pair(i, nd);
         let (da, db) = (
