@@ -62,9 +62,9 @@ fn update_f32(s: &mut [f32], d: &[f32], lanes: usize, coef: f32) {
         {
             *x += coef * (p + q);
         }
-        for i in inner.max(1)..ns {
-            let (a, b) = high_pair(i, nd);
-            s[i] += coef * (d[a] + d[b]);
+        if ns > nd.max(1) {
+            // Odd length: the last low sample mirrors its one high neighbour.
+            s[ns - 1] += coef * (d[nd - 1] + d[nd - 1]);
         }
         return;
     }
