@@ -197,3 +197,67 @@ fn roi_raises_quality_inside_the_region() {
     );
     assert!(roi > plain + 1.0, "ROI {roi:.2} dB, plain {plain:.2} dB");
 }
+
+#[test]
+fn sweep_writes_one_row_per_image_and_budget_and_keeps_rows_on_failure() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("trials.csv");
+    let rgb = testdata("kodim23-64x48.png");
+    let gray = testdata("peppers-gray-64.png");
+    let out = run(
+        ENCODE,
+        &[
+            "--sweep",
+            "60,200,800",
+            "--csv",
+            csv.to_str().unwrap(),
+            rgb.to_str().unwrap(),
+            gray.to_str().unwrap(),
+        ],
+        b"",
+    );
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let rows: Vec<Vec<&str>> = text.lines().map(|l| l.split(',').collect()).collect();
+    assert_eq!(
+        rows[0].join(","),
+        "image,width,height,budget_bytes,bytes,psnr_rgb_db,psnr_y_db,ssim,encode_ms,decode_ms"
+    );
+    assert_eq!(rows.len(), 1 + 6);
+    for image_rows in rows[1..].chunks(3) {
+        let psnrs: Vec<f64> = image_rows.iter().map(|r| r[5].parse().unwrap()).collect();
+        assert!(psnrs.windows(2).all(|w| w[1] > w[0]), "{psnrs:?}");
+        for r in image_rows {
+            assert_eq!(r[3], r[4], "bytes equal the budget");
+            let ssim: f64 = r[7].parse().unwrap();
+            assert!(ssim > 0.0 && ssim <= 1.0);
+        }
+    }
+    // A bad image after a good one: exit 2, the good image's rows are kept.
+    let junk = dir.path().join("junk.png");
+    std::fs::write(&junk, b"junk").unwrap();
+    let out = run(
+        ENCODE,
+        &[
+            "--sweep",
+            "60,200",
+            "--csv",
+            csv.to_str().unwrap(),
+            rgb.to_str().unwrap(),
+            junk.to_str().unwrap(),
+        ],
+        b"",
+    );
+    assert_eq!(out.code, 2);
+    assert!(
+        out.stderr.contains("junk.png: not a readable image"),
+        "{}",
+        out.stderr
+    );
+    assert_eq!(
+        std::fs::read_to_string(&csv).unwrap().lines().count(),
+        1 + 2
+    );
+    // --bytes or --sweep, not neither.
+    assert_eq!(run(ENCODE, &[rgb.to_str().unwrap()], b"").code, 2);
+}

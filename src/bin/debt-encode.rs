@@ -1,12 +1,14 @@
 //! debt-encode: an image file -> a DEBT stream of exactly the bytes asked.
 #![forbid(unsafe_code)]
 
-use std::path::PathBuf;
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::Parser;
-use rovlink::debt::{self, EncodeOptions, Rect};
+use rovlink::debt::{self, EncodeOptions, Rect, metrics};
 use rovlink::io::{EXIT_OK, Input, Output};
 
 /// The tool's name, prefixed to everything it says on stderr.
@@ -18,6 +20,7 @@ Examples:
   debt-encode photo.png --bytes 500 --roi 100,80,420,300 --roi-shift 4 -o roi.debt
   debt-encode --gray --scale 1 --bytes 250 < photo.png > tiny.debt
   debt-encode photo.png --lossless --bytes 10000000 -o exact.debt   (shorter when complete)
+  debt-encode --sweep 250,500,1000,2000,8000 --csv trials.csv a.png b.png   compression trials
 
 Exit codes: 0 ok, 2 bad usage or an unreadable image.";
 
@@ -30,15 +33,25 @@ Exit codes: 0 ok, 2 bad usage or an unreadable image.";
 #[command(version, after_help = EXAMPLES)]
 struct Args {
     /// Image file (PNG, JPEG, PNM, BMP, TIFF, GIF, WebP, TGA, QOI); `-` or nothing reads stdin.
-    input: Option<PathBuf>,
+    /// With --sweep, any number of images.
+    inputs: Vec<PathBuf>,
 
     /// Output file (written whole or not at all); `-` or nothing writes stdout.
     #[arg(short, long, value_name = "FILE")]
     output: Option<PathBuf>,
 
     /// Size of the stream in bytes.
-    #[arg(long, short = 'b', value_name = "N")]
-    bytes: usize,
+    #[arg(long, short = 'b', value_name = "N", required_unless_present = "sweep")]
+    bytes: Option<usize>,
+
+    /// Compression trials instead of one stream: encode and decode every input at each of
+    /// these byte budgets and write one CSV row per image and budget (flushed as it goes).
+    #[arg(long, value_name = "BYTES,...", value_delimiter = ',', conflicts_with_all = ["bytes", "output"])]
+    sweep: Vec<usize>,
+
+    /// Where --sweep writes its CSV; `-` or nothing writes stdout.
+    #[arg(long, value_name = "FILE", requires = "sweep")]
+    csv: Option<PathBuf>,
 
     /// Region of interest in pixels, x0,y0,x1,y1 (x1 and y1 exclusive), coded first.
     #[arg(long, value_name = "X0,Y0,X1,Y1", value_parser = parse_rect)]
@@ -106,9 +119,24 @@ fn read_image(input: Option<&std::path::Path>) -> Result<debt::Image> {
     Ok(img)
 }
 
-fn run(args: &Args) -> Result<u8> {
-    let img = read_image(args.input.as_deref())?;
-    let name = rovlink::io::display_name(args.input.as_deref(), "<stdin>");
+impl Args {
+    fn options(&self, bytes: usize) -> EncodeOptions {
+        EncodeOptions {
+            bytes,
+            levels: self.levels,
+            gray: self.gray,
+            lossless: self.lossless,
+            scale: self.scale,
+            roi: self.roi,
+            roi_shift: self.roi_shift,
+        }
+    }
+}
+
+/// Reads an image and checks the ROI against it.
+fn load(args: &Args, input: Option<&Path>) -> Result<(debt::Image, String)> {
+    let img = read_image(input)?;
+    let name = rovlink::io::display_name(input, "<stdin>");
     if let Some(r) = args.roi
         && (r.x1 > img.width || r.y1 > img.height)
     {
@@ -122,16 +150,115 @@ fn run(args: &Args) -> Result<u8> {
             img.height
         );
     }
-    let options = EncodeOptions {
-        bytes: args.bytes,
-        levels: args.levels,
-        gray: args.gray,
-        lossless: args.lossless,
-        scale: args.scale,
-        roi: args.roi,
-        roi_shift: args.roi_shift,
+    Ok((img, name))
+}
+
+/// The columns of a --sweep CSV.
+const SWEEP_COLUMNS: [&str; 10] = [
+    "image",
+    "width",
+    "height",
+    "budget_bytes",
+    "bytes",
+    "psnr_rgb_db",
+    "psnr_y_db",
+    "ssim",
+    "encode_ms",
+    "decode_ms",
+];
+
+fn sweep(args: &Args) -> Result<u8> {
+    let target = args.csv.as_deref();
+    let name = rovlink::io::display_name(target, "<stdout>");
+    // Rows are flushed one by one, so a campaign cut short keeps what it measured.
+    let sink: Box<dyn Write> = if rovlink::io::is_std(target) {
+        Box::new(std::io::stdout())
+    } else {
+        let path = target.unwrap_or(Path::new("-"));
+        Box::new(std::fs::File::create(path).with_context(|| format!("{name}: cannot create"))?)
     };
-    let stream = debt::encode(&img, &options).with_context(|| name.clone())?;
+    let mut csv = csv::Writer::from_writer(sink);
+    csv.write_record(SWEEP_COLUMNS)?;
+    csv.flush()
+        .with_context(|| format!("{name}: write failed"))?;
+    let inputs: Vec<Option<&Path>> = if args.inputs.is_empty() {
+        vec![None]
+    } else {
+        args.inputs.iter().map(|p| Some(p.as_path())).collect()
+    };
+    let progress = std::io::stderr().is_terminal();
+    for (k, input) in inputs.iter().enumerate() {
+        let (img, image_name) = load(args, *input)?;
+        for &budget in &args.sweep {
+            if progress {
+                eprint!(
+                    "\r{TOOL}: image {}/{} ({image_name}), {budget} bytes   ",
+                    k + 1,
+                    inputs.len()
+                );
+            }
+            let started = Instant::now();
+            let stream =
+                debt::encode(&img, &args.options(budget)).with_context(|| image_name.clone())?;
+            let encode_ms = started.elapsed().as_secs_f64() * 1e3;
+            let started = Instant::now();
+            let decoded = debt::decode(&stream)
+                .with_context(|| format!("{image_name}: decoding its own stream"))?;
+            let decode_ms = started.elapsed().as_secs_f64() * 1e3;
+            let reference = if decoded.channels == 1 && img.channels == 3 {
+                to_gray(&img)
+            } else {
+                img.clone()
+            };
+            csv.write_record([
+                image_name.clone(),
+                img.width.to_string(),
+                img.height.to_string(),
+                budget.to_string(),
+                stream.len().to_string(),
+                format!("{:.3}", metrics::psnr(&reference, &decoded)),
+                format!("{:.3}", metrics::psnr_y(&reference, &decoded)),
+                format!("{:.5}", metrics::ssim(&reference, &decoded)),
+                format!("{encode_ms:.2}"),
+                format!("{decode_ms:.2}"),
+            ])?;
+            csv.flush()
+                .with_context(|| format!("{name}: write failed"))?;
+        }
+    }
+    if progress {
+        eprintln!();
+    }
+    Ok(EXIT_OK)
+}
+
+/// The luma of a colour image, as the decoder of a --gray stream gives it back.
+fn to_gray(img: &debt::Image) -> debt::Image {
+    let data = metrics::luma(img)
+        .iter()
+        .map(|v| v.round().clamp(0.0, 255.0) as u8)
+        .collect();
+    debt::Image {
+        width: img.width,
+        height: img.height,
+        channels: 1,
+        data,
+    }
+}
+
+fn run(args: &Args) -> Result<u8> {
+    if !args.sweep.is_empty() {
+        return sweep(args);
+    }
+    if args.inputs.len() > 1 {
+        bail!(
+            "one input image at a time (several only with --sweep), found {}",
+            args.inputs.len()
+        );
+    }
+    let (img, name) = load(args, args.inputs.first().map(PathBuf::as_path))?;
+    let bytes = args.bytes.unwrap_or_default();
+    let stream = debt::encode(&img, &args.options(bytes)).with_context(|| name.clone())?;
     let mut out = Output::open(args.output.as_deref(), true)?;
     out.write_bytes(&stream)?;
     out.finish()?;

@@ -18,6 +18,7 @@
 //! any other bytes, truncated or corrupt, to some image without panicking.
 
 pub mod coder;
+pub mod metrics;
 pub mod rangecoder;
 pub mod wavelet;
 
@@ -747,23 +748,9 @@ pub fn decode(data: &[u8]) -> Result<Image, Error> {
     Ok(upscale(&img, header.width, header.height))
 }
 
-/// Peak signal-to-noise ratio in dB between two images of the same shape (infinite when equal).
-pub fn psnr(a: &Image, b: &Image) -> f64 {
-    let sse: f64 = a
-        .data
-        .iter()
-        .zip(&b.data)
-        .map(|(&x, &y)| (f64::from(x) - f64::from(y)).powi(2))
-        .sum();
-    if sse == 0.0 {
-        return f64::INFINITY;
-    }
-    let mse = sse / a.data.len() as f64;
-    10.0 * (255.0f64 * 255.0 / mse).log10()
-}
-
 #[cfg(test)]
 mod tests {
+    use super::metrics::psnr;
     use super::*;
 
     /// A smooth synthetic colour image with some edges and texture.
