@@ -261,3 +261,34 @@ fn sweep_writes_one_row_per_image_and_budget_and_keeps_rows_on_failure() {
     // --bytes or --sweep, not neither.
     assert_eq!(run(ENCODE, &[rgb.to_str().unwrap()], b"").code, 2);
 }
+
+#[test]
+fn erased_trunks_decode_the_prefix_before_the_first_loss() {
+    let input = testdata("peppers-gray-64.png");
+    let enc = run(ENCODE, &[input.to_str().unwrap(), "-b", "400"], b"");
+    let dir = tempfile::tempdir().unwrap();
+    let stream = dir.path().join("p.debt");
+    std::fs::write(&stream, &enc.stdout).unwrap();
+    let s = stream.to_str().unwrap();
+    let erased = run(DECODE, &[s, "--trunk-size", "39", "--erase", "7,3"], b"");
+    let prefix = run(DECODE, &[s, "--bytes", "117"], b"");
+    assert_eq!(erased.code, 0, "{}", erased.stderr);
+    assert_eq!(
+        erased.stdout, prefix.stdout,
+        "trunks 3.. lost = the first 3 x 39 bytes"
+    );
+    let header_lost = run(DECODE, &[s, "--trunk-size", "39", "--erase", "0"], b"");
+    assert_eq!(header_lost.code, 2);
+    assert!(
+        header_lost
+            .stderr
+            .contains("trunk 0 (the header) is erased"),
+        "{}",
+        header_lost.stderr
+    );
+    assert_eq!(
+        run(DECODE, &[s, "--erase", "3"], b"").code,
+        2,
+        "--erase needs --trunk-size"
+    );
+}

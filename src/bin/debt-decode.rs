@@ -17,6 +17,7 @@ Examples:
   debt-decode photo.debt -o photo.png             decode to PNG
   debt-decode photo.debt --bytes 300 -o early.pgm what the first 300 bytes show
   debt-encode in.png -b 800 | debt-decode -o out.ppm
+  debt-decode photo.debt --trunk-size 39 --erase 3,7 -o lossy.png   trunks 3 and 7 lost
 
 Exit codes: 0 ok, 2 bad usage or a stream that is not DEBT.";
 
@@ -36,6 +37,21 @@ struct Args {
     /// Decode only the first N bytes of the stream.
     #[arg(long, short = 'b', value_name = "N")]
     bytes: Option<usize>,
+
+    /// Trunk size in bytes for --erase: the stream as the ROV cuts it into image trunks.
+    #[arg(long, value_name = "T", requires = "erase", value_parser = clap::value_parser!(u64).range(1..))]
+    trunk_size: Option<u64>,
+
+    /// Decode as if these trunks (0-based ITSN) were lost in transit. Version 1 streams are one
+    /// embedded segment: everything from the first lost trunk on is unusable, so this decodes
+    /// the prefix before it.
+    #[arg(
+        long,
+        value_name = "ITSN,...",
+        value_delimiter = ',',
+        requires = "trunk_size"
+    )]
+    erase: Vec<u64>,
 }
 
 /// Encodes the decoded image as PNG or, by the output's extension, PPM/PGM.
@@ -72,6 +88,17 @@ fn run(args: &Args) -> Result<u8> {
     let mut stream = input.read_all()?;
     if let Some(n) = args.bytes {
         stream.truncate(n);
+    }
+    if let (Some(trunk), Some(&first)) = (args.trunk_size, args.erase.iter().min()) {
+        // The header travels in trunk 0: without it nothing decodes.
+        if first == 0 {
+            anyhow::bail!(
+                "{}: trunk 0 (the header) is erased: nothing to decode",
+                input.name
+            );
+        }
+        let keep = usize::try_from(first.saturating_mul(trunk)).unwrap_or(usize::MAX);
+        stream.truncate(keep);
     }
     let img = debt::decode(&stream).with_context(|| input.name.clone())?;
     let bytes = write_image(&img, args.output.as_deref())?;
