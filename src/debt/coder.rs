@@ -1,15 +1,16 @@
 //! The block-tree bit-plane coder: the heart of DEBT.
 //!
 //! Every subband of every component is covered by a quadtree whose nodes know the largest
-//! coefficient magnitude beneath them. Bit-plane by bit-plane, from the most significant down:
+//! coefficient magnitude beneath them. Bit-plane by bit-plane, from the most significant down,
+//! three passes, each over the subbands coarse to fine with components interleaved:
 //!
-//! 1. **Significance** (per subband, coarse to fine, components interleaved): the insignificant
-//!    nodes of each quadtree level are tested, leaves first (coefficients next to significant
-//!    ones are the likeliest to become significant: the cheap, valuable bits come first). A node
-//!    that becomes significant is split at once, depth first, down to the coefficients; of four
-//!    children of a significant node, the last is known significant if the other three are not.
-//!    A coefficient that becomes significant sends its sign.
-//! 2. **Refinement**: every coefficient significant before this plane sends one more bit.
+//! 1. **Propagation**: insignificant coefficients next to a significant one are tested first:
+//!    they are the likeliest to become significant, so their bits buy the most.
+//! 2. **Cleanup**: the remaining insignificant nodes of each quadtree level are tested, leaves
+//!    first. A node that becomes significant is split at once, depth first, down to the
+//!    coefficients; of the children of a significant node, the last is known significant if
+//!    the others are not. A coefficient that becomes significant sends its sign.
+//! 3. **Refinement**: every coefficient significant before this plane sends one more bit.
 //!
 //! Each decision is coded by the adaptive range coder in a context made of the subband class,
 //! the quadtree level, the significance of neighbours, and the significance of the parent (the
@@ -162,6 +163,8 @@ pub struct Band {
     lin: Vec<Vec<u32>>,
     lsp: Vec<u32>,
     refine_count: usize,
+    /// Coefficients found insignificant by this plane's propagation pass.
+    deferred: Vec<u32>,
 }
 
 impl Band {
@@ -225,6 +228,7 @@ impl Band {
             lin,
             lsp: Vec::new(),
             refine_count: 0,
+            deferred: Vec::new(),
         }
     }
 
@@ -401,19 +405,55 @@ fn descend<C: BitCoder>(
     Ok(())
 }
 
+/// The two significance passes of a bit-plane.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Pass {
+    /// Coefficients next to a significant one: the likeliest to become significant, so the
+    /// most valuable bits, coded before the refinement pass.
+    Propagation,
+    /// Everything else, after the refinement pass: the remaining coefficients and the quadtree.
+    Cleanup,
+}
+
+fn has_significant_neighbour(b: &Band, node: usize) -> bool {
+    let (x, y) = ((node % b.width) as isize, (node / b.width) as isize);
+    [
+        (-1, -1),
+        (0, -1),
+        (1, -1),
+        (-1, 0),
+        (1, 0),
+        (-1, 1),
+        (0, 1),
+        (1, 1),
+    ]
+    .iter()
+    .any(|&(dx, dy)| b.sig_at(0, x + dx, y + dy))
+}
+
 fn significance_pass<C: BitCoder>(
     bands: &mut [Band],
     band: usize,
     plane: u32,
+    pass: Pass,
     coder: &mut C,
 ) -> Result<(), Stop> {
     let threshold = 1u32 << plane;
-    for level in 0..bands[band].dims.len() {
+    let levels = if pass == Pass::Propagation {
+        1
+    } else {
+        bands[band].dims.len()
+    };
+    for level in 0..levels {
         let list = std::mem::take(&mut bands[band].lin[level]);
         let (w, _) = bands[band].dims[level];
         let mut keep = Vec::with_capacity(list.len());
         for (k, &node) in list.iter().enumerate() {
             let node = node as usize;
+            if pass == Pass::Propagation && !has_significant_neighbour(&bands[band], node) {
+                keep.push(node as u32);
+                continue;
+            }
             let truth = C::ENCODER && bands[band].max[level][node] >= threshold;
             let c = node_context(bands, band, level, node % w, node / w);
             let significant = match coder.bit(c, truth) {
@@ -431,6 +471,9 @@ fn significance_pass<C: BitCoder>(
                 } else {
                     descend(bands, band, level, node, plane, coder)?;
                 }
+            } else if pass == Pass::Propagation {
+                // Tested in this plane already: not again in the cleanup pass.
+                bands[band].deferred.push(node as u32);
             } else {
                 keep.push(node as u32);
             }
@@ -440,6 +483,11 @@ fn significance_pass<C: BitCoder>(
         let mut pushed = std::mem::take(&mut bands[band].lin[level]);
         keep.append(&mut pushed);
         bands[band].lin[level] = keep;
+    }
+    if pass == Pass::Cleanup {
+        let b = &mut bands[band];
+        let mut deferred = std::mem::take(&mut b.deferred);
+        b.lin[0].append(&mut deferred);
     }
     Ok(())
 }
@@ -485,7 +533,10 @@ pub fn code_planes<C: BitCoder>(
             b.refine_count = b.lsp.len();
         }
         for band in 0..bands.len() {
-            significance_pass(bands, band, plane, coder)?;
+            significance_pass(bands, band, plane, Pass::Propagation, coder)?;
+        }
+        for band in 0..bands.len() {
+            significance_pass(bands, band, plane, Pass::Cleanup, coder)?;
         }
         for band in 0..bands.len() {
             refinement_pass(bands, band, plane, coder)?;

@@ -55,8 +55,8 @@ impl Context {
     }
 
     fn update(&mut self, bit: bool) {
-        let fast_shift = u32::from(self.count.min(3)) + 1;
-        let slow_shift = u32::from(self.count.min(6)) + 1;
+        let fast_shift = u32::from(self.count.min(2)) + 1;
+        let slow_shift = u32::from(self.count.min(5)) + 1;
         let target: i32 = if bit { 0 } else { PROB_ONE as i32 - 1 };
         let step = |p: u16, shift: u32| -> u16 {
             let p = i32::from(p);
