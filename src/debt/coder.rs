@@ -187,11 +187,12 @@ impl Band {
         let encoding = data.is_some();
         let (mag, neg, max) = match data {
             Some((mag, neg)) => {
-                let mut max: Vec<Vec<u32>> = vec![mag.clone()];
+                // Level 0 of the tree is the magnitudes themselves: `max[0]` stays empty.
+                let mut max: Vec<Vec<u32>> = vec![Vec::new()];
                 for l in 1..dims.len() {
                     let (pw, ph) = dims[l - 1];
                     let (w, h) = dims[l];
-                    let below = &max[l - 1];
+                    let below = if l == 1 { &mag } else { &max[l - 1] };
                     let mut level = vec![0u32; w * h];
                     for y in 0..ph {
                         for x in 0..pw {
@@ -234,11 +235,23 @@ impl Band {
 
     /// Largest magnitude in the band (encoder side).
     pub fn max_magnitude(&self) -> u32 {
+        if self.dims.len() == 1 {
+            return self.mag.first().copied().unwrap_or(0);
+        }
         self.max
             .last()
             .and_then(|l| l.first())
             .copied()
             .unwrap_or(0)
+    }
+
+    /// Largest magnitude under node (`level`, `node`) (encoder side).
+    fn node_max(&self, level: usize, node: usize) -> u32 {
+        if level == 0 {
+            self.mag[node]
+        } else {
+            self.max[level][node]
+        }
     }
 
     /// True if coefficient `i` is significant.
@@ -386,7 +399,7 @@ fn descend<C: BitCoder>(
         let significant = if k == count - 1 && !any {
             true
         } else {
-            let truth = C::ENCODER && bands[band].max[child_level][child] >= threshold;
+            let truth = C::ENCODER && bands[band].node_max(child_level, child) >= threshold;
             let c = node_context(bands, band, child_level, child % cw, child / cw);
             coder.bit(c, truth)?
         };
@@ -454,7 +467,7 @@ fn significance_pass<C: BitCoder>(
                 keep.push(node as u32);
                 continue;
             }
-            let truth = C::ENCODER && bands[band].max[level][node] >= threshold;
+            let truth = C::ENCODER && bands[band].node_max(level, node) >= threshold;
             let c = node_context(bands, band, level, node % w, node / w);
             let significant = match coder.bit(c, truth) {
                 Ok(s) => s,
