@@ -254,6 +254,11 @@ impl Band {
         }
     }
 
+    /// The significant coefficients' indices, in the order they became significant.
+    pub fn significant(&self) -> &[u32] {
+        &self.lsp
+    }
+
     /// True if coefficient `i` is significant.
     pub fn is_significant(&self, i: usize) -> bool {
         self.sig[0][i]

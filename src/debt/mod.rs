@@ -467,7 +467,8 @@ fn to_components(img: &Image, gray: bool, lossless: bool) -> Vec<Vec<f32>> {
 
 fn from_components(planes: &[Vec<f32>], width: usize, height: usize, lossless: bool) -> Image {
     let n = width * height;
-    let clamp = |v: f32| v.round().clamp(0.0, 255.0) as u8;
+    // Clamped first, so adding one half and truncating rounds to nearest.
+    let clamp = |v: f32| (v.clamp(0.0, 255.0) + 0.5) as u8;
     if planes.len() == 1 {
         let data = planes[0].iter().map(|&y| clamp(y + 128.0)).collect();
         return Image {
@@ -714,31 +715,26 @@ pub fn decode(data: &[u8]) -> Result<Image, Error> {
         } else {
             weight * (1 << FRACTION_BITS) as f32
         };
-        for y in 0..sb.height {
-            for x in 0..sb.width {
-                let i = y * sb.width + x;
-                let known = band.known[i];
-                if known == u8::MAX {
-                    continue;
+        for &i in band.significant() {
+            let i = i as usize;
+            let (x, y) = (i % sb.width, i / sb.width);
+            let known = band.known[i];
+            let mag = band.mag[i];
+            let mut value = if known == 0 {
+                mag as f32 + if header.lossless { 0.0 } else { 0.5 }
+            } else {
+                mag as f32 + RECONSTRUCTION_OFFSET * (1u64 << known) as f32
+            };
+            if let Some((rect, shift)) = roi
+                && in_roi(&rect, sb.level, x, y)
+            {
+                value /= (1u64 << shift) as f32;
+                if header.lossless {
+                    value = value.floor();
                 }
-                let mag = band.mag[i];
-                let mut value = if known == 0 {
-                    mag as f32 + if header.lossless { 0.0 } else { 0.5 }
-                } else {
-                    mag as f32 + RECONSTRUCTION_OFFSET * (1u64 << known) as f32
-                };
-                if let Some((rect, shift)) = roi
-                    && in_roi(&rect, sb.level, x, y)
-                {
-                    value /= (1u64 << shift) as f32;
-                    if header.lossless {
-                        value = value.floor();
-                    }
-                }
-                let value = value / scale;
-                planes[comp][(sb.y0 + y) * w + sb.x0 + x] =
-                    if band.neg[i] { -value } else { value };
             }
+            let value = value / scale;
+            planes[comp][(sb.y0 + y) * w + sb.x0 + x] = if band.neg[i] { -value } else { value };
         }
     }
     for plane in &mut planes {
