@@ -54,32 +54,47 @@ struct Args {
     erase: Vec<u64>,
 }
 
-/// Encodes the decoded image as PNG or, by the output's extension, PPM/PGM.
+/// Encodes the decoded image as PNG or, by the output's extension, binary PPM (P6) or PGM (P5):
+/// `.ppm` always RGB, `.pgm` always grey (luma), `.pnm` as decoded.
 fn write_image(img: &debt::Image, path: Option<&std::path::Path>) -> Result<Vec<u8>> {
     let ext = path
         .and_then(|p| p.extension())
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
-    let format = match ext.as_str() {
-        "ppm" | "pgm" | "pnm" => image::ImageFormat::Pnm,
-        _ => image::ImageFormat::Png,
+    let channels = match ext.as_str() {
+        "ppm" => 3,
+        "pgm" => 1,
+        "pnm" => img.channels,
+        _ => {
+            let color = if img.channels == 1 {
+                image::ExtendedColorType::L8
+            } else {
+                image::ExtendedColorType::Rgb8
+            };
+            let mut bytes = Vec::new();
+            image::write_buffer_with_format(
+                &mut std::io::Cursor::new(&mut bytes),
+                &img.data,
+                img.width as u32,
+                img.height as u32,
+                color,
+                image::ImageFormat::Png,
+            )
+            .context("cannot encode the output image")?;
+            return Ok(bytes);
+        }
     };
-    let color = if img.channels == 1 {
-        image::ExtendedColorType::L8
-    } else {
-        image::ExtendedColorType::Rgb8
-    };
-    let mut bytes = Vec::new();
-    let mut cursor = std::io::Cursor::new(&mut bytes);
-    image::write_buffer_with_format(
-        &mut cursor,
-        &img.data,
-        img.width as u32,
-        img.height as u32,
-        color,
-        format,
-    )
-    .context("cannot encode the output image")?;
+    let magic = if channels == 1 { "P5" } else { "P6" };
+    let mut bytes = format!("{magic}\n{} {}\n255\n", img.width, img.height).into_bytes();
+    match (img.channels, channels) {
+        (a, b) if a == b => bytes.extend_from_slice(&img.data),
+        (1, _) => bytes.extend(img.data.iter().flat_map(|&v| [v, v, v])),
+        _ => bytes.extend(
+            debt::metrics::luma(img)
+                .iter()
+                .map(|&v| (v.clamp(0.0, 255.0) + 0.5) as u8),
+        ),
+    }
     Ok(bytes)
 }
 

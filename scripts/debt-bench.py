@@ -1,0 +1,102 @@
+#!/usr/bin/env python3
+"""DEBT speed and ROI figures against the anchors measured in the same run.
+
+Speed: a 1280x720 colour image (UIEB 616, read from ../shared and written as PPM to a temporary
+directory so that no PNG decoding is timed) is encoded to 6000 bytes by debt-encode and by
+opj_compress (9/7, -I, rate set for about 6000 bytes), and both streams are decoded, runs
+interleaved; the table gives the median wall time of each and the ratio to OpenJPEG.
+
+ROI: each underwater image resized to 640 wide is coded at 1000 bytes without and with a centred
+ROI (a quarter and a sixteenth of the area, shift 3 and 5); the table gives the ROI's PSNR.
+
+Usage: scripts/debt-bench.sh [--runs N]
+"""
+import argparse
+import math
+import os
+import statistics
+import subprocess
+import tempfile
+import time
+
+import numpy as np
+from PIL import Image
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SHARED = os.path.join(ROOT, "..", "shared", "testdata", "images")
+ENC = os.path.join(ROOT, "target", "release", "debt-encode")
+DEC = os.path.join(ROOT, "target", "release", "debt-decode")
+
+
+def timed(cmd):
+    start = time.perf_counter()
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return time.perf_counter() - start
+
+
+def speed(tmp, runs):
+    src = os.path.join(tmp, "u616.ppm")
+    Image.open(os.path.join(SHARED, "uieb-616.png")).convert("RGB").save(src)
+    w, h = Image.open(src).size
+    ratio = w * h * 3 / 6000
+    times = {k: [] for k in ("debt-encode", "opj_compress", "debt-decode", "opj_decompress")}
+    debt, j2k = os.path.join(tmp, "s.debt"), os.path.join(tmp, "s.j2k")
+    for _ in range(runs):
+        times["debt-encode"].append(timed([ENC, src, "--bytes", "6000", "-o", debt]))
+        times["opj_compress"].append(timed(["opj_compress", "-i", src, "-o", j2k, "-r", f"{ratio:.3f}", "-I"]))
+        times["debt-decode"].append(timed([DEC, debt, "-o", os.path.join(tmp, "d.ppm")]))
+        times["opj_decompress"].append(timed(["opj_decompress", "-i", j2k, "-o", os.path.join(tmp, "j.ppm")]))
+    med = {k: statistics.median(v) * 1e3 for k, v in times.items()}
+    print(f"speed: {w}x{h} RGB, DEBT {os.path.getsize(debt)} B, J2K {os.path.getsize(j2k)} B, {runs} runs, median ms")
+    print(f"  {'encode':<8} DEBT {med['debt-encode']:7.1f}  OpenJPEG {med['opj_compress']:7.1f}  "
+          f"ratio {med['debt-encode'] / med['opj_compress']:.2f} (bar <= 0.25)")
+    print(f"  {'decode':<8} DEBT {med['debt-decode']:7.1f}  OpenJPEG {med['opj_decompress']:7.1f}  "
+          f"ratio {med['debt-decode'] / med['opj_decompress']:.2f} (bar < 1)")
+
+
+def psnr(a, b):
+    mse = ((a - b) ** 2).mean()
+    return float("inf") if mse == 0 else 10 * math.log10(255 * 255 / mse)
+
+
+def roi(tmp):
+    print("ROI at 1000 bytes: PSNR of the region (dB), mean over the underwater images")
+    cases = [("quarter", 4), ("sixteenth", 16)]
+    results = {}
+    for name in ("uieb-616", "uieb-866", "uieb-880"):
+        im = Image.open(os.path.join(SHARED, name + ".png")).convert("RGB")
+        w, h = im.size
+        im = im.resize((640, round(h * 640 / w)), Image.LANCZOS)
+        src = os.path.join(tmp, name + ".ppm")
+        im.save(src)
+        ref = np.asarray(im, dtype=np.float64)
+        W, H = im.size
+        for label, area in cases:
+            side = math.sqrt(area)
+            x0, y0 = int(W / 2 - W / side / 2), int(H / 2 - H / side / 2)
+            x1, y1 = int(W / 2 + W / side / 2), int(H / 2 + H / side / 2)
+            for shift in (None, 3, 5):
+                extra = [] if shift is None else ["--roi", f"{x0},{y0},{x1},{y1}", "--roi-shift", str(shift)]
+                out, dec = os.path.join(tmp, "r.debt"), os.path.join(tmp, "r.ppm")
+                subprocess.run([ENC, src, "--bytes", "1000", "-o", out] + extra, check=True)
+                subprocess.run([DEC, out, "-o", dec], check=True)
+                got = np.asarray(Image.open(dec), dtype=np.float64)
+                results.setdefault((label, shift), []).append(psnr(ref[y0:y1, x0:x1], got[y0:y1, x0:x1]))
+    for label, _ in cases:
+        base = statistics.mean(results[(label, None)])
+        row = "  ".join(f"shift {s}: {statistics.mean(results[(label, s)]):.2f} ({statistics.mean(results[(label, s)]) - base:+.2f})"
+                        for s in (3, 5))
+        print(f"  {label:<9} no ROI: {base:.2f}  {row}")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--runs", type=int, default=15)
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        speed(tmp, args.runs)
+        roi(tmp)
+
+
+if __name__ == "__main__":
+    main()
