@@ -708,7 +708,8 @@ pub fn decode(data: &[u8]) -> Result<Image, Error> {
         let _ = coder::code_planes(&mut bands, planes, &mut dec);
     }
     let roi = header.roi_rect();
-    let mut planes = vec![vec![0.0f32; w * h]; header.components()];
+    // Each plane its own zeroed allocation (cloning one would touch every page).
+    let mut planes: Vec<Vec<f32>> = (0..header.components()).map(|_| vec![0.0; w * h]).collect();
     for (band, &(comp, sb, weight)) in bands.iter().zip(&layout) {
         let scale = if header.lossless {
             1.0
