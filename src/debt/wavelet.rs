@@ -191,18 +191,24 @@ fn level<T: Copy + Default, K: Kernel<T>>(
             let row = &mut buf[r * stride..r * stride + cw];
             let line = &mut tmp[..cw];
             if fwd {
-                for (i, &x) in row.iter().enumerate() {
-                    line[if i % 2 == 0 { i / 2 } else { ns + i / 2 }] = x;
-                }
                 let (s, d) = line.split_at_mut(ns);
+                for (dst, &x) in s.iter_mut().zip(row.iter().step_by(2)) {
+                    *dst = x;
+                }
+                for (dst, &x) in d.iter_mut().zip(row.iter().skip(1).step_by(2)) {
+                    *dst = x;
+                }
                 K::forward(s, d, 1);
                 row.copy_from_slice(line);
             } else {
                 line.copy_from_slice(row);
                 let (s, d) = line.split_at_mut(ns);
                 K::inverse(s, d, 1);
-                for (i, x) in row.iter_mut().enumerate() {
-                    *x = line[if i % 2 == 0 { i / 2 } else { ns + i / 2 }];
+                for (x, &v) in row.iter_mut().step_by(2).zip(s.iter()) {
+                    *x = v;
+                }
+                for (x, &v) in row.iter_mut().skip(1).step_by(2).zip(d.iter()) {
+                    *x = v;
                 }
             }
         }
