@@ -200,3 +200,17 @@ pub(crate) const fn with_bit(byte: u8, bit: u8, value: bool) -> u8 {
 pub(crate) const fn with_bits(byte: u8, mask: u8, shift: u8, value: u8) -> u8 {
     (byte & !mask) | ((value << shift) & mask)
 }
+
+/// Helpers of the per-field tests: apply one setter to a buffer of 0xa5 bytes and compare
+/// with the 0xa5 buffer changed at the expected bytes only.
+#[cfg(test)]
+pub(crate) mod field_test {
+    /// `N` bytes of 0xa5 with the given (offset, value) changes.
+    pub fn a5_with<const N: usize>(changes: &[(usize, u8)]) -> [u8; N] {
+        let mut buf = [0xa5u8; N];
+        for &(at, value) in changes {
+            buf[at] = value;
+        }
+        buf
+    }
+}

@@ -968,11 +968,7 @@ mod tests {
     }
 
     fn a5_with(changes: &[(usize, u8)]) -> [u8; 11] {
-        let mut buf = [0xa5u8; 11];
-        for &(at, value) in changes {
-            buf[at] = value;
-        }
-        buf
+        crate::wire::field_test::a5_with(changes)
     }
 
     #[test]

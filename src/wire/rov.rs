@@ -687,13 +687,8 @@ mod tests {
         buf
     }
 
-    /// The 0xa5 buffer with byte `at` replaced by `value`.
     fn a5_with(changes: &[(usize, u8)]) -> [u8; 13] {
-        let mut buf = [0xa5u8; 13];
-        for &(at, value) in changes {
-            buf[at] = value;
-        }
-        buf
+        crate::wire::field_test::a5_with(changes)
     }
 
     #[test]
