@@ -339,10 +339,12 @@ fn node_context(bands: &[Band], band: usize, level: usize, x: usize, y: usize) -
 }
 
 fn sign_context(b: &Band, x: usize, y: usize) -> usize {
-    let s = |xx: isize, yy: isize| -> usize {
+    // EBCOT's sign contributions: each of the horizontal and the vertical pair of neighbours
+    // gives +1, -1 or 0 (none significant, or opposite signs).
+    let s = |xx: isize, yy: isize| -> i32 {
         if b.sig_at(0, xx, yy) {
             if b.neg[yy as usize * b.width + xx as usize] {
-                2
+                -1
             } else {
                 1
             }
@@ -350,7 +352,10 @@ fn sign_context(b: &Band, x: usize, y: usize) -> usize {
             0
         }
     };
-    ctx::SIGN + (b.class * 3 + s(x as isize - 1, y as isize)) * 3 + s(x as isize, y as isize - 1)
+    let (xi, yi) = (x as isize, y as isize);
+    let h = (s(xi - 1, yi) + s(xi + 1, yi)).signum() + 1;
+    let v = (s(xi, yi - 1) + s(xi, yi + 1)).signum() + 1;
+    ctx::SIGN + (b.class * 3 + h as usize) * 3 + v as usize
 }
 
 /// A coefficient becomes significant at `plane`: code its sign, set its state.
