@@ -195,10 +195,17 @@ impl Band {
                     let (w, h) = dims[l];
                     let below = if l == 1 { &mag } else { &max[l - 1] };
                     let mut level = vec![0u32; w * h];
-                    for y in 0..ph {
-                        for x in 0..pw {
-                            let at = (y / 2) * w + x / 2;
-                            level[at] = level[at].max(below[y * pw + x]);
+                    // Each row of nodes takes the maximum over a pair of rows below it, two
+                    // columns at a time.
+                    for (y, out) in level.chunks_exact_mut(w).enumerate() {
+                        for row in
+                            below[2 * y * pw..]
+                                .chunks(pw)
+                                .take(if 2 * y + 1 < ph { 2 } else { 1 })
+                        {
+                            for (o, pair) in out.iter_mut().zip(row.chunks(2)) {
+                                *o = (*o).max(pair.iter().copied().max().unwrap_or(0));
+                            }
                         }
                     }
                     max.push(level);

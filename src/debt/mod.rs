@@ -564,17 +564,16 @@ fn build_bands(
                     weight * (1 << FRACTION_BITS) as f32
                 };
                 for y in 0..sb.height {
-                    for x in 0..sb.width {
-                        let c = plane[(sb.y0 + y) * w + sb.x0 + x];
-                        let mut m = (c.abs() * scale) as u32;
-                        if let Some((rect, shift)) = roi
-                            && in_roi(&rect, sb.level, x, y)
-                        {
+                    let row = &plane[(sb.y0 + y) * w + sb.x0..][..sb.width];
+                    mag.extend(row.iter().map(|&c| (c.abs() * scale) as u32));
+                    neg.extend(row.iter().map(|&c| c < 0.0));
+                }
+                if let Some((rect, shift)) = roi {
+                    for (i, m) in mag.iter_mut().enumerate() {
+                        if in_roi(&rect, sb.level, i % sb.width, i / sb.width) {
                             // Saturates (at 2^31 - 1) rather than wraps for extreme shifts.
-                            m = (u64::from(m) << shift).min(u64::from(u32::MAX >> 1)) as u32;
+                            *m = (u64::from(*m) << shift).min(u64::from(u32::MAX >> 1)) as u32;
                         }
-                        mag.push(m);
-                        neg.push(c < 0.0);
                     }
                 }
                 (mag, neg)
