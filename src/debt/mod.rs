@@ -64,6 +64,19 @@ pub enum Error {
         /// Bytes found.
         found: usize,
     },
+    /// A region of interest that is empty or reaches outside the image.
+    #[error(
+        "ROI {},{},{},{}: expected x0 < x1 <= {width} and y0 < y1 <= {height} (the image's size)",
+        rect.x0, rect.y0, rect.x1, rect.y1
+    )]
+    Roi {
+        /// The rectangle asked for.
+        rect: Rect,
+        /// Image width.
+        width: usize,
+        /// Image height.
+        height: usize,
+    },
     /// A setting out of range.
     #[error("{field}: expected {expected}, found {found}")]
     Setting {
@@ -635,10 +648,10 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
                 });
             }
             if r.x0 >= r.x1 || r.y0 >= r.y1 || r.x1 > img.width || r.y1 > img.height {
-                return Err(Error::Setting {
-                    field: "ROI",
-                    expected: "x0 < x1 <= width, y0 < y1 <= height",
-                    found: 0,
+                return Err(Error::Roi {
+                    rect: r,
+                    width: img.width,
+                    height: img.height,
                 });
             }
             let cell = |v: usize, side: usize| ((v * ROI_CELLS) / side).min(ROI_CELLS - 1) as u8;
@@ -774,6 +787,29 @@ mod tests {
             channels,
             data,
         }
+    }
+
+    #[test]
+    fn bad_roi_is_named() {
+        let img = synthetic(16, 8, 1);
+        let roi = Some(Rect {
+            x0: 4,
+            y0: 0,
+            x1: 20,
+            y1: 8,
+        });
+        let err = encode(
+            &img,
+            &EncodeOptions {
+                roi,
+                ..Default::default()
+            },
+        )
+        .unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "ROI 4,0,20,8: expected x0 < x1 <= 16 and y0 < y1 <= 8 (the image's size)"
+        );
     }
 
     #[test]
