@@ -180,8 +180,10 @@ fn level<T: Copy + Default, K: Kernel<T>>(
     forward: bool,
     tmp: &mut Vec<T>,
 ) {
-    tmp.clear();
-    tmp.resize(cw * ch, T::default());
+    // Every sample of the scratch is written before it is read: grow it, never clear it.
+    if tmp.len() < cw * ch {
+        tmp.resize(cw * ch, T::default());
+    }
     let rows = |buf: &mut [T], tmp: &mut Vec<T>, fwd: bool| {
         if cw < 2 {
             return;
