@@ -38,9 +38,9 @@ pub trait BitCoder {
 
 /// Context counts and offsets.
 mod ctx {
-    pub const NODE: usize = 0; // class 4 x level 3 x parent 2 x neighbour 2 = 48
-    pub const COEF: usize = NODE + 48; // class 4 x neighbourhood 9 x parent 2 = 72
-    pub const SIGN: usize = COEF + 72; // class 4 x left 3 x up 3 = 36
+    pub const NODE: usize = 0; // origin 4 x class 4 x level 3 x parent 2 x neighbour 2 = 192
+    pub const COEF: usize = NODE + 192; // origin 4 x class 4 x neighbourhood 9 x parent 2 = 288
+    pub const SIGN: usize = COEF + 288; // class 4 x left 3 x up 3 = 36
     pub const REFINE: usize = SIGN + 36; // class 4 x first 2 x neighbour 2 = 16
     pub const COUNT: usize = REFINE + 16;
 }
@@ -295,7 +295,14 @@ fn parent_sig(bands: &[Band], band: usize, level: usize, x: usize, y: usize) -> 
     }
 }
 
-fn node_context(bands: &[Band], band: usize, level: usize, x: usize, y: usize) -> usize {
+fn node_context(
+    bands: &[Band],
+    band: usize,
+    level: usize,
+    x: usize,
+    y: usize,
+    origin: usize,
+) -> usize {
     let b = &bands[band];
     let (xi, yi) = (x as isize, y as isize);
     if level == 0 {
@@ -334,14 +341,14 @@ fn node_context(bands: &[Band], band: usize, level: usize, x: usize, y: usize) -
             }
         };
         let parent = usize::from(parent_sig(bands, band, 0, x, y));
-        ctx::COEF + (b.class * 9 + neighbourhood) * 2 + parent
+        ctx::COEF + ((origin * 4 + b.class) * 9 + neighbourhood) * 2 + parent
     } else {
         let neighbour = [(-1, 0), (1, 0), (0, -1), (0, 1)]
             .iter()
             .any(|&(dx, dy)| b.sig_at(level, xi + dx, yi + dy));
         let parent = usize::from(parent_sig(bands, band, level, x, y));
         let lev = (level - 1).min(2);
-        ctx::NODE + ((b.class * 3 + lev) * 2 + parent) * 2 + usize::from(neighbour)
+        ctx::NODE + (((origin * 4 + b.class) * 3 + lev) * 2 + parent) * 2 + usize::from(neighbour)
     }
 }
 
@@ -415,7 +422,14 @@ fn descend<C: BitCoder>(
             true
         } else {
             let truth = C::ENCODER && bands[band].node_max(child_level, child) >= threshold;
-            let c = node_context(bands, band, child_level, child % cw, child / cw);
+            let origin = if any {
+                3
+            } else if k + 2 == count {
+                2
+            } else {
+                1
+            };
+            let c = node_context(bands, band, child_level, child % cw, child / cw, origin);
             coder.bit(c, truth)?
         };
         if significant {
@@ -483,7 +497,7 @@ fn significance_pass<C: BitCoder>(
                 continue;
             }
             let truth = C::ENCODER && bands[band].node_max(level, node) >= threshold;
-            let c = node_context(bands, band, level, node % w, node / w);
+            let c = node_context(bands, band, level, node % w, node / w, 0);
             let significant = match coder.bit(c, truth) {
                 Ok(s) => s,
                 Err(stop) => {
