@@ -292,3 +292,46 @@ fn erased_trunks_decode_the_prefix_before_the_first_loss() {
         "--erase needs --trunk-size"
     );
 }
+
+#[test]
+fn segmented_streams_lose_one_segment_per_lost_trunk() {
+    let input = testdata("kodim23-64x48.png");
+    let reference = image::open(&input).unwrap().into_rgb8().into_raw();
+    let i = input.to_str().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let quality = |args: &[&str], erase: Option<&str>| -> f64 {
+        let enc = run(ENCODE, args, b"");
+        assert_eq!(enc.code, 0, "{}", enc.stderr);
+        assert_eq!(enc.stdout.len(), 800);
+        let stream = dir.path().join("s.debt");
+        std::fs::write(&stream, &enc.stdout).unwrap();
+        let s = stream.to_str().unwrap();
+        let mut dec_args = vec![s];
+        if let Some(e) = erase {
+            dec_args.extend(["--trunk-size", "20", "--erase", e]);
+        }
+        let dec = run(DECODE, &dec_args, b"");
+        assert_eq!(dec.code, 0, "{}", dec.stderr);
+        psnr(&reference, &load(&dec.stdout).into_rgb8().into_raw())
+    };
+    let plain = [i, "-b", "800"];
+    let segmented = [i, "-b", "800", "--segments", "3", "--trunk-size", "20"];
+    let (plain_whole, seg_whole) = (quality(&plain, None), quality(&segmented, None));
+    let (plain_lost, seg_lost) = (quality(&plain, Some("4")), quality(&segmented, Some("4")));
+    assert!(
+        seg_whole > plain_whole - 1.0,
+        "{seg_whole:.2} vs {plain_whole:.2}"
+    );
+    assert!(
+        seg_lost > plain_lost + 1.0,
+        "trunk 4 lost: segmented {seg_lost:.2} dB, plain {plain_lost:.2} dB"
+    );
+    let lone_trunk_size = run(ENCODE, &[i, "-b", "800", "--trunk-size", "20"], b"");
+    assert_eq!(lone_trunk_size.code, 2, "--trunk-size needs --segments");
+    let tiny_trunk = run(
+        ENCODE,
+        &[i, "-b", "800", "--segments", "3", "--trunk-size", "8"],
+        b"",
+    );
+    assert_eq!(tiny_trunk.code, 2);
+}

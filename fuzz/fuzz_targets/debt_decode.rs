@@ -1,9 +1,10 @@
 //! The DEBT decoder on arbitrary bytes: never panics; a stream it accepts decodes to an image of
-//! the size its header states, and every prefix of it decodes too.
+//! the size its header states, and every prefix of it decodes too, and so does the stream with
+//! a byte range after the header lost (segmented streams drop that range's segments).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::debt::{Header, decode};
+use rovlink::debt::{Header, decode, decode_with_loss};
 
 fuzz_target!(|data: &[u8]| {
     // Keep each run fast: images up to 64 x 64 (the decoder's cost grows with the area).
@@ -23,4 +24,8 @@ fuzz_target!(|data: &[u8]| {
             assert!(decode(&data[..cut]).is_ok());
         }
     }
+    // A lost range chosen by the data itself, after the header.
+    let start = header.len() + usize::from(data[data.len() - 1]);
+    let lost = [start..start + 1 + usize::from(data[0] & 0x3f)];
+    assert!(decode_with_loss(data, &lost).is_ok());
 });

@@ -42,9 +42,10 @@ struct Args {
     #[arg(long, value_name = "T", requires = "erase", value_parser = clap::value_parser!(u64).range(1..))]
     trunk_size: Option<u64>,
 
-    /// Decode as if these trunks (0-based ITSN) were lost in transit. Version 1 streams are one
+    /// Decode as if these trunks (0-based ITSN) were lost in transit. A plain stream is one
     /// embedded segment: everything from the first lost trunk on is unusable, so this decodes
-    /// the prefix before it.
+    /// the prefix before it. A segmented stream (debt-encode --segments) loses only the
+    /// segments those trunks carried, from the lost trunk on.
     #[arg(
         long,
         value_name = "ITSN,...",
@@ -104,18 +105,22 @@ fn run(args: &Args) -> Result<u8> {
     if let Some(n) = args.bytes {
         stream.truncate(n);
     }
-    if let (Some(trunk), Some(&first)) = (args.trunk_size, args.erase.iter().min()) {
+    let mut lost = Vec::new();
+    if let Some(trunk) = args.trunk_size {
         // The header travels in trunk 0: without it nothing decodes.
-        if first == 0 {
+        if args.erase.contains(&0) {
             anyhow::bail!(
                 "{}: trunk 0 (the header) is erased: nothing to decode",
                 input.name
             );
         }
-        let keep = usize::try_from(first.saturating_mul(trunk)).unwrap_or(usize::MAX);
-        stream.truncate(keep);
+        for &e in &args.erase {
+            let start = usize::try_from(e.saturating_mul(trunk)).unwrap_or(usize::MAX);
+            let end = usize::try_from(trunk).map_or(usize::MAX, |t| start.saturating_add(t));
+            lost.push(start..end);
+        }
     }
-    let img = debt::decode(&stream).with_context(|| input.name.clone())?;
+    let img = debt::decode_with_loss(&stream, &lost).with_context(|| input.name.clone())?;
     let bytes = write_image(&img, args.output.as_deref())?;
     let mut out = Output::open(args.output.as_deref(), true)?;
     out.write_bytes(&bytes)?;

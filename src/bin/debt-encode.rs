@@ -21,6 +21,7 @@ Examples:
   debt-encode --gray --scale 1 --bytes 250 < photo.png > tiny.debt
   debt-encode photo.png --lossless --bytes 10000000 -o exact.debt   (shorter when complete)
   debt-encode --sweep 250,500,1000,2000,8000 --csv trials.csv a.png b.png   compression trials
+  debt-encode photo.png --bytes 2000 --segments 4 --trunk-size 39 -o robust.debt   loss-resilient
 
 Exit codes: 0 ok, 2 bad usage or an unreadable image.";
 
@@ -73,9 +74,21 @@ struct Args {
     #[arg(long, value_name = "K", default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=3))]
     scale: u32,
 
-    /// Wavelet levels (0..=7); by default as many as keep the low band at least 8 pixels.
+    /// Wavelet levels (0..=7); by default as many as keep the low band at least 2 pixels a
+    /// side.
     #[arg(long, value_parser = clap::value_parser!(u32).range(0..=7))]
     levels: Option<u32>,
+
+    /// Split the stream into K independently decodable segments (2..=16, stripes of rows)
+    /// interleaved trunk by trunk: a lost trunk then blurs one stripe instead of ending the
+    /// image. Costs some quality when nothing is lost (see docs/debt-format.md).
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(2..=16))]
+    segments: Option<u64>,
+
+    /// With --segments: the trunk size in bytes (16..=255) the link cuts the stream into
+    /// [default: 39, the paper's image trunk].
+    #[arg(long, value_name = "T", requires = "segments", value_parser = clap::value_parser!(u64).range(16..=255))]
+    trunk_size: Option<u64>,
 }
 
 fn parse_rect(text: &str) -> Result<Rect, String> {
@@ -129,6 +142,10 @@ impl Args {
             scale: self.scale,
             roi: self.roi,
             roi_shift: self.roi_shift,
+            segments: self.segments.map(|count| debt::Segments {
+                count: count as usize,
+                trunk_bytes: self.trunk_size.unwrap_or(39) as usize,
+            }),
         }
     }
 }

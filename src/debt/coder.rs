@@ -34,6 +34,17 @@ pub trait BitCoder {
     fn bit(&mut self, ctx: usize, bit: bool) -> Result<bool, Stop>;
     /// Codes `bits` bits of `value` at probability one half.
     fn raw(&mut self, value: u32, bits: u32) -> Result<u32, Stop>;
+    /// Notes that the pass with this [`pass_index`] is complete (the encoder records where).
+    fn mark(&mut self, _pass_index: usize) {}
+}
+
+/// Number of distinct pass indices: three passes of 32 planes.
+pub const PASS_INDICES: usize = 96;
+
+/// Position of pass `pass` (0 propagation, 1 cleanup, 2 refinement) of bit-plane `plane` in
+/// coding order, the same for every stream whatever its number of planes.
+pub fn pass_index(plane: u32, pass: usize) -> usize {
+    (31 - plane.min(31) as usize) * 3 + pass
 }
 
 /// Context counts and offsets.
@@ -53,6 +64,8 @@ pub struct Encoder {
     rc: RangeEncoder,
     contexts: Vec<Context>,
     budget_bits: u64,
+    /// Each completed pass: its [`pass_index`] and the bits written by its end.
+    pub marks: Vec<(usize, u64)>,
 }
 
 impl Encoder {
@@ -62,6 +75,7 @@ impl Encoder {
             rc: RangeEncoder::new(),
             contexts: vec![Context::default(); ctx::COUNT],
             budget_bits: (budget_bytes as u64).saturating_mul(8),
+            marks: Vec::new(),
         }
     }
 
@@ -95,6 +109,9 @@ impl BitCoder for Encoder {
         self.room()?;
         self.rc.encode_raw(value, bits);
         Ok(value)
+    }
+    fn mark(&mut self, pass_index: usize) {
+        self.marks.push((pass_index, self.rc.tell_bits()));
     }
 }
 
@@ -158,6 +175,9 @@ pub struct Band {
     pub mag: Vec<u32>,
     /// Sign of each coefficient (true = negative).
     pub neg: Vec<bool>,
+    /// Row of the subband this band's first row is (a segment holds a stripe of rows); the
+    /// parent of coefficient row `y` is parent row `(y + row0) / 2 - parent.row0`.
+    pub row0: usize,
     /// Decoder: lowest bit-plane known of each significant coefficient (meaningless for the
     /// others; empty when encoding).
     pub known: Vec<u8>,
@@ -229,6 +249,7 @@ impl Band {
             max,
             mag,
             neg,
+            row0: 0,
             // Zeroed allocations stay untouched (no page faults) in bands never reached.
             known: if encoding { Vec::new() } else { vec![0; n] },
             lin,
@@ -289,7 +310,8 @@ fn parent_sig(bands: &[Band], band: usize, level: usize, x: usize, y: usize) -> 
     };
     let parent = &bands[p];
     if level == 0 {
-        parent.sig_at(0, (x / 2) as isize, (y / 2) as isize)
+        let py = (y + bands[band].row0) / 2;
+        parent.sig_at(0, (x / 2) as isize, py as isize - parent.row0 as isize)
     } else {
         parent.sig_at(level - 1, x as isize, y as isize)
     }
@@ -577,12 +599,15 @@ pub fn code_planes<C: BitCoder>(
         for band in 0..bands.len() {
             significance_pass(bands, band, plane, Pass::Propagation, coder)?;
         }
+        coder.mark(pass_index(plane, 0));
         for band in 0..bands.len() {
             significance_pass(bands, band, plane, Pass::Cleanup, coder)?;
         }
+        coder.mark(pass_index(plane, 1));
         for band in 0..bands.len() {
             refinement_pass(bands, band, plane, coder)?;
         }
+        coder.mark(pass_index(plane, 2));
     }
     Ok(())
 }

@@ -10,9 +10,10 @@
 //! weighted so that a bit-plane is worth the same squared error in every subband and component
 //! (RGB error) -> block-tree bit-plane coding with adaptive contexts.
 //!
-//! Status: the codec core; the command-line tools, the loss-resilient segmenting and the
-//! comparison scripts are still to come (issue 3). The bitstream is described in
-//! `docs/debt-format.md`.
+//! Loss resilience (optional, [`Segments`]): the coefficients are split by rows into
+//! independently coded segments whose bytes are interleaved trunk by trunk, so a lost trunk
+//! truncates one segment (one horizontal stripe of the image loses detail) instead of the whole
+//! rest of the stream. The bitstream is described in `docs/debt-format.md`.
 //!
 //! No-panic contract: [`decode`] returns an [`Error`] for a stream that is not DEBT and decodes
 //! any other bytes, truncated or corrupt, to some image without panicking.
@@ -23,6 +24,7 @@ pub mod rangecoder;
 pub mod wavelet;
 
 use coder::{Band, BitCoder, Decoder, Encoder};
+use std::ops::Range;
 use wavelet::Orientation;
 
 /// Codec errors.
@@ -37,13 +39,15 @@ pub enum Error {
         found: usize,
     },
     /// The first byte does not say DEBT.
-    #[error("not a DEBT stream: first byte 0x{found:02x}, expected 0xd1 (DEBT version 1)")]
+    #[error("not a DEBT stream: first byte 0x{found:02x}, expected 0xd1 or 0xd2 (DEBT)")]
     NotDebt {
         /// The byte found.
         found: u8,
     },
     /// A DEBT stream of a version this build does not know.
-    #[error("DEBT version {found} is not supported (this build reads version {VERSION})")]
+    #[error(
+        "DEBT version {found} is not supported (this build reads {VERSION} and {VERSION_SEGMENTED})"
+    )]
     Version {
         /// The version found.
         found: u8,
@@ -89,8 +93,14 @@ pub enum Error {
     },
 }
 
-/// The bitstream version this build writes and reads.
+/// The bitstream version this build writes and reads: one embedded segment.
 pub const VERSION: u8 = 1;
+/// The same format split into trunk-interleaved segments ([`Segments`]).
+pub const VERSION_SEGMENTED: u8 = 2;
+/// Most segments a stream can have.
+pub const MAX_SEGMENTS: usize = 16;
+/// Smallest trunk a segmented stream can be cut for.
+pub const MIN_TRUNK_BYTES: usize = 16;
 const MAGIC: u8 = 0xd0;
 /// The largest width or height.
 pub const MAX_SIDE: usize = 4096;
@@ -146,6 +156,78 @@ pub struct EncodeOptions {
     pub roi: Option<Rect>,
     /// Bit-planes the region of interest is raised by (1..=15).
     pub roi_shift: u32,
+    /// Split into independently decodable segments for lossy links.
+    pub segments: Option<Segments>,
+}
+
+/// A segmented stream: `count` stripes of rows, each an embedded stream of its own, their bytes
+/// interleaved so that trunk `k` (bytes `k*trunk_bytes..(k+1)*trunk_bytes` of the stream, the
+/// header included in trunk 0) carries only segment `k % count`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Segments {
+    /// Number of segments, 2..=16.
+    pub count: usize,
+    /// Trunk size in bytes, 16..=255.
+    pub trunk_bytes: usize,
+}
+
+impl Segments {
+    fn check(&self) -> Result<(), Error> {
+        if !(2..=MAX_SEGMENTS).contains(&self.count) {
+            return Err(Error::Setting {
+                field: "segments",
+                expected: "2..=16",
+                found: self.count as u64,
+            });
+        }
+        if !(MIN_TRUNK_BYTES..=255).contains(&self.trunk_bytes) {
+            return Err(Error::Setting {
+                field: "segment trunk size",
+                expected: "16..=255 bytes",
+                found: self.trunk_bytes as u64,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// A segmented stream's layout as its header states it: the segments and each one's share of
+/// the trunks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SegmentLayout {
+    /// Count and trunk size.
+    pub segments: Segments,
+    /// Relative share of the trunks of each segment (1..=255; entries past `count` are 0).
+    pub weights: [u8; MAX_SEGMENTS + 1],
+}
+
+impl SegmentLayout {
+    /// The chunks of a stream of `total_bytes` whose header takes `header_bytes`: each chunk's
+    /// byte range in the stream and the segment it carries, in stream order. Trunk `k` is
+    /// chunk `k` (less the header in trunk 0); trunks go to segments by smooth weighted round
+    /// robin: each trunk, every segment gains its weight in credit, the segment with the most
+    /// credit (the first on ties) takes the trunk and pays the total weight.
+    fn chunks(&self, header_bytes: usize, total_bytes: usize) -> Vec<(Range<usize>, usize)> {
+        let trunk = self.segments.trunk_bytes;
+        let weights = &self.weights[..=self.segments.count];
+        let total_weight: i64 = weights.iter().map(|&w| i64::from(w)).sum();
+        let mut credit = [0i64; MAX_SEGMENTS + 1];
+        (0..total_bytes.div_ceil(trunk))
+            .map(|k| {
+                let mut best = 0;
+                for (i, &w) in weights.iter().enumerate() {
+                    credit[i] += i64::from(w);
+                    // Trunk 0, with the header, always carries the base.
+                    if k > 0 && credit[i] > credit[best] {
+                        best = i;
+                    }
+                }
+                credit[best] -= total_weight;
+                let range = (k * trunk).max(header_bytes)..((k + 1) * trunk).min(total_bytes);
+                (range, best)
+            })
+            .collect()
+    }
 }
 
 impl Default for EncodeOptions {
@@ -158,6 +240,7 @@ impl Default for EncodeOptions {
             scale: 0,
             roi: None,
             roi_shift: 3,
+            segments: None,
         }
     }
 }
@@ -179,15 +262,18 @@ pub struct Header {
     pub scale: u32,
     /// ROI as 1/32 cells: first and last column cell, first and last row cell; and its shift.
     pub roi: Option<([u8; 4], u32)>,
+    /// Segmenting, for version 2 streams.
+    pub segments: Option<SegmentLayout>,
 }
 
 /// ROI cells per image side in the header.
 const ROI_CELLS: usize = 32;
 
 impl Header {
-    /// Bytes the header takes: 5, or 8 with a region of interest.
+    /// Bytes the header takes: 5, or 8 with a region of interest; 2 more when segmented.
     pub fn len(&self) -> usize {
-        if self.roi.is_some() { 8 } else { 5 }
+        let base = if self.roi.is_some() { 8 } else { 5 };
+        base + self.segments.map_or(0, |l| 3 + l.segments.count)
     }
 
     /// Always false: a header is never empty (for clippy's len-without-is-empty).
@@ -196,7 +282,14 @@ impl Header {
     }
 
     fn write(&self, out: &mut Vec<u8>) {
-        out.push(MAGIC | VERSION);
+        out.push(
+            MAGIC
+                | if self.segments.is_some() {
+                    VERSION_SEGMENTED
+                } else {
+                    VERSION
+                },
+        );
         let size = ((self.width as u32 - 1) << 12) | (self.height as u32 - 1);
         out.extend_from_slice(&size.to_be_bytes()[1..]);
         out.push(
@@ -214,6 +307,11 @@ impl Header {
                 | u32::from(c[3]);
             out.extend_from_slice(&bits.to_be_bytes()[1..]);
         }
+        if let Some(layout) = self.segments {
+            out.push((layout.segments.count - 1) as u8);
+            out.push(layout.segments.trunk_bytes as u8);
+            out.extend_from_slice(&layout.weights[..=layout.segments.count]);
+        }
     }
 
     /// Reads a header from the start of a stream.
@@ -225,7 +323,8 @@ impl Header {
         if first & 0xf0 != MAGIC {
             return Err(Error::NotDebt { found: first });
         }
-        if first & 0x0f != VERSION {
+        let version = first & 0x0f;
+        if version != VERSION && version != VERSION_SEGMENTED {
             return Err(Error::Version {
                 found: first & 0x0f,
             });
@@ -246,6 +345,7 @@ impl Header {
             levels: u32::from((flags >> 3) & 0x07),
             scale: u32::from((flags >> 1) & 0x03),
             roi: None,
+            segments: None,
         };
         if flags & 1 != 0 {
             if data.len() < 8 {
@@ -266,6 +366,37 @@ impl Header {
                 });
             }
             header.roi = Some(([cells[0], cells[1], cells[2], cells[3]], shift));
+        }
+        if version == VERSION_SEGMENTED {
+            let at = if header.roi.is_some() { 8 } else { 5 };
+            let Some(&[count, trunk]) = data.get(at..at + 2) else {
+                return Err(Error::Truncated {
+                    expected: at + 2,
+                    found: data.len(),
+                });
+            };
+            let segments = Segments {
+                count: usize::from(count) + 1,
+                trunk_bytes: usize::from(trunk),
+            };
+            segments.check()?;
+            let at = at + 2;
+            let Some(read) = data.get(at..=at + segments.count) else {
+                return Err(Error::Truncated {
+                    expected: at + segments.count + 1,
+                    found: data.len(),
+                });
+            };
+            if let Some(&zero) = read.iter().find(|&&w| w == 0) {
+                return Err(Error::Setting {
+                    field: "segment weight",
+                    expected: "1..=255",
+                    found: zero.into(),
+                });
+            }
+            let mut weights = [0; MAX_SEGMENTS + 1];
+            weights[..=segments.count].copy_from_slice(read);
+            header.segments = Some(SegmentLayout { segments, weights });
         }
         Ok(header)
     }
@@ -535,12 +666,38 @@ fn transform(plane: &mut [f32], width: usize, height: usize, header: &Header, fo
     }
 }
 
-/// The coder's band list for a header: (component, subband) pairs in coding order, with the
-/// quantised data when encoding.
+/// Where a coder band sits: component, subband, quantisation weight, and its first row in the
+/// subband (segments hold stripes of rows).
+type Placement = (usize, wavelet::Subband, f32, usize);
+
+/// Fewest rows of a subband per stripe: shorter subbands go whole to the base segment.
+const MIN_STRIPE_ROWS: usize = 8;
+
+/// The rows of a subband `height` rows high that segment `part` of `parts` holds. One part:
+/// all. Otherwise part 0 is the base, which holds the subbands too short to give every stripe
+/// [`MIN_STRIPE_ROWS`] rows, and parts 1.. are the stripes, which share the rows of the others.
+fn part_rows(height: usize, part: usize, parts: usize) -> Range<usize> {
+    if parts == 1 {
+        return 0..height;
+    }
+    let stripes = parts - 1;
+    let base = height < stripes * MIN_STRIPE_ROWS;
+    match (part, base) {
+        (0, true) => 0..height,
+        (0, false) | (_, true) => 0..0,
+        (p, false) => (p - 1) * height / stripes..p * height / stripes,
+    }
+}
+
+/// The coder's band list for a header and segment `part` of `parts` (0 of 1 when not
+/// segmented): (component, subband) pairs in coding order, with the quantised data when
+/// encoding.
 fn build_bands(
     header: &Header,
     planes: Option<&[Vec<f32>]>,
-) -> (Vec<Band>, Vec<(usize, wavelet::Subband, f32)>) {
+    part: usize,
+    parts: usize,
+) -> (Vec<Band>, Vec<Placement>) {
     let (w, h) = header.coded_size();
     let subbands = wavelet::subbands(w, h, header.levels);
     let weights = subband_weights(header, &subbands);
@@ -558,7 +715,8 @@ fn build_bands(
             } else {
                 mse_weight.sqrt()
             };
-            layout.push((comp, *sb, weight * comp_weight));
+            let rows = part_rows(sb.height, part, parts);
+            layout.push((comp, *sb, weight * comp_weight, rows.start));
             keys.push((comp, orientation_code(sb.orientation), sb.level));
         }
     }
@@ -566,24 +724,25 @@ fn build_bands(
     let bands = layout
         .iter()
         .zip(parents)
-        .map(|(&(comp, sb, weight), parent)| {
+        .map(|(&(comp, sb, weight, row0), parent)| {
+            let rows = part_rows(sb.height, part, parts);
             let data = planes.map(|planes| {
                 let plane = &planes[comp];
-                let n = sb.width * sb.height;
+                let n = sb.width * rows.len();
                 let (mut mag, mut neg) = (Vec::with_capacity(n), Vec::with_capacity(n));
                 let scale = if header.lossless {
                     1.0
                 } else {
                     weight * (1 << FRACTION_BITS) as f32
                 };
-                for y in 0..sb.height {
+                for y in rows.clone() {
                     let row = &plane[(sb.y0 + y) * w + sb.x0..][..sb.width];
                     mag.extend(row.iter().map(|&c| (c.abs() * scale) as u32));
                     neg.extend(row.iter().map(|&c| c < 0.0));
                 }
                 if let Some((rect, shift)) = roi {
                     for (i, m) in mag.iter_mut().enumerate() {
-                        if in_roi(&rect, sb.level, i % sb.width, i / sb.width) {
+                        if in_roi(&rect, sb.level, i % sb.width, row0 + i / sb.width) {
                             // Saturates (at 2^31 - 1) rather than wraps for extreme shifts.
                             *m = (u64::from(*m) << shift).min(u64::from(u32::MAX >> 1)) as u32;
                         }
@@ -591,7 +750,9 @@ fn build_bands(
                 }
                 (mag, neg)
             });
-            Band::new(sb.width, sb.height, class_of(sb.orientation), parent, data)
+            let mut band = Band::new(sb.width, rows.len(), class_of(sb.orientation), parent, data);
+            band.row0 = row0;
+            band
         })
         .collect();
     (bands, layout)
@@ -677,7 +838,14 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
         levels,
         scale: options.scale,
         roi,
+        segments: options.segments.map(|segments| SegmentLayout {
+            segments,
+            weights: [1; MAX_SEGMENTS + 1],
+        }),
     };
+    if let Some(seg) = options.segments {
+        seg.check()?;
+    }
     let mut out = Vec::with_capacity(options.bytes);
     header.write(&mut out);
     if options.bytes < out.len() {
@@ -692,37 +860,211 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
     for plane in &mut planes {
         transform(plane, w, h, &header, true);
     }
-    let (mut bands, _) = build_bands(&header, Some(&planes));
+    let Some(layout) = header.segments else {
+        let budget = options.bytes - out.len();
+        let (payload, _) = encode_part(&header, &planes, 0, 1, budget);
+        out.extend_from_slice(&payload);
+        return Ok(out);
+    };
+    let count = layout.segments.count + 1;
+    let header_bytes = header.len();
+    // Every segment is coded once within the whole budget, noting where each pass ends; the
+    // budget is then split so that all segments stop at about the same pass (equal
+    // distortion-rate slope), and each keeps the prefix of its stream that fits its trunks.
+    let budget = options.bytes.saturating_sub(header_bytes);
+    let mut streams = Vec::with_capacity(count);
+    let mut ends = Vec::with_capacity(count);
+    for part in 0..count {
+        let (bands, _) = build_bands(&header, Some(&planes), part, count);
+        let (payload, complete, marks) = encode_bands(bands, budget);
+        ends.push(pass_ends(&marks, complete));
+        streams.push(payload);
+    }
+    let shares = split_budget(&ends, budget);
+    let largest = shares.iter().copied().max().unwrap_or(1).max(1);
+    let mut weights = [0u8; MAX_SEGMENTS + 1];
+    for (w, &share) in weights.iter_mut().zip(&shares) {
+        *w = (share * 255).div_ceil(largest).clamp(1, 255) as u8;
+    }
+    let layout = SegmentLayout {
+        segments: layout.segments,
+        weights,
+    };
+    let header = Header {
+        segments: Some(layout),
+        ..header
+    };
+    out.clear();
+    header.write(&mut out);
+    let chunks = layout.chunks(header_bytes, options.bytes);
+    let mut taken = vec![0; count];
+    for (range, part) in chunks {
+        let stream = &streams[part];
+        let from = taken[part];
+        let to = (from + range.len()).min(stream.len());
+        out.extend_from_slice(&stream[from.min(to)..to]);
+        // Past its end a segment's chunks are zeros (a complete stream ends in zeros anyway).
+        out.resize(out.len() + range.len() - (to - from.min(to)), 0);
+        taken[part] += range.len();
+    }
+    Ok(out)
+}
+
+/// Where each pass ends in a segment's stream, in bytes a decoder needs to have it all, indexed
+/// by [`coder::pass_index`]; `u64::MAX` for passes the stream stopped before finishing.
+fn pass_ends(marks: &[(usize, u64)], complete: bool) -> Vec<u64> {
+    let bytes = |bits: u64| (bits + u64::from(rangecoder::MARGIN_BITS)).div_ceil(8);
+    (0..coder::PASS_INDICES)
+        .map(|i| match marks.iter().rev().find(|m| m.0 <= i) {
+            // Planes above the segment's largest magnitude: nothing but the plane count.
+            None => bytes(5),
+            Some(&(index, bits)) if index == i || complete => bytes(bits),
+            Some(_) => u64::MAX,
+        })
+        .collect()
+}
+
+/// Splits `budget` bytes among segments whose pass ends are `ends`: each gets what reaches the
+/// last pass that all can complete together, and the rest in proportion to the next pass.
+fn split_budget(ends: &[Vec<u64>], budget: usize) -> Vec<usize> {
+    let budget = budget as u64;
+    let total = |i: usize| -> u64 { ends.iter().map(|e| e[i]).fold(0, u64::saturating_add) };
+    let mut base: Vec<u64> = vec![0; ends.len()];
+    let mut reached = None;
+    for i in 0..coder::PASS_INDICES {
+        if total(i) <= budget {
+            reached = Some(i);
+        } else {
+            break;
+        }
+    }
+    if let Some(i) = reached {
+        base = ends.iter().map(|e| e[i]).collect();
+    }
+    let next = reached.map_or(0, |i| i + 1).min(coder::PASS_INDICES - 1);
+    let left = budget - base.iter().sum::<u64>().min(budget);
+    let growth: Vec<u64> = ends
+        .iter()
+        .zip(&base)
+        .map(|(e, &b)| e[next].min(budget).saturating_sub(b).max(1))
+        .collect();
+    let growth_sum: u64 = growth.iter().sum();
+    base.iter()
+        .zip(&growth)
+        .map(|(&b, &g)| (b + left * g / growth_sum) as usize)
+        .collect()
+}
+
+/// Codes segment `part` of `parts` of the transformed `planes` in at most `budget` bytes:
+/// exactly `budget` unless it completes in fewer (the flag says so).
+fn encode_part(
+    header: &Header,
+    planes: &[Vec<f32>],
+    part: usize,
+    parts: usize,
+    budget: usize,
+) -> (Vec<u8>, bool) {
+    let (bands, _) = build_bands(header, Some(planes), part, parts);
+    let (payload, complete, _) = encode_bands(bands, budget);
+    (payload, complete)
+}
+
+/// Codes a band list in at most `budget` bytes: the bytes (exactly `budget` unless complete),
+/// whether every plane was coded, and where each pass ended ([`Encoder::marks`]).
+fn encode_bands(mut bands: Vec<Band>, budget: usize) -> (Vec<u8>, bool, Vec<(usize, u64)>) {
     let max = bands.iter().map(Band::max_magnitude).max().unwrap_or(0);
     let plane_count = 32 - max.leading_zeros();
-    let budget = options.bytes - out.len();
     let mut enc = Encoder::new(budget);
     let complete = enc.raw(plane_count, 5).is_ok()
         && coder::code_planes(&mut bands, plane_count, &mut enc).is_ok();
+    let marks = std::mem::take(&mut enc.marks);
     let mut payload = enc.finish(complete);
     if complete {
         payload.truncate(budget);
     } else {
         payload.resize(budget, 0);
     }
-    out.extend_from_slice(&payload);
-    Ok(out)
+    (payload, complete, marks)
 }
 
 /// Decodes a stream (or any prefix of one).
 pub fn decode(data: &[u8]) -> Result<Image, Error> {
+    decode_with_loss(data, &[])
+}
+
+/// Decodes a stream of which the byte ranges `lost` never arrived (their contents are ignored).
+/// A single-segment stream decodes up to its first lost byte; a segmented one loses, in each
+/// segment, the chunks from its first lost one on. The header must have arrived.
+pub fn decode_with_loss(data: &[u8], lost: &[Range<usize>]) -> Result<Image, Error> {
     let header = Header::read(data)?;
-    let (w, h) = header.coded_size();
-    let payload = &data[header.len().min(data.len())..];
-    let (mut bands, layout) = build_bands(&header, None);
-    let mut dec = Decoder::new(payload);
-    if let Ok(planes) = dec.raw(0, 5) {
-        let _ = coder::code_planes(&mut bands, planes, &mut dec);
+    let header_bytes = header.len();
+    let first_lost = lost
+        .iter()
+        .filter(|r| !r.is_empty())
+        .map(|r| r.start)
+        .min()
+        .unwrap_or(usize::MAX);
+    if first_lost < header_bytes {
+        return Err(Error::Truncated {
+            expected: header_bytes,
+            found: first_lost,
+        });
     }
-    let roi = header.roi_rect();
+    let (w, h) = header.coded_size();
     // Each plane its own zeroed allocation (cloning one would touch every page).
     let mut planes: Vec<Vec<f32>> = (0..header.components()).map(|_| vec![0.0; w * h]).collect();
-    for (band, &(comp, sb, weight)) in bands.iter().zip(&layout) {
+    match header.segments {
+        None => {
+            let end = data.len().min(first_lost);
+            decode_part(
+                &header,
+                &data[header_bytes.min(end)..end],
+                0,
+                1,
+                &mut planes,
+            );
+        }
+        Some(layout) => {
+            let count = layout.segments.count + 1;
+            let mut payloads = vec![Vec::new(); count];
+            let mut alive = vec![true; count];
+            for (range, part) in layout.chunks(header_bytes, data.len()) {
+                let hit = lost
+                    .iter()
+                    .any(|l| l.start < range.end && range.start < l.end);
+                alive[part] &= !hit;
+                if alive[part] {
+                    payloads[part].extend_from_slice(&data[range]);
+                }
+            }
+            for (part, payload) in payloads.iter().enumerate() {
+                decode_part(&header, payload, part, count, &mut planes);
+            }
+        }
+    }
+    for plane in &mut planes {
+        transform(plane, w, h, &header, false);
+    }
+    let img = from_components(&planes, w, h, header.lossless);
+    Ok(upscale(&img, header.width, header.height))
+}
+
+/// Decodes segment `part` of `parts` from its bytes and puts its coefficients in `planes`.
+fn decode_part(
+    header: &Header,
+    payload: &[u8],
+    part: usize,
+    parts: usize,
+    planes: &mut [Vec<f32>],
+) {
+    let (w, _) = header.coded_size();
+    let (mut bands, layout) = build_bands(header, None, part, parts);
+    let mut dec = Decoder::new(payload);
+    if let Ok(plane_count) = dec.raw(0, 5) {
+        let _ = coder::code_planes(&mut bands, plane_count, &mut dec);
+    }
+    let roi = header.roi_rect();
+    for (band, &(comp, sb, weight, row0)) in bands.iter().zip(&layout) {
         let scale = if header.lossless {
             1.0
         } else {
@@ -730,7 +1072,7 @@ pub fn decode(data: &[u8]) -> Result<Image, Error> {
         };
         for &i in band.significant() {
             let i = i as usize;
-            let (x, y) = (i % sb.width, i / sb.width);
+            let (x, y) = (i % sb.width, row0 + i / sb.width);
             let known = band.known[i];
             let mag = band.mag[i];
             let mut value = if known == 0 {
@@ -750,11 +1092,6 @@ pub fn decode(data: &[u8]) -> Result<Image, Error> {
             planes[comp][(sb.y0 + y) * w + sb.x0 + x] = if band.neg[i] { -value } else { value };
         }
     }
-    for plane in &mut planes {
-        transform(plane, w, h, &header, false);
-    }
-    let img = from_components(&planes, w, h, header.lossless);
-    Ok(upscale(&img, header.width, header.height))
 }
 
 #[cfg(test)]
@@ -822,11 +1159,47 @@ mod tests {
             levels: 5,
             scale: 2,
             roi: Some(([1, 30, 2, 29], 7)),
+            segments: None,
         };
         let mut out = Vec::new();
         h.write(&mut out);
         assert_eq!(out.len(), 8);
         assert_eq!(Header::read(&out).unwrap(), h);
+        let mut weights = [0; MAX_SEGMENTS + 1];
+        weights[..4].copy_from_slice(&[9, 255, 1, 40]);
+        let segmented = Header {
+            segments: Some(SegmentLayout {
+                segments: Segments {
+                    count: 3,
+                    trunk_bytes: 39,
+                },
+                weights,
+            }),
+            ..h
+        };
+        let mut out = Vec::new();
+        segmented.write(&mut out);
+        assert_eq!(out[0], 0xd2);
+        assert_eq!(&out[8..], &[2, 39, 9, 255, 1, 40]);
+        assert_eq!(segmented.len(), out.len());
+        assert_eq!(Header::read(&out).unwrap(), segmented);
+        // A zero weight, a segment count or trunk out of range, a cut header: errors.
+        let mut bad = out.clone();
+        bad[12] = 0;
+        assert!(matches!(Header::read(&bad), Err(Error::Setting { .. })));
+        bad = out.clone();
+        bad[9] = 15;
+        assert!(matches!(Header::read(&bad), Err(Error::Setting { .. })));
+        bad = out.clone();
+        bad[8] = 0;
+        assert!(matches!(Header::read(&bad), Err(Error::Setting { .. })));
+        assert_eq!(
+            Header::read(&out[..12]),
+            Err(Error::Truncated {
+                expected: 14,
+                found: 12
+            })
+        );
         assert_eq!(
             Header::read(&[0x55, 0, 0, 0, 0]),
             Err(Error::NotDebt { found: 0x55 })
@@ -865,6 +1238,64 @@ mod tests {
             last = q;
         }
         assert!(last > 30.0, "3000 bytes give only {last:.2} dB");
+    }
+
+    #[test]
+    // Lists of one lost range are what this test means, not ranges meant as lists.
+    #[allow(clippy::single_range_in_vec_init)]
+    fn segmented_streams_survive_lost_trunks() {
+        let img = synthetic(160, 128, 3);
+        let trunk = 39;
+        let options = |segments| EncodeOptions {
+            bytes: 1500,
+            segments,
+            ..Default::default()
+        };
+        let plain = encode(&img, &options(None)).unwrap();
+        let seg = Segments {
+            count: 4,
+            trunk_bytes: trunk,
+        };
+        let stream = encode(&img, &options(Some(seg))).unwrap();
+        assert_eq!(stream.len(), 1500);
+        let whole = psnr(&img, &decode(&stream).unwrap());
+        let plain_whole = psnr(&img, &decode(&plain).unwrap());
+        assert!(whole > plain_whole - 1.0, "{whole} vs {plain_whole}");
+        // Every trunk carries one segment; the base has trunk 0 and each segment some trunks.
+        let header = Header::read(&stream).unwrap();
+        let layout = header.segments.unwrap();
+        let chunks = layout.chunks(header.len(), stream.len());
+        assert_eq!(chunks.len(), 1500usize.div_ceil(trunk));
+        assert_eq!(chunks[0], (header.len()..trunk, 0));
+        for part in 0..=4 {
+            assert!(
+                chunks.iter().any(|c| c.1 == part),
+                "segment {part} has no trunk"
+            );
+        }
+        // Losing trunk 5 costs the plain stream everything after it; the segmented stream
+        // only the rest of one segment.
+        let lost = [5 * trunk..6 * trunk];
+        let plain_lossy = psnr(&img, &decode_with_loss(&plain, &lost).unwrap());
+        let seg_lossy = psnr(&img, &decode_with_loss(&stream, &lost).unwrap());
+        assert!(
+            seg_lossy > plain_lossy + 1.0,
+            "{seg_lossy} vs {plain_lossy}"
+        );
+        assert!(seg_lossy < whole);
+        // Losing a trunk is the same as never getting that segment's later chunks.
+        assert_eq!(
+            decode_with_loss(&plain, &lost).unwrap(),
+            decode(&plain[..5 * trunk]).unwrap()
+        );
+        // The header must arrive.
+        assert!(matches!(
+            decode_with_loss(&stream, &[3..4]),
+            Err(Error::Truncated { .. })
+        ));
+        // A cut segmented stream still decodes, and better with more bytes.
+        let short = psnr(&img, &decode(&stream[..400]).unwrap());
+        assert!(short < whole && short > 10.0, "{short}");
     }
 
     #[test]
