@@ -14,4 +14,5 @@
 
 pub mod debt;
 pub mod io;
+pub mod link;
 pub mod wire;
