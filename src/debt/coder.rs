@@ -627,26 +627,19 @@ pub fn parents(keys: &[(usize, u8, u32)]) -> Vec<Option<usize>> {
 mod tests {
     use super::*;
 
-    fn lcg(seed: &mut u64) -> u32 {
-        *seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (*seed >> 33) as u32
-    }
-
     fn random_bands(seed: u64) -> Vec<(usize, usize, Vec<u32>, Vec<bool>)> {
-        let mut s = seed;
+        let mut s = crate::link::Rng::new(seed, 0);
         [(5usize, 3usize), (5, 3), (9, 6), (1, 1), (17, 2)]
             .iter()
             .map(|&(w, h)| {
                 let mag: Vec<u32> = (0..w * h)
                     .map(|_| {
-                        let r = lcg(&mut s);
+                        let r = s.next_u32();
                         if r.is_multiple_of(3) { r % 1000 } else { r % 4 }
                     })
                     .collect();
                 let neg: Vec<bool> = (0..w * h)
-                    .map(|i| mag[i] != 0 && lcg(&mut s).is_multiple_of(2))
+                    .map(|i| mag[i] != 0 && s.next_u32().is_multiple_of(2))
                     .collect();
                 (w, h, mag, neg)
             })

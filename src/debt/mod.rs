@@ -862,8 +862,8 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
     }
     let Some(layout) = header.segments else {
         let budget = options.bytes - out.len();
-        let (payload, _) = encode_part(&header, &planes, 0, 1, budget);
-        out.extend_from_slice(&payload);
+        let (bands, _) = build_bands(&header, Some(&planes), 0, 1);
+        out.extend_from_slice(&encode_bands(bands, budget).0);
         return Ok(out);
     };
     let count = layout.segments.count + 1;
@@ -876,8 +876,10 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
     let mut ends = Vec::with_capacity(count);
     for part in 0..count {
         let (bands, _) = build_bands(&header, Some(&planes), part, count);
-        let (payload, complete, marks) = encode_bands(bands, budget);
+        let (mut payload, complete, marks) = encode_bands(bands, budget);
         ends.push(pass_ends(&marks, complete));
+        // A complete stream ends in zeros anyway: padded, every segment fills any share.
+        payload.resize(budget, 0);
         streams.push(payload);
     }
     let shares = split_budget(&ends, budget);
@@ -899,12 +901,7 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
     let chunks = layout.chunks(header_bytes, options.bytes);
     let mut taken = vec![0; count];
     for (range, part) in chunks {
-        let stream = &streams[part];
-        let from = taken[part];
-        let to = (from + range.len()).min(stream.len());
-        out.extend_from_slice(&stream[from.min(to)..to]);
-        // Past its end a segment's chunks are zeros (a complete stream ends in zeros anyway).
-        out.resize(out.len() + range.len() - (to - from.min(to)), 0);
+        out.extend_from_slice(&streams[part][taken[part]..][..range.len()]);
         taken[part] += range.len();
     }
     Ok(out)
@@ -929,18 +926,10 @@ fn pass_ends(marks: &[(usize, u64)], complete: bool) -> Vec<u64> {
 fn split_budget(ends: &[Vec<u64>], budget: usize) -> Vec<usize> {
     let budget = budget as u64;
     let total = |i: usize| -> u64 { ends.iter().map(|e| e[i]).fold(0, u64::saturating_add) };
-    let mut base: Vec<u64> = vec![0; ends.len()];
-    let mut reached = None;
-    for i in 0..coder::PASS_INDICES {
-        if total(i) <= budget {
-            reached = Some(i);
-        } else {
-            break;
-        }
-    }
-    if let Some(i) = reached {
-        base = ends.iter().map(|e| e[i]).collect();
-    }
+    let reached = (0..coder::PASS_INDICES)
+        .take_while(|&i| total(i) <= budget)
+        .last();
+    let base: Vec<u64> = ends.iter().map(|e| reached.map_or(0, |i| e[i])).collect();
     let next = reached.map_or(0, |i| i + 1).min(coder::PASS_INDICES - 1);
     let left = budget - base.iter().sum::<u64>().min(budget);
     let growth: Vec<u64> = ends
@@ -953,20 +942,6 @@ fn split_budget(ends: &[Vec<u64>], budget: usize) -> Vec<usize> {
         .zip(&growth)
         .map(|(&b, &g)| (b + left * g / growth_sum) as usize)
         .collect()
-}
-
-/// Codes segment `part` of `parts` of the transformed `planes` in at most `budget` bytes:
-/// exactly `budget` unless it completes in fewer (the flag says so).
-fn encode_part(
-    header: &Header,
-    planes: &[Vec<f32>],
-    part: usize,
-    parts: usize,
-    budget: usize,
-) -> (Vec<u8>, bool) {
-    let (bands, _) = build_bands(header, Some(planes), part, parts);
-    let (payload, complete, _) = encode_bands(bands, budget);
-    (payload, complete)
 }
 
 /// Codes a band list in at most `budget` bytes: the bytes (exactly `budget` unless complete),

@@ -269,21 +269,14 @@ impl<'a> RangeDecoder<'a> {
 mod tests {
     use super::*;
 
-    fn lcg(seed: &mut u64) -> u32 {
-        *seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (*seed >> 33) as u32
-    }
-
     /// Random symbols with skewed probabilities in a few contexts, plus raw bits.
     fn symbols(n: usize, seed: u64) -> Vec<(usize, bool, bool)> {
-        let mut s = seed;
+        let mut s = crate::link::Rng::new(seed, 0);
         (0..n)
             .map(|i| {
-                let ctx = (lcg(&mut s) % 4) as usize;
+                let ctx = (s.next_u32() % 4) as usize;
                 let threshold = [50, 200, 600, 950][ctx];
-                ((ctx), lcg(&mut s) % 1000 < threshold, i % 17 == 0)
+                ((ctx), s.next_u32() % 1000 < threshold, i % 17 == 0)
             })
             .collect()
     }
@@ -382,8 +375,8 @@ mod tests {
 
     #[test]
     fn decoder_survives_any_bytes() {
-        let mut s = 99;
-        let data: Vec<u8> = (0..500).map(|_| lcg(&mut s) as u8).collect();
+        let mut s = crate::link::Rng::new(99, 0);
+        let data: Vec<u8> = (0..500).map(|_| s.next_u32() as u8).collect();
         let mut d = RangeDecoder::new(&data);
         let mut ctx = Context::default();
         for _ in 0..10_000 {

@@ -49,6 +49,11 @@ impl Rng {
         result
     }
 
+    /// The next 32 random bits (the high half of [`Rng::next_u64`]).
+    pub fn next_u32(&mut self) -> u32 {
+        (self.next_u64() >> 32) as u32
+    }
+
     /// Uniform in [0, 1), 53 bits of precision.
     pub fn uniform(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
