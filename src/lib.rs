@@ -15,4 +15,5 @@
 pub mod debt;
 pub mod io;
 pub mod link;
+pub mod stats;
 pub mod wire;

@@ -1,4 +1,5 @@
-//! Links: the discrete-event scheduler every simulation runs on, and its seeded random streams.
+//! Links: modem and channel models, the discrete-event scheduler every simulation runs on, and
+//! its seeded random streams.
 //!
 //! Simulations run in virtual time ([`SimTime`], integer nanoseconds): events wait in a
 //! [`Scheduler`], a binary heap ordered by (time, sequence number), so two events due at the same
@@ -7,11 +8,17 @@
 //! seed and the stream's number, so adding a random stream never changes the others and the same
 //! seed gives the same bytes and the same trace.
 //!
-//! Status (issue 4): the scheduler and the random streams. The modem and channel models,
-//! `link-sim` and the real-time driver are still to come.
+//! A [`Model`] holds one direction's figures (bit rate, delays, jitter, range, errors, netem's
+//! extras); a [`Link`] runs two of them as a state machine given time, which the virtual-time
+//! driver ([`pipe`]) and the real-time driver ([`realtime`]) both drive.
 
+pub mod channel;
+pub mod model;
+pub mod pipe;
 pub mod rng;
 pub mod sched;
 
+pub use channel::{Distance, Fate, Link, Report, Side};
+pub use model::{Model, ModelArgs, ModelError};
 pub use rng::Rng;
 pub use sched::{Scheduler, SimTime};

@@ -1,0 +1,680 @@
+//! Modem and channel models: what a link does to each frame, as numbers a file can hold.
+//!
+//! A [`Model`] describes one direction of a link, the sending modem and the water (or air, or
+//! satellite hop) after it, in the terms of the paper's Table 3 and of UWSim-NET's device model
+//! (facts.md):
+//!
+//! - **air time**: a frame of `n` bytes occupies the channel for `n x 8 / bitrate_bps` seconds
+//!   (or `/ rate_limit_bps` when a netem-style rate limit is lower);
+//! - **intrinsic delay**: the modem's processing before transmission, `intrinsic_delay_ms` plus
+//!   a jitter drawn from `jitter_distribution` with standard deviation `jitter_ms`. The sum is
+//!   clamped at zero (a delay is never negative), which keeps the mean and the standard
+//!   deviation at the model's figures whenever the jitter is small against the delay (S100) and
+//!   moves them least when it is not (S2CR);
+//! - **propagation**: `propagation_min_ms + propagation_ms_per_m x distance`, and a frame is only
+//!   heard when the distance is within `[range_min_m, range_max_m]`;
+//! - **bit errors** at `ber` per bit: `errors: drop` loses the frame, `errors: corrupt` delivers
+//!   it with exactly the bits that were hit flipped;
+//! - **half duplex**: a modem cannot hear while it transmits;
+//! - a **transmit FIFO** of `fifo_bytes`: a frame that does not fit is dropped;
+//! - netem's extras: random loss, Gilbert-Elliott burst loss, corruption (one flipped bit),
+//!   duplication, a rate limit.
+//!
+//! Presets ([`Model::preset`]) give the paper's modems and the satellite link of the second
+//! paper. Model files are the JSON form of [`Model`]; every field is also a command-line flag
+//! ([`ModelArgs`]), so a file and a command line say the same things.
+//!
+//! Parsing never panics: a malformed file is a [`ModelError`] naming the field and the problem.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+/// Names of the built-in models, in the order `--help` lists them.
+pub const PRESETS: [&str; 5] = [
+    "s100",
+    "s2cr-burst",
+    "s2cr-ack",
+    "satellite-up",
+    "satellite-down",
+];
+
+/// The shape of the intrinsic-delay jitter. Every shape has mean 0 and the model's `jitter_ms`
+/// as its standard deviation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum JitterDistribution {
+    /// No jitter: every frame waits exactly the intrinsic delay.
+    None,
+    /// Uniform on [-sqrt 3, sqrt 3] x jitter_ms (netem's default shape).
+    Uniform,
+    /// Normal (Gaussian).
+    Normal,
+    /// Laplace (double exponential): more small and more large deviations than normal.
+    Laplace,
+}
+
+/// What a bit error does to a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum ErrorMode {
+    /// The frame is lost (a modem that checks its own CRC).
+    Drop,
+    /// The frame is delivered with the hit bits flipped (a transparent modem).
+    Corrupt,
+}
+
+/// Gilbert-Elliott burst loss, netem's `loss gemodel p r 1-h 1-k` in percent.
+///
+/// The channel is in a good or a bad state; each frame is lost with the state's loss
+/// probability, then the state moves on (good to bad with `p_percent`, bad to good with
+/// `r_percent`). The long-run loss is `(p x bad + r x good) / (p + r)`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GilbertElliott {
+    /// Probability of moving from the good to the bad state, per frame, in percent.
+    pub p_percent: f64,
+    /// Probability of moving from the bad to the good state, per frame, in percent.
+    pub r_percent: f64,
+    /// Loss probability in the bad state, in percent (netem's 1-h; default 100).
+    #[serde(default = "hundred")]
+    pub loss_bad_percent: f64,
+    /// Loss probability in the good state, in percent (netem's 1-k; default 0).
+    #[serde(default)]
+    pub loss_good_percent: f64,
+}
+
+fn hundred() -> f64 {
+    100.0
+}
+
+fn yes() -> bool {
+    true
+}
+
+fn default_jitter() -> JitterDistribution {
+    JitterDistribution::Normal
+}
+
+fn default_errors() -> ErrorMode {
+    ErrorMode::Drop
+}
+
+fn default_fifo_bytes() -> u64 {
+    65_536
+}
+
+/// One direction of a link: the sending modem and the channel after it.
+///
+/// Field names carry their units; the JSON form uses the same names. Only `bitrate_bps` and
+/// `intrinsic_delay_ms` are required in a file; the rest default to an ideal channel (jitter 0,
+/// no range limit, no errors or losses, half duplex, a 64 KiB FIFO).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Model {
+    /// A name for reports.
+    #[serde(default)]
+    pub name: String,
+    /// Where the figures come from.
+    #[serde(default)]
+    pub description: String,
+    /// Bit rate on the air, bit/s.
+    pub bitrate_bps: f64,
+    /// The modem's processing delay before it transmits, ms.
+    pub intrinsic_delay_ms: f64,
+    /// Shape of the jitter added to the intrinsic delay.
+    #[serde(default = "default_jitter")]
+    pub jitter_distribution: JitterDistribution,
+    /// Standard deviation of that jitter, ms.
+    #[serde(default)]
+    pub jitter_ms: f64,
+    /// Propagation delay at zero distance, ms.
+    #[serde(default)]
+    pub propagation_min_ms: f64,
+    /// Propagation delay per metre of distance, ms/m.
+    #[serde(default)]
+    pub propagation_ms_per_m: f64,
+    /// Nearest distance at which a frame is heard, m.
+    #[serde(default)]
+    pub range_min_m: f64,
+    /// Farthest distance at which a frame is heard, m (absent: no limit).
+    #[serde(default)]
+    pub range_max_m: Option<f64>,
+    /// Bit error rate (probability that a bit is flipped), 0 <= ber < 1.
+    #[serde(default)]
+    pub ber: f64,
+    /// What a frame with bit errors becomes.
+    #[serde(default = "default_errors")]
+    pub errors: ErrorMode,
+    /// The receiving modem cannot hear while it transmits (a reception that overlaps its own
+    /// transmission is lost).
+    #[serde(default = "yes")]
+    pub half_duplex: bool,
+    /// Transmit FIFO capacity, bytes: frames waiting for the air that do not fit are dropped.
+    #[serde(default = "default_fifo_bytes")]
+    pub fifo_bytes: u64,
+    /// Let jitter reorder frames (a later frame with less delay goes on air first).
+    #[serde(default)]
+    pub reorder: bool,
+    /// Random loss of a received frame, percent.
+    #[serde(default)]
+    pub loss_percent: f64,
+    /// Gilbert-Elliott burst loss (absent: none).
+    #[serde(default)]
+    pub gilbert_elliott: Option<GilbertElliott>,
+    /// Corruption of a received frame (one random bit flipped), percent.
+    #[serde(default)]
+    pub corrupt_percent: f64,
+    /// Duplication of a delivered frame, percent.
+    #[serde(default)]
+    pub duplicate_percent: f64,
+    /// A rate limit below the bit rate, bit/s (absent: none).
+    #[serde(default)]
+    pub rate_limit_bps: Option<f64>,
+}
+
+/// A model that cannot be used, or a model file that cannot be read.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelError {
+    /// A field holds a value the model cannot use.
+    #[error("field `{field}`: {problem}")]
+    Field {
+        /// The field's name, as in the JSON file.
+        field: String,
+        /// What is wrong, with the value found.
+        problem: String,
+    },
+    /// No preset of that name.
+    #[error("unknown model `{0}` (presets: {presets})", presets = PRESETS.join(", "))]
+    UnknownPreset(String),
+    /// The file is not valid JSON for a model.
+    #[error("{path}: {source}")]
+    File {
+        /// The model file.
+        path: PathBuf,
+        /// What is wrong.
+        source: Box<ModelError>,
+    },
+    /// The file could not be read.
+    #[error("{path}: cannot read: {source}")]
+    Read {
+        /// The model file.
+        path: PathBuf,
+        /// The reason.
+        source: std::io::Error,
+    },
+    /// The JSON does not describe a model.
+    #[error("field `{field}`: {message}")]
+    Json {
+        /// Where in the document (`.` when the problem is the document itself).
+        field: String,
+        /// serde's description, with line and column.
+        message: String,
+    },
+}
+
+impl Model {
+    /// A built-in model by name (see [`PRESETS`]).
+    pub fn preset(name: &str) -> Result<Model, ModelError> {
+        let base = Model {
+            name: name.to_string(),
+            description: String::new(),
+            bitrate_bps: 1.0,
+            intrinsic_delay_ms: 0.0,
+            jitter_distribution: JitterDistribution::Normal,
+            jitter_ms: 0.0,
+            propagation_min_ms: 0.0,
+            propagation_ms_per_m: 0.0,
+            range_min_m: 0.0,
+            range_max_m: None,
+            ber: 0.0,
+            errors: ErrorMode::Drop,
+            half_duplex: true,
+            fifo_bytes: default_fifo_bytes(),
+            reorder: false,
+            loss_percent: 0.0,
+            gilbert_elliott: None,
+            corrupt_percent: 0.0,
+            duplicate_percent: 0.0,
+            rate_limit_bps: None,
+        };
+        let model = match name {
+            "s100" => Model {
+                description: "WFS S100 RF modem (paper Table 3)".into(),
+                bitrate_bps: 1900.0,
+                intrinsic_delay_ms: 85.0,
+                jitter_ms: 13.20,
+                propagation_ms_per_m: 3.3e-9,
+                range_min_m: 0.5,
+                range_max_m: Some(5.0),
+                fifo_bytes: 2048,
+                ..base
+            },
+            "s2cr-burst" => Model {
+                description: "EvoLogics S2CR acoustic modem, burst mode (paper Table 3)".into(),
+                bitrate_bps: 1620.0,
+                intrinsic_delay_ms: 443.0,
+                jitter_ms: 412.99,
+                propagation_ms_per_m: 0.67,
+                range_max_m: Some(3500.0),
+                fifo_bytes: 8192,
+                ..base
+            },
+            "s2cr-ack" => Model {
+                description: "EvoLogics S2CR acoustic modem, data in D-MAC acks (paper Table 3)"
+                    .into(),
+                bitrate_bps: 100.0,
+                intrinsic_delay_ms: 443.0,
+                jitter_ms: 443.63,
+                propagation_ms_per_m: 0.67,
+                range_max_m: Some(3500.0),
+                fifo_bytes: 1024,
+                ..base
+            },
+            "satellite-up" => Model {
+                description: "DexROV satellite link, vessel to shore (768 kbit/s, 310 ms)".into(),
+                bitrate_bps: 768_000.0,
+                intrinsic_delay_ms: 310.0,
+                jitter_distribution: JitterDistribution::None,
+                half_duplex: false,
+                fifo_bytes: 1 << 20,
+                ..base
+            },
+            "satellite-down" => Model {
+                description: "DexROV satellite link, shore to vessel (256 kbit/s, 310 ms)".into(),
+                bitrate_bps: 256_000.0,
+                intrinsic_delay_ms: 310.0,
+                jitter_distribution: JitterDistribution::None,
+                half_duplex: false,
+                fifo_bytes: 1 << 20,
+                ..base
+            },
+            other => return Err(ModelError::UnknownPreset(other.to_string())),
+        };
+        Ok(model)
+    }
+
+    /// Reads a model from JSON text, then checks it ([`Model::validate`]).
+    pub fn from_json(text: &str) -> Result<Model, ModelError> {
+        let mut de = serde_json::Deserializer::from_str(text);
+        let model: Model = serde_path_to_error::deserialize(&mut de).map_err(|err| {
+            let field = err.path().to_string();
+            ModelError::Json {
+                field,
+                message: err.into_inner().to_string(),
+            }
+        })?;
+        de.end().map_err(|err| ModelError::Json {
+            field: ".".into(),
+            message: err.to_string(),
+        })?;
+        model.validate()?;
+        Ok(model)
+    }
+
+    /// Reads a model file; errors name the file.
+    pub fn from_file(path: &Path) -> Result<Model, ModelError> {
+        let text = std::fs::read(path).map_err(|source| ModelError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let text = String::from_utf8_lossy(&text);
+        Model::from_json(&text).map_err(|err| ModelError::File {
+            path: path.to_path_buf(),
+            source: Box::new(err),
+        })
+    }
+
+    /// The model as pretty JSON, the form [`Model::from_json`] reads.
+    pub fn to_json(&self) -> String {
+        let mut text = serde_json::to_string_pretty(self).unwrap_or_default();
+        text.push('\n');
+        text
+    }
+
+    /// Checks every field against its meaning; the error names the first bad field.
+    pub fn validate(&self) -> Result<(), ModelError> {
+        fn bad(field: &str, problem: String) -> Result<(), ModelError> {
+            Err(ModelError::Field {
+                field: field.to_string(),
+                problem,
+            })
+        }
+        let positive = |field: &str, value: f64| {
+            if value.is_finite() && value > 0.0 {
+                Ok(())
+            } else {
+                bad(field, format!("expected a number > 0, found {value}"))
+            }
+        };
+        let non_negative = |field: &str, value: f64| {
+            if value.is_finite() && value >= 0.0 {
+                Ok(())
+            } else {
+                bad(field, format!("expected a number >= 0, found {value}"))
+            }
+        };
+        let percent = |field: &str, value: f64| {
+            if (0.0..=100.0).contains(&value) {
+                Ok(())
+            } else {
+                bad(
+                    field,
+                    format!("expected a percentage 0..100, found {value}"),
+                )
+            }
+        };
+        positive("bitrate_bps", self.bitrate_bps)?;
+        non_negative("intrinsic_delay_ms", self.intrinsic_delay_ms)?;
+        non_negative("jitter_ms", self.jitter_ms)?;
+        non_negative("propagation_min_ms", self.propagation_min_ms)?;
+        non_negative("propagation_ms_per_m", self.propagation_ms_per_m)?;
+        non_negative("range_min_m", self.range_min_m)?;
+        if let Some(max) = self.range_max_m {
+            non_negative("range_max_m", max)?;
+            if max < self.range_min_m {
+                return bad(
+                    "range_max_m",
+                    format!("{max} is below range_min_m {}", self.range_min_m),
+                );
+            }
+        }
+        if !(0.0..1.0).contains(&self.ber) {
+            return bad(
+                "ber",
+                format!("expected a probability 0 <= ber < 1, found {}", self.ber),
+            );
+        }
+        if self.fifo_bytes == 0 {
+            return bad("fifo_bytes", "expected at least 1 byte, found 0".into());
+        }
+        percent("loss_percent", self.loss_percent)?;
+        percent("corrupt_percent", self.corrupt_percent)?;
+        percent("duplicate_percent", self.duplicate_percent)?;
+        if let Some(ge) = &self.gilbert_elliott {
+            percent("gilbert_elliott.p_percent", ge.p_percent)?;
+            percent("gilbert_elliott.r_percent", ge.r_percent)?;
+            percent("gilbert_elliott.loss_bad_percent", ge.loss_bad_percent)?;
+            percent("gilbert_elliott.loss_good_percent", ge.loss_good_percent)?;
+        }
+        if let Some(rate) = self.rate_limit_bps {
+            positive("rate_limit_bps", rate)?;
+        }
+        Ok(())
+    }
+
+    /// The rate frames go on air at, bit/s: the bit rate, or the rate limit when lower.
+    pub fn effective_rate_bps(&self) -> f64 {
+        match self.rate_limit_bps {
+            Some(limit) if limit < self.bitrate_bps => limit,
+            _ => self.bitrate_bps,
+        }
+    }
+
+    /// Air time of a frame of `bytes` bytes, seconds.
+    pub fn air_time_s(&self, bytes: usize) -> f64 {
+        bytes as f64 * 8.0 / self.effective_rate_bps()
+    }
+
+    /// Propagation delay over `distance_m`, seconds.
+    pub fn propagation_s(&self, distance_m: f64) -> f64 {
+        (self.propagation_min_ms + self.propagation_ms_per_m * distance_m) * 1e-3
+    }
+
+    /// True when a frame is heard at `distance_m`.
+    pub fn in_range(&self, distance_m: f64) -> bool {
+        distance_m >= self.range_min_m && self.range_max_m.is_none_or(|max| distance_m <= max)
+    }
+
+    /// Probability that a frame of `bytes` bytes has at least one bit error: 1 - (1 - BER)^bits.
+    pub fn packet_error_rate(&self, bytes: usize) -> f64 {
+        1.0 - (1.0 - self.ber).powf(bytes as f64 * 8.0)
+    }
+}
+
+/// Parses netem's `P,R[,BAD[,GOOD]]` (percent) for `--gilbert-elliott`.
+fn parse_gilbert_elliott(text: &str) -> Result<GilbertElliott, String> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|part| {
+            part.trim()
+                .parse::<f64>()
+                .map_err(|_| format!("`{part}` is not a number"))
+        })
+        .collect::<Result<_, _>>()?;
+    if !(2..=4).contains(&values.len()) {
+        return Err(format!(
+            "expected P,R[,BAD[,GOOD]] (2 to 4 percentages), found {} values",
+            values.len()
+        ));
+    }
+    Ok(GilbertElliott {
+        p_percent: values[0],
+        r_percent: values[1],
+        loss_bad_percent: values.get(2).copied().unwrap_or(100.0),
+        loss_good_percent: values.get(3).copied().unwrap_or(0.0),
+    })
+}
+
+/// The model flags every tool that runs a link shares: a preset or a file, then any field
+/// overridden. Each override flag is the JSON field's name with dashes.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct ModelArgs {
+    /// Built-in model: s100, s2cr-burst, s2cr-ack, satellite-up, satellite-down [default: s100].
+    #[arg(
+        long,
+        value_name = "NAME",
+        conflicts_with = "model_file",
+        help_heading = "Link model"
+    )]
+    pub model: Option<String>,
+    /// Model file (JSON; `--print-model NAME` prints one to start from).
+    #[arg(long, value_name = "FILE", help_heading = "Link model")]
+    pub model_file: Option<PathBuf>,
+    /// Bit rate on the air, bit/s.
+    #[arg(long, value_name = "BPS", help_heading = "Link model")]
+    pub bitrate_bps: Option<f64>,
+    /// Intrinsic (processing) delay before transmission, ms.
+    #[arg(long, value_name = "MS", help_heading = "Link model")]
+    pub intrinsic_delay_ms: Option<f64>,
+    /// Shape of the delay jitter.
+    #[arg(long, value_enum, value_name = "SHAPE", help_heading = "Link model")]
+    pub jitter_distribution: Option<JitterDistribution>,
+    /// Standard deviation of the delay jitter, ms.
+    #[arg(long, value_name = "MS", help_heading = "Link model")]
+    pub jitter_ms: Option<f64>,
+    /// Propagation delay at zero distance, ms.
+    #[arg(long, value_name = "MS", help_heading = "Link model")]
+    pub propagation_min_ms: Option<f64>,
+    /// Propagation delay per metre, ms/m.
+    #[arg(long, value_name = "MS_PER_M", help_heading = "Link model")]
+    pub propagation_ms_per_m: Option<f64>,
+    /// Nearest distance at which frames are heard, m.
+    #[arg(long, value_name = "M", help_heading = "Link model")]
+    pub range_min_m: Option<f64>,
+    /// Farthest distance at which frames are heard, m.
+    #[arg(long, value_name = "M", help_heading = "Link model")]
+    pub range_max_m: Option<f64>,
+    /// Bit error rate, e.g. 7e-4.
+    #[arg(long, value_name = "P", help_heading = "Link model")]
+    pub ber: Option<f64>,
+    /// What a frame with bit errors becomes: dropped, or delivered with the bits flipped.
+    #[arg(long, value_enum, value_name = "MODE", help_heading = "Link model")]
+    pub errors: Option<ErrorMode>,
+    /// Half duplex (a modem cannot hear while it transmits): true or false.
+    #[arg(long, value_name = "BOOL", help_heading = "Link model")]
+    pub half_duplex: Option<bool>,
+    /// Transmit FIFO capacity, bytes.
+    #[arg(long, value_name = "BYTES", help_heading = "Link model")]
+    pub fifo_bytes: Option<u64>,
+    /// Let jitter reorder frames.
+    #[arg(long, help_heading = "Link model")]
+    pub reorder: bool,
+    /// Random loss, percent.
+    #[arg(long, value_name = "PCT", help_heading = "Link model")]
+    pub loss_percent: Option<f64>,
+    /// Gilbert-Elliott burst loss, percent: P,R[,BAD[,GOOD]] as netem's gemodel.
+    #[arg(long, value_name = "P,R[,BAD[,GOOD]]", value_parser = parse_gilbert_elliott, help_heading = "Link model")]
+    pub gilbert_elliott: Option<GilbertElliott>,
+    /// Corruption (one bit flipped), percent.
+    #[arg(long, value_name = "PCT", help_heading = "Link model")]
+    pub corrupt_percent: Option<f64>,
+    /// Duplication, percent.
+    #[arg(long, value_name = "PCT", help_heading = "Link model")]
+    pub duplicate_percent: Option<f64>,
+    /// Rate limit, bit/s (netem's rate; applies when below the bit rate).
+    #[arg(long, value_name = "BPS", help_heading = "Link model")]
+    pub rate_limit_bps: Option<f64>,
+}
+
+impl ModelArgs {
+    /// The model the flags describe: the preset or file, with every given field overridden,
+    /// checked.
+    pub fn resolve(&self) -> Result<Model, ModelError> {
+        let mut model = match (&self.model_file, &self.model) {
+            (Some(path), _) => Model::from_file(path)?,
+            (None, Some(name)) => Model::preset(name)?,
+            (None, None) => Model::preset("s100")?,
+        };
+        self.apply(&mut model);
+        model.validate()?;
+        Ok(model)
+    }
+
+    /// Overrides the fields given on the command line.
+    pub fn apply(&self, model: &mut Model) {
+        fn set<T: Clone>(target: &mut T, value: &Option<T>) {
+            if let Some(value) = value {
+                *target = value.clone();
+            }
+        }
+        set(&mut model.bitrate_bps, &self.bitrate_bps);
+        set(&mut model.intrinsic_delay_ms, &self.intrinsic_delay_ms);
+        set(&mut model.jitter_distribution, &self.jitter_distribution);
+        set(&mut model.jitter_ms, &self.jitter_ms);
+        set(&mut model.propagation_min_ms, &self.propagation_min_ms);
+        set(&mut model.propagation_ms_per_m, &self.propagation_ms_per_m);
+        set(&mut model.range_min_m, &self.range_min_m);
+        if self.range_max_m.is_some() {
+            model.range_max_m = self.range_max_m;
+        }
+        set(&mut model.ber, &self.ber);
+        set(&mut model.errors, &self.errors);
+        set(&mut model.half_duplex, &self.half_duplex);
+        set(&mut model.fifo_bytes, &self.fifo_bytes);
+        model.reorder |= self.reorder;
+        set(&mut model.loss_percent, &self.loss_percent);
+        if self.gilbert_elliott.is_some() {
+            model.gilbert_elliott = self.gilbert_elliott;
+        }
+        set(&mut model.corrupt_percent, &self.corrupt_percent);
+        set(&mut model.duplicate_percent, &self.duplicate_percent);
+        if self.rate_limit_bps.is_some() {
+            model.rate_limit_bps = self.rate_limit_bps;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_preset_is_valid_and_round_trips_through_json() {
+        for name in PRESETS {
+            let model = Model::preset(name).unwrap();
+            model.validate().unwrap();
+            assert_eq!(Model::from_json(&model.to_json()).unwrap(), model, "{name}");
+        }
+    }
+
+    #[test]
+    fn s100_air_time_of_a_57_byte_frame_is_240_ms() {
+        let model = Model::preset("s100").unwrap();
+        assert!((model.air_time_s(57) - 0.240).abs() < 1e-12);
+        assert!((model.packet_error_rate(57) - 0.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn a_minimal_file_needs_only_the_rate_and_the_delay() {
+        let model = Model::from_json(r#"{"bitrate_bps": 1000, "intrinsic_delay_ms": 5}"#).unwrap();
+        assert_eq!(model.fifo_bytes, 65_536);
+        assert!(model.half_duplex);
+        assert_eq!(model.range_max_m, None);
+    }
+
+    #[test]
+    fn bad_files_name_the_field() {
+        let cases = [
+            (
+                r#"{"bitrate_bps": -3, "intrinsic_delay_ms": 5}"#,
+                "field `bitrate_bps`: expected a number > 0, found -3",
+            ),
+            (
+                r#"{"bitrate_bps": 9, "intrinsic_delay_ms": "x"}"#,
+                "field `intrinsic_delay_ms`: invalid type",
+            ),
+            (
+                r#"{"bitrate_bps": 9, "intrinsic_delay_ms": 1, "jitter_distribution": "gauss"}"#,
+                "field `jitter_distribution`: unknown variant `gauss`",
+            ),
+            (
+                r#"{"bitrate_bps": 9, "intrinsic_delay_ms": 1, "bitrate": 3}"#,
+                "field `bitrate`: unknown field `bitrate`",
+            ),
+            (
+                r#"{"bitrate_bps": 9}"#,
+                "field `.`: missing field `intrinsic_delay_ms`",
+            ),
+            (
+                r#"{"bitrate_bps": 9, "intrinsic_delay_ms": 1, "gilbert_elliott": {"p_percent": 1, "r_percent": 400}}"#,
+                "field `gilbert_elliott.r_percent`: expected a percentage 0..100, found 400",
+            ),
+            (
+                r#"{"bitrate_bps": 9, "intrinsic_delay_ms": 1, "range_min_m": 5, "range_max_m": 2}"#,
+                "field `range_max_m`: 2 is below range_min_m 5",
+            ),
+            (
+                r#"{"bitrate_bps": 9, "intrinsic_delay_ms": 1, "ber": 1}"#,
+                "field `ber`: expected a probability",
+            ),
+            (
+                r#"{"bitrate_bps": 9, "intrinsic_delay_ms": 1} x"#,
+                "field `.`: trailing characters",
+            ),
+        ];
+        for (text, expected) in cases {
+            let message = Model::from_json(text).unwrap_err().to_string();
+            assert!(message.starts_with(expected), "{text}: {message}");
+        }
+    }
+
+    #[test]
+    fn command_line_overrides_every_field_it_names() {
+        let args = ModelArgs {
+            model: Some("s2cr-burst".into()),
+            ber: Some(1e-3),
+            reorder: true,
+            gilbert_elliott: Some(parse_gilbert_elliott("1,30").unwrap()),
+            range_max_m: Some(100.0),
+            ..ModelArgs::default()
+        };
+        let model = args.resolve().unwrap();
+        assert_eq!(model.ber, 1e-3);
+        assert!(model.reorder);
+        assert_eq!(model.range_max_m, Some(100.0));
+        let ge = model.gilbert_elliott.unwrap();
+        assert_eq!(
+            (ge.p_percent, ge.r_percent, ge.loss_bad_percent),
+            (1.0, 30.0, 100.0)
+        );
+        assert!(parse_gilbert_elliott("1").is_err());
+        assert!(parse_gilbert_elliott("1,x").is_err());
+    }
+
+    #[test]
+    fn unknown_preset_lists_the_presets() {
+        let message = Model::preset("s200").unwrap_err().to_string();
+        assert!(message.contains("s100, s2cr-burst"), "{message}");
+    }
+}
