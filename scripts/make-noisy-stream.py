@@ -9,13 +9,7 @@ import binascii
 import sys
 
 
-def crc16_xmodem(data: bytes) -> int:
-    crc = 0
-    for b in data:
-        crc ^= b << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
-    return crc
+from wireframe import crc16_xmodem
 
 
 def main() -> None:

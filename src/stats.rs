@@ -64,6 +64,15 @@ impl Running {
     }
 }
 
+/// The `q` quantile (0..=1, nearest rank) of values sorted in ascending order; none when empty.
+pub fn quantile_sorted<T: Copy>(sorted: &[T], q: f64) -> Option<T> {
+    if sorted.is_empty() {
+        return None;
+    }
+    let rank = (q.clamp(0.0, 1.0) * sorted.len() as f64).ceil() as usize;
+    Some(sorted[rank.clamp(1, sorted.len()) - 1])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -80,6 +89,16 @@ mod tests {
         assert!((running.mean() - mean).abs() < 1e-9);
         assert!((running.std() - var.sqrt()).abs() < 1e-9);
         assert_eq!((running.min(), running.max()), (1e-3, 341.25));
+    }
+
+    #[test]
+    fn quantiles_are_nearest_rank() {
+        let values: Vec<u32> = (1..=100).collect();
+        assert_eq!(quantile_sorted(&values, 0.5), Some(50));
+        assert_eq!(quantile_sorted(&values, 0.99), Some(99));
+        assert_eq!(quantile_sorted(&values, 1.0), Some(100));
+        assert_eq!(quantile_sorted(&values, 0.0), Some(1));
+        assert_eq!(quantile_sorted::<u32>(&[], 0.5), None);
     }
 
     #[test]

@@ -9,19 +9,7 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::process::{Child, ChildStderr, Command, Stdio};
 use std::time::Duration;
 
-use nix::fcntl::OFlag;
-use nix::pty::{PtyMaster, grantpt, posix_openpt, ptsname_r, unlockpt};
-
-/// Opens a pseudo-terminal master (close-on-exec, so the child does not inherit it and closing
-/// it here really hangs up the line) and returns it with the path of its slave side.
-fn open_pty() -> (PtyMaster, String) {
-    let master =
-        posix_openpt(OFlag::O_RDWR | OFlag::O_NOCTTY | OFlag::O_CLOEXEC).expect("posix_openpt");
-    grantpt(&master).expect("grantpt");
-    unlockpt(&master).expect("unlockpt");
-    let path = ptsname_r(&master).expect("ptsname");
-    (master, path)
-}
+use common::open_pty;
 
 const DUMP: &str = env!("CARGO_BIN_EXE_rcp-dump");
 

@@ -31,6 +31,7 @@ use std::collections::{BinaryHeap, VecDeque};
 
 use serde::Serialize;
 
+use super::distance::Distance;
 use super::model::{ErrorMode, JitterDistribution, Model, ModelError};
 use super::rng::Rng;
 use super::sched::{Scheduler, SimTime};
@@ -54,7 +55,8 @@ impl Side {
         }
     }
 
-    fn index(self) -> usize {
+    /// 0 for A, 1 for B.
+    pub fn index(self) -> usize {
         match self {
             Side::A => 0,
             Side::B => 1,
@@ -141,45 +143,6 @@ pub struct Report {
     pub duplicate: bool,
     /// The bytes that arrived (empty when nothing arrived).
     pub bytes: Vec<u8>,
-}
-
-/// Distance between the two sides over time.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Distance {
-    /// Always the same, m (a driver may change it with [`Link::set_distance`]).
-    Fixed(f64),
-    /// `(t_s, distance_m)` points sorted by time, linearly interpolated, held at both ends.
-    Track(Vec<(f64, f64)>),
-}
-
-impl Distance {
-    /// The distance at `t_s`; `cursor` remembers where the last lookup was (times mostly grow).
-    fn at(&self, t_s: f64, cursor: &mut usize) -> f64 {
-        match self {
-            Distance::Fixed(d) => *d,
-            Distance::Track(points) => {
-                let Some(&(t_first, d_first)) = points.first() else {
-                    return 0.0;
-                };
-                if t_s <= t_first {
-                    *cursor = 0;
-                    return d_first;
-                }
-                if *cursor >= points.len() || points[*cursor].0 > t_s {
-                    *cursor = 0;
-                }
-                while *cursor + 1 < points.len() && points[*cursor + 1].0 <= t_s {
-                    *cursor += 1;
-                }
-                let (t0, d0) = points[*cursor];
-                match points.get(*cursor + 1) {
-                    None => d0,
-                    Some(&(t1, d1)) if t1 > t0 => d0 + (d1 - d0) * (t_s - t0) / (t1 - t0),
-                    Some(_) => d0,
-                }
-            }
-        }
-    }
 }
 
 /// A frame waiting in a transmit FIFO.
@@ -341,6 +304,11 @@ impl Link {
     /// When the next event is due (none when nothing is in flight).
     pub fn next_event_time(&self) -> Option<SimTime> {
         self.sched.next_due()
+    }
+
+    /// Events scheduled since the start (each is handled once): the simulation's work.
+    pub fn events_scheduled(&self) -> u64 {
+        self.sched.scheduled()
     }
 
     /// Frames offered but not yet reported.

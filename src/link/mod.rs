@@ -13,12 +13,15 @@
 //! driver ([`pipe`]) and the real-time driver ([`realtime`]) both drive.
 
 pub mod channel;
+pub mod distance;
 pub mod model;
 pub mod pipe;
+pub mod realtime;
 pub mod rng;
 pub mod sched;
 
-pub use channel::{Distance, Fate, Link, Report, Side};
+pub use channel::{Fate, Link, Report, Side};
+pub use distance::Distance;
 pub use model::{Model, ModelArgs, ModelError};
 pub use rng::Rng;
 pub use sched::{Scheduler, SimTime};

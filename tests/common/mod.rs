@@ -6,6 +6,9 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
+use nix::fcntl::OFlag;
+use nix::pty::{PtyMaster, grantpt, posix_openpt, ptsname_r, unlockpt};
+
 /// What a finished process left behind.
 pub struct Outcome {
     pub code: i32,
@@ -73,4 +76,15 @@ pub fn vector_frames() -> Vec<Vec<u8>> {
         .lines()
         .map(|l| rovlink::wire::json::decode_hex(l.trim()).expect("hex"))
         .collect()
+}
+
+/// Opens a pseudo-terminal master (close-on-exec, so the child does not inherit it and closing
+/// it here really hangs up the line) and returns it with the path of its slave side.
+pub fn open_pty() -> (PtyMaster, String) {
+    let master =
+        posix_openpt(OFlag::O_RDWR | OFlag::O_NOCTTY | OFlag::O_CLOEXEC).expect("posix_openpt");
+    grantpt(&master).expect("grantpt");
+    unlockpt(&master).expect("unlockpt");
+    let path = ptsname_r(&master).expect("ptsname");
+    (master, path)
 }

@@ -1,0 +1,630 @@
+//! link-sim: a statistical modem link between two ports, or on a pipe in virtual time.
+#![forbid(unsafe_code)]
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use clap::Parser;
+use rovlink::io::{AtomicFile, EXIT_CHECK_FAILED, EXIT_OK, Input, IoError, Output};
+use rovlink::link::channel::DirectionStats;
+use rovlink::link::pipe::{self, Pace};
+use rovlink::link::realtime::{Ended, Endpoints, Framing, PortSpec, RunInfo};
+use rovlink::link::{Distance, Link, Model, ModelArgs, Report, Side};
+use rovlink::wire::{DeframeEvent, Deframer};
+
+/// The tool's name, prefixed to everything it says on stderr.
+const TOOL: &str = "link-sim";
+
+/// Says something on stderr (never panics, even with stderr closed).
+macro_rules! say {
+    ($($arg:tt)*) => {
+        rovlink::io::warn(TOOL, &format!($($arg)*))
+    };
+}
+
+const EXAMPLES: &str = "\
+Examples:
+  link-sim --model s100 < frames.bin > out.bin          frames through an S100 link in virtual time
+  link-sim --model s100 --ber 7e-4 --trace t.csv --stats s.json < frames.bin > out.bin
+  link-sim --print-model s2cr-burst > m.json            a preset as a file to edit
+  link-sim --model-file m.json --interval 500 < frames.bin > out.bin
+  link-sim --model s100 --pty                           two pseudo-terminals (paths on stdout, A then B)
+  link-sim --model s100 --a /dev/ttyUSB0 --b /dev/ttyUSB1 --baud 9600
+  link-sim --model satellite-up --reverse-model satellite-down --udp-a 127.0.0.1:9001 --udp-b 127.0.0.1:9002
+  link-sim --model s100 --pty --raw --idle-ms 20 --distance-file dive.csv
+
+Modes: with no port option, frames (wire.md) from INPUT or stdin go from side A to side B in
+virtual time and the frames that arrive go to stdout, in arrival order. With --pty, --a/--b or
+--udp-a/--udp-b, the link runs in real time between the two sides until a side closes (exit 1),
+or SIGINT/SIGTERM (exit 0).
+
+Trace (--trace): one row per frame, in the order fates are decided:
+  seq,bytes,t_offered_s,t_tx_start_s,t_rx_s,fate      (real time adds a last column: side)
+fate: delivered, corrupted, ber, collision, overflow, range, loss (a duplicated frame has a
+second row with the same seq). t_tx_start_s is when the frame went on air; times are seconds
+from the start. Every model field can be set in the file or as a flag.
+
+Exit codes: 0 ok, 1 a side's port closed or failed, 2 bad usage or input.";
+
+/// Simulate an underwater modem link (or a netem-like link) between two ports, or on a pipe.
+///
+/// The model (a preset or a JSON file, every field overridable by a flag) gives each frame its
+/// air time, intrinsic delay and jitter, propagation, range, bit errors, collisions and losses.
+/// The same seed gives the same bytes and the same trace.
+#[derive(Parser, Debug)]
+#[command(version, after_help = EXAMPLES)]
+struct Args {
+    /// Frame byte stream for the virtual-time pipe; `-` or nothing reads standard input.
+    input: Option<PathBuf>,
+
+    /// Output of the pipe: the frames that arrive; `-` or nothing writes standard output.
+    #[arg(short, long, value_name = "FILE")]
+    output: Option<PathBuf>,
+
+    /// Print the model (the preset NAME, or --model/--model-file with the flags applied) as JSON and exit.
+    #[arg(long, value_name = "NAME", num_args = 0..=1, default_missing_value = "")]
+    print_model: Option<String>,
+
+    #[command(flatten)]
+    model: ModelArgs,
+
+    /// The model of frames from B to A, when it differs (a preset); the flags apply to it too.
+    #[arg(
+        long,
+        value_name = "NAME",
+        conflicts_with = "reverse_model_file",
+        help_heading = "Link model"
+    )]
+    reverse_model: Option<String>,
+
+    /// The model of frames from B to A, as a file.
+    #[arg(long, value_name = "FILE", help_heading = "Link model")]
+    reverse_model_file: Option<PathBuf>,
+
+    /// Seed of every random stream.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+
+    /// Distance between the two sides, m.
+    #[arg(
+        long,
+        value_name = "M",
+        default_value_t = 1.0,
+        conflicts_with = "distance_file"
+    )]
+    distance: f64,
+
+    /// Distance over time: CSV with columns t_s,distance_m (linear between rows).
+    #[arg(long, value_name = "FILE")]
+    distance_file: Option<PathBuf>,
+
+    /// Pipe: offer one frame every MS milliseconds instead of back to back.
+    #[arg(long, value_name = "MS")]
+    interval: Option<f64>,
+
+    /// Write one CSV row per frame here (rows flushed as they go in real time).
+    #[arg(long, value_name = "FILE")]
+    trace: Option<PathBuf>,
+
+    /// Write the counters of both directions as JSON here when the run ends.
+    #[arg(long, value_name = "FILE")]
+    stats: Option<PathBuf>,
+
+    /// Real time: create a pseudo-terminal pair and print its two paths (A, then B).
+    #[arg(long, help_heading = "Real time", conflicts_with_all = ["a", "udp_a"])]
+    pty: bool,
+
+    /// Real time: side A's serial port (or pseudo-terminal).
+    #[arg(long, value_name = "DEV", requires = "b", help_heading = "Real time")]
+    a: Option<String>,
+
+    /// Real time: side B's serial port.
+    #[arg(long, value_name = "DEV", requires = "a", help_heading = "Real time")]
+    b: Option<String>,
+
+    /// Baud rate of --a and --b.
+    #[arg(long, default_value_t = 9600, value_parser = clap::value_parser!(u32).range(1..), help_heading = "Real time")]
+    baud: u32,
+
+    /// Real time: side A's UDP address (bound here; each datagram is a frame).
+    #[arg(
+        long,
+        value_name = "ADDR:PORT",
+        requires = "udp_b",
+        conflicts_with = "a",
+        help_heading = "Real time"
+    )]
+    udp_a: Option<SocketAddr>,
+
+    /// Real time: side B's UDP address.
+    #[arg(
+        long,
+        value_name = "ADDR:PORT",
+        requires = "udp_a",
+        help_heading = "Real time"
+    )]
+    udp_b: Option<SocketAddr>,
+
+    /// Where side A's program listens [default: the source of its last datagram].
+    #[arg(
+        long,
+        value_name = "ADDR:PORT",
+        requires = "udp_a",
+        help_heading = "Real time"
+    )]
+    udp_a_peer: Option<SocketAddr>,
+
+    /// Where side B's program listens [default: the source of its last datagram].
+    #[arg(
+        long,
+        value_name = "ADDR:PORT",
+        requires = "udp_b",
+        help_heading = "Real time"
+    )]
+    udp_b_peer: Option<SocketAddr>,
+
+    /// Real time: run link-sim's threads under real-time (SCHED_FIFO) scheduling, when allowed
+    /// (root or CAP_SYS_NICE), so other processes cannot delay deliveries. Measure before relying
+    /// on it (scripts/pty-latency.py): on a virtual machine whose processor time is stolen by
+    /// the host it does not help, and the kernel's own pseudo-terminal work can then wait.
+    #[arg(long, help_heading = "Real time")]
+    rt_priority: bool,
+
+    /// Real time: packets are bytes separated by silence (a modem's transparent mode), not
+    /// wire.md frames.
+    #[arg(long, requires = "idle_ms", help_heading = "Real time")]
+    raw: bool,
+
+    /// Silence that ends a packet with --raw; with frames, the silence after which an
+    /// incomplete frame is given up [default with frames: 1000].
+    #[arg(long, value_name = "MS", help_heading = "Real time")]
+    idle_ms: Option<u64>,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    rovlink::io::finish_main(TOOL, run(&args))
+}
+
+fn run(args: &Args) -> Result<u8> {
+    if let Some(name) = &args.print_model {
+        let mut model_args = args.model.clone();
+        if !name.is_empty() {
+            model_args.model = Some(name.clone());
+            model_args.model_file = None;
+        }
+        let model = model_args.resolve()?;
+        let mut out = std::io::stdout().lock();
+        out.write_all(model.to_json().as_bytes())
+            .map_err(|source| IoError::Write {
+                name: "<stdout>".into(),
+                source,
+            })?;
+        return Ok(EXIT_OK);
+    }
+    let forward = args.model.resolve()?;
+    let reverse = match (&args.reverse_model, &args.reverse_model_file) {
+        (None, None) => forward.clone(),
+        (name, file) => {
+            let reverse_args = ModelArgs {
+                model: name.clone(),
+                model_file: file.clone(),
+                ..args.model.clone()
+            };
+            reverse_args.resolve()?
+        }
+    };
+    if !(args.distance.is_finite() && args.distance >= 0.0) {
+        bail!(usage(format!(
+            "--distance: expected metres >= 0, found {}",
+            args.distance
+        )));
+    }
+    let distance = match &args.distance_file {
+        Some(path) => Distance::from_csv_file(path)?,
+        None => Distance::Fixed(args.distance),
+    };
+    let link = Link::new(forward, reverse, args.seed, distance)?;
+    let specs = port_specs(args);
+    match specs {
+        None => {
+            if args.raw {
+                bail!(usage(
+                    "--raw applies to real-time byte streams (--pty, --a/--b), not to the pipe"
+                        .into()
+                ));
+            }
+            run_pipe(args, link)
+        }
+        Some(specs) => {
+            if args.interval.is_some() || args.output.is_some() || args.input.is_some() {
+                bail!(usage(
+                    "INPUT, --output and --interval apply to the pipe, not to real-time ports"
+                        .into()
+                ));
+            }
+            run_realtime(args, link, specs)
+        }
+    }
+}
+
+/// A usage error (exit 2) as an anyhow error.
+fn usage(message: String) -> anyhow::Error {
+    anyhow::Error::new(UsageError(message))
+}
+
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+struct UsageError(String);
+
+fn port_specs(args: &Args) -> Option<[PortSpec; 2]> {
+    if args.pty {
+        return Some([PortSpec::Pty, PortSpec::Pty]);
+    }
+    if let (Some(a), Some(b)) = (&args.a, &args.b) {
+        return Some([
+            PortSpec::Serial {
+                path: a.clone(),
+                baud: args.baud,
+            },
+            PortSpec::Serial {
+                path: b.clone(),
+                baud: args.baud,
+            },
+        ]);
+    }
+    if let (Some(a), Some(b)) = (args.udp_a, args.udp_b) {
+        return Some([
+            PortSpec::Udp {
+                bind: a,
+                peer: args.udp_a_peer,
+            },
+            PortSpec::Udp {
+                bind: b,
+                peer: args.udp_b_peer,
+            },
+        ]);
+    }
+    None
+}
+
+/// One trace row; `with_side` adds the sending side (real time, where both sides send).
+fn trace_row(report: &Report, with_side: bool) -> String {
+    let time = |t: Option<rovlink::link::SimTime>| {
+        t.map_or(String::new(), |t| format!("{:.9}", t.as_secs_f64()))
+    };
+    let mut row = format!(
+        "{},{},{:.9},{},{},{}",
+        report.seq,
+        report.len,
+        report.t_offered.as_secs_f64(),
+        time(report.t_tx_start),
+        time(report.t_rx),
+        report.fate.as_str()
+    );
+    if with_side {
+        row.push(',');
+        row.push_str(report.from.name());
+    }
+    row.push('\n');
+    row
+}
+
+/// The trace's header in the pipe (one direction, A to B).
+const TRACE_HEADER: &str = "seq,bytes,t_offered_s,t_tx_start_s,t_rx_s,fate\n";
+/// The trace's header in real time (both directions: the sending side is the last column).
+const TRACE_HEADER_SIDES: &str = "seq,bytes,t_offered_s,t_tx_start_s,t_rx_s,fate,side\n";
+
+/// The counters of both directions.
+#[derive(Default)]
+struct Counters {
+    directions: [DirectionStats; 2],
+}
+
+impl Counters {
+    fn record(&mut self, report: &Report) {
+        self.directions[report.from.index()].record(report);
+    }
+
+    fn summary(&self, mode: &str, seed: u64, duration_s: f64, link: &Link) {
+        let (forward, reverse) = (link.model(Side::A), link.model(Side::B));
+        let models = if forward == reverse {
+            format!("model {}", model_name(forward))
+        } else {
+            format!(
+                "models {} (A->B), {} (B->A)",
+                model_name(forward),
+                model_name(reverse)
+            )
+        };
+        say!("{mode}: {models}, seed {seed}, {duration_s:.3} s of link time");
+        for (side, stats) in [Side::A, Side::B].iter().zip(&self.directions) {
+            if stats.frames_offered > 0 || mode != "pipe" {
+                say!(
+                    "{}",
+                    stats.summary_line(&format!("{}->{}", side.name(), side.other().name()))
+                );
+            }
+        }
+        if link.in_flight() > 0 {
+            say!(
+                "{} frames still in flight when the run ended",
+                link.in_flight()
+            );
+        }
+    }
+}
+
+fn model_name(model: &Model) -> String {
+    if model.name.is_empty() {
+        "(unnamed)".into()
+    } else {
+        model.name.clone()
+    }
+}
+
+fn stats_json(
+    args: &Args,
+    counters: &Counters,
+    link: &Link,
+    mode: &str,
+    duration_s: f64,
+    info: Option<&RunInfo>,
+) -> serde_json::Value {
+    let mut json = serde_json::json!({
+        "mode": mode,
+        "seed": args.seed,
+        "duration_s": duration_s,
+        "a_to_b": counters.directions[0].to_json(),
+        "b_to_a": counters.directions[1].to_json(),
+        "in_flight_at_end": link.in_flight(),
+        "model_a_to_b": link.model(Side::A),
+        "model_b_to_a": link.model(Side::B),
+    });
+    if let Some(info) = info {
+        json["real_time"] = serde_json::json!({
+            "bytes_read": {"a": info.bytes_read[0], "b": info.bytes_read[1]},
+            "bytes_skipped": {"a": info.bytes_skipped[0], "b": info.bytes_skipped[1]},
+            "deliveries_not_taken": {"a": info.not_taken[0], "b": info.not_taken[1]},
+            "delivery_lateness_ms_p50": info.lateness_quantile_ms(0.5),
+            "delivery_lateness_ms_p99": info.lateness_quantile_ms(0.99),
+            "delivery_lateness_ms_max": info.lateness_quantile_ms(1.0),
+        });
+    }
+    json
+}
+
+/// Writes the stats JSON into its file, created at the start of the run (so a path that cannot
+/// be written fails before anything is measured), and commits it.
+fn write_stats(mut file: AtomicFile, path: &Path, json: &serde_json::Value) -> Result<()> {
+    let text = serde_json::to_string_pretty(json).unwrap_or_default() + "\n";
+    file.write_all(text.as_bytes())
+        .map_err(|source| IoError::Write {
+            name: path.display().to_string(),
+            source,
+        })?;
+    file.commit()?;
+    Ok(())
+}
+
+fn run_pipe(args: &Args, mut link: Link) -> Result<u8> {
+    let pace = match args.interval {
+        None => Pace::BackToBack,
+        Some(ms) if ms.is_finite() && ms > 0.0 => Pace::IntervalNs((ms * 1e6).round() as u64),
+        Some(ms) => bail!(usage(format!(
+            "--interval: expected milliseconds > 0, found {ms}"
+        ))),
+    };
+    let mut input = Input::open(args.input.as_deref())?;
+    let input_name = rovlink::io::display_name(args.input.as_deref(), "<stdin>");
+    let mut output = Output::open(args.output.as_deref(), true)?;
+    let mut trace = match &args.trace {
+        Some(path) => {
+            let mut file = BufWriter::new(AtomicFile::create(path)?);
+            file.write_all(TRACE_HEADER.as_bytes())
+                .map_err(|source| IoError::Write {
+                    name: path.display().to_string(),
+                    source,
+                })?;
+            Some((file, path.display().to_string()))
+        }
+        None => None,
+    };
+    let stats_file = args.stats.as_deref().map(AtomicFile::create).transpose()?;
+    let wall = Instant::now();
+    let mut counters = Counters::default();
+    let mut deframer = Deframer::new();
+    let mut frames = std::collections::VecDeque::new();
+    let mut chunk = vec![0u8; 64 * 1024];
+    let mut eof = false;
+    let mut bytes_in: u64 = 0;
+    let mut source = || -> Result<Option<Vec<u8>>> {
+        while frames.is_empty() && !eof {
+            let n = input.read_chunk(&mut chunk)?;
+            if n == 0 {
+                deframer.finish();
+                eof = true;
+            } else {
+                bytes_in += n as u64;
+                deframer.push(&chunk[..n]);
+            }
+            while let Some(event) = deframer.next_event() {
+                if let DeframeEvent::Frame { frame, .. } = event {
+                    frames.push_back(frame.into_inner().to_vec());
+                }
+            }
+        }
+        Ok(frames.pop_front())
+    };
+    let output_name = output.name();
+    let mut sink = |report: Report| -> Result<()> {
+        counters.record(&report);
+        if let Some((trace, name)) = trace.as_mut() {
+            trace
+                .write_all(trace_row(&report, false).as_bytes())
+                .map_err(|source| IoError::Write {
+                    name: name.clone(),
+                    source,
+                })?;
+        }
+        if report.fate.arrived() {
+            output.write_bytes(&report.bytes)?;
+        }
+        Ok(())
+    };
+    pipe::run(&mut link, pace, &mut source, &mut sink)?;
+    let skipped = deframer.stats();
+    if skipped.bytes_skipped > 0 {
+        if skipped.frames == 0 {
+            bail!(BadInput(format!(
+                "{input_name}: no link frame in {bytes_in} bytes (expected wire.md frames starting with 0x55 and a valid CRC)"
+            )));
+        }
+        say!(
+            "{input_name}: skipped {} bytes that were not good frames ({} CRC failures, {} truncated)",
+            skipped.bytes_skipped,
+            skipped.crc_failures,
+            skipped.truncated
+        );
+    }
+    output
+        .finish()
+        .with_context(|| format!("writing {output_name}"))?;
+    if let Some((trace, name)) = trace {
+        let file = trace.into_inner().map_err(|e| IoError::Write {
+            name: name.clone(),
+            source: e.into_error(),
+        })?;
+        file.commit()?;
+    }
+    let duration_s = link.now().as_secs_f64();
+    counters.summary("pipe", args.seed, duration_s, &link);
+    say!("{:.3} s of wall time", wall.elapsed().as_secs_f64());
+    if let (Some(mut file), Some(path)) = (stats_file, &args.stats) {
+        let json = stats_json(args, &counters, &link, "pipe", duration_s, None);
+        let text = serde_json::to_string_pretty(&json).unwrap_or_default() + "\n";
+        file.write_all(text.as_bytes())
+            .map_err(|source| IoError::Write {
+                name: path.display().to_string(),
+                source,
+            })?;
+        file.commit()?;
+    }
+    Ok(EXIT_OK)
+}
+
+/// Bad input (exit 2).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+struct BadInput(String);
+
+/// Tries real-time scheduling on a throwaway thread; says on stderr when it is not allowed.
+fn raise_priority_check() -> bool {
+    match std::thread::spawn(rovlink::link::realtime::raise_priority).join() {
+        Ok(Ok(())) => true,
+        Ok(Err(reason)) => {
+            say!("--rt-priority: real-time scheduling not allowed ({reason}); running without it");
+            false
+        }
+        Err(_) => false,
+    }
+}
+
+fn run_realtime(args: &Args, mut link: Link, specs: [PortSpec; 2]) -> Result<u8> {
+    let framing = if args.raw {
+        Framing::Raw {
+            idle: Duration::from_millis(args.idle_ms.unwrap_or(20)),
+        }
+    } else {
+        Framing::Frames {
+            give_up: Duration::from_millis(args.idle_ms.unwrap_or(1000)),
+        }
+    };
+    let mut trace = match &args.trace {
+        Some(path) => {
+            let mut file = File::create(path).map_err(|source| IoError::Open {
+                path: path.clone(),
+                source,
+            })?;
+            file.write_all(TRACE_HEADER_SIDES.as_bytes())
+                .map_err(|source| IoError::Write {
+                    name: path.display().to_string(),
+                    source,
+                })?;
+            Some((file, path.display().to_string()))
+        }
+        None => None,
+    };
+    let stats_file = args.stats.as_deref().map(AtomicFile::create).transpose()?;
+    let realtime_priority = args.rt_priority && raise_priority_check();
+    let endpoints = Endpoints::open(specs, realtime_priority)?;
+    let stopper = endpoints.stopper();
+    ctrlc::set_handler(move || stopper.stop()).context("cannot install the signal handler")?;
+    if args.pty {
+        let mut out = std::io::stdout().lock();
+        let names = endpoints.names();
+        writeln!(out, "{}\n{}", names[0], names[1])
+            .and_then(|()| out.flush())
+            .map_err(|source| IoError::Write {
+                name: "<stdout>".into(),
+                source,
+            })?;
+    }
+    say!(
+        "forwarding A ({}) <-> B ({}) through the model until a side closes or SIGINT/SIGTERM",
+        endpoints.names()[0],
+        endpoints.names()[1]
+    );
+    let mut counters = Counters::default();
+    let mut trace_error = None;
+    let (ended, info) = endpoints.run(&mut link, framing, |report| {
+        counters.record(report);
+        if let Some((file, name)) = trace.as_mut()
+            && trace_error.is_none()
+            && let Err(source) = file.write_all(trace_row(report, true).as_bytes())
+        {
+            trace_error = Some(IoError::Write {
+                name: name.clone(),
+                source,
+            });
+        }
+    });
+    let duration_s = link.now().as_secs_f64();
+    counters.summary("real time", args.seed, duration_s, &link);
+    if let (Some(p50), Some(p99)) = (
+        info.lateness_quantile_ms(0.5),
+        info.lateness_quantile_ms(0.99),
+    ) {
+        say!(
+            "deliveries handed to the port {p50:.3} ms (median), {p99:.3} ms (p99) after their model time"
+        );
+    }
+    for side in [Side::A, Side::B] {
+        if info.not_taken[side.index()] > 0 {
+            say!(
+                "side {}: {} deliveries not taken (its program was not reading)",
+                side.name(),
+                info.not_taken[side.index()]
+            );
+        }
+    }
+    if let (Some(file), Some(path)) = (stats_file, &args.stats) {
+        let json = stats_json(args, &counters, &link, "real time", duration_s, Some(&info));
+        write_stats(file, path, &json)?;
+    }
+    if let Some(err) = trace_error {
+        return Err(err.into());
+    }
+    match ended {
+        Ended::Stopped => Ok(EXIT_OK),
+        Ended::Closed { side, name, reason } => {
+            say!("side {} ({name}) closed: {reason}", side.name());
+            Ok(EXIT_CHECK_FAILED)
+        }
+    }
+}

@@ -1,0 +1,543 @@
+//! The real-time driver: a [`Link`] between two real transports, on the monotonic clock.
+//!
+//! Each side is a pseudo-terminal this process creates, an existing serial port (or someone
+//! else's pseudo-terminal), or a UDP socket. One thread per side reads bytes and stamps them
+//! with the time they arrived; one thread per side writes what the link delivers, so a side
+//! whose reader has stopped reading can never stall the other direction. The main loop owns the
+//! link: it cuts the bytes into packets (wire.md frames found by the deframer, or, with raw
+//! framing, bytes separated by a quiet gap), offers them at their arrival time, sleeps until the
+//! link's next event or the next input, and hands every delivered frame to the writer of the
+//! other side at the time the model scheduled.
+//!
+//! The run ends when a side closes or fails (which side, and why, is in [`Ended`]) or when
+//! [`Stopper::stop`] is called (from a signal handler, say).
+
+use std::fs::File;
+use std::io::{self, Read, Write};
+use std::net::{SocketAddr, UdpSocket};
+use std::os::unix::fs::OpenOptionsExt;
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender, SyncSender, TrySendError};
+use std::sync::{Arc, Mutex};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use nix::fcntl::OFlag;
+use nix::pty::{PtyMaster, grantpt, posix_openpt, ptsname_r, unlockpt};
+use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
+
+use super::channel::{Link, Report, Side};
+use super::sched::SimTime;
+use crate::wire::{DeframeEvent, Deframer};
+
+/// Frames a side's writer may hold before deliveries to it are counted as not taken.
+const WRITE_QUEUE_FRAMES: usize = 1024;
+
+/// Longest sleep of the main loop when nothing is scheduled, so a stop is seen promptly.
+const IDLE_POLL: Duration = Duration::from_millis(200);
+
+/// What one side of the link is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum PortSpec {
+    /// A new pseudo-terminal pair; programs open its path as if it were a serial port.
+    Pty,
+    /// An existing serial port or pseudo-terminal.
+    Serial {
+        /// Device path.
+        path: String,
+        /// Baud rate.
+        baud: u32,
+    },
+    /// A UDP socket bound here; each datagram is one packet. Packets for this side go to
+    /// `peer`, or else to whoever sent the last datagram to this socket.
+    Udp {
+        /// Local address to bind.
+        bind: SocketAddr,
+        /// Where this side's program listens, if known in advance.
+        peer: Option<SocketAddr>,
+    },
+}
+
+/// How a byte stream is cut into packets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Framing {
+    /// wire.md link frames; bytes that are not part of a good frame are skipped and counted.
+    /// An incomplete frame is given up after this much silence (a false preamble in noise).
+    Frames {
+        /// Silence after which an incomplete frame is abandoned.
+        give_up: Duration,
+    },
+    /// A modem's transparent mode: bytes separated by more than `idle` of silence are one packet.
+    Raw {
+        /// The silence that ends a packet.
+        idle: Duration,
+    },
+}
+
+/// Why a side could not be opened.
+#[derive(Debug, thiserror::Error)]
+#[error("side {side} ({name}): cannot open: {reason}")]
+pub struct OpenError {
+    /// "A" or "B".
+    pub side: &'static str,
+    /// The device or address.
+    pub name: String,
+    /// The reason.
+    pub reason: String,
+}
+
+/// How a real-time run ended.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Ended {
+    /// [`Stopper::stop`] was called.
+    Stopped,
+    /// A side's port closed or failed.
+    Closed {
+        /// Which side.
+        side: Side,
+        /// Its device or address.
+        name: String,
+        /// What happened.
+        reason: String,
+    },
+}
+
+/// Counters of a real-time run beyond the link's own reports.
+#[derive(Debug, Clone, Default)]
+pub struct RunInfo {
+    /// Deliveries a side's writer could not take (its program was not reading), per side.
+    pub not_taken: [u64; 2],
+    /// Bytes read per side.
+    pub bytes_read: [u64; 2],
+    /// Bytes that were not part of any frame, per side (frame framing only).
+    pub bytes_skipped: [u64; 2],
+    /// How late each delivery was handed to its writer, microseconds after the model's time.
+    pub lateness_us: Vec<u32>,
+}
+
+impl RunInfo {
+    /// The `q` quantile (0..=1) of the delivery lateness in milliseconds (none without deliveries).
+    pub fn lateness_quantile_ms(&self, q: f64) -> Option<f64> {
+        let mut sorted = self.lateness_us.clone();
+        sorted.sort_unstable();
+        crate::stats::quantile_sorted(&sorted, q).map(|us| us as f64 * 1e-3)
+    }
+}
+
+enum Message {
+    Data {
+        side: Side,
+        at: Instant,
+        bytes: Vec<u8>,
+        /// A datagram: one packet as it is, not bytes of a stream.
+        datagram: bool,
+    },
+    Closed {
+        side: Side,
+        reason: String,
+    },
+    Stop,
+}
+
+/// Stops a run from another thread (a signal handler).
+#[derive(Clone)]
+pub struct Stopper(Sender<Message>);
+
+impl Stopper {
+    /// Ends the run at the next turn of its loop.
+    pub fn stop(&self) {
+        let _ = self.0.send(Message::Stop);
+    }
+}
+
+/// Where a side's deliveries go.
+struct Writer {
+    queue: SyncSender<Vec<u8>>,
+}
+
+/// The two open sides of a real-time link.
+pub struct Endpoints {
+    names: [String; 2],
+    writers: [Writer; 2],
+    inbox: Receiver<Message>,
+    sender: Sender<Message>,
+    /// Pseudo-terminal slaves kept open so the pair lives while programs come and go.
+    _slaves: Vec<File>,
+    /// Run the threads under real-time scheduling.
+    realtime_priority: bool,
+}
+
+/// Puts the calling thread under SCHED_FIFO at the lowest real-time priority: above every
+/// ordinary process, below the kernel's own real-time threads. Timer wake-ups of such a thread
+/// are not delayed by other work on the machine (nor by timer slack). Needs root or
+/// CAP_SYS_NICE; the error says why not.
+pub fn raise_priority() -> Result<(), String> {
+    use thread_priority::{
+        RealtimeThreadSchedulePolicy, ThreadPriority, ThreadSchedulePolicy,
+        set_thread_priority_and_policy, thread_native_id,
+    };
+    set_thread_priority_and_policy(
+        thread_native_id(),
+        ThreadPriority::Min,
+        ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::Fifo),
+    )
+    .map_err(|e| format!("{e:?}"))
+}
+
+impl Endpoints {
+    /// Opens both sides and starts their reader and writer threads; with `realtime_priority`
+    /// every thread of the link asks for real-time scheduling ([`raise_priority`]).
+    pub fn open(specs: [PortSpec; 2], realtime_priority: bool) -> Result<Endpoints, OpenError> {
+        let (sender, inbox) = mpsc::channel();
+        let [spec_a, spec_b] = specs;
+        let rt = realtime_priority;
+        let (name_a, writer_a, slave_a) = open_side(Side::A, spec_a, sender.clone(), rt)?;
+        let (name_b, writer_b, slave_b) = open_side(Side::B, spec_b, sender.clone(), rt)?;
+        let names = [name_a, name_b];
+        let writers = [writer_a, writer_b];
+        let slaves = slave_a.into_iter().chain(slave_b).collect();
+        Ok(Endpoints {
+            names,
+            writers,
+            inbox,
+            sender,
+            _slaves: slaves,
+            realtime_priority,
+        })
+    }
+
+    /// The device path or address of each side (A, then B): for a pseudo-terminal, the path
+    /// programs open.
+    pub fn names(&self) -> &[String; 2] {
+        &self.names
+    }
+
+    /// A handle that stops the run.
+    pub fn stopper(&self) -> Stopper {
+        Stopper(self.sender.clone())
+    }
+
+    /// Runs `link` between the two sides until one closes or the run is stopped. `on_report`
+    /// sees every report when the model decides it (delivered frames are then written), with
+    /// the link's clock `start` anchored at the first call.
+    pub fn run(
+        &self,
+        link: &mut Link,
+        framing: Framing,
+        mut on_report: impl FnMut(&Report),
+    ) -> (Ended, RunInfo) {
+        if self.realtime_priority {
+            let _ = raise_priority();
+        }
+        let start = Instant::now();
+        let clock = |at: Instant| SimTime(at.saturating_duration_since(start).as_nanos() as u64);
+        let mut info = RunInfo::default();
+        let mut framers = [Framer::new(framing), Framer::new(framing)];
+        loop {
+            let now = clock(Instant::now());
+            link.advance(now);
+            while let Some(report) = link.pop_report() {
+                if report.fate.arrived() {
+                    let to = report.from.other();
+                    if let Some(t_rx) = report.t_rx {
+                        let late_us = now.0.saturating_sub(t_rx.0) / 1000;
+                        info.lateness_us.push(late_us.min(u32::MAX as u64) as u32);
+                    }
+                    match self.writers[to.index()]
+                        .queue
+                        .try_send(report.bytes.clone())
+                    {
+                        Ok(()) => {}
+                        Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {
+                            info.not_taken[to.index()] += 1
+                        }
+                    }
+                }
+                on_report(&report);
+            }
+            for side in [Side::A, Side::B] {
+                for packet in framers[side.index()].due(now) {
+                    link.offer(side, packet);
+                }
+            }
+            let mut wake = link.next_event_time();
+            for framer in &framers {
+                if let Some(due) = framer.deadline() {
+                    wake = Some(wake.map_or(due, |w| w.min(due)));
+                }
+            }
+            let idle_until = start + Duration::from_nanos(now.0) + IDLE_POLL;
+            let deadline = match wake {
+                Some(due) => (start + Duration::from_nanos(due.0)).min(idle_until),
+                None => idle_until,
+            };
+            let timeout = deadline.saturating_duration_since(Instant::now());
+            match self.inbox.recv_timeout(timeout) {
+                Ok(Message::Data {
+                    side,
+                    at,
+                    bytes,
+                    datagram,
+                }) => {
+                    let t = clock(at);
+                    link.advance(t);
+                    info.bytes_read[side.index()] += bytes.len() as u64;
+                    if datagram {
+                        link.offer(side, bytes);
+                        continue;
+                    }
+                    let framer = &mut framers[side.index()];
+                    for packet in framer.push(t, &bytes) {
+                        link.offer(side, packet);
+                    }
+                    info.bytes_skipped[side.index()] = framer.skipped;
+                }
+                Ok(Message::Closed { side, reason }) => {
+                    let name = self.names[side.index()].clone();
+                    return (Ended::Closed { side, name, reason }, info);
+                }
+                Ok(Message::Stop) | Err(RecvTimeoutError::Disconnected) => {
+                    return (Ended::Stopped, info);
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+            }
+        }
+    }
+}
+
+/// Cuts one side's bytes into packets.
+struct Framer {
+    framing: Framing,
+    deframer: Deframer,
+    raw: Vec<u8>,
+    last_byte: SimTime,
+    skipped: u64,
+}
+
+impl Framer {
+    fn new(framing: Framing) -> Framer {
+        Framer {
+            framing,
+            deframer: Deframer::new(),
+            raw: Vec::new(),
+            last_byte: SimTime::ZERO,
+            skipped: 0,
+        }
+    }
+
+    /// Takes bytes that arrived at `t`; returns the packets they complete.
+    fn push(&mut self, t: SimTime, bytes: &[u8]) -> Vec<Vec<u8>> {
+        let mut packets = Vec::new();
+        if let Framing::Raw { idle } = self.framing {
+            if !self.raw.is_empty() && t.0.saturating_sub(self.last_byte.0) > idle.as_nanos() as u64
+            {
+                packets.push(std::mem::take(&mut self.raw));
+            }
+            self.raw.extend_from_slice(bytes);
+            self.last_byte = t;
+            return packets;
+        }
+        self.last_byte = t;
+        self.deframer.push(bytes);
+        self.drain(&mut packets);
+        packets
+    }
+
+    fn drain(&mut self, packets: &mut Vec<Vec<u8>>) {
+        while let Some(event) = self.deframer.next_event() {
+            match event {
+                DeframeEvent::Frame { frame, .. } => packets.push(frame.into_inner().to_vec()),
+                DeframeEvent::Skipped { len, .. } => self.skipped += len,
+                DeframeEvent::BadCrc { .. } | DeframeEvent::Truncated { .. } => {}
+            }
+        }
+    }
+
+    /// When the pending bytes are due to become a packet (raw) or be given up (frames).
+    fn deadline(&self) -> Option<SimTime> {
+        match self.framing {
+            Framing::Raw { idle } => (!self.raw.is_empty())
+                .then(|| SimTime(self.last_byte.0 + idle.as_nanos() as u64 + 1)),
+            Framing::Frames { give_up } => (self.deframer.pending_bytes() > 0
+                && !give_up.is_zero())
+            .then(|| SimTime(self.last_byte.0 + give_up.as_nanos() as u64)),
+        }
+    }
+
+    /// The packets completed by silence at `now`: a raw packet, or, for frames, those found
+    /// after giving up a stalled incomplete frame.
+    fn due(&mut self, now: SimTime) -> Vec<Vec<u8>> {
+        if self.deadline().is_none_or(|deadline| deadline > now) {
+            return Vec::new();
+        }
+        match self.framing {
+            Framing::Raw { .. } => vec![std::mem::take(&mut self.raw)],
+            Framing::Frames { .. } => {
+                self.deframer.abandon_incomplete();
+                let mut packets = Vec::new();
+                self.drain(&mut packets);
+                packets
+            }
+        }
+    }
+}
+
+fn open_side(
+    side: Side,
+    spec: PortSpec,
+    inbox: Sender<Message>,
+    rt: bool,
+) -> Result<(String, Writer, Option<File>), OpenError> {
+    let fail = |name: &str, reason: String| OpenError {
+        side: side.name(),
+        name: name.to_string(),
+        reason,
+    };
+    let (queue, outbox) = mpsc::sync_channel::<Vec<u8>>(WRITE_QUEUE_FRAMES);
+    match spec {
+        PortSpec::Pty => {
+            let (master, slave, path) = open_pty().map_err(|e| fail("pty", e.to_string()))?;
+            let master = Arc::new(master);
+            let reader = Arc::clone(&master);
+            spawn_reader(side, rt, false, inbox.clone(), move |buf| {
+                (&*reader).read(buf)
+            });
+            spawn_writer(side, rt, inbox, outbox, move |bytes| {
+                (&*master).write_all(bytes)
+            });
+            Ok((path, Writer { queue }, Some(slave)))
+        }
+        PortSpec::Serial { path, baud } => {
+            let port = serialport::new(&path, baud)
+                .timeout(Duration::from_millis(100))
+                .open()
+                .map_err(|e| fail(&path, e.to_string()))?;
+            let mut writer = port.try_clone().map_err(|e| fail(&path, e.to_string()))?;
+            let mut reader = port;
+            spawn_reader(side, rt, false, inbox.clone(), move |buf| reader.read(buf));
+            spawn_writer(side, rt, inbox, outbox, move |bytes| {
+                writer.write_all(bytes)?;
+                writer.flush()
+            });
+            Ok((path, Writer { queue }, None))
+        }
+        PortSpec::Udp { bind, peer } => {
+            let name = bind.to_string();
+            let socket = UdpSocket::bind(bind).map_err(|e| fail(&name, e.to_string()))?;
+            let reader = socket.try_clone().map_err(|e| fail(&name, e.to_string()))?;
+            let peer = Arc::new(Mutex::new(peer));
+            let learned = Arc::clone(&peer);
+            let fixed = peer.lock().map(|p| p.is_some()).unwrap_or(false);
+            spawn_reader(side, rt, true, inbox.clone(), move |buf| {
+                let (n, from) = reader.recv_from(buf)?;
+                if !fixed && let Ok(mut peer) = learned.lock() {
+                    *peer = Some(from);
+                }
+                if n == 0 {
+                    // An empty datagram is no packet (and 0 would read as end of file).
+                    return Err(io::ErrorKind::Interrupted.into());
+                }
+                Ok(n)
+            });
+            spawn_writer(side, rt, inbox, outbox, move |bytes| {
+                let target = peer.lock().ok().and_then(|p| *p);
+                match target {
+                    Some(addr) => socket.send_to(bytes, addr).map(|_| ()),
+                    None => Ok(()), // nobody has spoken on this side yet: the packet is lost
+                }
+            });
+            Ok((name, Writer { queue }, None))
+        }
+    }
+}
+
+/// A pseudo-terminal pair in raw mode: the master, the slave (kept open), the slave's path.
+fn open_pty() -> nix::Result<(PtyMaster, File, String)> {
+    let master = posix_openpt(OFlag::O_RDWR | OFlag::O_NOCTTY | OFlag::O_CLOEXEC)?;
+    grantpt(&master)?;
+    unlockpt(&master)?;
+    let path = ptsname_r(&master)?;
+    let slave = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .custom_flags(OFlag::O_NOCTTY.bits())
+        .open(&path)
+        .map_err(|e| nix::Error::from_raw(e.raw_os_error().unwrap_or(0)))?;
+    let mut termios = tcgetattr(&slave)?;
+    cfmakeraw(&mut termios);
+    tcsetattr(&slave, SetArg::TCSANOW, &termios)?;
+    Ok((master, slave, path))
+}
+
+fn spawn_reader(
+    side: Side,
+    rt: bool,
+    datagram: bool,
+    inbox: Sender<Message>,
+    mut read: impl FnMut(&mut [u8]) -> io::Result<usize> + Send + 'static,
+) {
+    thread::spawn(move || {
+        if rt {
+            let _ = raise_priority();
+        }
+        let mut buf = vec![0u8; 65_536];
+        loop {
+            match read(&mut buf) {
+                Ok(0) => {
+                    let _ = inbox.send(Message::Closed {
+                        side,
+                        reason: "end of file (the other end closed)".into(),
+                    });
+                    return;
+                }
+                Ok(n) => {
+                    let message = Message::Data {
+                        side,
+                        at: Instant::now(),
+                        bytes: buf[..n].to_vec(),
+                        datagram,
+                    };
+                    if inbox.send(message).is_err() {
+                        return;
+                    }
+                }
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        io::ErrorKind::TimedOut
+                            | io::ErrorKind::Interrupted
+                            | io::ErrorKind::WouldBlock
+                    ) => {}
+                Err(e) => {
+                    let _ = inbox.send(Message::Closed {
+                        side,
+                        reason: format!("read failed: {e}"),
+                    });
+                    return;
+                }
+            }
+        }
+    });
+}
+
+fn spawn_writer(
+    side: Side,
+    rt: bool,
+    inbox: Sender<Message>,
+    outbox: Receiver<Vec<u8>>,
+    mut write: impl FnMut(&[u8]) -> io::Result<()> + Send + 'static,
+) {
+    thread::spawn(move || {
+        if rt {
+            let _ = raise_priority();
+        }
+        for bytes in outbox {
+            if let Err(e) = write(&bytes) {
+                let _ = inbox.send(Message::Closed {
+                    side,
+                    reason: format!("write failed: {e}"),
+                });
+                return;
+            }
+        }
+    });
+}
