@@ -92,4 +92,15 @@ done
 "$enc" "$images/kodim23-64x48.png" --bytes 300 --roi 8,8,30,20 --roi-shift 4 --scale 1 -o "$corpus/debt_decode/seed-roi"
 "$enc" "$images/kodim23-64x48.png" --bytes 100000 --lossless -o "$corpus/debt_decode/seed-lossless"
 
+# link_files: every preset as its model file, one with every netem extra, and a distance track.
+(cd "$here/.." && cargo build --release --quiet --bin link-sim)
+sim="$here/../target/release/link-sim"
+mkdir -p "$corpus/link_files"
+for preset in s100 s2cr-burst s2cr-ack satellite-up satellite-down; do
+    "$sim" --print-model "$preset" >"$corpus/link_files/seed-$preset.json"
+done
+"$sim" --print-model s100 --ber 1e-3 --errors corrupt --gilbert-elliott 5,20 --duplicate-percent 10 \
+    --corrupt-percent 5 --loss-percent 3 --reorder --rate-limit-bps 900 >"$corpus/link_files/seed-extras.json"
+printf 't_s,distance_m\n0,1\n10,6\n20,1\n' >"$corpus/link_files/seed-track.csv"
+
 echo "seeded $(find "$corpus" -name 'seed-*' | wc -l) files in $corpus"

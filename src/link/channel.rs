@@ -472,7 +472,7 @@ impl Link {
         let receiver = &mut self.ends[side.other().index()];
         if !reorder && rx_end < receiver.last_rx_end {
             let shift = receiver.last_rx_end.0 - rx_end.0;
-            rx_start = SimTime(rx_start.0 + shift);
+            rx_start = SimTime(rx_start.0.saturating_add(shift));
             rx_end = receiver.last_rx_end;
         }
         receiver.last_rx_end = receiver.last_rx_end.max(rx_end);
@@ -557,16 +557,17 @@ impl Link {
             Fate::Loss
         } else {
             let hit = flip_bit_errors(model.ber, &mut reception.bytes, &mut streams.ber);
-            if hit && model.errors == ErrorMode::Drop {
-                Fate::Ber
+            if hit {
+                match model.errors {
+                    ErrorMode::Drop => Fate::Ber,
+                    ErrorMode::Corrupt => Fate::Corrupted,
+                }
             } else if model.corrupt_percent > 0.0
                 && streams.corrupt.bernoulli(model.corrupt_percent / 100.0)
                 && !reception.bytes.is_empty()
             {
                 let bit = (streams.corrupt.uniform() * (reception.bytes.len() * 8) as f64) as usize;
                 reception.bytes[bit / 8] ^= 0x80 >> (bit % 8);
-                Fate::Corrupted
-            } else if hit {
                 Fate::Corrupted
             } else {
                 Fate::Delivered
