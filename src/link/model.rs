@@ -589,6 +589,15 @@ mod tests {
     }
 
     #[test]
+    fn numbers_read_back_exactly() {
+        // Found by fuzzing: without exact float parsing this came back one ulp off.
+        let mut model = Model::preset("satellite-up").unwrap();
+        model.bitrate_bps = 7.333333333333335e111;
+        model.jitter_ms = 0.1 + 0.2;
+        assert_eq!(Model::from_json(&model.to_json()).unwrap(), model);
+    }
+
+    #[test]
     fn s100_air_time_of_a_57_byte_frame_is_240_ms() {
         let model = Model::preset("s100").unwrap();
         assert!((model.air_time_s(57) - 0.240).abs() < 1e-12);
