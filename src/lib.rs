@@ -15,5 +15,6 @@
 pub mod debt;
 pub mod io;
 pub mod link;
+pub mod measure;
 pub mod stats;
 pub mod wire;

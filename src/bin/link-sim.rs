@@ -443,7 +443,7 @@ fn run_pipe(args: &Args, mut link: Link) -> Result<u8> {
     let mut chunk = vec![0u8; 64 * 1024];
     let mut eof = false;
     let mut bytes_in: u64 = 0;
-    let mut source = || -> Result<Option<Vec<u8>>> {
+    let mut source = |_| -> Result<Option<Vec<u8>>> {
         while frames.is_empty() && !eof {
             let n = input.read_chunk(&mut chunk)?;
             if n == 0 {

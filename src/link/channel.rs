@@ -821,7 +821,7 @@ mod tests {
         pipe::run::<()>(
             &mut link,
             pace,
-            || {
+            |_| {
                 sent += 1;
                 Ok((sent <= count).then(|| {
                     let mut frame = vec![0u8; len];
@@ -1123,7 +1123,7 @@ mod tests {
         pipe::run::<()>(
             &mut link,
             Pace::IntervalNs(100_000_000),
-            || {
+            |_| {
                 sent += 1;
                 Ok((sent <= 50_000).then(|| vec![0; 57]))
             },

@@ -24,39 +24,37 @@ pub enum Pace {
 
 /// Offers every frame `source` yields from side A of `link`, in virtual time at `pace`, and
 /// hands each report to `sink` (in the order fates are decided) until the last frame's fate is
-/// known. Errors from the source or the sink stop the run and are returned.
+/// known. `source` is called at each offer time, with that time, and returns the frame to offer
+/// (`None` ends the input). Errors from the source or the sink stop the run and are returned.
 pub fn run<E>(
     link: &mut Link,
     pace: Pace,
-    mut source: impl FnMut() -> Result<Option<Vec<u8>>, E>,
+    mut source: impl FnMut(SimTime) -> Result<Option<Vec<u8>>, E>,
     mut sink: impl FnMut(Report) -> Result<(), E>,
 ) -> Result<(), E> {
-    let mut next = source()?;
+    let mut exhausted = false;
     let mut offered: u64 = 0;
     loop {
-        if let Some(frame) = next.take() {
+        if !exhausted {
             let offer_at = match pace {
                 Pace::BackToBack => link.tx_idle(Side::A).then(|| link.now()),
                 Pace::IntervalNs(interval) => Some(SimTime(offered.saturating_mul(interval))),
             };
             match offer_at {
                 // Events due at the offer time come first: a transmitter freed at t takes a
-                // frame offered at t.
+                // frame offered at t. (Back to back with nothing pending: the link is idle.)
                 Some(t) if link.next_event_time().is_none_or(|due| due > t) => {
                     link.advance(t);
-                    link.offer(Side::A, frame);
-                    offered += 1;
-                    next = source()?;
+                    match source(link.now())? {
+                        Some(frame) => {
+                            link.offer(Side::A, frame);
+                            offered += 1;
+                        }
+                        None => exhausted = true,
+                    }
                 }
                 _ => {
-                    next = Some(frame);
-                    if !link.step() {
-                        // Nothing pending: the transmitter is free whatever it says.
-                        let frame = next.take().unwrap_or_default();
-                        link.offer(Side::A, frame);
-                        offered += 1;
-                        next = source()?;
-                    }
+                    link.step();
                 }
             }
         } else if !link.step() {

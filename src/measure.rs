@@ -1,0 +1,445 @@
+//! Modem characterisation: probe packets, one row per packet, and the figures of the paper's
+//! Table 3 computed from the rows.
+//!
+//! A probe is a wire.md link frame of exactly the requested size (header and CRC included)
+//! whose payload starts with the probe's sequence number (u32, big endian) and its send time in
+//! microseconds (u48, big endian), then filler. The receiver finds the sequence number in what
+//! arrives; the send time lets a receiver on another host compute a delay without the sender's
+//! log.
+//!
+//! [`Summary::from_rows`] gives the delay statistics, RFC 3550's interarrival jitter, the
+//! inter-arrival times and throughput, and, over a sweep of packet sizes, a least-squares fit of
+//! delay on size: `delay = intrinsic + size x 8 / bitrate`, the way Table 3's bit rate and
+//! intrinsic delay were obtained.
+//!
+//! Parsing a received probe never panics: anything that is not a probe is `None`.
+
+use serde::Serialize;
+
+use crate::link::model::{JitterDistribution, Model};
+use crate::stats::{Running, quantile_sorted};
+use crate::wire::frame::{self, Frame, OVERHEAD_BYTES};
+
+/// Bytes of the probe header inside the payload: sequence number and send time.
+pub const PROBE_HEADER_BYTES: usize = 10;
+
+/// The smallest probe: frame overhead plus the probe header.
+pub const MIN_PROBE_BYTES: usize = OVERHEAD_BYTES + PROBE_HEADER_BYTES;
+
+/// The largest probe: a frame with 255 payload bytes.
+pub const MAX_PROBE_BYTES: usize = OVERHEAD_BYTES + 255;
+
+/// Builds probe `seq` of `size` bytes (a whole link frame), sent at `t_tx_us` microseconds.
+/// `None` when the size is outside [`MIN_PROBE_BYTES`]..=[`MAX_PROBE_BYTES`].
+pub fn probe(seq: u32, size: usize, t_tx_us: u64) -> Option<Vec<u8>> {
+    if !(MIN_PROBE_BYTES..=MAX_PROBE_BYTES).contains(&size) {
+        return None;
+    }
+    let mut payload = Vec::with_capacity(size - OVERHEAD_BYTES);
+    payload.extend_from_slice(&seq.to_be_bytes());
+    payload.extend_from_slice(&(t_tx_us & 0xFFFF_FFFF_FFFF).to_be_bytes()[2..]);
+    // Filler that differs between probes, so a corrupted probe is unlikely to look intact.
+    payload.extend(
+        (0..size - OVERHEAD_BYTES - PROBE_HEADER_BYTES).map(|k| (seq as usize * 13 + k * 7) as u8),
+    );
+    frame::build(1, 2, &payload).ok()
+}
+
+/// What a received probe says about itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ProbeInfo {
+    /// Its sequence number.
+    pub seq: u32,
+    /// Its send time, microseconds (48 bits).
+    pub t_tx_us: u64,
+    /// Its length, bytes.
+    pub size: usize,
+}
+
+/// Reads a probe from a received frame; `None` when the bytes are not an intact probe.
+pub fn read_probe(bytes: &[u8]) -> Option<ProbeInfo> {
+    let frame = Frame::new_checked(bytes).ok()?;
+    frame.check().ok()?;
+    let payload = frame.payload();
+    if payload.len() < PROBE_HEADER_BYTES {
+        return None;
+    }
+    let seq = u32::from_be_bytes(payload[..4].try_into().ok()?);
+    let mut time = [0u8; 8];
+    time[2..].copy_from_slice(&payload[4..10]);
+    Some(ProbeInfo {
+        seq,
+        t_tx_us: u64::from_be_bytes(time),
+        size: frame.total_len(),
+    })
+}
+
+/// One packet of a campaign: the row of `packets.csv`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Row {
+    /// Sequence number, from 0 across the whole campaign.
+    pub seq: u32,
+    /// Bytes written to the modem.
+    pub size_bytes: usize,
+    /// Send time, seconds from the start.
+    pub t_tx_s: f64,
+    /// Arrival time, seconds from the start (none when lost).
+    pub t_rx_s: Option<f64>,
+    /// Arrival minus send time, ms (none when lost).
+    pub delay_ms: Option<f64>,
+    /// True when it arrived (intact or not).
+    pub delivered: bool,
+    /// True when it arrived with errors.
+    pub corrupted: bool,
+}
+
+/// The CSV header of [`Row`].
+pub const ROW_HEADER: &str = "seq,size_bytes,t_tx_s,t_rx_s,delay_ms,delivered,corrupted";
+
+impl Row {
+    /// The row as a CSV line (no newline).
+    pub fn to_csv(&self) -> String {
+        let opt =
+            |v: Option<f64>, digits: usize| v.map_or(String::new(), |v| format!("{v:.digits$}"));
+        format!(
+            "{},{},{:.6},{},{},{},{}",
+            self.seq,
+            self.size_bytes,
+            self.t_tx_s,
+            opt(self.t_rx_s, 6),
+            opt(self.delay_ms, 3),
+            self.delivered,
+            self.corrupted
+        )
+    }
+}
+
+/// Least-squares fit of delay on packet size: `delay_ms = intercept + slope x size_bytes`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fit {
+    /// Delay at zero bytes, ms: the intrinsic delay (plus propagation).
+    pub intercept_ms: f64,
+    /// ms per byte.
+    pub slope_ms_per_byte: f64,
+}
+
+impl Fit {
+    /// Fits `(size_bytes, delay_ms)` points; none with fewer than two distinct sizes.
+    pub fn from_points(points: impl IntoIterator<Item = (f64, f64)>) -> Option<Fit> {
+        let (mut n, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for (x, y) in points {
+            n += 1.0;
+            sx += x;
+            sy += y;
+            sxx += x * x;
+            sxy += x * y;
+        }
+        let denominator = n * sxx - sx * sx;
+        if n < 2.0 || denominator.abs() <= 1e-9 * n * sxx.max(1.0) {
+            return None;
+        }
+        let slope = (n * sxy - sx * sy) / denominator;
+        Some(Fit {
+            intercept_ms: (sy - slope * sx) / n,
+            slope_ms_per_byte: slope,
+        })
+    }
+
+    /// The bit rate the slope means, bit/s (none when the slope is not positive).
+    pub fn bitrate_bps(&self) -> Option<f64> {
+        (self.slope_ms_per_byte > 0.0).then(|| 8000.0 / self.slope_ms_per_byte)
+    }
+}
+
+/// The figures of a campaign (`--summary`): Table 3's columns and more.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    /// Packets sent.
+    pub count: u64,
+    /// Packets that arrived.
+    pub delivered: u64,
+    /// Packets that arrived corrupted.
+    pub corrupted: u64,
+    /// 1 - delivered / count.
+    pub loss_ratio: f64,
+    /// Mean delay, ms.
+    pub delay_ms_mean: Option<f64>,
+    /// Median delay, ms.
+    pub delay_ms_p50: Option<f64>,
+    /// 99th percentile of the delay, ms.
+    pub delay_ms_p99: Option<f64>,
+    /// Standard deviation of the delay, ms (the paper's jitter).
+    pub jitter_ms: Option<f64>,
+    /// RFC 3550's interarrival jitter estimate at the end of the run, ms.
+    pub jitter_rfc3550_ms: Option<f64>,
+    /// Mean time between consecutive arrivals, ms.
+    pub iat_ms_mean: Option<f64>,
+    /// Standard deviation of the time between arrivals, ms.
+    pub iat_ms_std: Option<f64>,
+    /// Bits of the packets that arrived per second, from the first send to the last arrival.
+    pub throughput_bps: Option<f64>,
+    /// Bit rate from the fit of delay on size (needs two sizes or more).
+    pub fit_bitrate_bps: Option<f64>,
+    /// Intrinsic delay from the fit, ms.
+    pub fit_intrinsic_delay_ms: Option<f64>,
+    /// Per size: packets, delivered, mean delay, jitter.
+    pub sizes: Vec<SizeSummary>,
+}
+
+/// The figures of one packet size.
+#[derive(Debug, Clone, Serialize)]
+pub struct SizeSummary {
+    /// Packet size, bytes.
+    pub size_bytes: usize,
+    /// Packets sent.
+    pub count: u64,
+    /// Packets that arrived.
+    pub delivered: u64,
+    /// Mean delay, ms.
+    pub delay_ms_mean: Option<f64>,
+    /// Standard deviation of the delay, ms.
+    pub jitter_ms: Option<f64>,
+}
+
+impl Summary {
+    /// Computes the figures from the rows (in any order).
+    pub fn from_rows(rows: &[Row]) -> Summary {
+        let count = rows.len() as u64;
+        let arrived: Vec<&Row> = rows.iter().filter(|r| r.delivered).collect();
+        let delivered = arrived.len() as u64;
+        let corrupted = rows.iter().filter(|r| r.corrupted).count() as u64;
+        let mut delay = Running::new();
+        let mut delays: Vec<f64> = Vec::with_capacity(arrived.len());
+        for row in &arrived {
+            if let Some(d) = row.delay_ms {
+                delay.push(d);
+                delays.push(d);
+            }
+        }
+        delays.sort_by(f64::total_cmp);
+        let some = |v: f64| (delay.count() > 0).then_some(v);
+
+        // RFC 3550 A.8: J += (|D(i-1, i)| - J) / 16 over packets in arrival order.
+        let mut by_arrival: Vec<&Row> = arrived
+            .iter()
+            .copied()
+            .filter(|r| r.t_rx_s.is_some())
+            .collect();
+        by_arrival.sort_by(|a, b| a.t_rx_s.unwrap_or(0.0).total_cmp(&b.t_rx_s.unwrap_or(0.0)));
+        let mut rfc_jitter = 0.0;
+        let mut iat = Running::new();
+        for pair in by_arrival.windows(2) {
+            let transit = |r: &Row| r.delay_ms.unwrap_or(0.0);
+            rfc_jitter += ((transit(pair[1]) - transit(pair[0])).abs() - rfc_jitter) / 16.0;
+            iat.push((pair[1].t_rx_s.unwrap_or(0.0) - pair[0].t_rx_s.unwrap_or(0.0)) * 1e3);
+        }
+        let throughput_bps = match (
+            rows.iter().map(|r| r.t_tx_s).reduce(f64::min),
+            by_arrival.last().and_then(|r| r.t_rx_s),
+        ) {
+            (Some(first), Some(last)) if last > first => Some(
+                arrived
+                    .iter()
+                    .map(|r| r.size_bytes as f64 * 8.0)
+                    .sum::<f64>()
+                    / (last - first),
+            ),
+            _ => None,
+        };
+        let fit = Fit::from_points(
+            arrived
+                .iter()
+                .filter_map(|r| r.delay_ms.map(|d| (r.size_bytes as f64, d))),
+        );
+        let mut sizes: Vec<usize> = rows.iter().map(|r| r.size_bytes).collect();
+        sizes.sort_unstable();
+        sizes.dedup();
+        let sizes = sizes
+            .into_iter()
+            .map(|size| {
+                let mut d = Running::new();
+                let of_size: Vec<&Row> = rows.iter().filter(|r| r.size_bytes == size).collect();
+                of_size
+                    .iter()
+                    .filter_map(|r| r.delay_ms)
+                    .for_each(|v| d.push(v));
+                SizeSummary {
+                    size_bytes: size,
+                    count: of_size.len() as u64,
+                    delivered: of_size.iter().filter(|r| r.delivered).count() as u64,
+                    delay_ms_mean: (d.count() > 0).then(|| d.mean()),
+                    jitter_ms: (d.count() > 1).then(|| d.std()),
+                }
+            })
+            .collect();
+        Summary {
+            count,
+            delivered,
+            corrupted,
+            loss_ratio: if count == 0 {
+                0.0
+            } else {
+                1.0 - delivered as f64 / count as f64
+            },
+            delay_ms_mean: some(delay.mean()),
+            delay_ms_p50: quantile_sorted(&delays, 0.5),
+            delay_ms_p99: quantile_sorted(&delays, 0.99),
+            jitter_ms: (delay.count() > 1).then(|| delay.std()),
+            jitter_rfc3550_ms: (by_arrival.len() > 1).then_some(rfc_jitter),
+            iat_ms_mean: (iat.count() > 0).then(|| iat.mean()),
+            iat_ms_std: (iat.count() > 1).then(|| iat.std()),
+            throughput_bps,
+            fit_bitrate_bps: fit.and_then(|f| f.bitrate_bps()),
+            fit_intrinsic_delay_ms: fit.map(|f| f.intercept_ms),
+            sizes,
+        }
+    }
+
+    /// The jitter to put in a model: the mean of the per-size standard deviations (the delay's
+    /// spread around each size's own mean, so the size sweep itself does not count as jitter).
+    pub fn jitter_within_sizes_ms(&self) -> Option<f64> {
+        let spreads: Vec<f64> = self.sizes.iter().filter_map(|s| s.jitter_ms).collect();
+        (!spreads.is_empty()).then(|| spreads.iter().sum::<f64>() / spreads.len() as f64)
+    }
+
+    /// A link model from the measurement: the fitted bit rate and intrinsic delay (or, with one
+    /// size, the mean delay less the air time at `assumed_bitrate_bps`), normal jitter with the
+    /// spread within sizes, and the observed loss as a bit error rate for the mean size.
+    pub fn to_model(&self, name: &str, assumed_bitrate_bps: f64) -> Option<Model> {
+        let (bitrate_bps, intrinsic_delay_ms) =
+            match (self.fit_bitrate_bps, self.fit_intrinsic_delay_ms) {
+                (Some(rate), Some(intrinsic)) => (rate, intrinsic.max(0.0)),
+                _ => {
+                    let size = self.sizes.first()?;
+                    let mean = size.delay_ms_mean?;
+                    let air_ms = size.size_bytes as f64 * 8.0 / assumed_bitrate_bps * 1e3;
+                    (assumed_bitrate_bps, (mean - air_ms).max(0.0))
+                }
+            };
+        let mean_bits = {
+            let (bytes, n) = self.sizes.iter().fold((0.0, 0.0), |(b, n), s| {
+                (b + s.size_bytes as f64 * s.count as f64, n + s.count as f64)
+            });
+            if n > 0.0 { bytes * 8.0 / n } else { 0.0 }
+        };
+        // Packet error rate p = 1 - (1 - ber)^bits, so ber = 1 - (1 - p)^(1 / bits).
+        let ber = if mean_bits > 0.0 && self.loss_ratio > 0.0 {
+            (1.0 - (1.0 - self.loss_ratio.min(0.999_999)).powf(1.0 / mean_bits)).min(0.5)
+        } else {
+            0.0
+        };
+        let mut model = Model::preset("s100").ok()?;
+        model.name = name.to_string();
+        model.description = format!(
+            "fitted by modem-bench from {} packets ({} delivered)",
+            self.count, self.delivered
+        );
+        model.bitrate_bps = bitrate_bps;
+        model.intrinsic_delay_ms = intrinsic_delay_ms;
+        model.jitter_distribution = JitterDistribution::Normal;
+        model.jitter_ms = self.jitter_within_sizes_ms().unwrap_or(0.0);
+        model.propagation_ms_per_m = 0.0;
+        model.range_min_m = 0.0;
+        model.range_max_m = None;
+        model.ber = ber;
+        model.fifo_bytes = 65_536;
+        model.validate().ok()?;
+        Some(model)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn probes_carry_their_number_time_and_size() {
+        for size in [MIN_PROBE_BYTES, 16, 57, 100, MAX_PROBE_BYTES] {
+            let bytes = probe(70_000, size, 0x1234_5678_9abc).unwrap();
+            assert_eq!(bytes.len(), size);
+            let info = read_probe(&bytes).unwrap();
+            assert_eq!(
+                info,
+                ProbeInfo {
+                    seq: 70_000,
+                    t_tx_us: 0x1234_5678_9abc,
+                    size
+                }
+            );
+        }
+        assert!(probe(0, MIN_PROBE_BYTES - 1, 0).is_none());
+        assert!(probe(0, MAX_PROBE_BYTES + 1, 0).is_none());
+        let mut damaged = probe(3, 57, 9).unwrap();
+        damaged[20] ^= 1;
+        assert!(read_probe(&damaged).is_none());
+        assert!(read_probe(&[0x55]).is_none());
+    }
+
+    #[test]
+    fn the_fit_recovers_a_line() {
+        let points = (0..30).map(|k| {
+            let size = [16.0, 57.0, 100.0][k % 3];
+            (size, 85.0 + size * 8.0 / 1900.0 * 1e3)
+        });
+        let fit = Fit::from_points(points).unwrap();
+        assert!((fit.intercept_ms - 85.0).abs() < 1e-9);
+        assert!((fit.bitrate_bps().unwrap() - 1900.0).abs() < 1e-6);
+        assert!(Fit::from_points([(57.0, 300.0), (57.0, 310.0)]).is_none());
+    }
+
+    fn row(seq: u32, size: usize, t_tx: f64, delay_ms: Option<f64>) -> Row {
+        Row {
+            seq,
+            size_bytes: size,
+            t_tx_s: t_tx,
+            t_rx_s: delay_ms.map(|d| t_tx + d / 1e3),
+            delay_ms,
+            delivered: delay_ms.is_some(),
+            corrupted: false,
+        }
+    }
+
+    #[test]
+    fn summary_figures() {
+        let rows = vec![
+            row(0, 57, 0.0, Some(320.0)),
+            row(1, 57, 1.0, Some(330.0)),
+            row(2, 57, 2.0, None),
+            row(3, 57, 3.0, Some(325.0)),
+        ];
+        let s = Summary::from_rows(&rows);
+        assert_eq!((s.count, s.delivered), (4, 3));
+        assert!((s.loss_ratio - 0.25).abs() < 1e-12);
+        assert!((s.delay_ms_mean.unwrap() - 325.0).abs() < 1e-9);
+        assert_eq!(s.delay_ms_p50, Some(325.0));
+        assert!((s.jitter_ms.unwrap() - 5.0).abs() < 1e-9);
+        // Arrivals at 0.320, 1.330, 3.325 s.
+        assert!((s.iat_ms_mean.unwrap() - 1502.5).abs() < 1e-6);
+        // J = 10/16 = 0.625, then += (5 - 0.625) / 16.
+        assert!((s.jitter_rfc3550_ms.unwrap() - (0.625 + 4.375 / 16.0)).abs() < 1e-9);
+        assert!((s.throughput_bps.unwrap() - 3.0 * 456.0 / 3.325).abs() < 1e-6);
+        assert_eq!(s.fit_bitrate_bps, None);
+    }
+
+    #[test]
+    fn a_model_from_a_measurement() {
+        let mut rows = Vec::new();
+        for k in 0..300u32 {
+            let size = [16usize, 57, 100][k as usize % 3];
+            let wobble = if (k / 3) % 2 == 0 { 10.0 } else { -10.0 };
+            let delay = 85.0 + size as f64 * 8.0 / 1900.0 * 1e3 + wobble;
+            rows.push(row(k, size, k as f64, (k % 10 != 0).then_some(delay)));
+        }
+        let s = Summary::from_rows(&rows);
+        let model = s.to_model("fitted", 1900.0).unwrap();
+        assert!(
+            (model.bitrate_bps - 1900.0).abs() < 1.0,
+            "{}",
+            model.bitrate_bps
+        );
+        assert!((model.intrinsic_delay_ms - 85.0).abs() < 1.0);
+        assert!((model.jitter_ms - 10.0).abs() < 0.2, "{}", model.jitter_ms);
+        // 10 % of packets of 57.67 bytes on average lost.
+        assert!((model.packet_error_rate(57) - 0.1).abs() < 0.01);
+    }
+}
