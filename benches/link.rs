@@ -35,7 +35,7 @@ fn run(model: Model, seed: u64, count: u64) -> (Running, u64, u64, f64) {
     pipe::run::<()>(
         &mut link,
         Pace::BackToBack,
-        || {
+        |_| {
             sent += 1;
             Ok((sent <= count).then(|| frame.clone()))
         },
