@@ -13,6 +13,7 @@
 #![warn(missing_docs)]
 
 pub mod debt;
+pub mod gll;
 pub mod io;
 pub mod link;
 pub mod measure;

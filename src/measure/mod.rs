@@ -14,6 +14,8 @@
 //!
 //! Parsing a received probe never panics: anything that is not a probe is `None`.
 
+pub mod live;
+
 use serde::Serialize;
 
 use crate::link::model::{JitterDistribution, Model};
@@ -121,13 +123,17 @@ pub struct Fit {
     pub intercept_ms: f64,
     /// ms per byte.
     pub slope_ms_per_byte: f64,
+    /// Standard deviation of the points around the line, ms (n - 2 degrees of freedom): the
+    /// delay's jitter once the size is accounted for, Table 3's "intrinsic jitter".
+    pub residual_std_ms: f64,
 }
 
 impl Fit {
     /// Fits `(size_bytes, delay_ms)` points; none with fewer than two distinct sizes.
     pub fn from_points(points: impl IntoIterator<Item = (f64, f64)>) -> Option<Fit> {
+        let points: Vec<(f64, f64)> = points.into_iter().collect();
         let (mut n, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for (x, y) in points {
+        for &(x, y) in &points {
             n += 1.0;
             sx += x;
             sy += y;
@@ -139,9 +145,19 @@ impl Fit {
             return None;
         }
         let slope = (n * sxy - sx * sy) / denominator;
+        let intercept = (sy - slope * sx) / n;
+        let squares: f64 = points
+            .iter()
+            .map(|&(x, y)| (y - intercept - slope * x).powi(2))
+            .sum();
         Some(Fit {
-            intercept_ms: (sy - slope * sx) / n,
+            intercept_ms: intercept,
             slope_ms_per_byte: slope,
+            residual_std_ms: if n > 2.0 {
+                (squares / (n - 2.0)).sqrt()
+            } else {
+                0.0
+            },
         })
     }
 
@@ -182,6 +198,9 @@ pub struct Summary {
     pub fit_bitrate_bps: Option<f64>,
     /// Intrinsic delay from the fit, ms.
     pub fit_intrinsic_delay_ms: Option<f64>,
+    /// Standard deviation of the delays around the fit, ms: the jitter with the size's share
+    /// taken out (equal to `jitter_ms` for a single size, up to n - 2 against n - 1).
+    pub fit_jitter_ms: Option<f64>,
     /// Per size: packets, delivered, mean delay, jitter.
     pub sizes: Vec<SizeSummary>,
 }
@@ -291,6 +310,7 @@ impl Summary {
             throughput_bps,
             fit_bitrate_bps: fit.and_then(|f| f.bitrate_bps()),
             fit_intrinsic_delay_ms: fit.map(|f| f.intercept_ms),
+            fit_jitter_ms: fit.map(|f| f.residual_std_ms),
             sizes,
         }
     }
@@ -304,7 +324,8 @@ impl Summary {
 
     /// A link model from the measurement: the fitted bit rate and intrinsic delay (or, with one
     /// size, the mean delay less the air time at `assumed_bitrate_bps`), normal jitter with the
-    /// spread within sizes, and the observed loss as a bit error rate for the mean size.
+    /// spread around the fit (or within the size), and the observed loss as a bit error rate
+    /// for the mean size.
     pub fn to_model(&self, name: &str, assumed_bitrate_bps: f64) -> Option<Model> {
         let (bitrate_bps, intrinsic_delay_ms) =
             match (self.fit_bitrate_bps, self.fit_intrinsic_delay_ms) {
@@ -337,7 +358,10 @@ impl Summary {
         model.bitrate_bps = bitrate_bps;
         model.intrinsic_delay_ms = intrinsic_delay_ms;
         model.jitter_distribution = JitterDistribution::Normal;
-        model.jitter_ms = self.jitter_within_sizes_ms().unwrap_or(0.0);
+        model.jitter_ms = self
+            .fit_jitter_ms
+            .or_else(|| self.jitter_within_sizes_ms())
+            .unwrap_or(0.0);
         model.propagation_ms_per_m = 0.0;
         model.range_min_m = 0.0;
         model.range_max_m = None;
@@ -384,6 +408,7 @@ mod tests {
         let fit = Fit::from_points(points).unwrap();
         assert!((fit.intercept_ms - 85.0).abs() < 1e-9);
         assert!((fit.bitrate_bps().unwrap() - 1900.0).abs() < 1e-6);
+        assert!(fit.residual_std_ms < 1e-9);
         assert!(Fit::from_points([(57.0, 300.0), (57.0, 310.0)]).is_none());
     }
 
