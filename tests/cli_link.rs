@@ -409,17 +409,7 @@ fn serial_ports_that_vanish_end_the_run_naming_the_side() {
     );
 
     drop(master_a); // the modem on side A is unplugged
-    let started = Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            break status;
-        }
-        assert!(
-            started.elapsed() < Duration::from_secs(5),
-            "link-sim did not notice"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    let status = common::wait_for_exit(&mut child, Duration::from_secs(5));
     let mut rest = String::new();
     stderr.read_to_string(&mut rest).unwrap();
     assert_eq!(status.code(), Some(1), "{rest}");

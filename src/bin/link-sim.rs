@@ -37,6 +37,7 @@ Examples:
   link-sim --model s100 --a /dev/ttyUSB0 --b /dev/ttyUSB1 --baud 9600
   link-sim --model satellite-up --reverse-model satellite-down --udp-a 127.0.0.1:9001 --udp-b 127.0.0.1:9002
   link-sim --model s100 --pty --raw --idle-ms 20 --distance-file dive.csv
+  link-sim --model s2cr-burst --pty --dialect evologics  programs speak AT*SEND / RECV to it
 
 Modes: with no port option, frames (wire.md) from INPUT or stdin go from side A to side B in
 virtual time and the frames that arrive go to stdout, in arrival order. With --pty, --a/--b or
@@ -50,6 +51,15 @@ second row with the same seq). t_tx_start_s is when the frame went on air; times
 from the start. Every model field can be set in the file or as a flag.
 
 Exit codes: 0 ok, 1 a side's port closed or failed, 2 bad usage or input.";
+
+/// What the programs on the ports speak.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Dialect {
+    /// Bare packets: wire.md frames (or --raw packets, or datagrams).
+    Transparent,
+    /// The EvoLogics AT command set.
+    Evologics,
+}
 
 /// Simulate an underwater modem link (or a netem-like link) between two ports, or on a pipe.
 ///
@@ -174,6 +184,12 @@ struct Args {
     /// the host it does not help, and the kernel's own pseudo-terminal work can then wait.
     #[arg(long, help_heading = "Real time")]
     rt_priority: bool,
+
+    /// Real time: what the programs on the ports speak: bare packets, or the EvoLogics AT
+    /// dialect (AT*SEND / AT*SENDIM in, RECV / RECVIM / DELIVEREDIM / FAILEDIM out; side A is
+    /// address 1, side B address 2).
+    #[arg(long, value_enum, default_value_t = Dialect::Transparent, help_heading = "Real time")]
+    dialect: Dialect,
 
     /// Real time: packets are bytes separated by silence (a modem's transparent mode), not
     /// wire.md frames.
@@ -582,7 +598,9 @@ fn run_realtime(args: &Args, mut link: Link, specs: [PortSpec; 2]) -> Result<u8>
     );
     let mut counters = Counters::default();
     let mut trace_error = None;
-    let (ended, info) = endpoints.run(&mut link, framing, |report| {
+    let mut emulator = rovlink::link::dialect::EvoLogicsEmulator::new();
+    let dialect = (args.dialect == Dialect::Evologics).then_some(&mut emulator);
+    let (ended, info) = endpoints.run(&mut link, framing, dialect, |report| {
         counters.record(report);
         if let Some((file, name)) = trace.as_mut()
             && trace_error.is_none()

@@ -13,6 +13,7 @@
 //! driver ([`pipe`]) and the real-time driver ([`realtime`]) both drive.
 
 pub mod channel;
+pub mod dialect;
 pub mod distance;
 pub mod model;
 pub mod pipe;

@@ -26,6 +26,7 @@ use nix::pty::{PtyMaster, grantpt, posix_openpt, ptsname_r, unlockpt};
 use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
 
 use super::channel::{Link, Report, Side};
+use super::dialect::EvoLogicsEmulator;
 use super::sched::SimTime;
 use crate::wire::{DeframeEvent, Deframer};
 
@@ -211,6 +212,19 @@ impl Endpoints {
         &self.names
     }
 
+    /// Hands bytes to a side's writer; counts them as not taken when its queue is full.
+    fn write(&self, side: Side, bytes: Vec<u8>, info: &mut RunInfo) {
+        if bytes.is_empty() {
+            return;
+        }
+        match self.writers[side.index()].queue.try_send(bytes) {
+            Ok(()) => {}
+            Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {
+                info.not_taken[side.index()] += 1
+            }
+        }
+    }
+
     /// A handle that stops the run.
     pub fn stopper(&self) -> Stopper {
         Stopper(self.sender.clone())
@@ -218,11 +232,13 @@ impl Endpoints {
 
     /// Runs `link` between the two sides until one closes or the run is stopped. `on_report`
     /// sees every report when the model decides it (delivered frames are then written), with
-    /// the link's clock `start` anchored at the first call.
+    /// the link's clock anchored at the start of the call. With a `dialect`, the sides speak
+    /// the EvoLogics AT commands instead of sending bare packets (`framing` is then unused).
     pub fn run(
         &self,
         link: &mut Link,
         framing: Framing,
+        mut dialect: Option<&mut EvoLogicsEmulator>,
         mut on_report: impl FnMut(&Report),
     ) -> (Ended, RunInfo) {
         if self.realtime_priority {
@@ -236,21 +252,22 @@ impl Endpoints {
             let now = clock(Instant::now());
             link.advance(now);
             while let Some(report) = link.pop_report() {
-                if report.fate.arrived() {
-                    let to = report.from.other();
-                    if let Some(t_rx) = report.t_rx {
-                        let late_us = now.0.saturating_sub(t_rx.0) / 1000;
-                        info.lateness_us.push(late_us.min(u32::MAX as u64) as u32);
+                if let (Some(t_rx), true) = (report.t_rx, report.fate.arrived()) {
+                    let late_us = now.0.saturating_sub(t_rx.0) / 1000;
+                    info.lateness_us.push(late_us.min(u32::MAX as u64) as u32);
+                }
+                let to = report.from.other();
+                match dialect.as_deref_mut() {
+                    Some(emulator) => {
+                        let (to_receiver, to_sender) =
+                            emulator.on_report(&report, link.model(report.from));
+                        self.write(to, to_receiver, &mut info);
+                        self.write(report.from, to_sender, &mut info);
                     }
-                    match self.writers[to.index()]
-                        .queue
-                        .try_send(report.bytes.clone())
-                    {
-                        Ok(()) => {}
-                        Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {
-                            info.not_taken[to.index()] += 1
-                        }
+                    None if report.fate.arrived() => {
+                        self.write(to, report.bytes.clone(), &mut info)
                     }
+                    None => {}
                 }
                 on_report(&report);
             }
@@ -281,6 +298,15 @@ impl Endpoints {
                     let t = clock(at);
                     link.advance(t);
                     info.bytes_read[side.index()] += bytes.len() as u64;
+                    if let Some(emulator) = dialect.as_deref_mut() {
+                        let (packets, replies) = emulator.from_host(side, &bytes);
+                        self.write(side, replies, &mut info);
+                        for (data, kind) in packets {
+                            let seq = link.offer(side, data);
+                            emulator.sent(side, seq, kind);
+                        }
+                        continue;
+                    }
                     if datagram {
                         link.offer(side, bytes);
                         continue;

@@ -88,3 +88,21 @@ pub fn open_pty() -> (PtyMaster, String) {
     let path = ptsname_r(&master).expect("ptsname");
     (master, path)
 }
+
+/// Waits for `child` to exit on its own, failing the test if it has not within `limit`.
+pub fn wait_for_exit(
+    child: &mut std::process::Child,
+    limit: std::time::Duration,
+) -> std::process::ExitStatus {
+    let started = std::time::Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().expect("try_wait") {
+            return status;
+        }
+        assert!(
+            started.elapsed() < limit,
+            "the process did not exit within {limit:?}"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
