@@ -103,4 +103,9 @@ done
     --corrupt-percent 5 --loss-percent 3 --reorder --rate-limit-bps 900 >"$corpus/link_files/seed-extras.json"
 printf 't_s,distance_m\n0,1\n10,6\n20,1\n' >"$corpus/link_files/seed-track.csv"
 
+# evologics: a chunk-length byte, then commands and notifications with binary data.
+mkdir -p "$corpus/evologics"
+printf '\x05AT*SEND,4,2,ab\r\n\r\nAT*SENDIM,3,2,ack,xyz\r\nAT?T\r\n+++AT*SEND,1,1,q\r\n' >"$corpus/evologics/seed-commands"
+printf '\x07RECV,3,1,2,1620,-50,100,670,0.00,a\r\nb\r\nRECVIM,2,2,1,ack,5000,-45,80,0.25,hi\r\nDELIVEREDIM,2\r\nOK\r\nERROR WRONG FORMAT\r\nBUSY BACKOFF\r\n' >"$corpus/evologics/seed-notifications"
+
 echo "seeded $(find "$corpus" -name 'seed-*' | wc -l) files in $corpus"

@@ -326,3 +326,53 @@ fn a_port_that_vanishes_keeps_the_rows_and_exits_1() {
     assert!(kept.iter().take(2).all(|r| r[5] == "true"), "{kept:?}");
     drop(tx_master);
 }
+
+#[test]
+fn udp_endpoints_through_link_sim() {
+    let free = || {
+        std::net::UdpSocket::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .to_string()
+    };
+    let (sim_a, sim_b, tx, rx) = (free(), free(), free(), free());
+    let mut sim = Command::new(LINK_SIM)
+        .args(["--jitter-ms", "0", "--udp-a", &sim_a, "--udp-b", &sim_b])
+        .args(["--udp-b-peer", &rx])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut first = String::new();
+    BufReader::new(sim.stderr.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
+    let out = run(
+        MODEM_BENCH,
+        &[
+            "--tx",
+            &format!("udp:{tx}={sim_a}"),
+            "--rx",
+            &format!("udp:{rx}={sim_b}"),
+            "--size",
+            "30",
+            "--count",
+            "3",
+            "--interval",
+            "300",
+            "--timeout",
+            "2",
+        ],
+        b"",
+    );
+    stop(sim);
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    let rows = rows(&out.stdout_text());
+    assert_eq!(rows.len(), 3);
+    for row in rows {
+        let delay: f64 = row[4].parse().unwrap();
+        // 85 ms + 30 bytes at 1900 bit/s.
+        assert!((211.0..800.0).contains(&delay), "{row:?}");
+    }
+}

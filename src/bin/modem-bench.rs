@@ -12,7 +12,7 @@ use std::time::Duration;
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
 use rovlink::gll::evologics::{EvoLogics, SendMode};
-use rovlink::gll::{Endpoint, GllError, Pacing, Transparent, open_serial};
+use rovlink::gll::{Endpoint, GllError, Pacing, Transparent, Udp, open_serial};
 use rovlink::io::{AtomicFile, EXIT_CHECK_FAILED, EXIT_OK, IoError};
 use rovlink::link::pipe::{self, Pace};
 use rovlink::link::{Distance, Link, ModelArgs};
@@ -37,6 +37,9 @@ Examples:
   modem-bench --tx /dev/ttyUSB0 --rx /dev/ttyUSB1 --sizes 16,57,100 --count 60 --interval 700 -o p.csv
   modem-bench --tx A --rx B --dialect evologics --sizes 16,57 --count 60 --interval 3000
   modem-bench --port /dev/ttyUSB0 --echo --count 100 --interval 2000     round trips via a far-end echo
+
+DEV is a serial port or pseudo-terminal, tcp:HOST:PORT (a modem's TCP interface, e.g. an
+EvoLogics modem on Ethernet), or udp:BIND_ADDR=PEER_ADDR (one datagram per packet).
 
 Size = bytes written to the modem per packet: a whole wire.md frame (header and CRC included)
 whose payload carries the sequence number and the send time; 15 to 260 bytes.
@@ -426,24 +429,48 @@ fn run_sim(
     Ok(rate)
 }
 
-fn open_endpoint(args: &Args, path: &str) -> Result<Box<dyn Endpoint>, GllError> {
+/// Opens a modem: a serial port or pseudo-terminal, `tcp:HOST:PORT` (a modem's TCP console,
+/// EvoLogics' usual interface), or `udp:BIND_ADDR=PEER_ADDR` (one datagram per packet).
+fn open_endpoint(args: &Args, path: &str) -> Result<Box<dyn Endpoint>> {
+    if let Some(spec) = path.strip_prefix("udp:") {
+        let Some((bind, peer)) = spec.split_once('=') else {
+            bail!(usage(format!("{path}: expected udp:BIND_ADDR=PEER_ADDR")));
+        };
+        let parse = |text: &str| {
+            text.parse::<std::net::SocketAddr>()
+                .map_err(|e| usage(format!("{path}: `{text}`: {e}")))
+        };
+        if args.dialect != Dialect::Transparent {
+            bail!(usage(format!(
+                "{path}: UDP carries bare datagrams: use --dialect transparent"
+            )));
+        }
+        return Ok(Box::new(Udp::open(parse(bind)?, parse(peer)?)?));
+    }
+    let pacing = args.chunk_bytes.map(|chunk_bytes| Pacing {
+        chunk_bytes,
+        rate_bps: args.chunk_rate_bps,
+    });
+    let mode = if args.instant {
+        SendMode::Instant { ack: false }
+    } else {
+        SendMode::Burst
+    };
+    if let Some(address) = path.strip_prefix("tcp:") {
+        let stream = std::net::TcpStream::connect(address).map_err(|e| GllError::Open {
+            name: path.to_string(),
+            reason: e.to_string(),
+        })?;
+        let _ = stream.set_nodelay(true);
+        return Ok(match args.dialect {
+            Dialect::Transparent => Box::new(Transparent::new(path, stream, pacing)),
+            Dialect::Evologics => Box::new(EvoLogics::new(path, stream, args.address, mode)),
+        });
+    }
     let port = open_serial(path, args.baud)?;
     Ok(match args.dialect {
-        Dialect::Transparent => {
-            let pacing = args.chunk_bytes.map(|chunk_bytes| Pacing {
-                chunk_bytes,
-                rate_bps: args.chunk_rate_bps,
-            });
-            Box::new(Transparent::new(path, port, pacing))
-        }
-        Dialect::Evologics => {
-            let mode = if args.instant {
-                SendMode::Instant { ack: false }
-            } else {
-                SendMode::Burst
-            };
-            Box::new(EvoLogics::new(path, port, args.address, mode))
-        }
+        Dialect::Transparent => Box::new(Transparent::new(path, port, pacing)),
+        Dialect::Evologics => Box::new(EvoLogics::new(path, port, args.address, mode)),
     })
 }
 
