@@ -376,3 +376,38 @@ fn udp_endpoints_through_link_sim() {
         assert!((211.0..800.0).contains(&delay), "{row:?}");
     }
 }
+
+#[test]
+fn ctrl_c_keeps_the_rows_and_writes_the_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let (csv, summary) = (dir.path().join("p.csv"), dir.path().join("s.json"));
+    let (sim, a, b) = link_sim(&["--model", "s100", "--jitter-ms", "0"]);
+    let mut child = Command::new(MODEM_BENCH)
+        .args(["--tx", &a, "--rx", &b, "--size", "20", "--count", "1000"])
+        .args(["--interval", "100", "-o"])
+        .arg(&csv)
+        .arg("--summary")
+        .arg(&summary)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(1500));
+    kill(Pid::from_raw(child.id() as i32), Signal::SIGINT).unwrap();
+    let status = common::wait_for_exit(&mut child, Duration::from_secs(5));
+    stop(sim);
+    let mut stderr = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut stderr)
+        .unwrap();
+    assert_eq!(status.code(), Some(0), "{stderr}");
+    assert!(stderr.contains("stopped:"), "{stderr}");
+    let kept = rows(&std::fs::read_to_string(&csv).unwrap());
+    assert!(kept.len() >= 5, "{} rows", kept.len());
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    assert_eq!(s["count"].as_u64().unwrap(), kept.len() as u64);
+}

@@ -2,15 +2,23 @@
 //! link-sim hears from a host) and `NotificationReader` (what modem-bench hears from a modem).
 //!
 //! Byte 0 is the chunk length (1..=64). Checks: neither reader panics; every command and
-//! notification read re-formats to bytes that read back to the same item; reading in chunks
-//! gives the same items as reading everything at once.
+//! notification read re-formats to bytes that read back to the same item (except an `Other`
+//! line that starts like a data item: read alone, the reader rightly waits for its data);
+//! reading in chunks gives the same items as reading everything at once.
 
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
 use rovlink::gll::evologics::{
-    CommandReader, NotificationReader, format_command, format_notification,
+    Command, CommandReader, Notification, NotificationReader, format_command, format_notification,
 };
+
+/// True for an `Other` line that begins like an item with binary data.
+fn looks_like_data(line: &str) -> bool {
+    ["AT*SEND,", "AT*SENDIM,", "RECV,", "RECVIM,"]
+        .iter()
+        .any(|prefix| line.starts_with(prefix))
+}
 
 fuzz_target!(|data: &[u8]| {
     let Some((&first, stream)) = data.split_first() else {
@@ -32,6 +40,9 @@ fuzz_target!(|data: &[u8]| {
         assert_eq!(all, pieces, "commands depend on the chunking");
     }
     for command in &all {
+        if matches!(command, Command::Other(line) if looks_like_data(line)) {
+            continue;
+        }
         let mut again = CommandReader::new();
         again.push(&format_command(command));
         assert_eq!(again.next_command().as_ref(), Some(command), "command does not round trip");
@@ -50,6 +61,9 @@ fuzz_target!(|data: &[u8]| {
         assert_eq!(all, pieces, "notifications depend on the chunking");
     }
     for note in &all {
+        if matches!(note, Notification::Other(line) if looks_like_data(line)) {
+            continue;
+        }
         let mut again = NotificationReader::new();
         again.push(&format_notification(note));
         let back = again.next_notification();

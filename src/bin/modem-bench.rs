@@ -496,22 +496,17 @@ fn run_real(
     let flag = Arc::clone(&stop);
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
         .context("cannot install the Ctrl-C handler")?;
-    let mut tx_port;
-    let mut rx_port;
-    let ports = match (&args.tx, &args.rx, &args.port) {
-        (Some(tx), Some(rx), _) => {
-            tx_port = open_endpoint(args, tx)?;
-            rx_port = open_endpoint(args, rx)?;
-            Ports::Pair {
-                tx: tx_port.as_mut(),
-                rx: rx_port.as_mut(),
-            }
-        }
-        (_, _, Some(port)) => {
-            tx_port = open_endpoint(args, port)?;
-            Ports::Echo(tx_port.as_mut())
-        }
+    let (mut tx_port, mut rx_port) = match (&args.tx, &args.rx, &args.port) {
+        (Some(tx), Some(rx), _) => (open_endpoint(args, tx)?, Some(open_endpoint(args, rx)?)),
+        (_, _, Some(port)) => (open_endpoint(args, port)?, None),
         _ => bail!(usage("give --tx and --rx, or --port with --echo".into())),
+    };
+    let ports = match rx_port.as_mut() {
+        Some(rx) => Ports::Pair {
+            tx: tx_port.as_mut(),
+            rx: rx.as_mut(),
+        },
+        None => Ports::Echo(tx_port.as_mut()),
     };
     if !args.quiet {
         say!(

@@ -484,6 +484,10 @@ impl<P: TimedRead> Endpoint for EvoLogics<P> {
         &self.name
     }
 
+    fn refusals(&self) -> &[String] {
+        &self.refusals
+    }
+
     fn send(&mut self, packet: &[u8]) -> Result<(), GllError> {
         let command = match self.mode {
             SendMode::Burst => Command::Send {

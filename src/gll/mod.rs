@@ -69,6 +69,10 @@ pub trait Endpoint {
     fn send(&mut self, packet: &[u8]) -> Result<(), GllError>;
     /// Waits until `deadline` at most for a packet; `None` when none came.
     fn receive(&mut self, deadline: Instant) -> Result<Option<Received>, GllError>;
+    /// Commands the modem refused so far (`ERROR ...`, `BUSY ...`), for the report.
+    fn refusals(&self) -> &[String] {
+        &[]
+    }
 }
 
 /// Reads with a timeout: the common shape of serial ports and sockets.
