@@ -307,8 +307,12 @@ impl CommandReader {
             while self.buf.starts_with(b"\r\n") {
                 self.buf.drain(..2);
             }
-            if self.buf.starts_with(b"+++") {
+            // The data-mode escape, only in front of a command (so the answer never depends
+            // on how the bytes were chunked).
+            if self.buf.starts_with(b"+++AT") {
                 self.buf.drain(..3);
+            } else if !self.buf.is_empty() && b"+++AT".starts_with(&self.buf) {
+                return None;
             }
             let command = take(
                 &mut self.buf,
