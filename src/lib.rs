@@ -17,5 +17,7 @@ pub mod gll;
 pub mod io;
 pub mod link;
 pub mod measure;
+pub mod rcp;
 pub mod stats;
+pub mod vehicle;
 pub mod wire;

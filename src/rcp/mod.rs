@@ -1,0 +1,150 @@
+//! The remote-control protocol's engines: the operator (TDMA master) and the ROV (slave), as
+//! state machines given the time and the frames that arrived, returning the frames to send.
+//!
+//! The semantics are wire.md's: orders with one-bit ids acknowledged by the ROV's EOID toggle
+//! (so an order is never executed twice), images sent trunk by trunk with a received-trunk
+//! bitmap and RIT resends, EISN/ISN toggles, CI/IC cancellation, heartbeats and the recovery
+//! algorithm. [`session`] runs both ends and a link in virtual time.
+
+pub mod operator;
+pub mod rov;
+pub mod session;
+
+use crate::debt;
+use crate::wire::operator::{Order, Roi};
+use crate::wire::{Message, MessageRepr};
+
+/// Something an engine did that a report or a test wants to know.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    /// ROV: a high-level order was executed.
+    OrderExecuted(Order),
+    /// ROV: the order in execution was cancelled (CLO).
+    OrderCancelled,
+    /// Operator: high-level order number `index` was acknowledged (EOID toggled).
+    OrderAcknowledged(u64),
+    /// ROV: a new image went into the pipe.
+    ImageStarted {
+        /// Its trunks.
+        trunks: usize,
+        /// Its bytes.
+        bytes: usize,
+    },
+    /// ROV: the image in flight was cancelled by new settings.
+    ImageCancelled,
+    /// Operator: every trunk of an image arrived; the DEBT stream.
+    ImageCompleted(Vec<u8>),
+    /// ROV: no heartbeat for the timeout.
+    LinkLost,
+    /// ROV: heartbeats again.
+    LinkRecovered,
+}
+
+/// How the ROV encodes and cuts its images.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ImageSettings {
+    /// Region of interest, if any.
+    pub roi: Option<Roi>,
+    /// Bit-planes the ROI is raised by.
+    pub roi_shift: u8,
+    /// Luma only.
+    pub gray: bool,
+    /// Capture downscale exponent (size / 2^scale).
+    pub scale: u8,
+    /// Encoded size, bytes.
+    pub size_bytes: u16,
+    /// Trunk size, bytes.
+    pub trunk_bytes: u8,
+}
+
+impl Default for ImageSettings {
+    fn default() -> Self {
+        ImageSettings {
+            roi: None,
+            roi_shift: 3,
+            gray: false,
+            scale: 0,
+            size_bytes: 2000,
+            trunk_bytes: 39,
+        }
+    }
+}
+
+/// Most trunks an image may have (ITSN is 6 bits).
+pub const MAX_TRUNKS: usize = 64;
+
+/// A frame carrying `message` from `src` to `dst`.
+pub fn emit(src: u8, dst: u8, message: Message) -> Vec<u8> {
+    let repr = MessageRepr { src, dst, message };
+    let mut out = Vec::with_capacity(repr.buffer_len());
+    // Engines build only valid messages; an emit failure would leave the frame empty.
+    let _ = repr.emit_to_vec(&mut out);
+    out
+}
+
+/// Encodes `image` with `settings` and cuts the stream into trunks (at most [`MAX_TRUNKS`]: the
+/// size is capped at 64 trunks).
+pub fn trunks_of(image: &debt::Image, settings: &ImageSettings) -> Vec<Vec<u8>> {
+    let trunk = usize::from(settings.trunk_bytes.max(1));
+    let bytes = usize::from(settings.size_bytes).clamp(16, trunk * MAX_TRUNKS);
+    let roi = settings.roi.map(|r| debt::Rect {
+        x0: usize::from(r.x0),
+        y0: usize::from(r.y0),
+        x1: usize::from(r.x1),
+        y1: usize::from(r.y1),
+    });
+    let options = debt::EncodeOptions {
+        bytes,
+        gray: settings.gray,
+        scale: u32::from(settings.scale.min(3)),
+        roi,
+        roi_shift: u32::from(settings.roi_shift.clamp(1, 15)),
+        ..debt::EncodeOptions::default()
+    };
+    let stream = debt::encode(image, &options)
+        .or_else(|_| {
+            // A ROI outside the picture: encode without it rather than send nothing.
+            debt::encode(
+                image,
+                &debt::EncodeOptions {
+                    roi: None,
+                    ..options.clone()
+                },
+            )
+        })
+        .unwrap_or_default();
+    stream.chunks(trunk).map(<[u8]>::to_vec).collect()
+}
+
+/// A built-in camera picture: `width` x `height` RGB, a seabed-like texture with a few
+/// objects, different for each `seed`.
+pub fn test_image(width: usize, height: usize, seed: u64) -> debt::Image {
+    let mut data = Vec::with_capacity(width * height * 3);
+    let s = seed as f64;
+    for y in 0..height {
+        for x in 0..width {
+            let (fx, fy) = (x as f64 / width as f64, y as f64 / height as f64);
+            let sand = 0.5
+                + 0.15 * ((fx * 23.0 + s).sin() * (fy * 17.0 - s).cos())
+                + 0.1 * ((fx * 71.0 + fy * 43.0 + s * 3.0).sin());
+            let rock = ((fx - 0.3 - 0.05 * s.sin()).powi(2) + (fy - 0.6).powi(2)).sqrt() < 0.15;
+            let pipe = (fy - 0.35 - 0.1 * fx).abs() < 0.03;
+            let (r, g, b) = if rock {
+                (0.25, 0.3, 0.3)
+            } else if pipe {
+                (0.8, 0.6, 0.1)
+            } else {
+                (0.3 * sand, 0.6 * sand, 0.7 * sand + 0.1)
+            };
+            for c in [r, g, b] {
+                data.push((c * 255.0).clamp(0.0, 255.0) as u8);
+            }
+        }
+    }
+    debt::Image {
+        width,
+        height,
+        channels: 3,
+        data,
+    }
+}

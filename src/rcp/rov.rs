@@ -1,0 +1,385 @@
+//! The ROV's side of the protocol: answers each operator message in its slot, executes orders
+//! exactly once, sends camera images trunk by trunk, and recovers the link by backtracking.
+//!
+//! [`Rov::receive`] takes an operator frame and returns the reply to send at once (the TDMA
+//! slave transmits only in answer). [`Rov::poll`] advances the vehicle and the recovery timers;
+//! [`Rov::poll_at`] says when it next wants to be called. Nothing here reads a clock.
+
+use std::collections::VecDeque;
+
+use super::{Event, ImageSettings, emit, trunks_of};
+use crate::debt;
+use crate::link::SimTime;
+use crate::vehicle::{Command, Vehicle};
+use crate::wire::frame::{ADDR_OPERATOR, Frame};
+use crate::wire::operator::Order;
+use crate::wire::rov::{BasicStatus, Status};
+use crate::wire::{Message, MessageRepr, Nav, rov};
+
+/// The ROV's fixed figures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RovConfig {
+    /// Its address, 1..=14.
+    pub address: u8,
+    /// Silence after which the link counts as lost, s.
+    pub heartbeat_timeout_s: f64,
+    /// Period of the position stack while the link is up, s.
+    pub stack_period_s: f64,
+    /// Positions kept (oldest dropped).
+    pub stack_depth: usize,
+    /// Time step of the vehicle simulation, s.
+    pub step_s: f64,
+    /// Image settings until an ImageSettings order changes them.
+    pub settings: ImageSettings,
+}
+
+impl Default for RovConfig {
+    fn default() -> Self {
+        RovConfig {
+            address: 1,
+            heartbeat_timeout_s: 5.0,
+            stack_period_s: 2.0,
+            stack_depth: 64,
+            step_s: 0.1,
+            settings: ImageSettings::default(),
+        }
+    }
+}
+
+/// The high-level order being executed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Executing {
+    GoTo([f64; 3], f64),
+}
+
+/// An image being sent.
+struct Outgoing {
+    trunks: Vec<Vec<u8>>,
+    /// Trunks sent once so far (the first pass goes in order).
+    first_pass: usize,
+}
+
+/// The ROV engine.
+pub struct Rov {
+    cfg: RovConfig,
+    /// The simulated vehicle (read it for poses; the engine drives it).
+    pub vehicle: Vehicle,
+    images: Vec<debt::Image>,
+    next_image: usize,
+    settings: ImageSettings,
+    eoid: bool,
+    loc: bool,
+    executing: Option<Executing>,
+    arm: bool,
+    nav: Nav,
+    joystick: [f64; 4],
+    isn: bool,
+    ci: bool,
+    image: Option<Outgoing>,
+    last_heartbeat: SimTime,
+    link_up: bool,
+    stack: VecDeque<[f64; 3]>,
+    next_push: SimTime,
+    next_step: SimTime,
+    events: Vec<Event>,
+}
+
+impl Rov {
+    /// A ROV at `start` (NED, m) whose camera yields `images`, cycled.
+    pub fn new(cfg: RovConfig, start: [f64; 3], images: Vec<debt::Image>) -> Rov {
+        Rov {
+            settings: cfg.settings,
+            vehicle: Vehicle::new(start),
+            images,
+            next_image: 0,
+            eoid: false,
+            loc: false,
+            executing: None,
+            arm: false,
+            nav: Nav::Manual,
+            joystick: [0.0; 4],
+            isn: false,
+            ci: false,
+            image: None,
+            last_heartbeat: SimTime::ZERO,
+            link_up: true,
+            stack: VecDeque::new(),
+            next_push: SimTime::ZERO,
+            next_step: SimTime::ZERO,
+            events: Vec::new(),
+            cfg,
+        }
+    }
+
+    /// Takes the events since the last call.
+    pub fn take_events(&mut self) -> Vec<Event> {
+        std::mem::take(&mut self.events)
+    }
+
+    /// True while heartbeats arrive.
+    pub fn link_up(&self) -> bool {
+        self.link_up
+    }
+
+    /// When [`Rov::poll`] wants to run next.
+    pub fn poll_at(&self) -> SimTime {
+        self.next_step
+    }
+
+    /// Advances the vehicle to `now` and runs the recovery algorithm.
+    pub fn poll(&mut self, now: SimTime) {
+        while self.next_step <= now {
+            let t = self.next_step;
+            self.step(t);
+            self.next_step = t.after_secs(self.cfg.step_s);
+        }
+    }
+
+    fn step(&mut self, now: SimTime) {
+        let since = now.0.saturating_sub(self.last_heartbeat.0) as f64 * 1e-9;
+        if self.link_up && since > self.cfg.heartbeat_timeout_s {
+            self.link_up = false;
+            self.events.push(Event::LinkLost);
+        }
+        if self.link_up && now >= self.next_push {
+            if self.stack.len() == self.cfg.stack_depth {
+                self.stack.pop_front();
+            }
+            self.stack.push_back(self.vehicle.position_m);
+            self.next_push = now.after_secs(self.cfg.stack_period_s);
+        }
+        let command = if !self.link_up {
+            // Backtracking: drive to the newest stacked position, pop it when reached.
+            while let Some(&back) = self.stack.back() {
+                if self.vehicle.distance_to(back) > crate::vehicle::ARRIVAL_M
+                    || self.stack.len() == 1
+                {
+                    break;
+                }
+                self.stack.pop_back();
+            }
+            match self.stack.back() {
+                Some(&[x, y, z]) => Command::GoTo {
+                    x,
+                    y,
+                    z,
+                    heading_deg: self.vehicle.heading_deg,
+                },
+                None => idle(),
+            }
+        } else {
+            match self.executing {
+                Some(Executing::GoTo([x, y, z], heading_deg)) => {
+                    if self.vehicle.reached([x, y, z], heading_deg) {
+                        self.executing = None;
+                        idle()
+                    } else {
+                        Command::GoTo {
+                            x,
+                            y,
+                            z,
+                            heading_deg,
+                        }
+                    }
+                }
+                None if self.arm => Command::Thrust {
+                    surge: self.joystick[0],
+                    sway: self.joystick[1],
+                    heave: self.joystick[2],
+                    yaw: self.joystick[3],
+                },
+                None => idle(),
+            }
+        };
+        self.vehicle.step(self.cfg.step_s, command);
+    }
+
+    /// Takes an operator frame received at `now`; returns the reply frame.
+    pub fn receive(&mut self, now: SimTime, bytes: &[u8]) -> Option<Vec<u8>> {
+        let frame = Frame::new_checked(bytes).ok()?;
+        let repr = MessageRepr::parse(&frame).ok()?;
+        if repr.src != ADDR_OPERATOR || (repr.dst != self.cfg.address && repr.dst != 15) {
+            return None;
+        }
+        let Message::Operator(msg) = repr.message else {
+            return None;
+        };
+        self.poll(now);
+        self.last_heartbeat = now;
+        if !self.link_up {
+            self.link_up = true;
+            self.events.push(Event::LinkRecovered);
+        }
+
+        if msg.clo && self.executing.is_some() && msg.oid != self.eoid {
+            self.executing = None;
+            self.loc = true;
+            self.events.push(Event::OrderCancelled);
+        }
+        match msg.order {
+            Order::Velocity {
+                vx,
+                vy,
+                vz,
+                vyaw,
+                arm,
+                disarm,
+                nav,
+            } => {
+                self.joystick = [vx, vy, vz, vyaw].map(|v| f64::from(v) * 100.0 / 127.0);
+                if arm {
+                    self.arm = true;
+                }
+                if disarm {
+                    self.arm = false;
+                }
+                self.nav = nav;
+            }
+            order @ (Order::GoTo { .. }
+            | Order::ImageSettings { .. }
+            | Order::HoldHeading { .. }) => {
+                if msg.oid == self.eoid {
+                    self.eoid = !self.eoid;
+                    self.loc = false;
+                    self.execute(order);
+                    self.events.push(Event::OrderExecuted(order));
+                }
+            }
+            Order::Unknown { .. } => {}
+        }
+
+        // Images: IC ends a cancellation; EISN != ISN acknowledges the image.
+        if self.ci {
+            if msg.ic {
+                self.ci = false;
+                self.capture();
+            }
+        } else if self.image.is_none() {
+            self.capture();
+        } else if msg.eisn != self.isn {
+            self.isn = !self.isn;
+            self.capture();
+        }
+        Some(self.reply(msg.rit))
+    }
+
+    fn execute(&mut self, order: Order) {
+        match order {
+            Order::GoTo {
+                x_cm,
+                y_cm,
+                z_cm,
+                heading_deg,
+            } => {
+                let target = [x_cm, y_cm, z_cm].map(|c| f64::from(c) / 100.0);
+                self.executing = Some(Executing::GoTo(target, f64::from(heading_deg)));
+                self.arm = true;
+                self.nav = Nav::Guided;
+            }
+            Order::HoldHeading {
+                heading_deg,
+                enable,
+            } => {
+                self.vehicle.heading_hold_deg = enable.then_some(f64::from(heading_deg));
+            }
+            Order::ImageSettings {
+                roi,
+                roi_shift,
+                gray,
+                scale,
+                size_bytes,
+                trunk_bytes,
+            } => {
+                self.settings = ImageSettings {
+                    roi: (roi.to_array() != [0; 4]).then_some(roi),
+                    roi_shift,
+                    gray,
+                    scale,
+                    size_bytes,
+                    trunk_bytes,
+                };
+                if self.image.is_some() {
+                    self.ci = true;
+                    self.image = None;
+                    self.events.push(Event::ImageCancelled);
+                }
+            }
+            Order::Velocity { .. } | Order::Unknown { .. } => {}
+        }
+    }
+
+    /// Encodes the next camera image with the current settings.
+    fn capture(&mut self) {
+        if self.images.is_empty() {
+            self.image = None;
+            return;
+        }
+        let picture = &self.images[self.next_image % self.images.len()];
+        self.next_image += 1;
+        let trunks = trunks_of(picture, &self.settings);
+        self.events.push(Event::ImageStarted {
+            trunks: trunks.len(),
+            bytes: trunks.iter().map(Vec::len).sum(),
+        });
+        self.image = Some(Outgoing {
+            trunks,
+            first_pass: 0,
+        });
+    }
+
+    fn reply(&mut self, rit: u8) -> Vec<u8> {
+        let [x_cm, y_cm, z_cm] = self
+            .vehicle
+            .position_m
+            .map(|m| (m * 100.0).round().clamp(-32768.0, 32767.0) as i16);
+        let status = BasicStatus {
+            rd: self.executing.is_none(),
+            eoid: self.eoid,
+            loc: self.loc,
+            hh: self.vehicle.heading_hold_deg.is_some(),
+            arm: self.arm,
+            nav: self.nav,
+            x_cm,
+            y_cm,
+            z_cm,
+            roll_deg: 0,
+            pitch_deg: 0,
+            yaw_deg: (self.vehicle.heading_deg.round() as u16) % 360,
+        };
+        let (mut ft, mut lt, mut itsn, mut trunk) = (false, false, 0u8, Vec::new());
+        if let (false, Some(image)) = (self.ci, self.image.as_mut()) {
+            let n = image.trunks.len();
+            let k = if image.first_pass < n {
+                image.first_pass += 1;
+                image.first_pass - 1
+            } else if usize::from(rit) < n {
+                usize::from(rit)
+            } else {
+                n - 1
+            };
+            ft = k == 0;
+            lt = k + 1 == n;
+            itsn = k as u8;
+            trunk = image.trunks[k].clone();
+        }
+        let message = Message::Rov(rov::Repr {
+            ft,
+            lt,
+            isn: self.isn,
+            ci: self.ci,
+            itsn,
+            status: Status::Basic(status),
+            trunk,
+        });
+        emit(self.cfg.address, ADDR_OPERATOR, message)
+    }
+}
+
+fn idle() -> Command {
+    Command::Thrust {
+        surge: 0.0,
+        sway: 0.0,
+        heave: 0.0,
+        yaw: 0.0,
+    }
+}

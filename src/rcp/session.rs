@@ -1,0 +1,488 @@
+//! A whole teleoperation session in virtual time: operator, link and ROV in one process.
+//!
+//! The operator is side A of a [`Link`], the ROV side B. The loop takes the earliest of: a link
+//! event, the operator's next slot, the ROV's next vehicle step, the next scripted joystick
+//! change or waypoint; the ROV answers a delivered operator frame at the instant it arrives. The
+//! ROV's distance to the buoy (the operator's modem) sets the link's distance at every vehicle
+//! step, so the range model cuts the link when the vehicle strays.
+
+use serde::Serialize;
+
+use super::operator::{Joystick, Operator, SlotContent};
+use super::rov::{Rov, RovConfig};
+use super::{Event, ImageSettings};
+use crate::debt;
+use crate::link::{Distance, Fate, Link, Model, ModelError, Report, Side, SimTime};
+use crate::stats::Running;
+use crate::wire::frame::Frame;
+use crate::wire::operator::Order;
+use crate::wire::{Message, MessageRepr};
+
+/// A GoTo order sent at a time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Waypoint {
+    /// When the operator queues it, s.
+    pub t_s: f64,
+    /// Target, NED m.
+    pub position_m: [f64; 3],
+    /// Heading, degrees.
+    pub heading_deg: f64,
+}
+
+/// A joystick change at a time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JoystickChange {
+    /// When, s.
+    pub t_s: f64,
+    /// The new state.
+    pub joystick: Joystick,
+}
+
+/// Everything a simulated session needs.
+#[derive(Debug, Clone)]
+pub struct SessionConfig {
+    /// The link model (both directions).
+    pub model: Model,
+    /// Seed of the link's random streams.
+    pub seed: u64,
+    /// Inter-packet gap, s.
+    pub ipg_s: f64,
+    /// Length of the session, s.
+    pub duration_s: f64,
+    /// The operator modem's position, NED m.
+    pub buoy_m: [f64; 3],
+    /// The ROV's initial position, NED m.
+    pub start_m: [f64; 3],
+    /// Joystick changes, sorted by time.
+    pub script: Vec<JoystickChange>,
+    /// GoTo orders, sorted by time.
+    pub waypoints: Vec<Waypoint>,
+    /// Image settings at the start.
+    pub settings: ImageSettings,
+    /// The camera's pictures, cycled.
+    pub images: Vec<debt::Image>,
+}
+
+/// The IPG wire.md derives from a model: both frames' air times, twice the intrinsic delay
+/// and the propagation at `distance_m`, and a guard of three jitter standard deviations.
+pub fn auto_ipg_s(
+    model: &Model,
+    operator_frame_bytes: usize,
+    rov_frame_bytes: usize,
+    distance_m: f64,
+) -> f64 {
+    model.air_time_s(operator_frame_bytes)
+        + model.air_time_s(rov_frame_bytes)
+        + 2.0 * (model.intrinsic_delay_ms * 1e-3 + model.propagation_s(distance_m))
+        + 3.0 * model.jitter_ms * 1e-3
+}
+
+/// One direction's figures.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct DirectionMetrics {
+    /// Bits of delivered frames per second, kbit/s.
+    pub throughput_kbps: f64,
+    /// Mean delay (arrival minus send), ms.
+    pub delay_ms: f64,
+    /// Standard deviation of the delay, ms.
+    pub jitter_ms: f64,
+    /// Mean time between consecutive deliveries, ms.
+    pub iat_ms: f64,
+    /// Standard deviation of that time, ms.
+    pub iat_sigma_ms: f64,
+    /// Frames sent.
+    pub frames_sent: u64,
+    /// Frames delivered intact.
+    pub frames_delivered: u64,
+}
+
+/// The session's figures (`--metrics`).
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Metrics {
+    /// ROV to operator.
+    pub rov_to_operator: DirectionMetrics,
+    /// Operator to ROV.
+    pub operator_to_rov: DirectionMetrics,
+    /// Images the operator completed.
+    pub images_completed: u64,
+    /// Mean time between completed images, s.
+    pub image_period_s: Option<f64>,
+    /// High-level orders queued by the operator.
+    pub orders_sent: u64,
+    /// Of those, acknowledged by the ROV's EOID.
+    pub orders_acknowledged: u64,
+    /// Orders the ROV executed.
+    pub orders_executed: u64,
+    /// Executions of an order already executed (must be 0).
+    pub orders_executed_twice: u64,
+    /// Orders acknowledged that the ROV had not executed (must be 0).
+    pub orders_acknowledged_unexecuted: u64,
+    /// Times the ROV lost the heartbeat.
+    pub link_losses: u64,
+    /// Times it came back.
+    pub link_recoveries: u64,
+    /// Session length, s.
+    pub duration_s: f64,
+}
+
+/// One frame's row of `--events` (the data of the paper's Fig. 10).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FrameEvent {
+    /// `operator_to_rov` or `rov_to_operator`.
+    pub direction: &'static str,
+    /// velocity, goto, image_settings, hold_heading (operator); image_trunk or status (ROV).
+    pub kind: &'static str,
+    /// Frame length.
+    pub bytes: usize,
+    /// When it was sent, s.
+    pub t_sent_s: f64,
+    /// When it arrived, s (none when lost).
+    pub t_received_s: Option<f64>,
+    /// The link's fate for it.
+    pub fate: &'static str,
+}
+
+/// What happened along the way, for outputs beyond the metrics.
+pub trait Observer {
+    /// A frame's fate is known.
+    fn frame(&mut self, _event: &FrameEvent) {}
+    /// The operator completed an image (its DEBT stream) at `t_s`.
+    fn image(&mut self, _t_s: f64, _stream: &[u8]) {}
+    /// The vehicle's pose after a step: NED position (m), heading (degrees), link up.
+    fn pose(&mut self, _t_s: f64, _position_m: [f64; 3], _heading_deg: f64, _link_up: bool) {}
+}
+
+/// An observer that observes nothing.
+pub struct Quiet;
+
+impl Observer for Quiet {}
+
+#[derive(Default)]
+struct Direction {
+    delay_ms: Running,
+    iat_ms: Running,
+    last_delivery: Option<SimTime>,
+    sent: u64,
+    delivered: u64,
+    bits: u64,
+}
+
+impl Direction {
+    fn record(&mut self, report: &Report) {
+        if report.duplicate {
+            return;
+        }
+        self.sent += 1;
+        if let (Fate::Delivered, Some(t_rx)) = (report.fate, report.t_rx) {
+            self.delivered += 1;
+            self.bits += report.len as u64 * 8;
+            self.delay_ms
+                .push((t_rx.0 - report.t_offered.0) as f64 * 1e-6);
+            if let Some(last) = self.last_delivery {
+                self.iat_ms
+                    .push((t_rx.0.saturating_sub(last.0)) as f64 * 1e-6);
+            }
+            self.last_delivery = Some(t_rx);
+        }
+    }
+
+    fn metrics(&self, duration_s: f64) -> DirectionMetrics {
+        DirectionMetrics {
+            throughput_kbps: if duration_s > 0.0 {
+                self.bits as f64 / duration_s / 1000.0
+            } else {
+                0.0
+            },
+            delay_ms: self.delay_ms.mean(),
+            jitter_ms: self.delay_ms.std(),
+            iat_ms: self.iat_ms.mean(),
+            iat_sigma_ms: self.iat_ms.std(),
+            frames_sent: self.sent,
+            frames_delivered: self.delivered,
+        }
+    }
+}
+
+/// What a frame is, for the events table.
+fn kind_of(bytes: &[u8]) -> &'static str {
+    let parsed = Frame::new_checked(bytes)
+        .ok()
+        .and_then(|f| MessageRepr::parse(&f).ok());
+    match parsed.map(|r| r.message) {
+        Some(Message::Operator(op)) => op.order.name(),
+        Some(Message::Rov(rov)) if !rov.trunk.is_empty() => "image_trunk",
+        Some(Message::Rov(_)) => "status",
+        _ => "raw",
+    }
+}
+
+/// Runs a session; `observer` sees frames, images and poses as they happen.
+pub fn run(config: &SessionConfig, observer: &mut dyn Observer) -> Result<Metrics, ModelError> {
+    let mut link = Link::symmetric(config.model.clone(), config.seed, Distance::Fixed(1.0))?;
+    let rov_config = RovConfig {
+        settings: config.settings,
+        ..RovConfig::default()
+    };
+    let mut rov = Rov::new(rov_config, config.start_m, config.images.clone());
+    let mut operator = Operator::new(1, (config.ipg_s * 1e9).round().max(1.0) as u64);
+    link.set_distance(rov.vehicle.distance_to(config.buoy_m));
+    let end = SimTime::from_secs_f64(config.duration_s);
+    let (mut script, mut waypoints) = (
+        config.script.iter().peekable(),
+        config.waypoints.iter().peekable(),
+    );
+    let mut directions = [Direction::default(), Direction::default()];
+    let mut slot_orders: std::collections::HashMap<u64, u64> = std::collections::HashMap::new();
+    let mut executions: std::collections::HashMap<u64, u64> = std::collections::HashMap::new();
+    let mut metrics = Metrics::default();
+    let mut image_times: Vec<f64> = Vec::new();
+
+    loop {
+        let next_script = script.peek().map(|c| SimTime::from_secs_f64(c.t_s));
+        let next_waypoint = waypoints.peek().map(|w| SimTime::from_secs_f64(w.t_s));
+        let candidates = [
+            link.next_event_time(),
+            Some(operator.poll_at()),
+            Some(rov.poll_at()),
+            next_script,
+            next_waypoint,
+        ];
+        let Some(t) = candidates.iter().flatten().min().copied() else {
+            break;
+        };
+        if t > end {
+            break;
+        }
+        if link.next_event_time() == Some(t) {
+            link.step();
+            while let Some(report) = link.pop_report() {
+                let from_operator = report.from == Side::A;
+                directions[usize::from(!from_operator)].record(&report);
+                let event = FrameEvent {
+                    direction: if from_operator {
+                        "operator_to_rov"
+                    } else {
+                        "rov_to_operator"
+                    },
+                    kind: kind_of(&report.bytes),
+                    bytes: report.len,
+                    t_sent_s: report.t_offered.as_secs_f64(),
+                    t_received_s: report.t_rx.map(SimTime::as_secs_f64),
+                    fate: report.fate.as_str(),
+                };
+                observer.frame(&event);
+                if report.fate != Fate::Delivered {
+                    continue;
+                }
+                if from_operator {
+                    let order = slot_orders.remove(&report.seq);
+                    if let Some(reply) = rov.receive(link.now(), &report.bytes) {
+                        link.offer(Side::B, reply);
+                    }
+                    for event in rov.take_events() {
+                        match event {
+                            Event::OrderExecuted(_) => {
+                                metrics.orders_executed += 1;
+                                if let Some(index) = order {
+                                    let count = executions.entry(index).or_insert(0);
+                                    *count += 1;
+                                    if *count > 1 {
+                                        metrics.orders_executed_twice += 1;
+                                    }
+                                }
+                            }
+                            Event::LinkLost => metrics.link_losses += 1,
+                            Event::LinkRecovered => metrics.link_recoveries += 1,
+                            _ => {}
+                        }
+                    }
+                } else {
+                    operator.receive(link.now(), &report.bytes);
+                    for event in operator.take_events() {
+                        match event {
+                            Event::OrderAcknowledged(index) => {
+                                metrics.orders_acknowledged += 1;
+                                if !executions.contains_key(&index) {
+                                    metrics.orders_acknowledged_unexecuted += 1;
+                                }
+                            }
+                            Event::ImageCompleted(stream) => {
+                                metrics.images_completed += 1;
+                                image_times.push(link.now().as_secs_f64());
+                                observer.image(link.now().as_secs_f64(), &stream);
+                            }
+                            _ => {}
+                        }
+                    }
+                }
+            }
+            continue;
+        }
+        link.advance(t);
+        if next_script == Some(t) {
+            if let Some(change) = script.next() {
+                operator.set_joystick(change.joystick);
+            }
+            continue;
+        }
+        if next_waypoint == Some(t) {
+            if let Some(w) = waypoints.next() {
+                let cm = |m: f64| (m * 100.0).round().clamp(-32768.0, 32767.0) as i16;
+                operator.push_order(Order::GoTo {
+                    x_cm: cm(w.position_m[0]),
+                    y_cm: cm(w.position_m[1]),
+                    z_cm: cm(w.position_m[2]),
+                    heading_deg: (w.heading_deg.rem_euclid(360.0).round() as u16) % 360,
+                });
+                metrics.orders_sent += 1;
+            }
+            continue;
+        }
+        if operator.poll_at() == t {
+            let (frame, content) = operator.poll(t);
+            let seq = link.offer(Side::A, frame);
+            if let SlotContent::Order(index) = content {
+                slot_orders.insert(seq, index);
+            }
+            continue;
+        }
+        if rov.poll_at() == t {
+            rov.poll(t);
+            link.set_distance(rov.vehicle.distance_to(config.buoy_m));
+            for event in rov.take_events() {
+                match event {
+                    Event::LinkLost => metrics.link_losses += 1,
+                    Event::LinkRecovered => metrics.link_recoveries += 1,
+                    _ => {}
+                }
+            }
+            observer.pose(
+                t.as_secs_f64(),
+                rov.vehicle.position_m,
+                rov.vehicle.heading_deg,
+                rov.link_up(),
+            );
+        }
+    }
+    metrics.duration_s = config.duration_s;
+    metrics.operator_to_rov = directions[0].metrics(config.duration_s);
+    metrics.rov_to_operator = directions[1].metrics(config.duration_s);
+    metrics.image_period_s = (image_times.len() > 1).then(|| {
+        (image_times[image_times.len() - 1] - image_times[0]) / (image_times.len() - 1) as f64
+    });
+    Ok(metrics)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::link::model::JitterDistribution;
+
+    fn config(model: Model, duration_s: f64) -> SessionConfig {
+        SessionConfig {
+            model,
+            seed: 1,
+            ipg_s: 0.64,
+            duration_s,
+            buoy_m: [0.0; 3],
+            start_m: [1.0, 0.0, 0.0],
+            script: Vec::new(),
+            waypoints: Vec::new(),
+            settings: ImageSettings::default(),
+            images: vec![super::super::test_image(160, 120, 1)],
+        }
+    }
+
+    #[derive(Default)]
+    struct Images(Vec<f64>);
+
+    impl Observer for Images {
+        fn image(&mut self, t_s: f64, _stream: &[u8]) {
+            self.0.push(t_s);
+        }
+    }
+
+    #[test]
+    fn without_loss_an_image_takes_exactly_its_trunk_count_in_slots() {
+        let mut model = Model::preset("s100").unwrap();
+        model.jitter_distribution = JitterDistribution::None;
+        let mut images = Images::default();
+        let metrics = run(&config(model, 200.0), &mut images).unwrap();
+        // 2000 bytes in 39-byte trunks: 52 trunks, one per 0.64 s slot.
+        let trunks = 2000usize.div_ceil(39);
+        assert!(images.0.len() >= 4, "{:?}", images.0);
+        for pair in images.0.windows(2) {
+            assert!(
+                (pair[1] - pair[0] - trunks as f64 * 0.64).abs() < 1e-6,
+                "{pair:?}"
+            );
+        }
+        assert_eq!(
+            metrics.operator_to_rov.frames_delivered,
+            metrics.operator_to_rov.frames_sent
+        );
+    }
+
+    #[test]
+    fn s100_session_matches_table_4_at_ber_0() {
+        let metrics = run(&config(Model::preset("s100").unwrap(), 600.0), &mut Quiet).unwrap();
+        let (r, o) = (&metrics.rov_to_operator, &metrics.operator_to_rov);
+        assert!((r.throughput_kbps / 0.72 - 1.0).abs() < 0.05, "{r:?}");
+        assert!((o.throughput_kbps / 0.2 - 1.0).abs() < 0.05, "{o:?}");
+        assert!((r.delay_ms / 333.17 - 1.0).abs() < 0.05, "{r:?}");
+        assert!((o.delay_ms / 158.99 - 1.0).abs() < 0.05, "{o:?}");
+        assert!((r.iat_ms / 640.21 - 1.0).abs() < 0.05, "{r:?}");
+        assert!((o.iat_ms / 640.36 - 1.0).abs() < 0.05, "{o:?}");
+    }
+
+    #[test]
+    fn orders_survive_heavy_loss_exactly_once_and_images_complete() {
+        for seed in 1..=12 {
+            let mut model = Model::preset("s100").unwrap();
+            model.loss_percent = 20.0;
+            let mut cfg = config(model, 240.0);
+            cfg.seed = seed;
+            cfg.waypoints = (0..30)
+                .map(|k| Waypoint {
+                    t_s: 2.0 + k as f64 * 7.0,
+                    position_m: [1.0 + (k % 3) as f64, (k % 2) as f64, 0.5],
+                    heading_deg: (k * 40) as f64,
+                })
+                .collect();
+            let metrics = run(&cfg, &mut Quiet).unwrap();
+            assert_eq!(metrics.orders_executed_twice, 0, "seed {seed}: {metrics:?}");
+            assert_eq!(
+                metrics.orders_acknowledged_unexecuted, 0,
+                "seed {seed}: {metrics:?}"
+            );
+            assert!(
+                metrics.orders_acknowledged >= 25,
+                "seed {seed}: {metrics:?}"
+            );
+            assert!(metrics.orders_executed >= metrics.orders_acknowledged);
+            // 52 trunks at 0.64 s and 36 % of exchanges failing: an image in well under a minute.
+            assert!(metrics.images_completed >= 3, "seed {seed}: {metrics:?}");
+        }
+    }
+
+    #[test]
+    fn the_link_is_lost_past_the_range_and_regained_by_backtracking() {
+        let mut cfg = config(Model::preset("s100").unwrap(), 200.0);
+        cfg.start_m = [1.0, 0.0, 1.0];
+        cfg.waypoints = vec![
+            Waypoint {
+                t_s: 5.0,
+                position_m: [2.0, 0.0, 1.0],
+                heading_deg: 0.0,
+            },
+            Waypoint {
+                t_s: 40.0,
+                position_m: [8.0, 0.0, 1.0],
+                heading_deg: 0.0,
+            },
+        ];
+        let metrics = run(&cfg, &mut Quiet).unwrap();
+        assert!(metrics.link_losses >= 1, "{metrics:?}");
+        assert!(metrics.link_recoveries >= 1, "{metrics:?}");
+    }
+}
