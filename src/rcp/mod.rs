@@ -82,11 +82,16 @@ pub fn emit(src: u8, dst: u8, message: Message) -> Vec<u8> {
     out
 }
 
-/// Encodes `image` with `settings` and cuts the stream into trunks (at most [`MAX_TRUNKS`]: the
-/// size is capped at 64 trunks).
+/// Encodes `image` with `settings` and cuts the stream into trunks. The size is rounded up to a
+/// whole number of trunks, so every slot carries a full trunk (the paper's constant 57-byte ROV
+/// frame with 39-byte trunks), and capped at [`MAX_TRUNKS`] trunks.
 pub fn trunks_of(image: &debt::Image, settings: &ImageSettings) -> Vec<Vec<u8>> {
     let trunk = usize::from(settings.trunk_bytes.max(1));
-    let bytes = usize::from(settings.size_bytes).clamp(16, trunk * MAX_TRUNKS);
+    let bytes = usize::from(settings.size_bytes)
+        .div_ceil(trunk)
+        .clamp(1, MAX_TRUNKS)
+        * trunk;
+    let bytes = bytes.max(16);
     let roi = settings.roi.map(|r| debt::Rect {
         x0: usize::from(r.x0),
         y0: usize::from(r.y0),

@@ -236,6 +236,10 @@ pub fn run(config: &SessionConfig, observer: &mut dyn Observer) -> Result<Metric
     let mut executions: std::collections::HashMap<u64, u64> = std::collections::HashMap::new();
     let mut metrics = Metrics::default();
     let mut image_times: Vec<f64> = Vec::new();
+    // What each frame in flight is, by (sender, link sequence number): a lost frame's report
+    // no longer has its bytes.
+    let mut kinds: std::collections::HashMap<(Side, u64), &'static str> =
+        std::collections::HashMap::new();
 
     loop {
         let next_script = script.peek().map(|c| SimTime::from_secs_f64(c.t_s));
@@ -264,7 +268,14 @@ pub fn run(config: &SessionConfig, observer: &mut dyn Observer) -> Result<Metric
                     } else {
                         "rov_to_operator"
                     },
-                    kind: kind_of(&report.bytes),
+                    kind: if report.duplicate {
+                        kinds
+                            .get(&(report.from, report.seq))
+                            .copied()
+                            .unwrap_or("raw")
+                    } else {
+                        kinds.remove(&(report.from, report.seq)).unwrap_or("raw")
+                    },
                     bytes: report.len,
                     t_sent_s: report.t_offered.as_secs_f64(),
                     t_received_s: report.t_rx.map(SimTime::as_secs_f64),
@@ -277,7 +288,9 @@ pub fn run(config: &SessionConfig, observer: &mut dyn Observer) -> Result<Metric
                 if from_operator {
                     let order = slot_orders.remove(&report.seq);
                     if let Some(reply) = rov.receive(link.now(), &report.bytes) {
-                        link.offer(Side::B, reply);
+                        let kind = kind_of(&reply);
+                        let seq = link.offer(Side::B, reply);
+                        kinds.insert((Side::B, seq), kind);
                     }
                     for event in rov.take_events() {
                         match event {
@@ -340,7 +353,9 @@ pub fn run(config: &SessionConfig, observer: &mut dyn Observer) -> Result<Metric
         }
         if operator.poll_at() == t {
             let (frame, content) = operator.poll(t);
+            let kind = kind_of(&frame);
             let seq = link.offer(Side::A, frame);
+            kinds.insert((Side::A, seq), kind);
             if let SlotContent::Order(index) = content {
                 slot_orders.insert(seq, index);
             }
@@ -408,8 +423,9 @@ mod tests {
         model.jitter_distribution = JitterDistribution::None;
         let mut images = Images::default();
         let metrics = run(&config(model, 200.0), &mut images).unwrap();
-        // 2000 bytes in 39-byte trunks: 52 trunks, one per 0.64 s slot.
+        // 2000 bytes rounded up to 52 trunks of 39 bytes, one per 0.64 s slot.
         let trunks = 2000usize.div_ceil(39);
+        assert_eq!(trunks, 52);
         assert!(images.0.len() >= 4, "{:?}", images.0);
         for pair in images.0.windows(2) {
             assert!(

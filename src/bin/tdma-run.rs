@@ -1,0 +1,525 @@
+//! tdma-run: a whole teleoperation session, operator and ROV, over a link model in virtual time.
+#![forbid(unsafe_code)]
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Result, bail};
+use clap::Parser;
+use rovlink::io::{AtomicFile, EXIT_OK, IoError};
+use rovlink::link::ModelArgs;
+use rovlink::rcp::operator::Joystick;
+use rovlink::rcp::session::{
+    self, FrameEvent, JoystickChange, Observer, SessionConfig, Waypoint, auto_ipg_s,
+};
+use rovlink::rcp::{ImageSettings, test_image};
+use rovlink::wire::operator::Roi;
+
+/// The tool's name, prefixed to everything it says on stderr.
+const TOOL: &str = "tdma-run";
+
+macro_rules! say {
+    ($($arg:tt)*) => {
+        rovlink::io::warn(TOOL, &format!($($arg)*))
+    };
+}
+
+const EXAMPLES: &str = "\
+Examples:
+  tdma-run                                   10 minutes over the S100 model, built-in script and image
+  tdma-run --model s100 --ipg 640 --ber 0 --duration 600 --metrics m.json
+  tdma-run --ber 7e-4 --events events.csv    one row per frame: the data of the paper's Fig. 10
+  tdma-run --waypoints wp.csv --buoy 0,0,0 --start 1,0,1 --duration 200
+  tdma-run --images photos/ --image-size 1500 --roi 100,80,420,300 --images-out received/
+
+--script: CSV t_s,vx,vy,vz,vyaw (joystick, percent of full thrust, from t on).
+--waypoints: CSV t_s,x_m,y_m,z_m,heading_deg (a GoTo order queued at t; NED metres).
+The summary on stderr has Table 4's rows for both directions; --metrics writes them as JSON
+with the image, order and link-recovery counters.
+
+Not yet here (issue 6 in progress): real-time roles over ports (--role), --mcap, scripts/table4.sh
+and scripts/recovery.sh.
+
+Exit codes: 0 ok, 2 bad usage or input.";
+
+/// Run a teleoperation session: operator (TDMA master) and ROV over a link model, in virtual time.
+///
+/// Both ends speak the remote-control protocol of wire.md: joystick and high-level orders down,
+/// status and DEBT-coded camera images up, one frame per slot, with heartbeats and the ROV's
+/// recovery by backtracking. The same seed gives the same session.
+#[derive(Parser, Debug)]
+#[command(version, after_help = EXAMPLES)]
+struct Args {
+    #[command(flatten)]
+    model: ModelArgs,
+
+    /// Inter-packet gap: milliseconds, or `auto` (air times + 2 x delays + 3 jitter sigmas).
+    #[arg(long, value_name = "MS|auto", default_value = "auto")]
+    ipg: String,
+
+    /// Session length, s.
+    #[arg(long, value_name = "S", default_value_t = 600.0)]
+    duration: f64,
+
+    /// Seed of the link's random streams.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+
+    /// The operator modem's position, NED m: its distance to the ROV drives the range model.
+    #[arg(long, value_name = "X,Y,Z", default_value = "0,0,0")]
+    buoy: String,
+
+    /// The ROV's initial position, NED m.
+    #[arg(long, value_name = "X,Y,Z", default_value = "1,0,0")]
+    start: String,
+
+    /// Joystick script, CSV t_s,vx,vy,vz,vyaw [default: a built-in 10-minute script].
+    #[arg(long, value_name = "FILE")]
+    script: Option<PathBuf>,
+
+    /// GoTo orders, CSV t_s,x_m,y_m,z_m,heading_deg [default: the built-in script's].
+    #[arg(long, value_name = "FILE")]
+    waypoints: Option<PathBuf>,
+
+    /// Encoded image size, bytes (at most 64 trunks).
+    #[arg(long, value_name = "BYTES", default_value_t = 2000)]
+    image_size: u16,
+
+    /// Trunk size, bytes (39 makes the paper's 57-byte ROV frame).
+    #[arg(long, value_name = "BYTES", default_value_t = 39, value_parser = clap::value_parser!(u8).range(1..))]
+    trunk: u8,
+
+    /// Region of interest x0,y0,x1,y1 in pixels.
+    #[arg(long, value_name = "X0,Y0,X1,Y1")]
+    roi: Option<String>,
+
+    /// Camera pictures: a directory of images or one image file, cycled [default: built-in].
+    #[arg(long, value_name = "DIR|FILE")]
+    images: Option<PathBuf>,
+
+    /// Write the session's figures as JSON here.
+    #[arg(long, value_name = "FILE")]
+    metrics: Option<PathBuf>,
+
+    /// Write one CSV row per frame here: direction,kind,bytes,t_sent_s,t_received_s,fate.
+    #[arg(long, value_name = "FILE")]
+    events: Option<PathBuf>,
+
+    /// Write every completed image here as PNG (image-0001.png, ...).
+    #[arg(long, value_name = "DIR")]
+    images_out: Option<PathBuf>,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    rovlink::io::finish_main(TOOL, run(&args))
+}
+
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+struct BadInput(String);
+
+fn bad(message: String) -> anyhow::Error {
+    anyhow::Error::new(BadInput(message))
+}
+
+fn triple(flag: &str, text: &str) -> Result<[f64; 3]> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| bad(format!("{flag}: expected X,Y,Z in metres, found `{text}`")))?;
+    match values[..] {
+        [x, y, z] if values.iter().all(|v| v.is_finite()) => Ok([x, y, z]),
+        _ => Err(bad(format!(
+            "{flag}: expected X,Y,Z in metres, found `{text}`"
+        ))),
+    }
+}
+
+/// Reads a CSV file with a header holding `columns`; every row's fields as numbers.
+fn read_table(path: &Path, columns: &[&str]) -> Result<Vec<Vec<f64>>> {
+    let text = std::fs::read(path).map_err(|source| IoError::Open {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let name = path.display();
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_reader(&text[..]);
+    let headers = reader
+        .headers()
+        .map_err(|e| bad(format!("{name}: line 1: {e}")))?
+        .clone();
+    let index: Vec<usize> = columns
+        .iter()
+        .map(|c| {
+            headers.iter().position(|h| h == *c).ok_or_else(|| {
+                bad(format!(
+                    "{name}: line 1: missing column `{c}` (expected {})",
+                    columns.join(",")
+                ))
+            })
+        })
+        .collect::<Result<_>>()?;
+    let mut rows = Vec::new();
+    for record in reader.records() {
+        let record = record.map_err(|e| bad(format!("{name}: {e}")))?;
+        let line = record.position().map_or(0, |p| p.line());
+        let row = index
+            .iter()
+            .zip(columns)
+            .map(|(&i, c)| {
+                let field = record.get(i).unwrap_or("");
+                field
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite())
+                    .ok_or_else(|| {
+                        bad(format!(
+                            "{name}: line {line}: field `{c}`: expected a number, found `{field}`"
+                        ))
+                    })
+            })
+            .collect::<Result<Vec<f64>>>()?;
+        rows.push(row);
+    }
+    Ok(rows)
+}
+
+/// The built-in 10-minute session: some joystick driving, then three GoTo orders, all within
+/// the S100's 5 m of the buoy.
+fn builtin_script() -> (Vec<JoystickChange>, Vec<Waypoint>) {
+    let js = |t_s, vx, vy, vz, vyaw| JoystickChange {
+        t_s,
+        joystick: Joystick { vx, vy, vz, vyaw },
+    };
+    let script = vec![
+        js(5.0, 20.0, 0.0, 10.0, 0.0),
+        js(15.0, 0.0, 0.0, 0.0, 0.0),
+        js(30.0, 0.0, 0.0, 0.0, 30.0),
+        js(36.0, 0.0, 0.0, 0.0, 0.0),
+        js(60.0, -15.0, 10.0, 0.0, 0.0),
+        js(75.0, 0.0, 0.0, 0.0, 0.0),
+    ];
+    let wp = |t_s, x, y, z, heading_deg| Waypoint {
+        t_s,
+        position_m: [x, y, z],
+        heading_deg,
+    };
+    let waypoints = vec![
+        wp(120.0, 3.0, 1.0, 0.5, 90.0),
+        wp(300.0, 1.5, -1.0, 0.5, 180.0),
+        wp(450.0, 1.0, 0.0, 0.0, 0.0),
+    ];
+    (script, waypoints)
+}
+
+fn load_images(path: Option<&Path>) -> Result<Vec<rovlink::debt::Image>> {
+    let Some(path) = path else {
+        return Ok((0..4).map(|k| test_image(320, 240, k)).collect());
+    };
+    let mut files = Vec::new();
+    if path.is_dir() {
+        let entries = std::fs::read_dir(path).map_err(|source| IoError::Open {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        for entry in entries.flatten() {
+            files.push(entry.path());
+        }
+        files.sort();
+    } else {
+        files.push(path.to_path_buf());
+    }
+    let mut images = Vec::new();
+    for file in files {
+        let Ok(picture) = image::open(&file) else {
+            if path.is_dir() {
+                continue; // not an image: skipped
+            }
+            bail!(bad(format!(
+                "{}: not an image this tool reads",
+                file.display()
+            )));
+        };
+        let rgb = picture.to_rgb8();
+        images.push(rovlink::debt::Image {
+            width: rgb.width() as usize,
+            height: rgb.height() as usize,
+            channels: 3,
+            data: rgb.into_raw(),
+        });
+    }
+    if images.is_empty() {
+        bail!(bad(format!("{}: no image found", path.display())));
+    }
+    Ok(images)
+}
+
+/// Writes events, images and nothing else.
+struct Outputs {
+    events: Option<(std::io::BufWriter<AtomicFile>, String)>,
+    images_out: Option<PathBuf>,
+    images: u64,
+    error: Option<anyhow::Error>,
+}
+
+impl Observer for Outputs {
+    fn frame(&mut self, e: &FrameEvent) {
+        if let (Some((out, name)), None) = (self.events.as_mut(), self.error.as_ref()) {
+            let t_rx = e.t_received_s.map_or(String::new(), |t| format!("{t:.6}"));
+            if let Err(source) = writeln!(
+                out,
+                "{},{},{},{:.6},{},{}",
+                e.direction, e.kind, e.bytes, e.t_sent_s, t_rx, e.fate
+            ) {
+                self.error = Some(
+                    IoError::Write {
+                        name: name.clone(),
+                        source,
+                    }
+                    .into(),
+                );
+            }
+        }
+    }
+
+    fn image(&mut self, _t_s: f64, stream: &[u8]) {
+        self.images += 1;
+        let (Some(dir), None) = (self.images_out.as_ref(), self.error.as_ref()) else {
+            return;
+        };
+        let path = dir.join(format!("image-{:04}.png", self.images));
+        let saved = rovlink::debt::decode(stream)
+            .map_err(|e| anyhow::anyhow!("image {}: {e}", self.images))
+            .and_then(|img| {
+                let color = if img.channels == 1 {
+                    image::ExtendedColorType::L8
+                } else {
+                    image::ExtendedColorType::Rgb8
+                };
+                image::save_buffer(&path, &img.data, img.width as u32, img.height as u32, color)
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+            });
+        if let Err(e) = saved {
+            self.error = Some(e);
+        }
+    }
+}
+
+fn run(args: &Args) -> Result<u8> {
+    let model = args.model.resolve()?;
+    let buoy = triple("--buoy", &args.buoy)?;
+    let start = triple("--start", &args.start)?;
+    if !(args.duration.is_finite() && args.duration > 0.0) {
+        bail!(bad(format!(
+            "--duration: expected seconds > 0, found {}",
+            args.duration
+        )));
+    }
+    let settings = ImageSettings {
+        roi: match &args.roi {
+            None => None,
+            Some(text) => {
+                let v: Vec<u16> = text
+                    .split(',')
+                    .map(|p| p.trim().parse::<u16>())
+                    .collect::<Result<_, _>>()
+                    .map_err(|_| {
+                        bad(format!(
+                            "--roi: expected x0,y0,x1,y1 in pixels, found `{text}`"
+                        ))
+                    })?;
+                match v[..] {
+                    [x0, y0, x1, y1] if x0 < x1 && y0 < y1 && x1 < 1024 && y1 < 1024 => {
+                        Some(Roi { x0, y0, x1, y1 })
+                    }
+                    _ => bail!(bad(format!(
+                        "--roi: expected x0 < x1, y0 < y1, all < 1024, found `{text}`"
+                    ))),
+                }
+            }
+        },
+        size_bytes: args.image_size,
+        trunk_bytes: args.trunk,
+        ..ImageSettings::default()
+    };
+    let rov_frame = 5 + 13 + usize::from(args.trunk);
+    let distance = ((0..3).map(|k| (start[k] - buoy[k]).powi(2)).sum::<f64>()).sqrt();
+    let ipg_s = if args.ipg == "auto" {
+        auto_ipg_s(&model, 16, rov_frame, distance)
+    } else {
+        match args.ipg.parse::<f64>() {
+            Ok(ms) if ms.is_finite() && ms > 0.0 => ms / 1e3,
+            _ => bail!(bad(format!(
+                "--ipg: expected milliseconds > 0 or `auto`, found `{}`",
+                args.ipg
+            ))),
+        }
+    };
+    let (mut script, mut waypoints) = builtin_script();
+    if let Some(path) = &args.script {
+        script = read_table(path, &["t_s", "vx", "vy", "vz", "vyaw"])?
+            .into_iter()
+            .map(|r| JoystickChange {
+                t_s: r[0],
+                joystick: Joystick {
+                    vx: r[1],
+                    vy: r[2],
+                    vz: r[3],
+                    vyaw: r[4],
+                },
+            })
+            .collect();
+        if args.waypoints.is_none() {
+            waypoints.clear();
+        }
+    }
+    if let Some(path) = &args.waypoints {
+        waypoints = read_table(path, &["t_s", "x_m", "y_m", "z_m", "heading_deg"])?
+            .into_iter()
+            .map(|r| Waypoint {
+                t_s: r[0],
+                position_m: [r[1], r[2], r[3]],
+                heading_deg: r[4],
+            })
+            .collect();
+        if args.script.is_none() {
+            script.clear();
+        }
+    }
+    script.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    waypoints.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    let images = load_images(args.images.as_deref())?;
+    let metrics_file = args
+        .metrics
+        .as_deref()
+        .map(AtomicFile::create)
+        .transpose()?;
+    let events = match &args.events {
+        Some(path) => {
+            let mut out = std::io::BufWriter::new(AtomicFile::create(path)?);
+            writeln!(out, "direction,kind,bytes,t_sent_s,t_received_s,fate").map_err(|source| {
+                IoError::Write {
+                    name: path.display().to_string(),
+                    source,
+                }
+            })?;
+            Some((out, path.display().to_string()))
+        }
+        None => None,
+    };
+    if let Some(dir) = &args.images_out {
+        std::fs::create_dir_all(dir).map_err(|source| IoError::Open {
+            path: dir.clone(),
+            source,
+        })?;
+    }
+    let config = SessionConfig {
+        model: model.clone(),
+        seed: args.seed,
+        ipg_s,
+        duration_s: args.duration,
+        buoy_m: buoy,
+        start_m: start,
+        script,
+        waypoints,
+        settings,
+        images,
+    };
+    let mut outputs = Outputs {
+        events,
+        images_out: args.images_out.clone(),
+        images: 0,
+        error: None,
+    };
+    let wall = std::time::Instant::now();
+    let metrics = session::run(&config, &mut outputs)?;
+    if let Some(error) = outputs.error.take() {
+        return Err(error);
+    }
+    if let Some((out, name)) = outputs.events.take() {
+        out.into_inner()
+            .map_err(|e| IoError::Write {
+                name,
+                source: e.into_error(),
+            })?
+            .commit()?;
+    }
+    if let (Some(mut file), Some(path)) = (metrics_file, &args.metrics) {
+        let text = serde_json::to_string_pretty(&metrics).unwrap_or_default() + "\n";
+        file.write_all(text.as_bytes())
+            .map_err(|source| IoError::Write {
+                name: path.display().to_string(),
+                source,
+            })?;
+        file.commit()?;
+    }
+    say!(
+        "{:.0} s over {} (seed {}), IPG {:.1} ms, {:.3} s of wall time",
+        args.duration,
+        if model.name.is_empty() {
+            "a model file"
+        } else {
+            &model.name
+        },
+        args.seed,
+        ipg_s * 1e3,
+        wall.elapsed().as_secs_f64()
+    );
+    let (r, o) = (&metrics.rov_to_operator, &metrics.operator_to_rov);
+    say!("{:<18} {:>10} {:>10}", "", "ROV->op", "op->ROV");
+    say!(
+        "{:<18} {:>10.3} {:>10.3}",
+        "throughput kbit/s",
+        r.throughput_kbps,
+        o.throughput_kbps
+    );
+    say!(
+        "{:<18} {:>10.2} {:>10.2}",
+        "delay ms",
+        r.delay_ms,
+        o.delay_ms
+    );
+    say!(
+        "{:<18} {:>10.2} {:>10.2}",
+        "jitter ms",
+        r.jitter_ms,
+        o.jitter_ms
+    );
+    say!("{:<18} {:>10.2} {:>10.2}", "IAT ms", r.iat_ms, o.iat_ms);
+    say!(
+        "{:<18} {:>10.2} {:>10.2}",
+        "IAT sigma ms",
+        r.iat_sigma_ms,
+        o.iat_sigma_ms
+    );
+    say!(
+        "{:<18} {:>10} {:>10}",
+        "frames sent",
+        r.frames_sent,
+        o.frames_sent
+    );
+    say!(
+        "{:<18} {:>10} {:>10}",
+        "frames delivered",
+        r.frames_delivered,
+        o.frames_delivered
+    );
+    say!(
+        "images completed {} (one every {}); orders sent {}, acknowledged {}, executed {}, executed twice {}; link lost {} times, recovered {}",
+        metrics.images_completed,
+        metrics
+            .image_period_s
+            .map_or("-".into(), |p| format!("{p:.1} s")),
+        metrics.orders_sent,
+        metrics.orders_acknowledged,
+        metrics.orders_executed,
+        metrics.orders_executed_twice,
+        metrics.link_losses,
+        metrics.link_recoveries
+    );
+    Ok(EXIT_OK)
+}
