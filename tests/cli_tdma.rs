@@ -47,20 +47,30 @@ fn a_session_writes_metrics_and_one_event_per_frame() {
     assert_eq!(m["orders_executed_twice"], 0);
     let csv = std::fs::read_to_string(&events).unwrap();
     let mut lines = csv.lines();
-    assert_eq!(lines.next(), Some("direction,kind,bytes,t_sent_s,t_received_s,fate"));
+    assert_eq!(
+        lines.next(),
+        Some("direction,kind,bytes,t_sent_s,t_received_s,fate")
+    );
     let rows: Vec<&str> = lines.collect();
     let sent = m["rov_to_operator"]["frames_sent"].as_u64().unwrap()
         + m["operator_to_rov"]["frames_sent"].as_u64().unwrap();
     assert_eq!(rows.len() as u64, sent);
     assert!(rows.iter().any(|r| r.contains(",ber")));
-    assert!(rows.iter().any(|r| r.starts_with("rov_to_operator,image_trunk,57,")));
+    assert!(
+        rows.iter()
+            .any(|r| r.starts_with("rov_to_operator,image_trunk,57,"))
+    );
 }
 
 #[test]
 fn waypoints_past_the_range_lose_and_regain_the_link() {
     let dir = tempfile::tempdir().unwrap();
     let (waypoints, metrics) = (dir.path().join("wp.csv"), dir.path().join("m.json"));
-    std::fs::write(&waypoints, "t_s,x_m,y_m,z_m,heading_deg\n5,2,0,1,0\n40,8,0,1,0\n").unwrap();
+    std::fs::write(
+        &waypoints,
+        "t_s,x_m,y_m,z_m,heading_deg\n5,2,0,1,0\n40,8,0,1,0\n",
+    )
+    .unwrap();
     let out = run(
         TDMA_RUN,
         &[
@@ -91,7 +101,12 @@ fn bad_input_names_the_file_line_and_field() {
     std::fs::write(&waypoints, "t_s,x_m,y_m,z_m,heading_deg\n5,2,0,north,0\n").unwrap();
     let out = run(TDMA_RUN, &["--waypoints", waypoints.to_str().unwrap()], b"");
     assert_eq!(out.code, 2);
-    assert!(out.stderr.contains("wp.csv: line 2: field `z_m`: expected a number, found `north`"), "{}", out.stderr);
+    assert!(
+        out.stderr
+            .contains("wp.csv: line 2: field `z_m`: expected a number, found `north`"),
+        "{}",
+        out.stderr
+    );
     let out = run(TDMA_RUN, &["--ipg", "fast"], b"");
     assert_eq!(out.code, 2);
     assert!(out.stderr.contains("--ipg"), "{}", out.stderr);
