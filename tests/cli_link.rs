@@ -308,19 +308,8 @@ fn read_exactly(file: &mut std::fs::File, n: usize, limit: Duration) -> Vec<u8> 
 
 /// Starts link-sim in --pty mode with `args` and opens both sides raw: (child, A, B).
 fn start_pty(args: &[&str]) -> (std::process::Child, std::fs::File, std::fs::File) {
-    let mut child = Command::new(LINK_SIM)
-        .arg("--pty")
-        .args(args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdout = BufReader::new(child.stdout.take().unwrap());
-    let (mut a_path, mut b_path) = (String::new(), String::new());
-    stdout.read_line(&mut a_path).unwrap();
-    stdout.read_line(&mut b_path).unwrap();
-    let (a, b) = (open_rw(a_path.trim()), open_rw(b_path.trim()));
-    (child, a, b)
+    let (child, a_path, b_path) = common::link_sim_pty(args);
+    (child, open_rw(&a_path), open_rw(&b_path))
 }
 
 #[test]

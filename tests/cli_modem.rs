@@ -140,22 +140,6 @@ fn bad_arguments_are_refused() {
     assert!(out.stdout.is_empty());
 }
 
-/// Starts link-sim --pty with `args`; returns it and its two paths.
-fn link_sim(args: &[&str]) -> (Child, String, String) {
-    let mut child = Command::new(LINK_SIM)
-        .arg("--pty")
-        .args(args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdout = BufReader::new(child.stdout.take().unwrap());
-    let (mut a, mut b) = (String::new(), String::new());
-    stdout.read_line(&mut a).unwrap();
-    stdout.read_line(&mut b).unwrap();
-    (child, a.trim().to_string(), b.trim().to_string())
-}
-
 fn stop(mut child: Child) {
     kill(Pid::from_raw(child.id() as i32), Signal::SIGTERM).unwrap();
     child.wait().unwrap();
@@ -163,7 +147,7 @@ fn stop(mut child: Child) {
 
 #[test]
 fn real_time_through_link_sim_measures_its_model() {
-    let (sim, a, b) = link_sim(&["--model", "s100", "--jitter-ms", "0"]);
+    let (sim, a, b) = common::link_sim_pty(&["--model", "s100", "--jitter-ms", "0"]);
     let out = run(
         MODEM_BENCH,
         &[
@@ -199,7 +183,7 @@ fn real_time_through_link_sim_measures_its_model() {
 
 #[test]
 fn the_evologics_dialect_works_end_to_end() {
-    let (sim, a, b) = link_sim(&[
+    let (sim, a, b) = common::link_sim_pty(&[
         "--model",
         "s2cr-burst",
         "--jitter-ms",
@@ -381,7 +365,7 @@ fn udp_endpoints_through_link_sim() {
 fn ctrl_c_keeps_the_rows_and_writes_the_summary() {
     let dir = tempfile::tempdir().unwrap();
     let (csv, summary) = (dir.path().join("p.csv"), dir.path().join("s.json"));
-    let (sim, a, b) = link_sim(&["--model", "s100", "--jitter-ms", "0"]);
+    let (sim, a, b) = common::link_sim_pty(&["--model", "s100", "--jitter-ms", "0"]);
     let mut child = Command::new(MODEM_BENCH)
         .args(["--tx", &a, "--rx", &b, "--size", "20", "--count", "1000"])
         .args(["--interval", "100", "-o"])

@@ -106,3 +106,20 @@ pub fn wait_for_exit(
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
 }
+
+/// Starts `link-sim --pty` with `args`; returns it and the paths of its sides A and B.
+pub fn link_sim_pty(args: &[&str]) -> (std::process::Child, String, String) {
+    use std::io::BufRead;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_link-sim"))
+        .arg("--pty")
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("link-sim starts");
+    let mut stdout = std::io::BufReader::new(child.stdout.take().expect("stdout"));
+    let (mut a, mut b) = (String::new(), String::new());
+    stdout.read_line(&mut a).expect("side A's path");
+    stdout.read_line(&mut b).expect("side B's path");
+    (child, a.trim().to_string(), b.trim().to_string())
+}
