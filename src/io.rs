@@ -143,6 +143,83 @@ pub fn only_with<A: clap::CommandFactory>(
     }
 }
 
+/// What is wrong with a table of numbers ([`read_number_table`]).
+#[derive(Debug, thiserror::Error)]
+#[error("line {line}: field `{field}`: {problem}")]
+pub struct TableError {
+    /// Line in the text, from 1.
+    pub line: u64,
+    /// The column (or `header`, `row`).
+    pub field: String,
+    /// What is wrong, with what was found.
+    pub problem: String,
+}
+
+/// Reads CSV text with a header row as numbers: for every row, its line number and the values
+/// of `columns` (found by name, in the order asked), each a finite number >= `lowest`. Fields
+/// and names are trimmed; lines starting with `#` are comments. Never panics.
+pub fn read_number_table(
+    text: &[u8],
+    columns: &[&str],
+    lowest: f64,
+) -> Result<Vec<(u64, Vec<f64>)>, TableError> {
+    let error = |line: u64, field: &str, problem: String| TableError {
+        line,
+        field: field.to_string(),
+        problem,
+    };
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .comment(Some(b'#'))
+        .from_reader(text);
+    let headers = reader
+        .headers()
+        .map_err(|e| error(1, "header", e.to_string()))?
+        .clone();
+    let index: Vec<usize> = columns
+        .iter()
+        .map(|name| {
+            headers.iter().position(|h| h == *name).ok_or_else(|| {
+                let header: Vec<&str> = headers.iter().collect();
+                error(
+                    1,
+                    name,
+                    format!("missing column (header is `{}`)", header.join(",")),
+                )
+            })
+        })
+        .collect::<Result<_, _>>()?;
+    let expected = if lowest.is_finite() {
+        format!("a number >= {lowest}")
+    } else {
+        "a number".to_string()
+    };
+    let mut rows = Vec::new();
+    for record in reader.records() {
+        let record = record.map_err(|e| {
+            let line = e.position().map_or(0, |p| p.line());
+            error(line, "row", e.to_string())
+        })?;
+        let line = record.position().map_or(0, |p| p.line());
+        let values = index
+            .iter()
+            .zip(columns)
+            .map(|(&col, name)| {
+                let field = record.get(col).unwrap_or("");
+                field
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite() && *v >= lowest)
+                    .ok_or_else(|| {
+                        error(line, name, format!("expected {expected}, found `{field}`"))
+                    })
+            })
+            .collect::<Result<Vec<f64>, _>>()?;
+        rows.push((line, values));
+    }
+    Ok(rows)
+}
+
 /// True when `path` means standard input/output (`None` or `-`).
 pub fn is_std(path: Option<&Path>) -> bool {
     path.is_none_or(|p| p.as_os_str() == "-")
@@ -277,6 +354,30 @@ impl AtomicFile {
             writer: Some(BufWriter::with_capacity(64 * 1024, file)),
             committed: false,
         })
+    }
+
+    /// Writes all of `bytes`, naming the target on failure.
+    pub fn write_bytes(&mut self, bytes: &[u8]) -> Result<(), IoError> {
+        self.write_all(bytes).map_err(|source| IoError::Write {
+            name: self.target.display().to_string(),
+            source,
+        })
+    }
+
+    /// Writes `bytes` and commits: the whole file or nothing.
+    pub fn commit_with(mut self, bytes: &[u8]) -> Result<(), IoError> {
+        self.write_bytes(bytes)?;
+        self.commit()
+    }
+
+    /// Writes `value` as pretty JSON ending in a newline, and commits.
+    pub fn commit_json<T: serde::Serialize + ?Sized>(self, value: &T) -> Result<(), IoError> {
+        let mut text = serde_json::to_string_pretty(value).map_err(|e| IoError::Write {
+            name: self.target.display().to_string(),
+            source: io::Error::other(e),
+        })?;
+        text.push('\n');
+        self.commit_with(text.as_bytes())
     }
 
     /// Flushes, syncs and renames the file into place.

@@ -66,24 +66,7 @@ fn write_image(img: &debt::Image, path: Option<&std::path::Path>) -> Result<Vec<
         "ppm" => 3,
         "pgm" => 1,
         "pnm" => img.channels,
-        _ => {
-            let color = if img.channels == 1 {
-                image::ExtendedColorType::L8
-            } else {
-                image::ExtendedColorType::Rgb8
-            };
-            let mut bytes = Vec::new();
-            image::write_buffer_with_format(
-                &mut std::io::Cursor::new(&mut bytes),
-                &img.data,
-                img.width as u32,
-                img.height as u32,
-                color,
-                image::ImageFormat::Png,
-            )
-            .context("cannot encode the output image")?;
-            return Ok(bytes);
-        }
+        _ => return debt::picture::to_png(img).context("cannot encode the output image"),
     };
     let magic = if channels == 1 { "P5" } else { "P6" };
     let mut bytes = format!("{magic}\n{} {}\n255\n", img.width, img.height).into_bytes();

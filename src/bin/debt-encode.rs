@@ -111,25 +111,8 @@ fn parse_rect(text: &str) -> Result<Rect, String> {
 fn read_image(input: Option<&std::path::Path>) -> Result<debt::Image> {
     let mut src = Input::open(input)?;
     let bytes = src.read_all()?;
-    let decoded = image::load_from_memory(&bytes)
-        .with_context(|| format!("{}: not a readable image", src.name))?;
-    let (width, height) = (decoded.width() as usize, decoded.height() as usize);
-    let img = if decoded.color().has_color() {
-        debt::Image {
-            width,
-            height,
-            channels: 3,
-            data: decoded.into_rgb8().into_raw(),
-        }
-    } else {
-        debt::Image {
-            width,
-            height,
-            channels: 1,
-            data: decoded.into_luma8().into_raw(),
-        }
-    };
-    Ok(img)
+    debt::picture::from_file_bytes(&bytes)
+        .with_context(|| format!("{}: not a readable image", src.name))
 }
 
 impl Args {

@@ -2,9 +2,9 @@
 #![forbid(unsafe_code)]
 
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::Write;
 use std::net::SocketAddr;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
@@ -415,19 +415,6 @@ fn stats_json(
     json
 }
 
-/// Writes the stats JSON into its file, created at the start of the run (so a path that cannot
-/// be written fails before anything is measured), and commits it.
-fn write_stats(mut file: AtomicFile, path: &Path, json: &serde_json::Value) -> Result<()> {
-    let text = serde_json::to_string_pretty(json).unwrap_or_default() + "\n";
-    file.write_all(text.as_bytes())
-        .map_err(|source| IoError::Write {
-            name: path.display().to_string(),
-            source,
-        })?;
-    file.commit()?;
-    Ok(())
-}
-
 fn run_pipe(args: &Args, mut link: Link) -> Result<u8> {
     let pace = match args.interval {
         None => Pace::BackToBack,
@@ -441,16 +428,13 @@ fn run_pipe(args: &Args, mut link: Link) -> Result<u8> {
     let mut output = Output::open(args.output.as_deref(), true)?;
     let mut trace = match &args.trace {
         Some(path) => {
-            let mut file = BufWriter::new(AtomicFile::create(path)?);
-            file.write_all(TRACE_HEADER.as_bytes())
-                .map_err(|source| IoError::Write {
-                    name: path.display().to_string(),
-                    source,
-                })?;
-            Some((file, path.display().to_string()))
+            let mut file = AtomicFile::create(path)?;
+            file.write_bytes(TRACE_HEADER.as_bytes())?;
+            Some(file)
         }
         None => None,
     };
+    // Created before anything is measured, so a path that cannot be written fails at once.
     let stats_file = args.stats.as_deref().map(AtomicFile::create).transpose()?;
     let wall = Instant::now();
     let mut counters = Counters::default();
@@ -480,13 +464,8 @@ fn run_pipe(args: &Args, mut link: Link) -> Result<u8> {
     let output_name = output.name();
     let mut sink = |report: Report| -> Result<()> {
         counters.record(&report);
-        if let Some((trace, name)) = trace.as_mut() {
-            trace
-                .write_all(trace_row(&report, false).as_bytes())
-                .map_err(|source| IoError::Write {
-                    name: name.clone(),
-                    source,
-                })?;
+        if let Some(trace) = trace.as_mut() {
+            trace.write_bytes(trace_row(&report, false).as_bytes())?;
         }
         if report.fate.arrived() {
             output.write_bytes(&report.bytes)?;
@@ -511,25 +490,16 @@ fn run_pipe(args: &Args, mut link: Link) -> Result<u8> {
     output
         .finish()
         .with_context(|| format!("writing {output_name}"))?;
-    if let Some((trace, name)) = trace {
-        let file = trace.into_inner().map_err(|e| IoError::Write {
-            name: name.clone(),
-            source: e.into_error(),
-        })?;
-        file.commit()?;
+    if let Some(trace) = trace {
+        trace.commit()?;
     }
     let duration_s = link.now().as_secs_f64();
     counters.summary("pipe", args.seed, duration_s, &link);
     say!("{:.3} s of wall time", wall.elapsed().as_secs_f64());
-    if let (Some(mut file), Some(path)) = (stats_file, &args.stats) {
-        let json = stats_json(args, &counters, &link, "pipe", duration_s, None);
-        let text = serde_json::to_string_pretty(&json).unwrap_or_default() + "\n";
-        file.write_all(text.as_bytes())
-            .map_err(|source| IoError::Write {
-                name: path.display().to_string(),
-                source,
-            })?;
-        file.commit()?;
+    if let Some(file) = stats_file {
+        file.commit_json(&stats_json(
+            args, &counters, &link, "pipe", duration_s, None,
+        ))?;
     }
     Ok(EXIT_OK)
 }
@@ -631,9 +601,15 @@ fn run_realtime(args: &Args, mut link: Link, specs: [PortSpec; 2]) -> Result<u8>
             );
         }
     }
-    if let (Some(file), Some(path)) = (stats_file, &args.stats) {
-        let json = stats_json(args, &counters, &link, "real time", duration_s, Some(&info));
-        write_stats(file, path, &json)?;
+    if let Some(file) = stats_file {
+        file.commit_json(&stats_json(
+            args,
+            &counters,
+            &link,
+            "real time",
+            duration_s,
+            Some(&info),
+        ))?;
     }
     if let Some(err) = trace_error {
         return Err(err.into());

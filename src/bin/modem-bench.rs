@@ -311,16 +311,10 @@ fn run(args: &Args) -> Result<u8> {
     if !args.quiet {
         print_summary(&summary);
     }
-    if let (Some(mut file), Some(path)) = (summary_file, &args.summary) {
-        let text = serde_json::to_string_pretty(&summary).unwrap_or_default() + "\n";
-        file.write_all(text.as_bytes())
-            .map_err(|source| IoError::Write {
-                name: path.display().to_string(),
-                source,
-            })?;
-        file.commit()?;
+    if let Some(file) = summary_file {
+        file.commit_json(&summary)?;
     }
-    if let (Some(mut file), Some(path)) = (fit_file, &args.fit) {
+    if let (Some(file), Some(path)) = (fit_file, &args.fit) {
         let name = path
             .file_stem()
             .map_or("fitted".into(), |s| s.to_string_lossy().into_owned());
@@ -330,12 +324,7 @@ fn run(args: &Args) -> Result<u8> {
                 summary.delivered, summary.count
             )));
         };
-        file.write_all(model.to_json().as_bytes())
-            .map_err(|source| IoError::Write {
-                name: path.display().to_string(),
-                source,
-            })?;
-        file.commit()?;
+        file.commit_with(model.to_json().as_bytes())?;
         if !args.quiet {
             say!(
                 "model written to {}: {:.1} bit/s, intrinsic delay {:.2} ms, jitter {:.2} ms, BER {:.3e}",

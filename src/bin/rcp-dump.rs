@@ -354,28 +354,6 @@ struct Summary<'a> {
     invalid_messages: u64,
 }
 
-/// Writes the summary into its (already created) file and commits it.
-fn write_summary(
-    mut file: AtomicFile,
-    path: &std::path::Path,
-    dumper: &Dumper,
-    stats: &DeframeStats,
-) -> Result<()> {
-    let summary = Summary {
-        input: &dumper.name,
-        stats,
-        invalid_messages: dumper.invalid,
-    };
-    let mut text = serde_json::to_string_pretty(&summary)?;
-    text.push('\n');
-    std::io::Write::write_all(&mut file, text.as_bytes()).map_err(|source| IoError::Write {
-        name: path.display().to_string(),
-        source,
-    })?;
-    file.commit()?;
-    Ok(())
-}
-
 /// Reads the whole input (file, stdin or port) through the deframer into the sink.
 fn pump(args: &Args, dumper: &mut Dumper, deframer: &mut Deframer, sink: &mut Sink) -> Result<()> {
     match &args.port {
@@ -427,8 +405,12 @@ fn run(args: &Args) -> Result<u8> {
     }
     pumped?;
     sink.finish()?;
-    if let (Some(file), Some(path)) = (summary_file, &args.summary) {
-        write_summary(file, path, &dumper, &stats)?;
+    if let Some(file) = summary_file {
+        file.commit_json(&Summary {
+            input: &dumper.name,
+            stats: &stats,
+            invalid_messages: dumper.invalid,
+        })?;
     }
     let clean = stats.bytes_skipped == 0 && dumper.invalid == 0;
     if args.strict && !clean {

@@ -1,7 +1,6 @@
 //! tdma-run: a whole teleoperation session, operator and ROV, over a link model in virtual time.
 #![forbid(unsafe_code)]
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -144,48 +143,9 @@ fn read_table(path: &Path, columns: &[&str]) -> Result<Vec<Vec<f64>>> {
         path: path.to_path_buf(),
         source,
     })?;
-    let name = path.display();
-    let mut reader = csv::ReaderBuilder::new()
-        .trim(csv::Trim::All)
-        .from_reader(&text[..]);
-    let headers = reader
-        .headers()
-        .map_err(|e| bad(format!("{name}: line 1: {e}")))?
-        .clone();
-    let index: Vec<usize> = columns
-        .iter()
-        .map(|c| {
-            headers.iter().position(|h| h == *c).ok_or_else(|| {
-                bad(format!(
-                    "{name}: line 1: missing column `{c}` (expected {})",
-                    columns.join(",")
-                ))
-            })
-        })
-        .collect::<Result<_>>()?;
-    let mut rows = Vec::new();
-    for record in reader.records() {
-        let record = record.map_err(|e| bad(format!("{name}: {e}")))?;
-        let line = record.position().map_or(0, |p| p.line());
-        let row = index
-            .iter()
-            .zip(columns)
-            .map(|(&i, c)| {
-                let field = record.get(i).unwrap_or("");
-                field
-                    .parse::<f64>()
-                    .ok()
-                    .filter(|v| v.is_finite())
-                    .ok_or_else(|| {
-                        bad(format!(
-                            "{name}: line {line}: field `{c}`: expected a number, found `{field}`"
-                        ))
-                    })
-            })
-            .collect::<Result<Vec<f64>>>()?;
-        rows.push(row);
-    }
-    Ok(rows)
+    let rows = rovlink::io::read_number_table(&text, columns, f64::NEG_INFINITY)
+        .map_err(|e| bad(format!("{}: {e}", path.display())))?;
+    Ok(rows.into_iter().map(|(_, values)| values).collect())
 }
 
 /// The built-in 10-minute session: some joystick driving, then three GoTo orders, all within
@@ -260,7 +220,7 @@ fn load_images(path: Option<&Path>) -> Result<Vec<rovlink::debt::Image>> {
 
 /// Writes events, images and nothing else.
 struct Outputs {
-    events: Option<(std::io::BufWriter<AtomicFile>, String)>,
+    events: Option<AtomicFile>,
     images_out: Option<PathBuf>,
     images: u64,
     error: Option<anyhow::Error>,
@@ -268,20 +228,14 @@ struct Outputs {
 
 impl Observer for Outputs {
     fn frame(&mut self, e: &FrameEvent) {
-        if let (Some((out, name)), None) = (self.events.as_mut(), self.error.as_ref()) {
+        if let (Some(out), None) = (self.events.as_mut(), self.error.as_ref()) {
             let t_rx = e.t_received_s.map_or(String::new(), |t| format!("{t:.6}"));
-            if let Err(source) = writeln!(
-                out,
-                "{},{},{},{:.6},{},{}",
+            let row = format!(
+                "{},{},{},{:.6},{},{}\n",
                 e.direction, e.kind, e.bytes, e.t_sent_s, t_rx, e.fate
-            ) {
-                self.error = Some(
-                    IoError::Write {
-                        name: name.clone(),
-                        source,
-                    }
-                    .into(),
-                );
+            );
+            if let Err(error) = out.write_bytes(row.as_bytes()) {
+                self.error = Some(error.into());
             }
         }
     }
@@ -295,13 +249,9 @@ impl Observer for Outputs {
         let saved = rovlink::debt::decode(stream)
             .map_err(|e| anyhow::anyhow!("image {}: {e}", self.images))
             .and_then(|img| {
-                let color = if img.channels == 1 {
-                    image::ExtendedColorType::L8
-                } else {
-                    image::ExtendedColorType::Rgb8
-                };
-                image::save_buffer(&path, &img.data, img.width as u32, img.height as u32, color)
-                    .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+                let png = rovlink::debt::picture::to_png(&img)
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+                Ok(AtomicFile::create(&path)?.commit_with(&png)?)
             });
         if let Err(e) = saved {
             self.error = Some(e);
@@ -400,14 +350,9 @@ fn run(args: &Args) -> Result<u8> {
         .transpose()?;
     let events = match &args.events {
         Some(path) => {
-            let mut out = std::io::BufWriter::new(AtomicFile::create(path)?);
-            writeln!(out, "direction,kind,bytes,t_sent_s,t_received_s,fate").map_err(|source| {
-                IoError::Write {
-                    name: path.display().to_string(),
-                    source,
-                }
-            })?;
-            Some((out, path.display().to_string()))
+            let mut out = AtomicFile::create(path)?;
+            out.write_bytes(b"direction,kind,bytes,t_sent_s,t_received_s,fate\n")?;
+            Some(out)
         }
         None => None,
     };
@@ -440,22 +385,11 @@ fn run(args: &Args) -> Result<u8> {
     if let Some(error) = outputs.error.take() {
         return Err(error);
     }
-    if let Some((out, name)) = outputs.events.take() {
-        out.into_inner()
-            .map_err(|e| IoError::Write {
-                name,
-                source: e.into_error(),
-            })?
-            .commit()?;
+    if let Some(out) = outputs.events.take() {
+        out.commit()?;
     }
-    if let (Some(mut file), Some(path)) = (metrics_file, &args.metrics) {
-        let text = serde_json::to_string_pretty(&metrics).unwrap_or_default() + "\n";
-        file.write_all(text.as_bytes())
-            .map_err(|source| IoError::Write {
-                name: path.display().to_string(),
-                source,
-            })?;
-        file.commit()?;
+    if let Some(file) = metrics_file {
+        file.commit_json(&metrics)?;
     }
     say!(
         "{:.0} s over {} (seed {}), IPG {:.1} ms, {:.3} s of wall time",

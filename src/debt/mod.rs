@@ -20,6 +20,7 @@
 
 pub mod coder;
 pub mod metrics;
+pub mod picture;
 pub mod rangecoder;
 pub mod wavelet;
 

@@ -49,49 +49,11 @@ impl Distance {
 impl Distance {
     /// Reads a `t_s,distance_m` track from CSV text.
     pub fn from_csv(text: &[u8]) -> Result<Distance, DistanceError> {
-        let mut reader = csv::ReaderBuilder::new()
-            .trim(csv::Trim::All)
-            .comment(Some(b'#'))
-            .from_reader(text);
-        let headers = reader
-            .headers()
-            .map_err(|e| DistanceError::at(1, "header", e.to_string()))?
-            .clone();
-        let column = |name: &str| {
-            headers.iter().position(|h| h == name).ok_or_else(|| {
-                DistanceError::at(
-                    1,
-                    name,
-                    format!(
-                        "missing column (header is `{}`)",
-                        headers.iter().collect::<Vec<_>>().join(",")
-                    ),
-                )
-            })
-        };
-        let (t_col, d_col) = (column("t_s")?, column("distance_m")?);
-        let mut points: Vec<(f64, f64)> = Vec::new();
-        for record in reader.records() {
-            let record = record.map_err(|e| {
-                let line = e.position().map_or(0, |p| p.line());
-                DistanceError::at(line, "row", e.to_string())
-            })?;
-            let line = record.position().map_or(0, |p| p.line());
-            let number = |col: usize, name: &str| -> Result<f64, DistanceError> {
-                let field = record.get(col).unwrap_or("");
-                field
-                    .parse::<f64>()
-                    .ok()
-                    .filter(|v| v.is_finite() && *v >= 0.0)
-                    .ok_or_else(|| {
-                        DistanceError::at(
-                            line,
-                            name,
-                            format!("expected a number >= 0, found `{field}`"),
-                        )
-                    })
-            };
-            let (t, d) = (number(t_col, "t_s")?, number(d_col, "distance_m")?);
+        let rows = crate::io::read_number_table(text, &["t_s", "distance_m"], 0.0)
+            .map_err(|e| DistanceError::at(e.line, &e.field, e.problem))?;
+        let mut points: Vec<(f64, f64)> = Vec::with_capacity(rows.len());
+        for (line, values) in rows {
+            let (t, d) = (values[0], values[1]);
             if let Some(&(last, _)) = points.last()
                 && t < last
             {

@@ -111,16 +111,15 @@ pub struct RunInfo {
     pub bytes_read: [u64; 2],
     /// Bytes that were not part of any frame, per side (frame framing only).
     pub bytes_skipped: [u64; 2],
-    /// How late each delivery was handed to its writer, microseconds after the model's time.
+    /// How late each delivery was handed to its writer, microseconds after the model's time;
+    /// sorted ascending when the run returns.
     pub lateness_us: Vec<u32>,
 }
 
 impl RunInfo {
     /// The `q` quantile (0..=1) of the delivery lateness in milliseconds (none without deliveries).
     pub fn lateness_quantile_ms(&self, q: f64) -> Option<f64> {
-        let mut sorted = self.lateness_us.clone();
-        sorted.sort_unstable();
-        crate::stats::quantile_sorted(&sorted, q).map(|us| us as f64 * 1e-3)
+        crate::stats::quantile_sorted(&self.lateness_us, q).map(|us| us as f64 * 1e-3)
     }
 }
 
@@ -235,6 +234,19 @@ impl Endpoints {
     /// the link's clock anchored at the start of the call. With a `dialect`, the sides speak
     /// the EvoLogics AT commands instead of sending bare packets (`framing` is then unused).
     pub fn run(
+        &self,
+        link: &mut Link,
+        framing: Framing,
+        dialect: Option<&mut EvoLogicsEmulator>,
+        on_report: impl FnMut(&Report),
+    ) -> (Ended, RunInfo) {
+        let (ended, mut info) = self.forward(link, framing, dialect, on_report);
+        info.lateness_us.sort_unstable();
+        (ended, info)
+    }
+
+    /// The loop of [`Endpoints::run`].
+    fn forward(
         &self,
         link: &mut Link,
         framing: Framing,
