@@ -417,6 +417,17 @@ impl Write for AtomicFile {
     }
 }
 
+/// Seeking serves formats that patch what they wrote (MCAP's summary offsets); a special file
+/// (a pipe, a terminal) refuses it.
+impl io::Seek for AtomicFile {
+    fn seek(&mut self, position: io::SeekFrom) -> io::Result<u64> {
+        match &mut self.writer {
+            Some(w) => w.seek(position),
+            None => Err(io::Error::other("file already committed")),
+        }
+    }
+}
+
 impl Drop for AtomicFile {
     fn drop(&mut self) {
         if !self.committed

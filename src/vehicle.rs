@@ -45,6 +45,9 @@ pub struct Vehicle {
     pub heading_deg: f64,
     /// Body velocities: surge, sway, heave (m/s), yaw rate (degrees/s).
     pub velocity: [f64; 4],
+    /// The velocities the last step's command asked for (same frame and units as `velocity`;
+    /// `velocity` follows them with the lag).
+    pub commanded_velocity: [f64; 4],
     /// Speed at full thrust, m/s.
     pub max_speed_mps: f64,
     /// Yaw rate at full thrust, degrees/s.
@@ -74,6 +77,7 @@ impl Vehicle {
             position_m,
             heading_deg: 0.0,
             velocity: [0.0; 4],
+            commanded_velocity: [0.0; 4],
             max_speed_mps: 0.5,
             max_yaw_rate_dps: 30.0,
             time_constant_s: 1.0,
@@ -148,6 +152,7 @@ impl Vehicle {
         let alpha = (dt_s / self.time_constant_s).min(1.0);
         for k in 0..4 {
             let target = thrust[k] / 100.0 * limits[k];
+            self.commanded_velocity[k] = target;
             self.velocity[k] += (target - self.velocity[k]) * alpha;
         }
         let psi = self.heading_deg.to_radians();

@@ -113,3 +113,230 @@ fn bad_input_names_the_file_line_and_field() {
     let out = run(TDMA_RUN, &["--buoy", "1,2"], b"");
     assert_eq!(out.code, 2);
 }
+
+fn json(path: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// Topic names and message counts of an MCAP file, read with the mcap crate.
+fn mcap_topics(path: &std::path::Path) -> std::collections::BTreeMap<String, usize> {
+    let bytes = std::fs::read(path).unwrap();
+    let mut topics = std::collections::BTreeMap::new();
+    for message in mcap::MessageStream::new(&bytes).unwrap() {
+        let message = message.unwrap();
+        let value: serde_json::Value = serde_json::from_slice(&message.data).unwrap();
+        assert!(value.is_object(), "{}", message.channel.topic);
+        *topics.entry(message.channel.topic.clone()).or_insert(0) += 1;
+    }
+    topics
+}
+
+#[test]
+fn the_two_ends_run_in_real_time_through_link_sim() {
+    use std::process::{Command, Stdio};
+    let dir = tempfile::tempdir().unwrap();
+    let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let (mut link, a, b) = common::link_sim_pty(&[
+        "--model",
+        "s100",
+        "--bitrate-bps",
+        "9600",
+        "--intrinsic-delay-ms",
+        "20",
+        "--jitter-ms",
+        "2",
+        // A debug build's ROV can answer late enough to collide with the next slot.
+        "--half-duplex",
+        "false",
+    ]);
+    let waypoints = path("wp.csv");
+    std::fs::write(
+        &waypoints,
+        "t_s,x_m,y_m,z_m,heading_deg\n1,1.5,0,0,90\n4,1,0.5,0,0\n",
+    )
+    .unwrap();
+    let mut rov = Command::new(TDMA_RUN)
+        .args([
+            "--role",
+            "rov",
+            "--port",
+            &b,
+            "--duration",
+            "12",
+            "--image-size",
+            "400",
+        ])
+        .args([
+            "--metrics",
+            &path("rov.json"),
+            "--track",
+            &path("track.csv"),
+        ])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let op = run(
+        TDMA_RUN,
+        &[
+            "--role",
+            "operator",
+            "--port",
+            &a,
+            "--ipg",
+            "150",
+            "--duration",
+            "9",
+            "--image-size",
+            "400",
+            "--waypoints",
+            &waypoints,
+            "--metrics",
+            &path("op.json"),
+            "--events",
+            &path("op.csv"),
+            "--mcap",
+            &path("op.mcap"),
+            "--images-out",
+            &path("images"),
+        ],
+        b"",
+    );
+    assert_eq!(op.code, 0, "{}", op.stderr);
+    let status = common::wait_for_exit(&mut rov, std::time::Duration::from_secs(20));
+    let _ = link.kill();
+    let _ = link.wait();
+    assert!(status.success(), "ROV end: {status:?}");
+
+    let (o, r) = (
+        json(&dir.path().join("op.json")),
+        json(&dir.path().join("rov.json")),
+    );
+    assert_eq!(o["measured_by"], "operator");
+    assert_eq!(r["measured_by"], "rov");
+    // 400 bytes are 11 trunks of 39: one image every 11 slots of 150 ms when nothing is lost.
+    // (A debug build on a busy machine misses some slots: the bounds are loose.)
+    let images = o["images_completed"].as_u64().unwrap();
+    assert!(images >= 2, "{o}");
+    assert_eq!(o["orders_sent"], 2, "{o}");
+    assert_eq!(o["orders_acknowledged"], 2, "{o}");
+    assert_eq!(r["orders_executed"], 2, "{r}");
+    let sent = o["operator_to_rov"]["frames_sent"].as_u64().unwrap();
+    let heard = r["operator_to_rov"]["frames_delivered"].as_u64().unwrap();
+    assert!(
+        sent >= 30 && heard == sent,
+        "sent {sent}, ROV heard {heard}"
+    );
+    let rtt = o["round_trip_ms"].as_f64().unwrap();
+    // 16 + 57 bytes at 9600 bit/s and 2 x 20 ms: about 101 ms.
+    assert!((90.0..400.0).contains(&rtt), "{o}");
+    assert_eq!(
+        std::fs::read_dir(dir.path().join("images"))
+            .unwrap()
+            .count() as u64,
+        images
+    );
+    let topics = mcap_topics(&dir.path().join("op.mcap"));
+    assert_eq!(
+        topics.get("/camera/image").copied(),
+        Some(images as usize),
+        "{topics:?}"
+    );
+    assert!(
+        topics.get("/rov/pose").copied().unwrap_or(0) > 10,
+        "{topics:?}"
+    );
+    // The ROV's track: a row per 0.1 s step, the first GoTo's goal in it.
+    let track = std::fs::read_to_string(dir.path().join("track.csv")).unwrap();
+    assert!(track.lines().count() > 100, "{track}");
+    assert!(
+        track.lines().any(|l| l.contains(",1.5000,0.0000,0.0000,")),
+        "{track}"
+    );
+}
+
+#[test]
+fn a_simulated_session_logs_to_mcap_and_track() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mcap, track) = (dir.path().join("s.mcap"), dir.path().join("t.csv"));
+    let out = run(
+        TDMA_RUN,
+        &[
+            "--sim",
+            "--duration",
+            "100",
+            "--mcap",
+            mcap.to_str().unwrap(),
+            "--track",
+            track.to_str().unwrap(),
+        ],
+        b"",
+    );
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    let topics = mcap_topics(&mcap);
+    assert_eq!(topics.get("/rov/pose").copied(), Some(1001), "{topics:?}");
+    for topic in [
+        "/rov/velocity/actual",
+        "/rov/velocity/commanded",
+        "/link/frames",
+        "/camera/image",
+    ] {
+        assert!(
+            topics.get(topic).copied().unwrap_or(0) > 0,
+            "{topic}: {topics:?}"
+        );
+    }
+    let text = std::fs::read_to_string(&track).unwrap();
+    assert_eq!(text.lines().count(), 1002);
+    // Virtual time: the same seed gives the same file.
+    let again = dir.path().join("again.mcap");
+    let out = run(
+        TDMA_RUN,
+        &["--duration", "100", "--mcap", again.to_str().unwrap()],
+        b"",
+    );
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    assert_eq!(
+        std::fs::read(&mcap).unwrap(),
+        std::fs::read(&again).unwrap()
+    );
+}
+
+#[test]
+fn a_port_that_closes_ends_the_run_with_exit_1_and_keeps_the_outputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let metrics = dir.path().join("m.json");
+    let (mut link, a, _b) = common::link_sim_pty(&["--model", "s100"]);
+    let mut op = std::process::Command::new(TDMA_RUN)
+        .args(["--role", "operator", "--port", &a, "--duration", "60"])
+        .args(["--metrics", metrics.to_str().unwrap()])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let _ = link.kill();
+    let _ = link.wait();
+    let status = common::wait_for_exit(&mut op, std::time::Duration::from_secs(10));
+    assert_eq!(status.code(), Some(1));
+    let m = json(&metrics);
+    assert!(
+        m["operator_to_rov"]["frames_sent"].as_u64().unwrap() >= 1,
+        "{m}"
+    );
+}
+
+#[test]
+fn real_time_flags_are_checked() {
+    let out = run(TDMA_RUN, &["--role", "rov"], b"");
+    assert_eq!(out.code, 2, "{}", out.stderr);
+    let out = run(TDMA_RUN, &["--dialect", "evologics"], b"");
+    assert_eq!(out.code, 2, "{}", out.stderr);
+    assert!(out.stderr.contains("--role"), "{}", out.stderr);
+    let out = run(
+        TDMA_RUN,
+        &["--role", "rov", "--port", "/nonexistent/tty"],
+        b"",
+    );
+    assert_eq!(out.code, 2, "{}", out.stderr);
+    assert!(out.stderr.contains("/nonexistent/tty"), "{}", out.stderr);
+}

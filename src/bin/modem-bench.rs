@@ -10,9 +10,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
-use clap::{Parser, ValueEnum};
-use rovlink::gll::evologics::{EvoLogics, SendMode};
-use rovlink::gll::{Endpoint, GllError, Pacing, Transparent, Udp, open_serial};
+use clap::Parser;
+use rovlink::gll::Endpoint;
+use rovlink::gll::port_args::{PortArgs, PortError};
 use rovlink::io::{AtomicFile, EXIT_CHECK_FAILED, EXIT_OK, IoError};
 use rovlink::link::pipe::{self, Pace};
 use rovlink::link::{Distance, Link, ModelArgs};
@@ -54,15 +54,6 @@ paper's Table 3. With a size sweep, jitter_ms includes the sizes' own spread; fi
 does not.
 
 Exit codes: 0 ok, 1 a port closed or failed during the run (rows so far kept), 2 bad usage or input.";
-
-/// How to talk to a real modem.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-enum Dialect {
-    /// Bytes in, bytes out (S100-like, or link-sim --pty): packets are wire.md frames.
-    Transparent,
-    /// EvoLogics AT commands: AT*SEND bursts (or --instant for AT*SENDIM), RECV notifications.
-    Evologics,
-}
 
 /// Characterise a modem link (real or simulated) and turn the measurement into a model.
 ///
@@ -120,40 +111,8 @@ struct Args {
     #[arg(long, requires = "port", help_heading = "Real modems")]
     echo: bool,
 
-    /// How the modems are spoken to.
-    #[arg(long, value_enum, default_value_t = Dialect::Transparent, help_heading = "Real modems")]
-    dialect: Dialect,
-
-    /// EvoLogics: send instant messages (AT*SENDIM, up to 64 bytes) instead of bursts.
-    #[arg(long, help_heading = "Real modems")]
-    instant: bool,
-
-    /// EvoLogics: the destination address of the packets.
-    #[arg(
-        long,
-        value_name = "ADDR",
-        default_value_t = 2,
-        help_heading = "Real modems"
-    )]
-    address: u32,
-
-    /// Baud rate of the serial ports.
-    #[arg(long, default_value_t = 9600, value_parser = clap::value_parser!(u32).range(1..), help_heading = "Real modems")]
-    baud: u32,
-
-    /// Transparent modems: write each packet in chunks of this many bytes, paced at --chunk-rate-bps
-    /// (the S100 driver sends 45-byte chunks at the air rate, without flow control).
-    #[arg(long, value_name = "BYTES", help_heading = "Real modems")]
-    chunk_bytes: Option<usize>,
-
-    /// The rate chunk pauses are computed from, bit/s.
-    #[arg(
-        long,
-        value_name = "BPS",
-        default_value_t = 1900.0,
-        help_heading = "Real modems"
-    )]
-    chunk_rate_bps: f64,
+    #[command(flatten)]
+    port_args: PortArgs,
 
     /// Real modems: a packet that has not arrived this long after its send is lost, s.
     #[arg(
@@ -280,8 +239,7 @@ fn run(args: &Args) -> Result<u8> {
         )));
     }
     let real = args.tx.is_some() || args.port.is_some();
-    if !real && (args.dialect != Dialect::Transparent || args.chunk_bytes.is_some() || args.instant)
-    {
+    if !real && args.port_args.any_set() {
         bail!(usage(
             "--dialect, --instant and --chunk-bytes apply to real modems (--tx/--rx or --port)"
                 .into()
@@ -300,7 +258,7 @@ fn run(args: &Args) -> Result<u8> {
 
     let (code, assumed_rate) = if real {
         let code = run_real(args, &sizes, &mut sink, &progress)?;
-        (code, args.chunk_rate_bps)
+        (code, args.port_args.chunk_rate_bps)
     } else {
         let model = run_sim(args, &sizes, &mut sink, &progress)?;
         (EXIT_OK, model)
@@ -418,48 +376,11 @@ fn run_sim(
     Ok(rate)
 }
 
-/// Opens a modem: a serial port or pseudo-terminal, `tcp:HOST:PORT` (a modem's TCP console,
-/// EvoLogics' usual interface), or `udp:BIND_ADDR=PEER_ADDR` (one datagram per packet).
-fn open_endpoint(args: &Args, path: &str) -> Result<Box<dyn Endpoint>> {
-    if let Some(spec) = path.strip_prefix("udp:") {
-        let Some((bind, peer)) = spec.split_once('=') else {
-            bail!(usage(format!("{path}: expected udp:BIND_ADDR=PEER_ADDR")));
-        };
-        let parse = |text: &str| {
-            text.parse::<std::net::SocketAddr>()
-                .map_err(|e| usage(format!("{path}: `{text}`: {e}")))
-        };
-        if args.dialect != Dialect::Transparent {
-            bail!(usage(format!(
-                "{path}: UDP carries bare datagrams: use --dialect transparent"
-            )));
-        }
-        return Ok(Box::new(Udp::open(parse(bind)?, parse(peer)?)?));
-    }
-    let pacing = args.chunk_bytes.map(|chunk_bytes| Pacing {
-        chunk_bytes,
-        rate_bps: args.chunk_rate_bps,
-    });
-    let mode = if args.instant {
-        SendMode::Instant { ack: false }
-    } else {
-        SendMode::Burst
-    };
-    if let Some(address) = path.strip_prefix("tcp:") {
-        let stream = std::net::TcpStream::connect(address).map_err(|e| GllError::Open {
-            name: path.to_string(),
-            reason: e.to_string(),
-        })?;
-        let _ = stream.set_nodelay(true);
-        return Ok(match args.dialect {
-            Dialect::Transparent => Box::new(Transparent::new(path, stream, pacing)),
-            Dialect::Evologics => Box::new(EvoLogics::new(path, stream, args.address, mode)),
-        });
-    }
-    let port = open_serial(path, args.baud)?;
-    Ok(match args.dialect {
-        Dialect::Transparent => Box::new(Transparent::new(path, port, pacing)),
-        Dialect::Evologics => Box::new(EvoLogics::new(path, port, args.address, mode)),
+/// Opens a modem as the flags say; a bad device name is bad usage.
+fn open(args: &Args, device: &str) -> Result<Box<dyn Endpoint>> {
+    args.port_args.open(device).map_err(|e| match e {
+        PortError::Usage(message) => usage(message),
+        PortError::Open(error) => error.into(),
     })
 }
 
@@ -486,8 +407,8 @@ fn run_real(
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
         .context("cannot install the Ctrl-C handler")?;
     let (mut tx_port, mut rx_port) = match (&args.tx, &args.rx, &args.port) {
-        (Some(tx), Some(rx), _) => (open_endpoint(args, tx)?, Some(open_endpoint(args, rx)?)),
-        (_, _, Some(port)) => (open_endpoint(args, port)?, None),
+        (Some(tx), Some(rx), _) => (open(args, tx)?, Some(open(args, rx)?)),
+        (_, _, Some(port)) => (open(args, port)?, None),
         _ => bail!(usage("give --tx and --rx, or --port with --echo".into())),
     };
     let ports = match rx_port.as_mut() {

@@ -1,18 +1,26 @@
-//! tdma-run: a whole teleoperation session, operator and ROV, over a link model in virtual time.
+//! tdma-run: a whole teleoperation session, operator and ROV: both ends over a link model in
+//! virtual time, or one end in real time over a serial port, pseudo-terminal or UDP.
 #![forbid(unsafe_code)]
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{Result, bail};
-use clap::Parser;
-use rovlink::io::{AtomicFile, EXIT_OK, IoError};
+use std::io::IsTerminal;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, ValueEnum};
+use rovlink::gll::port_args::{PortArgs, PortError};
+use rovlink::io::{AtomicFile, EXIT_CHECK_FAILED, EXIT_OK, IoError};
 use rovlink::link::ModelArgs;
+use rovlink::rcp::mcap_log::McapLog;
 use rovlink::rcp::operator::Joystick;
+use rovlink::rcp::realtime::{self, Ended, Role};
 use rovlink::rcp::session::{
-    self, FrameEvent, JoystickChange, Observer, SessionConfig, Waypoint, auto_ipg_s,
+    self, FrameEvent, JoystickChange, Metrics, Observer, SessionConfig, Waypoint, auto_ipg_s,
 };
-use rovlink::rcp::{ImageSettings, test_image};
+use rovlink::rcp::{ImageSettings, PoseSample, test_image};
 use rovlink::wire::operator::Roi;
 
 /// The tool's name, prefixed to everything it says on stderr.
@@ -27,29 +35,71 @@ macro_rules! say {
 const EXAMPLES: &str = "\
 Examples:
   tdma-run                                   10 minutes over the S100 model, built-in script and image
-  tdma-run --model s100 --ipg 640 --ber 0 --duration 600 --metrics m.json
+  tdma-run --sim --model s100 --ipg 640 --ber 0 --duration 600 --metrics m.json
   tdma-run --ber 7e-4 --events events.csv    one row per frame: the data of the paper's Fig. 10
-  tdma-run --waypoints wp.csv --buoy 0,0,0 --start 1,0,1 --duration 200
+  tdma-run --waypoints wp.csv --buoy 0,0,0 --start 1,0,1 --duration 200 --track track.csv
   tdma-run --images photos/ --image-size 1500 --roi 100,80,420,300 --images-out received/
+  tdma-run --mcap session.mcap               open it in Foxglove: pose, velocities, link, images
+
+Real time, one end per process (through link-sim standing in for the modems):
+  link-sim --model s100 --pty > ptys.txt &     prints two pseudo-terminals: A, then B
+  sleep 1; A=$(sed -n 1p ptys.txt); B=$(sed -n 2p ptys.txt)
+  tdma-run --role rov --port $B --duration 130 &
+  tdma-run --role operator --port $A --ipg 640 --duration 120 --images-out received/
+Real modems: --port /dev/ttyUSB0 (transparent, e.g. WFS S100), --dialect evologics with
+--port tcp:192.168.0.209:9200, or --port udp:BIND_ADDR=PEER_ADDR. Start the ROV end first.
 
 --script: CSV t_s,vx,vy,vz,vyaw (joystick, percent of full thrust, from t on).
 --waypoints: CSV t_s,x_m,y_m,z_m,heading_deg (a GoTo order queued at t; NED metres).
+--track: CSV t_s,x_m,y_m,z_m,heading_deg,distance_m,goal_x_m,goal_y_m,goal_z_m,
+  goal_distance_m,backtrack_x_m,backtrack_y_m,backtrack_z_m,link_up (one row per 0.1 s vehicle
+  step; distances from the buoy; the data of the paper's Figs. 12-14).
 The summary on stderr has Table 4's rows for both directions; --metrics writes them as JSON
-with the image, order and link-recovery counters.
+with the image, order and link-recovery counters. In real time each end knows only its half:
+frames it sent, and frames it received with their arrival times (no one-way delay: that needs
+both clocks); the operator adds the round trip from each slot's frame to the ROV's answer.
 
-Not yet here (issue 6 in progress): real-time roles over ports (--role), --mcap, scripts/table4.sh
-and scripts/recovery.sh.
+Exit codes: 0 ok, 1 the port failed during a real-time run (outputs so far kept), 2 bad usage
+or input.";
 
-Exit codes: 0 ok, 2 bad usage or input.";
+/// Which end runs in real time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum RoleArg {
+    /// The TDMA master: sends the slots, plays the script and waypoints, receives images.
+    Operator,
+    /// The vehicle: answers each slot, drives the simulated vehicle, sends images.
+    Rov,
+}
 
-/// Run a teleoperation session: operator (TDMA master) and ROV over a link model, in virtual time.
+/// Run a teleoperation session: operator (TDMA master) and ROV, over a link model in virtual
+/// time (the default, --sim) or one end per process over a real port (--role).
 ///
 /// Both ends speak the remote-control protocol of wire.md: joystick and high-level orders down,
 /// status and DEBT-coded camera images up, one frame per slot, with heartbeats and the ROV's
-/// recovery by backtracking. The same seed gives the same session.
+/// recovery by backtracking. In simulation the same seed gives the same session.
 #[derive(Parser, Debug)]
 #[command(version, after_help = EXAMPLES)]
 struct Args {
+    /// Both ends and the link in one process, in virtual time (the default).
+    #[arg(long, conflicts_with_all = ["role", "port"])]
+    sim: bool,
+
+    /// Run one end in real time over --port.
+    #[arg(long, value_enum, requires = "port", help_heading = "Real time")]
+    role: Option<RoleArg>,
+
+    /// The modem: a serial port or pseudo-terminal, tcp:HOST:PORT or udp:BIND_ADDR=PEER_ADDR.
+    #[arg(
+        long,
+        value_name = "DEV",
+        requires = "role",
+        help_heading = "Real time"
+    )]
+    port: Option<String>,
+
+    #[command(flatten)]
+    port_args: PortArgs,
+
     #[command(flatten)]
     model: ModelArgs,
 
@@ -108,6 +158,14 @@ struct Args {
     /// Write every completed image here as PNG (image-0001.png, ...).
     #[arg(long, value_name = "DIR")]
     images_out: Option<PathBuf>,
+
+    /// Write the vehicle's track here, one CSV row per vehicle step (see below).
+    #[arg(long, value_name = "FILE")]
+    track: Option<PathBuf>,
+
+    /// Write an MCAP session log here (Foxglove: pose, goal, velocities, link, images).
+    #[arg(long, value_name = "FILE")]
+    mcap: Option<PathBuf>,
 }
 
 fn main() -> ExitCode {
@@ -218,30 +276,82 @@ fn load_images(path: Option<&Path>) -> Result<Vec<rovlink::debt::Image>> {
     Ok(images)
 }
 
-/// Writes events, images and nothing else.
+/// Writes the chosen outputs as the session goes: events, track, MCAP, images, progress.
 struct Outputs {
     events: Option<AtomicFile>,
+    track: Option<AtomicFile>,
+    mcap: Option<McapLog>,
     images_out: Option<PathBuf>,
     images: u64,
+    buoy_m: [f64; 3],
+    progress: indicatif::ProgressBar,
     error: Option<anyhow::Error>,
+}
+
+/// The header of `--track`.
+const TRACK_HEADER: &str = "t_s,x_m,y_m,z_m,heading_deg,distance_m,goal_x_m,goal_y_m,goal_z_m,goal_distance_m,backtrack_x_m,backtrack_y_m,backtrack_z_m,link_up\n";
+
+impl Outputs {
+    fn keep(&mut self, outcome: Result<(), impl Into<anyhow::Error>>) {
+        if let (Err(error), None) = (outcome, self.error.as_ref()) {
+            self.error = Some(error.into());
+        }
+    }
+
+    /// Commits every file; the first error wins.
+    fn finish(mut self) -> Result<()> {
+        self.progress.finish_and_clear();
+        if let Some(error) = self.error.take() {
+            return Err(error);
+        }
+        if let Some(out) = self.events.take() {
+            out.commit()?;
+        }
+        if let Some(out) = self.track.take() {
+            out.commit()?;
+        }
+        if let Some(log) = self.mcap.take() {
+            log.finish()?;
+        }
+        Ok(())
+    }
+}
+
+fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt()
 }
 
 impl Observer for Outputs {
     fn frame(&mut self, e: &FrameEvent) {
-        if let (Some(out), None) = (self.events.as_mut(), self.error.as_ref()) {
-            let t_rx = e.t_received_s.map_or(String::new(), |t| format!("{t:.6}"));
+        let t = e.t_received_s.or(e.t_sent_s).unwrap_or(0.0);
+        self.progress.set_position(t as u64);
+        if let Some(log) = self.mcap.as_mut() {
+            log.frame(e);
+        }
+        if self.error.is_some() {
+            return;
+        }
+        if let Some(out) = self.events.as_mut() {
+            let time = |t: Option<f64>| t.map_or(String::new(), |t| format!("{t:.6}"));
             let row = format!(
-                "{},{},{},{:.6},{},{}\n",
-                e.direction, e.kind, e.bytes, e.t_sent_s, t_rx, e.fate
+                "{},{},{},{},{},{}\n",
+                e.direction,
+                e.kind,
+                e.bytes,
+                time(e.t_sent_s),
+                time(e.t_received_s),
+                e.fate
             );
-            if let Err(error) = out.write_bytes(row.as_bytes()) {
-                self.error = Some(error.into());
-            }
+            let outcome = out.write_bytes(row.as_bytes());
+            self.keep(outcome);
         }
     }
 
-    fn image(&mut self, _t_s: f64, stream: &[u8]) {
+    fn image(&mut self, t_s: f64, stream: &[u8]) {
         self.images += 1;
+        if let Some(log) = self.mcap.as_mut() {
+            log.image(t_s, stream);
+        }
         let (Some(dir), None) = (self.images_out.as_ref(), self.error.as_ref()) else {
             return;
         };
@@ -253,9 +363,37 @@ impl Observer for Outputs {
                     .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
                 Ok(AtomicFile::create(&path)?.commit_with(&png)?)
             });
-        if let Err(e) = saved {
-            self.error = Some(e);
+        self.keep(saved);
+    }
+
+    fn pose(&mut self, pose: &PoseSample) {
+        if let Some(log) = self.mcap.as_mut() {
+            log.pose(pose);
         }
+        let (Some(out), None) = (self.track.as_mut(), self.error.as_ref()) else {
+            return;
+        };
+        let point = |p: Option<[f64; 3]>| {
+            p.map_or(",,".to_string(), |p| {
+                format!("{:.4},{:.4},{:.4}", p[0], p[1], p[2])
+            })
+        };
+        let [x, y, z] = pose.position_m;
+        let row = format!(
+            "{:.3},{x:.4},{y:.4},{z:.4},{:.2},{:.4},{},{},{},{}\n",
+            pose.t_s,
+            pose.heading_deg,
+            distance(pose.position_m, self.buoy_m),
+            point(pose.goal_m),
+            pose.goal_m.map_or(String::new(), |g| format!(
+                "{:.4}",
+                distance(g, self.buoy_m)
+            )),
+            point(pose.backtrack_m),
+            u8::from(pose.link_up)
+        );
+        let outcome = out.write_bytes(row.as_bytes());
+        self.keep(outcome);
     }
 }
 
@@ -343,25 +481,51 @@ fn run(args: &Args) -> Result<u8> {
     script.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
     waypoints.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
     let images = load_images(args.images.as_deref())?;
+    let role = args.role.map(|r| match r {
+        RoleArg::Operator => Role::Operator,
+        RoleArg::Rov => Role::Rov,
+    });
+    if role.is_none() && args.port_args.any_set() {
+        bail!(bad(
+            "--dialect, --instant and --chunk-bytes apply to real modems (--role with --port)"
+                .into()
+        ));
+    }
+    // Every output file is created before the session starts, so a bad path fails at once.
     let metrics_file = args
         .metrics
         .as_deref()
         .map(AtomicFile::create)
         .transpose()?;
-    let events = match &args.events {
-        Some(path) => {
-            let mut out = AtomicFile::create(path)?;
-            out.write_bytes(b"direction,kind,bytes,t_sent_s,t_received_s,fate\n")?;
-            Some(out)
-        }
-        None => None,
+    let with_header = |path: &Option<PathBuf>, header: &str| -> Result<Option<AtomicFile>> {
+        let Some(path) = path else { return Ok(None) };
+        let mut out = AtomicFile::create(path)?;
+        out.write_bytes(header.as_bytes())?;
+        Ok(Some(out))
     };
+    let events = with_header(
+        &args.events,
+        "direction,kind,bytes,t_sent_s,t_received_s,fate\n",
+    )?;
+    let track = with_header(&args.track, TRACK_HEADER)?;
     if let Some(dir) = &args.images_out {
         std::fs::create_dir_all(dir).map_err(|source| IoError::Open {
             path: dir.clone(),
             source,
         })?;
     }
+    let base_ns = if role.is_some() {
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(0))
+    } else {
+        0
+    };
+    let mcap = args
+        .mcap
+        .as_deref()
+        .map(|path| McapLog::create(path, base_ns))
+        .transpose()?;
     let config = SessionConfig {
         model: model.clone(),
         seed: args.seed,
@@ -376,34 +540,101 @@ fn run(args: &Args) -> Result<u8> {
     };
     let mut outputs = Outputs {
         events,
+        track,
+        mcap,
         images_out: args.images_out.clone(),
         images: 0,
+        buoy_m: buoy,
+        progress: progress_bar(role.is_some(), args.duration),
         error: None,
     };
     let wall = std::time::Instant::now();
-    let metrics = session::run(&config, &mut outputs)?;
-    if let Some(error) = outputs.error.take() {
-        return Err(error);
-    }
-    if let Some(out) = outputs.events.take() {
-        out.commit()?;
-    }
+    let (metrics, code) = match (role, &args.port) {
+        (Some(role), Some(device)) => {
+            let stop = Arc::new(AtomicBool::new(false));
+            let flag = Arc::clone(&stop);
+            ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+                .context("cannot install the Ctrl-C handler")?;
+            let mut endpoint = args.port_args.open(device).map_err(|e| match e {
+                PortError::Usage(message) => bad(message),
+                PortError::Open(error) => error.into(),
+            })?;
+            match role {
+                Role::Operator => say!(
+                    "operator on {device}: {:.0} s, IPG {:.1} ms (Ctrl-C stops and keeps the outputs)",
+                    args.duration,
+                    ipg_s * 1e3
+                ),
+                Role::Rov => say!(
+                    "ROV on {device}: {:.0} s, answering every slot (Ctrl-C stops and keeps the outputs)",
+                    args.duration
+                ),
+            }
+            let (metrics, ended) =
+                realtime::run(role, &config, endpoint.as_mut(), &stop, &mut outputs);
+            let code = match ended {
+                Ended::Done => EXIT_OK,
+                Ended::Stopped => {
+                    say!("stopped after {:.1} s", metrics.duration_s);
+                    EXIT_OK
+                }
+                Ended::Failed(error) => {
+                    say!(
+                        "{error} after {:.1} s; outputs so far kept",
+                        metrics.duration_s
+                    );
+                    EXIT_CHECK_FAILED
+                }
+            };
+            (metrics, code)
+        }
+        _ => {
+            let metrics = session::run(&config, &mut outputs)?;
+            say!(
+                "{:.0} s over {} (seed {}), IPG {:.1} ms, {:.3} s of wall time",
+                args.duration,
+                if model.name.is_empty() {
+                    "a model file"
+                } else {
+                    &model.name
+                },
+                args.seed,
+                ipg_s * 1e3,
+                wall.elapsed().as_secs_f64()
+            );
+            (metrics, EXIT_OK)
+        }
+    };
+    outputs.finish()?;
     if let Some(file) = metrics_file {
         file.commit_json(&metrics)?;
     }
-    say!(
-        "{:.0} s over {} (seed {}), IPG {:.1} ms, {:.3} s of wall time",
-        args.duration,
-        if model.name.is_empty() {
-            "a model file"
-        } else {
-            &model.name
-        },
-        args.seed,
-        ipg_s * 1e3,
-        wall.elapsed().as_secs_f64()
-    );
+    print_summary(&metrics);
+    Ok(code)
+}
+
+/// A progress bar in seconds of session time, only for real-time runs on a terminal.
+fn progress_bar(real_time: bool, duration_s: f64) -> indicatif::ProgressBar {
+    if !real_time || !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(duration_s.ceil() as u64);
+    if let Ok(style) =
+        indicatif::ProgressStyle::with_template("{spinner} {pos}/{len} s [{bar:30}] {msg}")
+    {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar
+}
+
+/// Table 4's rows for both directions, then the counters, on stderr.
+fn print_summary(metrics: &Metrics) {
     let (r, o) = (&metrics.rov_to_operator, &metrics.operator_to_rov);
+    let ms = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
+    if metrics.measured_by != "simulation" {
+        print_half(metrics);
+        return;
+    }
     say!("{:<18} {:>10} {:>10}", "", "ROV->op", "op->ROV");
     say!(
         "{:<18} {:>10.3} {:>10.3}",
@@ -412,16 +643,16 @@ fn run(args: &Args) -> Result<u8> {
         o.throughput_kbps
     );
     say!(
-        "{:<18} {:>10.2} {:>10.2}",
+        "{:<18} {:>10} {:>10}",
         "delay ms",
-        r.delay_ms,
-        o.delay_ms
+        ms(r.delay_ms),
+        ms(o.delay_ms)
     );
     say!(
-        "{:<18} {:>10.2} {:>10.2}",
+        "{:<18} {:>10} {:>10}",
         "jitter ms",
-        r.jitter_ms,
-        o.jitter_ms
+        ms(r.jitter_ms),
+        ms(o.jitter_ms)
     );
     say!("{:<18} {:>10.2} {:>10.2}", "IAT ms", r.iat_ms, o.iat_ms);
     say!(
@@ -442,6 +673,42 @@ fn run(args: &Args) -> Result<u8> {
         r.frames_delivered,
         o.frames_delivered
     );
+    print_counters(metrics);
+}
+
+/// One end's figures in real time: what it sent, what it received.
+fn print_half(metrics: &Metrics) {
+    let (sent, received, sent_name, received_name) = if metrics.measured_by == "operator" {
+        (
+            &metrics.operator_to_rov,
+            &metrics.rov_to_operator,
+            "op->ROV",
+            "ROV->op",
+        )
+    } else {
+        (
+            &metrics.rov_to_operator,
+            &metrics.operator_to_rov,
+            "ROV->op",
+            "op->ROV",
+        )
+    };
+    say!(
+        "sent {sent_name}: {} frames; received {received_name}: {} frames, {:.3} kbit/s, IAT {:.2} ms (sigma {:.2} ms)",
+        sent.frames_sent,
+        received.frames_delivered,
+        received.throughput_kbps,
+        received.iat_ms,
+        received.iat_sigma_ms
+    );
+    if let (Some(rtt), Some(jitter)) = (metrics.round_trip_ms, metrics.round_trip_jitter_ms) {
+        say!("round trip slot -> answer {rtt:.2} ms (sigma {jitter:.2} ms)");
+    }
+    print_counters(metrics);
+}
+
+/// Images, orders and link recovery.
+fn print_counters(metrics: &Metrics) {
     say!(
         "images completed {} (one every {}); orders sent {}, acknowledged {}, executed {}, executed twice {}; link lost {} times, recovered {}",
         metrics.images_completed,
@@ -455,5 +722,4 @@ fn run(args: &Args) -> Result<u8> {
         metrics.link_losses,
         metrics.link_recoveries
     );
-    Ok(EXIT_OK)
 }

@@ -14,6 +14,7 @@
 //! directly.
 
 pub mod evologics;
+pub mod port_args;
 
 use std::io::{self, Read, Write};
 use std::net::{SocketAddr, UdpSocket};

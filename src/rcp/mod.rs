@@ -6,7 +6,9 @@
 //! bitmap and RIT resends, EISN/ISN toggles, CI/IC cancellation, heartbeats and the recovery
 //! algorithm. [`session`] runs both ends and a link in virtual time.
 
+pub mod mcap_log;
 pub mod operator;
+pub mod realtime;
 pub mod rov;
 pub mod session;
 
@@ -38,6 +40,27 @@ pub enum Event {
     LinkLost,
     /// ROV: heartbeats again.
     LinkRecovered,
+}
+
+/// The vehicle's state at one instant: what logs, plots and the MCAP file show.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseSample {
+    /// When, s since the session started.
+    pub t_s: f64,
+    /// Position, NED m.
+    pub position_m: [f64; 3],
+    /// Heading, degrees from north.
+    pub heading_deg: f64,
+    /// Body velocities: surge, sway, heave (m/s), yaw rate (degrees/s).
+    pub velocity: [f64; 4],
+    /// The velocities the command in force asks for (same frame and units).
+    pub commanded_velocity: [f64; 4],
+    /// The GoTo order being executed: its target, NED m.
+    pub goal_m: Option<[f64; 3]>,
+    /// While the link is lost: the stacked position the ROV is backtracking to, NED m.
+    pub backtrack_m: Option<[f64; 3]>,
+    /// True while heartbeats arrive.
+    pub link_up: bool,
 }
 
 /// How the ROV encodes and cuts its images.

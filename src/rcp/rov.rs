@@ -7,7 +7,7 @@
 
 use std::collections::VecDeque;
 
-use super::{Event, ImageSettings, emit, trunks_of};
+use super::{Event, ImageSettings, PoseSample, emit, trunks_of};
 use crate::debt;
 use crate::link::SimTime;
 use crate::vehicle::{Command, Vehicle};
@@ -119,6 +119,24 @@ impl Rov {
     /// True while heartbeats arrive.
     pub fn link_up(&self) -> bool {
         self.link_up
+    }
+
+    /// The vehicle's state at `t_s` for logs and plots.
+    pub fn pose(&self, t_s: f64) -> PoseSample {
+        PoseSample {
+            t_s,
+            position_m: self.vehicle.position_m,
+            heading_deg: self.vehicle.heading_deg,
+            velocity: self.vehicle.velocity,
+            commanded_velocity: self.vehicle.commanded_velocity,
+            goal_m: self.executing.map(|Executing::GoTo(target, _)| target),
+            backtrack_m: if self.link_up {
+                None
+            } else {
+                self.stack.back().copied()
+            },
+            link_up: self.link_up,
+        }
     }
 
     /// When [`Rov::poll`] wants to run next.

@@ -10,12 +10,11 @@ use serde::Serialize;
 
 use super::operator::{Joystick, Operator, SlotContent};
 use super::rov::{Rov, RovConfig};
-use super::{Event, ImageSettings};
+use super::{Event, ImageSettings, PoseSample};
 use crate::debt;
 use crate::link::{Distance, Fate, Link, Model, ModelError, Report, Side, SimTime};
 use crate::stats::Running;
 use crate::wire::frame::Frame;
-use crate::wire::operator::Order;
 use crate::wire::{Message, MessageRepr};
 
 /// A GoTo order sent at a time.
@@ -82,10 +81,10 @@ pub fn auto_ipg_s(
 pub struct DirectionMetrics {
     /// Bits of delivered frames per second, kbit/s.
     pub throughput_kbps: f64,
-    /// Mean delay (arrival minus send), ms.
-    pub delay_ms: f64,
-    /// Standard deviation of the delay, ms.
-    pub jitter_ms: f64,
+    /// Mean delay (arrival minus send), ms; none where one end cannot know it (real time).
+    pub delay_ms: Option<f64>,
+    /// Standard deviation of the delay, ms; none where the delay is unknown.
+    pub jitter_ms: Option<f64>,
     /// Mean time between consecutive deliveries, ms.
     pub iat_ms: f64,
     /// Standard deviation of that time, ms.
@@ -99,6 +98,9 @@ pub struct DirectionMetrics {
 /// The session's figures (`--metrics`).
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Metrics {
+    /// Whose figures: `simulation` (both ends, every field), or in real time `operator` or
+    /// `rov` (one end: the frames it sent and those it received; the far end's halves are 0).
+    pub measured_by: &'static str,
     /// ROV to operator.
     pub rov_to_operator: DirectionMetrics,
     /// Operator to ROV.
@@ -121,6 +123,12 @@ pub struct Metrics {
     pub link_losses: u64,
     /// Times it came back.
     pub link_recoveries: u64,
+    /// Real time, operator: mean time from a slot's frame to the ROV's answer, ms.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub round_trip_ms: Option<f64>,
+    /// Real time, operator: standard deviation of that time, ms.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub round_trip_jitter_ms: Option<f64>,
     /// Session length, s.
     pub duration_s: f64,
 }
@@ -134,8 +142,9 @@ pub struct FrameEvent {
     pub kind: &'static str,
     /// Frame length.
     pub bytes: usize,
-    /// When it was sent, s.
-    pub t_sent_s: f64,
+    /// When it was sent, s (none for a frame received in real time: its send time is the far
+    /// end's).
+    pub t_sent_s: Option<f64>,
     /// When it arrived, s (none when lost).
     pub t_received_s: Option<f64>,
     /// The link's fate for it.
@@ -148,8 +157,9 @@ pub trait Observer {
     fn frame(&mut self, _event: &FrameEvent) {}
     /// The operator completed an image (its DEBT stream) at `t_s`.
     fn image(&mut self, _t_s: f64, _stream: &[u8]) {}
-    /// The vehicle's pose after a step: NED position (m), heading (degrees), link up.
-    fn pose(&mut self, _t_s: f64, _position_m: [f64; 3], _heading_deg: f64, _link_up: bool) {}
+    /// The vehicle after a step (the ROV's side), or as the last status reported it (an
+    /// operator in real time).
+    fn pose(&mut self, _pose: &PoseSample) {}
 }
 
 /// An observer that observes nothing.
@@ -157,8 +167,9 @@ pub struct Quiet;
 
 impl Observer for Quiet {}
 
+/// One direction's running figures.
 #[derive(Default)]
-struct Direction {
+pub(crate) struct Direction {
     delay_ms: Running,
     iat_ms: Running,
     last_delivery: Option<SimTime>,
@@ -168,33 +179,46 @@ struct Direction {
 }
 
 impl Direction {
+    /// A frame went out.
+    pub(crate) fn sent(&mut self) {
+        self.sent += 1;
+    }
+
+    /// A frame of `len` bytes arrived intact at `t_rx`, `delay_ms` after it was sent if known.
+    pub(crate) fn delivered(&mut self, t_rx: SimTime, len: usize, delay_ms: Option<f64>) {
+        self.delivered += 1;
+        self.bits += len as u64 * 8;
+        if let Some(delay) = delay_ms {
+            self.delay_ms.push(delay);
+        }
+        if let Some(last) = self.last_delivery {
+            self.iat_ms
+                .push((t_rx.0.saturating_sub(last.0)) as f64 * 1e-6);
+        }
+        self.last_delivery = Some(t_rx);
+    }
+
     fn record(&mut self, report: &Report) {
         if report.duplicate {
             return;
         }
-        self.sent += 1;
+        self.sent();
         if let (Fate::Delivered, Some(t_rx)) = (report.fate, report.t_rx) {
-            self.delivered += 1;
-            self.bits += report.len as u64 * 8;
-            self.delay_ms
-                .push((t_rx.0 - report.t_offered.0) as f64 * 1e-6);
-            if let Some(last) = self.last_delivery {
-                self.iat_ms
-                    .push((t_rx.0.saturating_sub(last.0)) as f64 * 1e-6);
-            }
-            self.last_delivery = Some(t_rx);
+            let delay_ms = (t_rx.0 - report.t_offered.0) as f64 * 1e-6;
+            self.delivered(t_rx, report.len, Some(delay_ms));
         }
     }
 
-    fn metrics(&self, duration_s: f64) -> DirectionMetrics {
+    pub(crate) fn metrics(&self, duration_s: f64) -> DirectionMetrics {
+        let known = self.delay_ms.count() > 0;
         DirectionMetrics {
             throughput_kbps: if duration_s > 0.0 {
                 self.bits as f64 / duration_s / 1000.0
             } else {
                 0.0
             },
-            delay_ms: self.delay_ms.mean(),
-            jitter_ms: self.delay_ms.std(),
+            delay_ms: known.then(|| self.delay_ms.mean()),
+            jitter_ms: known.then(|| self.delay_ms.std()),
             iat_ms: self.iat_ms.mean(),
             iat_sigma_ms: self.iat_ms.std(),
             frames_sent: self.sent,
@@ -203,8 +227,14 @@ impl Direction {
     }
 }
 
+/// The mean time between completed images, s.
+pub(crate) fn image_period_s(image_times_s: &[f64]) -> Option<f64> {
+    let n = image_times_s.len();
+    (n > 1).then(|| (image_times_s[n - 1] - image_times_s[0]) / (n - 1) as f64)
+}
+
 /// What a frame is, for the events table.
-fn kind_of(bytes: &[u8]) -> &'static str {
+pub(crate) fn kind_of(bytes: &[u8]) -> &'static str {
     let parsed = Frame::new_checked(bytes)
         .ok()
         .and_then(|f| MessageRepr::parse(&f).ok());
@@ -277,7 +307,7 @@ pub fn run(config: &SessionConfig, observer: &mut dyn Observer) -> Result<Metric
                         kinds.remove(&(report.from, report.seq)).unwrap_or("raw")
                     },
                     bytes: report.len,
-                    t_sent_s: report.t_offered.as_secs_f64(),
+                    t_sent_s: Some(report.t_offered.as_secs_f64()),
                     t_received_s: report.t_rx.map(SimTime::as_secs_f64),
                     fate: report.fate.as_str(),
                 };
@@ -340,13 +370,7 @@ pub fn run(config: &SessionConfig, observer: &mut dyn Observer) -> Result<Metric
         }
         if next_waypoint == Some(t) {
             if let Some(w) = waypoints.next() {
-                let cm = |m: f64| (m * 100.0).round().clamp(-32768.0, 32767.0) as i16;
-                operator.push_order(Order::GoTo {
-                    x_cm: cm(w.position_m[0]),
-                    y_cm: cm(w.position_m[1]),
-                    z_cm: cm(w.position_m[2]),
-                    heading_deg: (w.heading_deg.rem_euclid(360.0).round() as u16) % 360,
-                });
+                operator.push_order(super::realtime::goto_order(w.position_m, w.heading_deg));
                 metrics.orders_sent += 1;
             }
             continue;
@@ -371,20 +395,14 @@ pub fn run(config: &SessionConfig, observer: &mut dyn Observer) -> Result<Metric
                     _ => {}
                 }
             }
-            observer.pose(
-                t.as_secs_f64(),
-                rov.vehicle.position_m,
-                rov.vehicle.heading_deg,
-                rov.link_up(),
-            );
+            observer.pose(&rov.pose(t.as_secs_f64()));
         }
     }
+    metrics.measured_by = "simulation";
     metrics.duration_s = config.duration_s;
     metrics.operator_to_rov = directions[0].metrics(config.duration_s);
     metrics.rov_to_operator = directions[1].metrics(config.duration_s);
-    metrics.image_period_s = (image_times.len() > 1).then(|| {
-        (image_times[image_times.len() - 1] - image_times[0]) / (image_times.len() - 1) as f64
-    });
+    metrics.image_period_s = image_period_s(&image_times);
     Ok(metrics)
 }
 
@@ -445,8 +463,8 @@ mod tests {
         let (r, o) = (&metrics.rov_to_operator, &metrics.operator_to_rov);
         assert!((r.throughput_kbps / 0.72 - 1.0).abs() < 0.05, "{r:?}");
         assert!((o.throughput_kbps / 0.2 - 1.0).abs() < 0.05, "{o:?}");
-        assert!((r.delay_ms / 333.17 - 1.0).abs() < 0.05, "{r:?}");
-        assert!((o.delay_ms / 158.99 - 1.0).abs() < 0.05, "{o:?}");
+        assert!((r.delay_ms.unwrap() / 333.17 - 1.0).abs() < 0.05, "{r:?}");
+        assert!((o.delay_ms.unwrap() / 158.99 - 1.0).abs() < 0.05, "{o:?}");
         assert!((r.iat_ms / 640.21 - 1.0).abs() < 0.05, "{r:?}");
         assert!((o.iat_ms / 640.36 - 1.0).abs() < 0.05, "{o:?}");
     }
