@@ -709,17 +709,33 @@ fn print_half(metrics: &Metrics) {
 
 /// Images, orders and link recovery.
 fn print_counters(metrics: &Metrics) {
-    say!(
-        "images completed {} (one every {}); orders sent {}, acknowledged {}, executed {}, executed twice {}; link lost {} times, recovered {}",
-        metrics.images_completed,
-        metrics
-            .image_period_s
-            .map_or("-".into(), |p| format!("{p:.1} s")),
-        metrics.orders_sent,
-        metrics.orders_acknowledged,
-        metrics.orders_executed,
-        metrics.orders_executed_twice,
-        metrics.link_losses,
-        metrics.link_recoveries
-    );
+    let period = metrics
+        .image_period_s
+        .map_or("-".into(), |p| format!("{p:.1} s"));
+    match metrics.measured_by {
+        "operator" => say!(
+            "images completed {} (one every {period}); orders sent {}, acknowledged {}",
+            metrics.images_completed,
+            metrics.orders_sent,
+            metrics.orders_acknowledged
+        ),
+        "rov" => say!(
+            "images started {}; orders executed {}; link lost {} times, recovered {}",
+            metrics.images_started,
+            metrics.orders_executed,
+            metrics.link_losses,
+            metrics.link_recoveries
+        ),
+        _ => say!(
+            "images completed {} of {} started (one every {period}); orders sent {}, acknowledged {}, executed {}, executed twice {}; link lost {} times, recovered {}",
+            metrics.images_completed,
+            metrics.images_started,
+            metrics.orders_sent,
+            metrics.orders_acknowledged,
+            metrics.orders_executed,
+            metrics.orders_executed_twice,
+            metrics.link_losses,
+            metrics.link_recoveries
+        ),
+    }
 }

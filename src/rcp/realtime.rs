@@ -286,6 +286,7 @@ impl End<'_> {
             for event in rov.take_events() {
                 match event {
                     Event::OrderExecuted(_) => metrics.orders_executed += 1,
+                    Event::ImageStarted { .. } => metrics.images_started += 1,
                     Event::LinkLost => metrics.link_losses += 1,
                     Event::LinkRecovered => metrics.link_recoveries += 1,
                     _ => {}

@@ -4,6 +4,12 @@
 //! [`Rov::receive`] takes an operator frame and returns the reply to send at once (the TDMA
 //! slave transmits only in answer). [`Rov::poll`] advances the vehicle and the recovery timers;
 //! [`Rov::poll_at`] says when it next wants to be called. Nothing here reads a clock.
+//!
+//! Recovery (wire.md, the paper's Algorithm 1): while heartbeats arrive the position is stacked
+//! every 2 s; after 5 s without one the ROV drives back through the stacked positions, newest
+//! first, until a heartbeat arrives. A GoTo in execution when the link is lost is abandoned (it
+//! is what took the ROV out of range; resuming it would oscillate at the range's edge): after
+//! recovery the ROV holds position under the joystick until the operator orders again.
 
 use std::collections::VecDeque;
 
@@ -157,6 +163,9 @@ impl Rov {
         let since = now.0.saturating_sub(self.last_heartbeat.0) as f64 * 1e-9;
         if self.link_up && since > self.cfg.heartbeat_timeout_s {
             self.link_up = false;
+            // The order in execution led out of range: it is abandoned, so that once the link
+            // is back the ROV holds where it regained it instead of driving out again.
+            self.executing = None;
             self.events.push(Event::LinkLost);
         }
         if self.link_up && now >= self.next_push {

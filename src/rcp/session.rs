@@ -105,6 +105,8 @@ pub struct Metrics {
     pub rov_to_operator: DirectionMetrics,
     /// Operator to ROV.
     pub operator_to_rov: DirectionMetrics,
+    /// Images the ROV started sending (simulation, or the ROV end in real time).
+    pub images_started: u64,
     /// Images the operator completed.
     pub images_completed: u64,
     /// Mean time between completed images, s.
@@ -334,6 +336,7 @@ pub fn run(config: &SessionConfig, observer: &mut dyn Observer) -> Result<Metric
                                     }
                                 }
                             }
+                            Event::ImageStarted { .. } => metrics.images_started += 1,
                             Event::LinkLost => metrics.link_losses += 1,
                             Event::LinkRecovered => metrics.link_recoveries += 1,
                             _ => {}
