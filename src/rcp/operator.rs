@@ -135,8 +135,9 @@ impl Operator {
                     disarm: false,
                     nav: Nav::Manual,
                 };
-                // A cancel refers to the last acknowledged order: OID = !EOID.
-                (order, !self.last_eoid, SlotContent::Velocity)
+                // OID is ignored for Velocity, except with CLO: the ROV cancels only when OID
+                // is its last announced EOID (so a CLO can never cancel a newer order).
+                (order, self.last_eoid, SlotContent::Velocity)
             }
         };
         let message = Message::Operator(operator::Repr {
@@ -174,7 +175,8 @@ impl Operator {
                 self.head_oid = None;
                 self.events.push(Event::OrderAcknowledged(index));
             }
-            if status.loc {
+            // Cancelled (LOC), or nothing left to cancel (RD): the request is done.
+            if status.loc || status.rd {
                 self.cancel = false;
             }
             self.last_status = Some(status);
@@ -205,5 +207,234 @@ impl Operator {
                 self.count = None;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::ImageSettings;
+    use super::super::rov::{Rov, RovConfig};
+    use super::*;
+    use crate::wire::operator::Roi;
+
+    /// Both engines with nothing between them but `lose`, which drops the ROV's reply to slot k
+    /// when it returns true.
+    struct Pair {
+        operator: Operator,
+        rov: Rov,
+        t: SimTime,
+        events: Vec<Event>,
+    }
+
+    impl Pair {
+        fn new(settings: ImageSettings) -> Pair {
+            let cfg = RovConfig {
+                settings,
+                ..RovConfig::default()
+            };
+            Pair {
+                operator: Operator::new(1, 640_000_000),
+                rov: Rov::new(
+                    cfg,
+                    [1.0, 0.0, 0.0],
+                    vec![super::super::test_image(64, 48, 1)],
+                ),
+                t: SimTime::ZERO,
+                events: Vec::new(),
+            }
+        }
+
+        /// One slot; returns the ROV's reply as parsed.
+        fn slot(&mut self, lose_reply: bool) -> crate::wire::rov::Repr {
+            let (frame, _) = self.operator.poll(self.t);
+            let reply = self.rov.receive(self.t, &frame).expect("the ROV answers");
+            self.events.extend(self.rov.take_events());
+            let t = self.t.after_secs(0.5);
+            if !lose_reply {
+                self.operator.receive(t, &reply);
+                self.events.extend(self.operator.take_events());
+            }
+            self.t = self.t.after_secs(0.64);
+            let frame = Frame::new_checked(&reply[..]).unwrap();
+            match MessageRepr::parse(&frame).unwrap().message {
+                Message::Rov(r) => r,
+                other => panic!("{other:?}"),
+            }
+        }
+
+        fn completed(&self) -> usize {
+            self.events
+                .iter()
+                .filter(|e| matches!(e, Event::ImageCompleted(_)))
+                .count()
+        }
+    }
+
+    fn small() -> ImageSettings {
+        ImageSettings {
+            size_bytes: 390,
+            ..ImageSettings::default()
+        }
+    }
+
+    #[test]
+    fn a_lost_trunk_is_asked_for_by_rit_and_resent() {
+        let mut pair = Pair::new(small());
+        // Ten trunks; the reply carrying trunk 3 is lost.
+        let mut sent = Vec::new();
+        for k in 0..10 {
+            sent.push(pair.slot(k == 3).itsn);
+        }
+        assert_eq!(sent, (0..10).collect::<Vec<u8>>());
+        assert_eq!(pair.completed(), 0);
+        assert_eq!(pair.operator.rit(), 3);
+        let resend = pair.slot(false);
+        assert_eq!(
+            resend.itsn, 3,
+            "the first pass is over: RIT's trunk comes next"
+        );
+        assert_eq!(pair.completed(), 1);
+        // The next image starts at trunk 0 with the ISN toggled.
+        let next = pair.slot(false);
+        assert_eq!((next.itsn, next.ft, next.isn), (0, true, true));
+    }
+
+    #[test]
+    fn new_image_settings_cancel_the_image_in_flight_with_ci_and_ic() {
+        let mut pair = Pair::new(small());
+        for _ in 0..4 {
+            pair.slot(false);
+        }
+        pair.operator.push_order(Order::ImageSettings {
+            roi: Roi {
+                x0: 0,
+                y0: 0,
+                x1: 0,
+                y1: 0,
+            },
+            roi_shift: 3,
+            gray: true,
+            scale: 0,
+            size_bytes: 195,
+            trunk_bytes: 39,
+        });
+        let cancelled = pair.slot(false);
+        assert!(cancelled.ci && cancelled.trunk.is_empty(), "{cancelled:?}");
+        assert!(pair.events.contains(&Event::ImageCancelled));
+        // The operator answers IC; the ROV starts the new 5-trunk image.
+        let mut trunks = Vec::new();
+        while pair.completed() == 0 {
+            let r = pair.slot(false);
+            assert!(!r.ci);
+            trunks.push(r.itsn);
+            assert!(trunks.len() < 10, "{trunks:?}");
+        }
+        assert_eq!(trunks, vec![0, 1, 2, 3, 4]);
+        assert!(pair.events.iter().any(|e| matches!(
+            e,
+            Event::ImageStarted {
+                trunks: 5,
+                bytes: 195
+            }
+        )));
+    }
+
+    #[test]
+    fn clo_cancels_the_order_in_execution_and_only_that() {
+        let mut pair = Pair::new(small());
+        pair.operator.push_order(Order::GoTo {
+            x_cm: 400,
+            y_cm: 0,
+            z_cm: 0,
+            heading_deg: 0,
+        });
+        let reply = pair.slot(false);
+        let Status::Basic(status) = reply.status else {
+            panic!()
+        };
+        assert!(
+            !status.rd && status.eoid,
+            "executing, EOID toggled: {status:?}"
+        );
+        assert!(pair.rov.pose(0.0).goal_m.is_some());
+        pair.operator.cancel();
+        let reply = pair.slot(false);
+        let Status::Basic(status) = reply.status else {
+            panic!()
+        };
+        assert!(status.loc && status.rd, "{status:?}");
+        assert!(pair.events.contains(&Event::OrderCancelled));
+        assert!(pair.rov.pose(0.0).goal_m.is_none());
+        // The request is over: a later order runs uncancelled.
+        pair.operator.push_order(Order::GoTo {
+            x_cm: 200,
+            y_cm: 0,
+            z_cm: 0,
+            heading_deg: 0,
+        });
+        pair.slot(false);
+        pair.slot(false);
+        assert!(pair.rov.pose(0.0).goal_m.is_some());
+        assert_eq!(
+            pair.events
+                .iter()
+                .filter(|e| matches!(e, Event::OrderCancelled))
+                .count(),
+            1
+        );
+    }
+
+    #[test]
+    fn a_clo_with_a_stale_oid_does_not_cancel() {
+        let mut rov = Rov::new(RovConfig::default(), [0.0; 3], Vec::new());
+        let goto = |oid, clo| {
+            emit(
+                ADDR_OPERATOR,
+                1,
+                Message::Operator(operator::Repr {
+                    oid,
+                    clo,
+                    eisn: false,
+                    ic: false,
+                    rit: 0,
+                    order: Order::GoTo {
+                        x_cm: 300,
+                        y_cm: 0,
+                        z_cm: 0,
+                        heading_deg: 0,
+                    },
+                }),
+            )
+        };
+        // EOID starts at 0: the order with OID 0 runs and EOID becomes 1.
+        rov.receive(SimTime::ZERO, &goto(false, false));
+        assert!(rov.pose(0.0).goal_m.is_some());
+        // A CLO carrying the old OID (0) refers to an earlier state: ignored.
+        rov.receive(SimTime(1), &goto(false, true));
+        assert!(rov.pose(0.0).goal_m.is_some());
+        assert!(!rov.take_events().contains(&Event::OrderCancelled));
+    }
+
+    #[test]
+    fn hold_heading_turns_heading_hold_on_and_off() {
+        let mut pair = Pair::new(small());
+        pair.operator.push_order(Order::HoldHeading {
+            heading_deg: 90,
+            enable: true,
+        });
+        let Status::Basic(on) = pair.slot(false).status else {
+            panic!()
+        };
+        assert!(on.hh);
+        assert_eq!(pair.rov.vehicle.heading_hold_deg, Some(90.0));
+        pair.operator.push_order(Order::HoldHeading {
+            heading_deg: 0,
+            enable: false,
+        });
+        pair.slot(false);
+        let Status::Basic(off) = pair.slot(false).status else {
+            panic!()
+        };
+        assert!(!off.hh);
     }
 }

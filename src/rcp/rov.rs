@@ -238,7 +238,7 @@ impl Rov {
             self.events.push(Event::LinkRecovered);
         }
 
-        if msg.clo && self.executing.is_some() && msg.oid != self.eoid {
+        if msg.clo && self.executing.is_some() && msg.oid == self.eoid {
             self.executing = None;
             self.loc = true;
             self.events.push(Event::OrderCancelled);
