@@ -7,6 +7,8 @@
 //! Modules, one concept each:
 //! - [`wire`]: the link frame, the ROV and operator messages, their JSON Lines text form and a
 //!   streaming deframer. The byte layouts are a contract (`shared/design/wire.md`).
+//! - [`octo`]: an OctoMap-compatible occupancy octree, point-cloud readers and the map-delta
+//!   stream.
 //! - [`io`]: the command-line conventions every tool shares (`-` for stdin/stdout, atomic output
 //!   files, refusing binary output to a terminal, error messages that name the file).
 #![forbid(unsafe_code)]
@@ -17,6 +19,7 @@ pub mod gll;
 pub mod io;
 pub mod link;
 pub mod measure;
+pub mod octo;
 pub mod rcp;
 pub mod stats;
 pub mod vehicle;

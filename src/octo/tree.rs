@@ -1,0 +1,1271 @@
+//! The occupancy octree: OctoMap's semantics on an arena of 8-node blocks.
+//!
+//! A voxel's state is a log-odds value (`f32`): every scan adds `prob_hit_log` to the voxels
+//! its points end in and `prob_miss_log` to the voxels its rays cross, clamped to
+//! `[clamp_min_log, clamp_max_log]`; a voxel is occupied when its log-odds is >= 0. Keys are 16
+//! bits per axis (`key = floor(c / res) + 32768`), so the tree has 16 levels below the root and
+//! a child's index at depth `d` takes bit `15 - d` of each key: `x | y << 1 | z << 2`.
+//!
+//! The arithmetic, the ray cells (Amanatides & Woo's 3D DDA, with OctoMap's stopping rule), the
+//! order of the updates (a voxel hit by a point is updated as occupied only, whatever rays
+//! crossed it) and pruning (eight equal leaf children collapse into their parent; an inner
+//! node holds the maximum of its children) are OctoMap 1.9's, so the same scans give the same
+//! tree, node for node and bit for bit, as `graph2tree` builds.
+//!
+//! Speed comes from doing the same work in a different order, which gives the same result:
+//! OctoMap updates voxel by voxel from a hash set, descending from the root and trying to prune
+//! the whole path after every voxel. Here a scan's voxels are sorted in Morton order (depth-first
+//! order of the tree) and applied in one recursive pass, so each touched inner node is visited
+//! once and pruned once, after all its children are final. Because every voxel is updated at
+//! most once per scan and pruning always ends in the same fully pruned tree, the outcome is
+//! OctoMap's.
+//!
+//! Colour (the second paper's rule): an occupied voxel keeps the brightest colour (highest
+//! luma) of the points that fell in it. Leaves with different colours are not pruned together,
+//! as in OctoMap's `ColorOcTree`.
+
+use super::cellset::CellSet;
+use super::{Pose, Scan};
+
+/// Tree depth: 16 levels below the root.
+pub const TREE_DEPTH: u32 = 16;
+/// Key of the cell whose lower corner is at coordinate 0.
+pub const KEY_CENTER: i64 = 32768;
+const NONE: u32 = u32::MAX;
+
+/// A voxel key: one `u16` per axis.
+pub type Key = [u16; 3];
+
+/// OctoMap's `logodds(p)`: computed in `f64`, stored as `f32`.
+pub fn logodds(probability: f64) -> f32 {
+    (probability / (1.0 - probability)).ln() as f32
+}
+
+/// OctoMap's `probability(l)`.
+pub fn probability(log_odds: f64) -> f64 {
+    1.0 - (1.0 / (1.0 + log_odds.exp()))
+}
+
+/// The sensor model and clamping, as log-odds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Params {
+    /// Log-odds added to a voxel a point ends in (OctoMap: `logodds(0.7)`).
+    pub hit_log: f32,
+    /// Log-odds added to a voxel a ray crosses (OctoMap: `logodds(0.4)`).
+    pub miss_log: f32,
+    /// Lower clamp (OctoMap: `logodds(0.1192)`).
+    pub clamp_min_log: f32,
+    /// Upper clamp (OctoMap: `logodds(0.971)`).
+    pub clamp_max_log: f32,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            hit_log: logodds(0.7),
+            miss_log: logodds(0.4),
+            clamp_min_log: logodds(0.1192),
+            clamp_max_log: logodds(0.971),
+        }
+    }
+}
+
+/// Spreads the 16 bits of `v` to every third bit (bit i -> bit 3i).
+fn spread3(v: u16) -> u64 {
+    let mut x = v as u64;
+    x = (x | (x << 16)) & 0x0000_ff00_00ff;
+    x = (x | (x << 8)) & 0x00f0_0f00_f00f;
+    x = (x | (x << 4)) & 0x0c30_c30c_30c3;
+    x = (x | (x << 2)) & 0x2492_4924_9249;
+    x
+}
+
+/// Gathers every third bit (bit 3i -> bit i).
+fn compact3(m: u64) -> u16 {
+    let mut x = m & 0x2492_4924_9249;
+    x = (x | (x >> 2)) & 0x0c30_c30c_30c3;
+    x = (x | (x >> 4)) & 0x00f0_0f00_f00f;
+    x = (x | (x >> 8)) & 0x0000_ff00_00ff;
+    x = (x | (x >> 16)) & 0xffff;
+    x as u16
+}
+
+/// The Morton code of a key: the child indices from the root down, 3 bits each, root first.
+pub fn morton(key: Key) -> u64 {
+    spread3(key[0]) | (spread3(key[1]) << 1) | (spread3(key[2]) << 2)
+}
+
+/// The key of a Morton code.
+pub fn unmorton(code: u64) -> Key {
+    [compact3(code), compact3(code >> 1), compact3(code >> 2)]
+}
+
+/// Luma of a colour, for the brightest-colour rule (BT.601 weights, integer).
+pub fn luma(rgb: [u8; 3]) -> u32 {
+    299 * rgb[0] as u32 + 587 * rgb[1] as u32 + 114 * rgb[2] as u32
+}
+
+/// A colour slot: r, g, b and a flag (1: set, 0: the voxel has no colour).
+pub type ColorSlot = [u8; 4];
+
+#[derive(Clone)]
+struct Block {
+    value: [f32; 8],
+    child: [u32; 8],
+    mask: u8,
+}
+
+impl Block {
+    fn empty() -> Self {
+        Block {
+            value: [0.0; 8],
+            child: [NONE; 8],
+            mask: 0,
+        }
+    }
+}
+
+/// A voxel whose state changed in a scan (OctoMap's change detection: it was unknown, or its
+/// occupancy flipped).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Change {
+    /// Morton code of the depth-16 voxel.
+    pub code: u64,
+    /// Occupied after the scan.
+    pub occupied: bool,
+    /// Its colour after the scan, if it has one.
+    pub color: Option<[u8; 3]>,
+}
+
+/// What inserting one scan did.
+#[derive(Debug, Clone, Default)]
+pub struct ScanUpdate {
+    /// Points in the scan.
+    pub points: usize,
+    /// Points skipped: not finite, or outside the tree's key range (never wrapped).
+    pub points_skipped: usize,
+    /// Points beyond the maximum range (their ray marks free space up to the range only).
+    pub points_beyond_range: usize,
+    /// Distinct voxels updated as free.
+    pub free_voxels: usize,
+    /// Distinct voxels updated as occupied.
+    pub occupied_voxels: usize,
+    /// Voxels whose state changed, in Morton order.
+    pub changes: Vec<Change>,
+}
+
+#[derive(Clone, Copy)]
+struct Upd {
+    code: u64,
+    hit: bool,
+    color: ColorSlot,
+}
+
+/// One node as a view: its value and whether it has children.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NodeView {
+    /// Log-odds.
+    pub log_odds: f32,
+    /// Colour, if any.
+    pub color: Option<[u8; 3]>,
+    /// Index of its children's block, if it has children.
+    children: u32,
+    /// Which children exist.
+    mask: u8,
+}
+
+impl NodeView {
+    /// Whether the node has children (is an inner node).
+    pub fn has_children(&self) -> bool {
+        self.children != NONE
+    }
+    /// Which of the eight children exist (bit i: child i).
+    pub fn child_mask(&self) -> u8 {
+        if self.children == NONE { 0 } else { self.mask }
+    }
+}
+
+/// The occupancy octree.
+#[derive(Clone)]
+pub struct OcTree {
+    resolution_m: f64,
+    resolution_factor: f64,
+    params: Params,
+    blocks: Vec<Block>,
+    colors: Option<Vec<[ColorSlot; 8]>>,
+    free_list: Vec<u32>,
+    nodes: usize,
+    threads: usize,
+    scratch: CellSet,
+}
+
+impl std::fmt::Debug for OcTree {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("OcTree")
+            .field("resolution_m", &self.resolution_m)
+            .field("nodes", &self.nodes)
+            .field("colored", &self.colors.is_some())
+            .finish()
+    }
+}
+
+/// Quaternion product in `f32`, in OctoMap's order of operations.
+fn qmul(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
+    let [au, ax, ay, az] = a;
+    let [bu, bx, by, bz] = b;
+    [
+        au * bu - ax * bx - ay * by - az * bz,
+        ay * bz - by * az + au * bx + bu * ax,
+        az * bx - bz * ax + au * by + bu * ay,
+        ax * by - bx * ay + au * bz + bu * az,
+    ]
+}
+
+/// `q * v * q^-1` as OctoMap's `Quaternion::rotate` computes it (no normalisation).
+fn rotate(q: [f32; 4], v: [f32; 3]) -> [f32; 3] {
+    let inv = [q[0], -q[1], -q[2], -q[3]];
+    let r = qmul(qmul(q, [0.0, v[0], v[1], v[2]]), inv);
+    [r[1], r[2], r[3]]
+}
+
+fn normalized(q: [f32; 4]) -> [f32; 4] {
+    let mut n = 0.0f64;
+    for c in q {
+        n += (c * c) as f64;
+    }
+    let len = n.sqrt() as f32;
+    if len > 0.0 {
+        [q[0] / len, q[1] / len, q[2] / len, q[3] / len]
+    } else {
+        q
+    }
+}
+
+fn transform(pose: &Pose, v: [f32; 3]) -> [f32; 3] {
+    let r = rotate(pose.rotation, v);
+    let t = pose.translation_m;
+    [r[0] + t[0], r[1] + t[1], r[2] + t[2]]
+}
+
+fn inverse(pose: &Pose) -> Pose {
+    let q = normalized([
+        pose.rotation[0],
+        -pose.rotation[1],
+        -pose.rotation[2],
+        -pose.rotation[3],
+    ]);
+    let t = pose.translation_m;
+    Pose {
+        translation_m: rotate(q, [-t[0], -t[1], -t[2]]),
+        rotation: q,
+    }
+}
+
+/// The points of a scan in the map frame and the sensor origin, computed exactly as
+/// `graph2tree` does (the origin goes through the inverse pose and back, in `f32`).
+pub fn world_points(scan: &Scan) -> (Vec<[f32; 3]>, [f32; 3]) {
+    let pose = &scan.pose;
+    let sensor = transform(&inverse(pose), pose.translation_m);
+    let origin = transform(pose, sensor);
+    let pts = scan.points.iter().map(|&p| transform(pose, p)).collect();
+    (pts, origin)
+}
+
+fn norm_f32(v: [f32; 3]) -> f64 {
+    ((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) as f64).sqrt()
+}
+
+impl OcTree {
+    /// An empty tree of voxel edge `resolution_m` metres with OctoMap's default sensor model.
+    pub fn new(resolution_m: f64) -> Self {
+        Self::with_params(resolution_m, Params::default())
+    }
+
+    /// An empty tree with the given sensor model.
+    pub fn with_params(resolution_m: f64, params: Params) -> Self {
+        let mut root = Block::empty();
+        root.mask = 0;
+        OcTree {
+            resolution_m,
+            resolution_factor: 1.0 / resolution_m,
+            params,
+            blocks: vec![root],
+            colors: None,
+            free_list: Vec::new(),
+            nodes: 0,
+            threads: 1,
+            scratch: CellSet::new(),
+        }
+    }
+
+    /// Makes the tree keep colours (a `ColorOcTree`).
+    pub fn enable_color(&mut self) {
+        if self.colors.is_none() {
+            self.colors = Some(vec![[[255, 255, 255, 0]; 8]; self.blocks.len()]);
+        }
+    }
+
+    /// Whether the tree keeps colours.
+    pub fn is_colored(&self) -> bool {
+        self.colors.is_some()
+    }
+
+    /// Voxel edge in metres.
+    pub fn resolution_m(&self) -> f64 {
+        self.resolution_m
+    }
+
+    /// The sensor model.
+    pub fn params(&self) -> Params {
+        self.params
+    }
+
+    /// Number of nodes (inner and leaves), as OctoMap's `size()`.
+    pub fn num_nodes(&self) -> usize {
+        self.nodes
+    }
+
+    /// Bytes held by the tree's arrays.
+    pub fn memory_bytes(&self) -> usize {
+        self.blocks.capacity() * std::mem::size_of::<Block>()
+            + self.colors.as_ref().map_or(0, |c| c.capacity() * 32)
+    }
+
+    /// OctoMap's `coordToKeyChecked` for one axis: `None` outside the key range.
+    pub fn coord_to_key(&self, c: f32) -> Option<u16> {
+        let scaled = (self.resolution_factor * c as f64).floor();
+        if !(scaled.is_finite()) {
+            return None;
+        }
+        let k = scaled as i64 + KEY_CENTER;
+        if (0..2 * KEY_CENTER).contains(&k) {
+            Some(k as u16)
+        } else {
+            None
+        }
+    }
+
+    /// The key of a point, `None` outside the key range.
+    pub fn key_of(&self, p: [f32; 3]) -> Option<Key> {
+        Some([
+            self.coord_to_key(p[0])?,
+            self.coord_to_key(p[1])?,
+            self.coord_to_key(p[2])?,
+        ])
+    }
+
+    /// The centre coordinate of a key on one axis.
+    pub fn key_to_coord(&self, k: u16) -> f64 {
+        ((k as i64 - KEY_CENTER) as f64 + 0.5) * self.resolution_m
+    }
+
+    /// The free cells of the ray from `origin` to `end` (OctoMap's `computeRayKeys`): from the
+    /// origin's cell up to, not including, the end's cell. `false` when either end is outside
+    /// the key range.
+    fn ray_keys(&self, origin: [f32; 3], end: [f32; 3], out: &mut CellSet) -> bool {
+        let (Some(ko), Some(ke)) = (self.key_of(origin), self.key_of(end)) else {
+            return false;
+        };
+        if ko == ke {
+            return true;
+        }
+        out.insert(ko);
+        let mut dir = [end[0] - origin[0], end[1] - origin[1], end[2] - origin[2]];
+        let length = norm_f32(dir) as f32;
+        for d in &mut dir {
+            *d /= length;
+        }
+        let mut step = [0i32; 3];
+        let mut t_max = [f64::MAX; 3];
+        let mut t_delta = [f64::MAX; 3];
+        let cur = ko;
+        for i in 0..3 {
+            if dir[i] > 0.0 {
+                step[i] = 1;
+            } else if dir[i] < 0.0 {
+                step[i] = -1;
+            }
+            if step[i] != 0 {
+                let mut border = self.key_to_coord(cur[i]);
+                border += (step[i] as f64 * self.resolution_m * 0.5) as f32 as f64;
+                t_max[i] = (border - origin[i] as f64) / dir[i] as f64;
+                t_delta[i] = self.resolution_m / (dir[i] as f64).abs();
+            }
+        }
+        let length = length as f64;
+        // One variable per axis (not arrays indexed by the moving axis): the loop then keeps
+        // everything in registers.
+        let [mut tx, mut ty, mut tz] = t_max;
+        let [dx, dy, dz] = t_delta;
+        let [sx, sy, sz] = step.map(|s| s as i16 as u16);
+        let [mut kx, mut ky, mut kz] = cur;
+        let [ex, ey, ez] = ke;
+        loop {
+            // OctoMap's choice of axis, ties included.
+            if tx < ty {
+                if tx < tz {
+                    kx = kx.wrapping_add(sx);
+                    tx += dx;
+                } else {
+                    kz = kz.wrapping_add(sz);
+                    tz += dz;
+                }
+            } else if ty < tz {
+                ky = ky.wrapping_add(sy);
+                ty += dy;
+            } else {
+                kz = kz.wrapping_add(sz);
+                tz += dz;
+            }
+            if kx == ex && ky == ey && kz == ez {
+                return true;
+            }
+            let m = if ty < tx { ty } else { tx };
+            let dist = if tz < m { tz } else { m };
+            if dist > length {
+                return true;
+            }
+            out.insert([kx, ky, kz]);
+        }
+    }
+
+    /// Sets how many threads cast a scan's rays (1: none besides the caller).
+    pub fn set_threads(&mut self, threads: usize) {
+        self.threads = threads.max(1);
+    }
+
+    /// The rays of `pts[range]`: free cells into `free`, end cells (with colour) into `occ`.
+    #[allow(clippy::too_many_arguments)]
+    fn cast(
+        &self,
+        pts: &[[f32; 3]],
+        first: usize,
+        origin: [f32; 3],
+        colors: Option<&[[u8; 3]]>,
+        max_range_m: Option<f64>,
+        free: &mut CellSet,
+        occ: &mut Vec<(u64, ColorSlot)>,
+    ) -> (usize, usize) {
+        let (mut skipped, mut beyond) = (0, 0);
+        for (j, &p) in pts.iter().enumerate() {
+            let i = first + j;
+            let diff = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
+            let within = max_range_m.is_none_or(|r| r < 0.0 || norm_f32(diff) <= r);
+            if within {
+                self.ray_keys(origin, p, free);
+                match self.key_of(p) {
+                    Some(k) => {
+                        let color = colors
+                            .and_then(|c| c.get(i))
+                            .map_or([255, 255, 255, 0], |c| [c[0], c[1], c[2], 1]);
+                        occ.push((morton(k), color));
+                    }
+                    None => skipped += 1,
+                }
+            } else {
+                beyond += 1;
+                let range = max_range_m.unwrap_or(0.0);
+                let len = norm_f32(diff);
+                let dir = if len > 0.0 {
+                    let l = len as f32;
+                    [diff[0] / l, diff[1] / l, diff[2] / l]
+                } else {
+                    diff
+                };
+                let r = range as f32;
+                let end = [
+                    origin[0] + dir[0] * r,
+                    origin[1] + dir[1] * r,
+                    origin[2] + dir[2] * r,
+                ];
+                self.ray_keys(origin, end, free);
+            }
+        }
+        (skipped, beyond)
+    }
+
+    /// Inserts one scan as `graph2tree` does (`insertPointCloud` with the scan's pose, no lazy
+    /// evaluation, no discretisation), with an optional maximum range, and returns what changed.
+    pub fn insert_scan(&mut self, scan: &Scan, max_range_m: Option<f64>) -> ScanUpdate {
+        let (pts, origin) = world_points(scan);
+        let mut report = ScanUpdate {
+            points: pts.len(),
+            ..ScanUpdate::default()
+        };
+        let colors = if self.colors.is_some() {
+            scan.colors.as_deref()
+        } else {
+            None
+        };
+        let mut free: Vec<u64> = Vec::new();
+        let mut occ: Vec<(u64, ColorSlot)> = Vec::with_capacity(pts.len());
+        let threads = if pts.len() >= 8192 { self.threads } else { 1 };
+        if threads <= 1 {
+            let mut set = std::mem::take(&mut self.scratch);
+            let (s, b) = self.cast(&pts, 0, origin, colors, max_range_m, &mut set, &mut occ);
+            set.drain_sorted(&mut free);
+            self.scratch = set;
+            report.points_skipped = s;
+            report.points_beyond_range = b;
+        } else {
+            let chunk = pts.len().div_ceil(threads);
+            let this = &*self;
+            let parts: Vec<CastPart> =
+                std::thread::scope(|sc| {
+                    let handles: Vec<_> = pts
+                        .chunks(chunk)
+                        .enumerate()
+                        .map(|(n, part)| {
+                            sc.spawn(move || {
+                                let mut set = CellSet::new();
+                                let mut o = Vec::with_capacity(part.len());
+                                let (s, b) = this.cast(
+                                    part,
+                                    n * chunk,
+                                    origin,
+                                    colors,
+                                    max_range_m,
+                                    &mut set,
+                                    &mut o,
+                                );
+                                let mut f = Vec::new();
+                                set.drain_sorted(&mut f);
+                                (f, o, s, b)
+                            })
+                        })
+                        .collect();
+                    handles
+                        .into_iter()
+                        .map(|h| h.join().unwrap_or_default())
+                        .collect()
+                });
+            let mut lists = Vec::with_capacity(parts.len());
+            for (f, o, s, b) in parts {
+                lists.push(f);
+                occ.extend(o);
+                report.points_skipped += s;
+                report.points_beyond_range += b;
+            }
+            free = merge_sorted(lists);
+        }
+        occ.sort_unstable_by(|a, b| {
+            a.0.cmp(&b.0)
+                .then(luma([b.1[0], b.1[1], b.1[2]]).cmp(&luma([a.1[0], a.1[1], a.1[2]])))
+                .then(b.1[3].cmp(&a.1[3]))
+        });
+        occ.dedup_by_key(|e| e.0);
+        // Merge: a voxel hit by a point is updated as occupied only.
+        let mut ups = Vec::with_capacity(free.len() + occ.len());
+        let (mut i, mut j) = (0, 0);
+        while i < free.len() || j < occ.len() {
+            if j >= occ.len() || (i < free.len() && free[i] < occ[j].0) {
+                ups.push(Upd {
+                    code: free[i],
+                    hit: false,
+                    color: [255, 255, 255, 0],
+                });
+                i += 1;
+            } else {
+                if i < free.len() && free[i] == occ[j].0 {
+                    i += 1;
+                }
+                ups.push(Upd {
+                    code: occ[j].0,
+                    hit: true,
+                    color: occ[j].1,
+                });
+                j += 1;
+            }
+        }
+        report.occupied_voxels = occ.len();
+        report.free_voxels = ups.len() - occ.len();
+        if !ups.is_empty() {
+            let created = self.blocks[0].mask & 1 == 0;
+            if created {
+                self.blocks[0].mask = 1;
+                self.blocks[0].value[0] = 0.0;
+                self.blocks[0].child[0] = NONE;
+                self.set_color(0, 0, [255, 255, 255, 0]);
+                self.nodes += 1;
+            }
+            self.apply(0, 0, 0, &ups, created, &mut report.changes);
+        }
+        report
+    }
+
+    fn set_color(&mut self, blk: u32, slot: usize, c: ColorSlot) {
+        if let Some(cs) = &mut self.colors {
+            cs[blk as usize][slot] = c;
+        }
+    }
+
+    fn color(&self, blk: u32, slot: usize) -> ColorSlot {
+        self.colors
+            .as_ref()
+            .map_or([255, 255, 255, 0], |cs| cs[blk as usize][slot])
+    }
+
+    fn alloc_block(&mut self) -> u32 {
+        if let Some(b) = self.free_list.pop() {
+            self.blocks[b as usize] = Block::empty();
+            if let Some(cs) = &mut self.colors {
+                cs[b as usize] = [[255, 255, 255, 0]; 8];
+            }
+            b
+        } else {
+            self.blocks.push(Block::empty());
+            if let Some(cs) = &mut self.colors {
+                cs.push([[255, 255, 255, 0]; 8]);
+            }
+            (self.blocks.len() - 1) as u32
+        }
+    }
+
+    /// Whether an update would leave a leaf of value `v` and colour `c` unchanged.
+    fn is_noop(&self, v: f32, c: ColorSlot, u: &Upd) -> bool {
+        let p = &self.params;
+        let occ_noop = if u.hit {
+            v >= p.clamp_max_log
+        } else {
+            v <= p.clamp_min_log
+        };
+        occ_noop && (u.color[3] == 0 || (c[3] == 1 && !brighter(u.color, c)))
+    }
+
+    fn apply(
+        &mut self,
+        blk: u32,
+        slot: usize,
+        depth: u32,
+        ups: &[Upd],
+        just_created: bool,
+        changes: &mut Vec<Change>,
+    ) {
+        if depth == TREE_DEPTH {
+            let u = &ups[0];
+            let v = self.blocks[blk as usize].value[slot];
+            let c = self.color(blk, slot);
+            let p = self.params;
+            let was_occ = v >= 0.0;
+            let mut nv = v;
+            let noop = if u.hit {
+                v >= p.clamp_max_log
+            } else {
+                v <= p.clamp_min_log
+            };
+            if !noop {
+                nv = v + if u.hit { p.hit_log } else { p.miss_log };
+                if nv < p.clamp_min_log {
+                    nv = p.clamp_min_log;
+                } else if nv > p.clamp_max_log {
+                    nv = p.clamp_max_log;
+                }
+            }
+            self.blocks[blk as usize].value[slot] = nv;
+            let mut nc = c;
+            if u.color[3] == 1 && (c[3] == 0 || brighter(u.color, c)) {
+                nc = u.color;
+                self.set_color(blk, slot, nc);
+            }
+            let now_occ = nv >= 0.0;
+            if just_created || was_occ != now_occ {
+                changes.push(Change {
+                    code: u.code,
+                    occupied: now_occ,
+                    color: (nc[3] == 1).then_some([nc[0], nc[1], nc[2]]),
+                });
+            }
+            return;
+        }
+        let mut child_blk = self.blocks[blk as usize].child[slot];
+        if child_blk == NONE {
+            if just_created {
+                child_blk = self.alloc_block();
+            } else {
+                // A pruned node: expand it unless no update would change anything.
+                let v = self.blocks[blk as usize].value[slot];
+                let c = self.color(blk, slot);
+                if ups.iter().all(|u| self.is_noop(v, c, u)) {
+                    return;
+                }
+                child_blk = self.alloc_block();
+                let b = &mut self.blocks[child_blk as usize];
+                b.value = [v; 8];
+                b.mask = 0xff;
+                if let Some(cs) = &mut self.colors {
+                    cs[child_blk as usize] = [c; 8];
+                }
+                self.nodes += 8;
+            }
+            self.blocks[blk as usize].child[slot] = child_blk;
+        }
+        let shift = 3 * (TREE_DEPTH - 1 - depth);
+        let mut start = 0;
+        while start < ups.len() {
+            let digit = ((ups[start].code >> shift) & 7) as usize;
+            let mut end = start + 1;
+            while end < ups.len() && ((ups[end].code >> shift) & 7) as usize == digit {
+                end += 1;
+            }
+            let b = &mut self.blocks[child_blk as usize];
+            let created = b.mask & (1 << digit) == 0;
+            if created {
+                b.mask |= 1 << digit;
+                b.value[digit] = 0.0;
+                b.child[digit] = NONE;
+                self.nodes += 1;
+            }
+            self.apply(
+                child_blk,
+                digit,
+                depth + 1,
+                &ups[start..end],
+                created,
+                changes,
+            );
+            start = end;
+        }
+        // Prune if the eight children are equal leaves, else hold the maximum of the children.
+        self.prune_or_max(blk, slot, child_blk);
+    }
+
+    /// The root node, if the tree is not empty.
+    pub fn root(&self) -> Option<NodeRef> {
+        (self.blocks[0].mask & 1 != 0).then_some(NodeRef { blk: 0, slot: 0 })
+    }
+
+    /// A node's value, colour and children.
+    pub fn node(&self, r: NodeRef) -> NodeView {
+        let b = &self.blocks[r.blk as usize];
+        let c = self.color(r.blk, r.slot as usize);
+        let children = b.child[r.slot as usize];
+        NodeView {
+            log_odds: b.value[r.slot as usize],
+            color: (c[3] == 1).then_some([c[0], c[1], c[2]]),
+            children,
+            mask: if children == NONE {
+                0
+            } else {
+                self.blocks[children as usize].mask
+            },
+        }
+    }
+
+    /// Child `i` of a node, if it exists.
+    pub fn child(&self, r: NodeRef, i: usize) -> Option<NodeRef> {
+        let c = self.blocks[r.blk as usize].child[r.slot as usize];
+        (c != NONE && self.blocks[c as usize].mask & (1 << i) != 0).then_some(NodeRef {
+            blk: c,
+            slot: i as u8,
+        })
+    }
+
+    /// The node that holds the voxel of Morton code `code` (depth-16 code) at `depth` or above
+    /// (a pruned leaf), with its depth; `None` if that space is unknown.
+    pub fn search(&self, code: u64, depth: u32) -> Option<(NodeRef, u32)> {
+        let mut r = self.root()?;
+        for d in 0..depth.min(TREE_DEPTH) {
+            let digit = ((code >> (3 * (TREE_DEPTH - 1 - d))) & 7) as usize;
+            let c = self.blocks[r.blk as usize].child[r.slot as usize];
+            if c == NONE {
+                return Some((r, d));
+            }
+            r = self.child(r, digit)?;
+        }
+        Some((r, depth.min(TREE_DEPTH)))
+    }
+
+    /// Builds a tree from a pre-order node stream (the `.ot`/`.bt` readers): `visit` is called
+    /// for each node with its depth and must return (log-odds, colour, child mask).
+    pub(crate) fn from_preorder<E>(
+        resolution_m: f64,
+        colored: bool,
+        mut visit: impl FnMut(u32) -> Result<(f32, Option<[u8; 3]>, u8), E>,
+        empty: bool,
+    ) -> Result<OcTree, E> {
+        let mut t = OcTree::new(resolution_m);
+        if colored {
+            t.enable_color();
+        }
+        if empty {
+            return Ok(t);
+        }
+        let (v, c, mask) = visit(0)?;
+        t.blocks[0].mask = 1;
+        t.blocks[0].value[0] = v;
+        t.set_color(0, 0, color_slot(c));
+        t.nodes = 1;
+        // Explicit stack: (block, slot, depth, mask, next child index).
+        let mut stack: Vec<(u32, usize, u32, u8, usize)> = vec![(0, 0, 0, mask, 0)];
+        while let Some(top) = stack.last_mut() {
+            let (blk, slot, depth, mask, next) = *top;
+            let Some(i) = (next..8).find(|i| mask & (1 << i) != 0) else {
+                stack.pop();
+                continue;
+            };
+            top.4 = i + 1;
+            let mut cb = t.blocks[blk as usize].child[slot];
+            if cb == NONE {
+                cb = t.alloc_block();
+                t.blocks[blk as usize].child[slot] = cb;
+            }
+            let (v, c, m) = visit(depth + 1)?;
+            let b = &mut t.blocks[cb as usize];
+            b.mask |= 1 << i;
+            b.value[i] = v;
+            t.set_color(cb, i, color_slot(c));
+            t.nodes += 1;
+            if m != 0 && depth + 1 < TREE_DEPTH {
+                stack.push((cb, i, depth + 1, m, 0));
+            }
+        }
+        Ok(t)
+    }
+
+    /// Sets a voxel at `depth` (a node of edge `res * 2^(16 - depth)`) to a log-odds value and
+    /// colour, creating the path and expanding pruned nodes as needed; then prunes and updates
+    /// inner values along the path. For building views (the operator's map).
+    pub fn set_node(&mut self, code: u64, depth: u32, log_odds: f32, color: Option<[u8; 3]>) {
+        let created = self.blocks[0].mask & 1 == 0;
+        if created {
+            self.blocks[0].mask = 1;
+            self.blocks[0].value[0] = 0.0;
+            self.blocks[0].child[0] = NONE;
+            self.set_color(0, 0, [255, 255, 255, 0]);
+            self.nodes += 1;
+        }
+        self.set_recurs(
+            (0, 0),
+            0,
+            created,
+            code,
+            depth.min(TREE_DEPTH),
+            log_odds,
+            color_slot(color),
+        );
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn set_recurs(
+        &mut self,
+        (blk, slot): (u32, usize),
+        depth: u32,
+        just_created: bool,
+        code: u64,
+        target: u32,
+        v: f32,
+        c: ColorSlot,
+    ) {
+        if depth == target {
+            if let Some(cb) = self.take_children(blk, slot) {
+                self.free_subtree(cb);
+            }
+            self.blocks[blk as usize].value[slot] = v;
+            self.set_color(blk, slot, c);
+            return;
+        }
+        let mut cb = self.blocks[blk as usize].child[slot];
+        if cb == NONE {
+            let pv = self.blocks[blk as usize].value[slot];
+            let pc = self.color(blk, slot);
+            cb = self.alloc_block();
+            self.blocks[blk as usize].child[slot] = cb;
+            if !just_created {
+                // A pruned leaf (known space) expands into eight copies of itself.
+                let b = &mut self.blocks[cb as usize];
+                b.value = [pv; 8];
+                b.mask = 0xff;
+                if let Some(cs) = &mut self.colors {
+                    cs[cb as usize] = [pc; 8];
+                }
+                self.nodes += 8;
+            }
+        }
+        let digit = ((code >> (3 * (TREE_DEPTH - 1 - depth))) & 7) as usize;
+        let created = self.blocks[cb as usize].mask & (1 << digit) == 0;
+        if created {
+            let b = &mut self.blocks[cb as usize];
+            b.mask |= 1 << digit;
+            b.value[digit] = 0.0;
+            b.child[digit] = NONE;
+            self.set_color(cb, digit, [255, 255, 255, 0]);
+            self.nodes += 1;
+        }
+        self.set_recurs((cb, digit), depth + 1, created, code, target, v, c);
+        self.prune_or_max(blk, slot, cb);
+    }
+
+    /// After a node's children changed: collapse them if they are eight equal leaves, else set
+    /// the node to the maximum of its children.
+    fn prune_or_max(&mut self, blk: u32, slot: usize, cb: u32) {
+        if !self.try_collapse(blk, slot, cb) {
+            let b = &self.blocks[cb as usize];
+            let mut max = -f32::MAX;
+            for i in 0..8 {
+                if b.mask & (1 << i) != 0 && b.value[i] > max {
+                    max = b.value[i];
+                }
+            }
+            self.blocks[blk as usize].value[slot] = max;
+        }
+    }
+
+    /// OctoMap's `pruneNode`: if the node's children (block `cb`) are eight leaves with equal
+    /// values (and colours), they are deleted and the node takes their value; true if so.
+    fn try_collapse(&mut self, blk: u32, slot: usize, cb: u32) -> bool {
+        let b = &self.blocks[cb as usize];
+        let collapsible = b.mask == 0xff
+            && b.child.iter().all(|&x| x == NONE)
+            && b.value.iter().all(|&x| x == b.value[0])
+            && self.colors.as_ref().is_none_or(|cs| {
+                let row = &cs[cb as usize];
+                row.iter().all(|x| *x == row[0])
+            });
+        if collapsible {
+            let v0 = b.value[0];
+            let c0 = self.color(cb, 0);
+            self.free_list.push(cb);
+            self.nodes -= 8;
+            self.blocks[blk as usize].child[slot] = NONE;
+            self.blocks[blk as usize].value[slot] = v0;
+            self.set_color(blk, slot, c0);
+        }
+        collapsible
+    }
+
+    /// Sets every inner node to the maximum of its children (after reading a `.bt`).
+    pub fn recompute_inner_values(&mut self) {
+        if self.blocks[0].mask & 1 != 0 {
+            self.max_recurs(0, 0);
+        }
+    }
+
+    fn max_recurs(&mut self, blk: u32, slot: usize) -> f32 {
+        let cb = self.blocks[blk as usize].child[slot];
+        if cb == NONE {
+            return self.blocks[blk as usize].value[slot];
+        }
+        let mask = self.blocks[cb as usize].mask;
+        let mut max = -f32::MAX;
+        for i in 0..8 {
+            if mask & (1 << i) != 0 {
+                max = max.max(self.max_recurs(cb, i));
+            }
+        }
+        self.blocks[blk as usize].value[slot] = max;
+        max
+    }
+
+    fn take_children(&mut self, blk: u32, slot: usize) -> Option<u32> {
+        let cb = self.blocks[blk as usize].child[slot];
+        if cb == NONE {
+            return None;
+        }
+        self.blocks[blk as usize].child[slot] = NONE;
+        Some(cb)
+    }
+
+    fn free_subtree(&mut self, cb: u32) {
+        let b = self.blocks[cb as usize].clone();
+        for i in 0..8 {
+            if b.mask & (1 << i) != 0 {
+                self.nodes -= 1;
+                if b.child[i] != NONE {
+                    self.free_subtree(b.child[i]);
+                }
+            }
+        }
+        self.free_list.push(cb);
+    }
+
+    /// OctoMap's `toMaxLikelihood()` followed by `prune()`, as many times as `prunes` (OctoMap's
+    /// `prune()` walks depths 15..1 and stops at the first depth where nothing was pruned, so a
+    /// second call can prune more; `graph2tree`'s `.bt` has had two).
+    pub fn to_max_likelihood(&mut self, prunes: usize) {
+        let (lo, hi) = (self.params.clamp_min_log, self.params.clamp_max_log);
+        for b in &mut self.blocks {
+            for v in &mut b.value {
+                *v = if *v >= 0.0 { hi } else { lo };
+            }
+        }
+        for _ in 0..prunes {
+            self.prune_octomap();
+        }
+    }
+
+    /// OctoMap's `prune()`: for depth 15 down to 1, prune every collapsible node at that depth;
+    /// stop at the first depth where none was.
+    pub fn prune_octomap(&mut self) {
+        let Some(root) = self.root() else { return };
+        for depth in (1..TREE_DEPTH).rev() {
+            let mut pruned = 0usize;
+            self.prune_at(root.blk, root.slot as usize, 0, depth, &mut pruned);
+            if pruned == 0 {
+                break;
+            }
+        }
+    }
+
+    fn prune_at(&mut self, blk: u32, slot: usize, depth: u32, target: u32, pruned: &mut usize) {
+        let cb = self.blocks[blk as usize].child[slot];
+        if cb == NONE {
+            return;
+        }
+        if depth < target {
+            let mask = self.blocks[cb as usize].mask;
+            for i in 0..8 {
+                if mask & (1 << i) != 0 {
+                    self.prune_at(cb, i, depth + 1, target, pruned);
+                }
+            }
+            return;
+        }
+        if self.try_collapse(blk, slot, cb) {
+            *pruned += 1;
+        }
+    }
+
+    /// Calls `f(code, depth, view)` for every leaf (a node without children), in pre-order.
+    /// `code` is the depth-16 Morton code of the leaf's first voxel.
+    pub fn for_each_leaf(&self, mut f: impl FnMut(u64, u32, NodeView)) {
+        let Some(root) = self.root() else { return };
+        let mut stack = vec![(root, 0u32, 0u64)];
+        while let Some((r, depth, code)) = stack.pop() {
+            let view = self.node(r);
+            if !view.has_children() {
+                f(code, depth, view);
+                continue;
+            }
+            for i in (0..8).rev() {
+                if let Some(c) = self.child(r, i) {
+                    let shift = 3 * (TREE_DEPTH - 1 - depth);
+                    stack.push((c, depth + 1, code | ((i as u64) << shift)));
+                }
+            }
+        }
+    }
+}
+
+/// One thread's share of a scan: free codes (sorted), end cells, points skipped and beyond range.
+type CastPart = (Vec<u64>, Vec<(u64, ColorSlot)>, usize, usize);
+
+/// Merges ascending lists into one ascending list without duplicates.
+fn merge_sorted(mut lists: Vec<Vec<u64>>) -> Vec<u64> {
+    while lists.len() > 1 {
+        let b = lists.pop().unwrap_or_default();
+        let a = lists.pop().unwrap_or_default();
+        let mut m = Vec::with_capacity(a.len() + b.len());
+        let (mut i, mut j) = (0, 0);
+        while i < a.len() && j < b.len() {
+            if a[i] < b[j] {
+                m.push(a[i]);
+                i += 1;
+            } else if b[j] < a[i] {
+                m.push(b[j]);
+                j += 1;
+            } else {
+                m.push(a[i]);
+                i += 1;
+                j += 1;
+            }
+        }
+        m.extend_from_slice(&a[i..]);
+        m.extend_from_slice(&b[j..]);
+        lists.push(m);
+    }
+    lists.pop().unwrap_or_default()
+}
+
+fn color_slot(c: Option<[u8; 3]>) -> ColorSlot {
+    match c {
+        Some(c) => [c[0], c[1], c[2], 1],
+        None => [255, 255, 255, 0],
+    }
+}
+
+fn brighter(a: ColorSlot, b: ColorSlot) -> bool {
+    luma([a[0], a[1], a[2]]) > luma([b[0], b[1], b[2]])
+}
+
+/// A node of the tree (a handle, valid until the tree changes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NodeRef {
+    blk: u32,
+    slot: u8,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_params_are_octomaps_floats() {
+        let p = Params::default();
+        assert_eq!(p.clamp_min_log.to_bits(), 0xc000_0075);
+        assert_eq!(p.clamp_max_log.to_bits(), 0x4060_b4ba);
+        assert_eq!(p.hit_log.to_bits(), 0x3f58_e883);
+        assert_eq!(p.miss_log.to_bits(), 0xbecf_991f);
+        // graph2tree re-derives them through probability(): the same floats.
+        assert_eq!(logodds(probability(p.hit_log as f64)), p.hit_log);
+        assert_eq!(
+            logodds(probability(p.clamp_min_log as f64)),
+            p.clamp_min_log
+        );
+    }
+
+    #[test]
+    fn morton_round_trip_and_child_order() {
+        for k in [
+            [0u16, 0, 0],
+            [1, 2, 3],
+            [65535, 0, 32768],
+            [12345, 54321, 777],
+        ] {
+            assert_eq!(unmorton(morton(k)), k);
+        }
+        // Bit 15 of x, y, z is the root's child index bits 0, 1, 2.
+        assert_eq!(morton([0x8000, 0, 0]) >> 45, 1);
+        assert_eq!(morton([0, 0x8000, 0]) >> 45, 2);
+        assert_eq!(morton([0, 0, 0x8000]) >> 45, 4);
+    }
+
+    #[test]
+    fn keys_follow_octomap_and_refuse_out_of_range() {
+        let t = OcTree::new(0.1);
+        assert_eq!(t.coord_to_key(0.0), Some(32768));
+        assert_eq!(t.coord_to_key(-0.01), Some(32767));
+        assert_eq!(t.coord_to_key(0.25), Some(32770));
+        assert_eq!(t.coord_to_key(3276.75), Some(65535));
+        assert_eq!(t.coord_to_key(3276.9), None);
+        assert_eq!(t.coord_to_key(-3276.9), None);
+        assert_eq!(t.coord_to_key(f32::NAN), None);
+        assert!((t.key_to_coord(32768) - 0.05).abs() < 1e-12);
+    }
+
+    fn scan(points: Vec<[f32; 3]>) -> Scan {
+        Scan {
+            points,
+            colors: None,
+            pose: Pose::IDENTITY,
+        }
+    }
+
+    #[test]
+    fn one_ray_marks_free_cells_then_the_end() {
+        let mut t = OcTree::new(0.1);
+        let up = t.insert_scan(&scan(vec![[1.05, 0.05, 0.05]]), None);
+        // Origin cell (0) to cell 9 free, cell 10 occupied.
+        assert_eq!(up.free_voxels, 10);
+        assert_eq!(up.occupied_voxels, 1);
+        assert_eq!(up.changes.len(), 11);
+        assert_eq!(up.changes.iter().filter(|c| c.occupied).count(), 1);
+        let end = morton([32778, 32768, 32768]);
+        let (n, d) = t.search(end, 16).unwrap();
+        assert_eq!(d, 16);
+        assert_eq!(t.node(n).log_odds, Params::default().hit_log);
+        // Scanning again changes nothing's state.
+        let up = t.insert_scan(&scan(vec![[1.05, 0.05, 0.05]]), None);
+        assert!(up.changes.is_empty());
+    }
+
+    #[test]
+    fn occupied_wins_over_free_in_one_scan() {
+        let mut t = OcTree::new(0.1);
+        // The first point's ray crosses the second point's cell.
+        let up = t.insert_scan(&scan(vec![[1.05, 0.05, 0.05], [0.55, 0.05, 0.05]]), None);
+        assert_eq!(up.occupied_voxels, 2);
+        assert_eq!(up.free_voxels, 9);
+        let (n, _) = t.search(morton([32773, 32768, 32768]), 16).unwrap();
+        assert!(t.node(n).log_odds > 0.0);
+    }
+
+    #[test]
+    fn clamping_and_pruning() {
+        let mut t = OcTree::new(0.5);
+        // Eight points filling one depth-15 node's children, scanned until clamped.
+        let mut pts = Vec::new();
+        for i in 0..8 {
+            pts.push([
+                10.0 + 0.25 + 0.5 * (i & 1) as f32,
+                10.0 + 0.25 + 0.5 * ((i >> 1) & 1) as f32,
+                10.0 + 0.25 + 0.5 * ((i >> 2) & 1) as f32,
+            ]);
+        }
+        for _ in 0..10 {
+            t.insert_scan(&scan(pts.clone()), None);
+        }
+        let code = morton(t.key_of(pts[0]).unwrap());
+        let (n, d) = t.search(code, 16).unwrap();
+        assert_eq!(
+            d, 15,
+            "eight equal clamped leaves are pruned into their parent"
+        );
+        assert_eq!(t.node(n).log_odds, Params::default().clamp_max_log);
+    }
+
+    #[test]
+    fn out_of_range_points_are_skipped_not_wrapped() {
+        let mut t = OcTree::new(0.1);
+        let up = t.insert_scan(&scan(vec![[5000.0, 0.0, 0.0], [f32::NAN, 0.0, 0.0]]), None);
+        assert_eq!(up.points_skipped, 2);
+        assert_eq!(up.occupied_voxels, 0);
+        assert_eq!(up.free_voxels, 0);
+    }
+
+    #[test]
+    fn max_range_truncates_rays() {
+        let mut t = OcTree::new(0.1);
+        let up = t.insert_scan(&scan(vec![[5.05, 0.05, 0.05]]), Some(1.0));
+        assert_eq!(up.points_beyond_range, 1);
+        assert_eq!(up.occupied_voxels, 0);
+        assert!(up.free_voxels >= 9 && up.free_voxels <= 11);
+    }
+
+    #[test]
+    fn brightest_colour_wins() {
+        let mut t = OcTree::new(0.1);
+        t.enable_color();
+        let mut s = scan(vec![[1.05, 0.05, 0.05], [1.06, 0.06, 0.06]]);
+        s.colors = Some(vec![[10, 10, 10], [200, 0, 0]]);
+        let up = t.insert_scan(&s, None);
+        let occ: Vec<_> = up.changes.iter().filter(|c| c.occupied).collect();
+        assert_eq!(occ[0].color, Some([200, 0, 0]));
+        s.colors = Some(vec![[100, 100, 100], [50, 50, 50]]);
+        t.insert_scan(&s, None);
+        let (n, _) = t.search(occ[0].code, 16).unwrap();
+        assert_eq!(t.node(n).color, Some([100, 100, 100]));
+        s.colors = Some(vec![[0, 0, 90], [1, 1, 1]]);
+        t.insert_scan(&s, None);
+        let (n, _) = t.search(occ[0].code, 16).unwrap();
+        assert_eq!(t.node(n).color, Some([100, 100, 100]));
+    }
+
+    #[test]
+    fn node_count_matches_a_walk() {
+        let mut t = OcTree::new(0.2);
+        let mut rng = crate::link::Rng::new(7, 0);
+        for _ in 0..5 {
+            let pts = (0..300)
+                .map(|_| {
+                    [
+                        (rng.uniform() * 6.0 - 3.0) as f32,
+                        (rng.uniform() * 6.0 - 3.0) as f32,
+                        (rng.uniform() * 2.0 - 1.0) as f32,
+                    ]
+                })
+                .collect();
+            t.insert_scan(&scan(pts), None);
+        }
+        let mut count = 0;
+        let mut stack = vec![t.root().unwrap()];
+        while let Some(r) = stack.pop() {
+            count += 1;
+            for i in 0..8 {
+                if let Some(c) = t.child(r, i) {
+                    stack.push(c);
+                }
+            }
+        }
+        assert_eq!(count, t.num_nodes());
+    }
+}
