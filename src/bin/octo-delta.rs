@@ -160,6 +160,11 @@ struct BuildArgs {
     #[arg(long)]
     no_color: bool,
 
+    /// Also resend an occupied voxel when a brighter colour is found for it (by default a
+    /// voxel's colour is sent once, when it becomes occupied, as in the paper).
+    #[arg(long, conflicts_with = "no_color")]
+    color_updates: bool,
+
     /// Send each scan's message over this link model in virtual time (reliable, shaped to 85%
     /// of the link rate) and report when each scan reached the operator.
     #[arg(long, value_name = "MODEL")]
@@ -407,6 +412,7 @@ fn build(args: &BuildArgs) -> Result<u8> {
     // The tree keeps colours when the first scan has them (a ColorOcTree), unless --no-color.
     let mut tree: Option<OcTree> = None;
     let mut sender = Sender::new(spec);
+    sender.set_color_updates(args.color_updates);
     out.write_bytes(&delta::encode_header(&spec))?;
     let threads = args
         .threads

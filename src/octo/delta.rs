@@ -106,6 +106,7 @@ impl Delta {
 pub struct Sender {
     spec: ViewSpec,
     coarse_sent: HashMap<u64, bool>,
+    color_updates: bool,
 }
 
 impl Sender {
@@ -114,7 +115,14 @@ impl Sender {
         Sender {
             spec,
             coarse_sent: HashMap::new(),
+            color_updates: false,
         }
+    }
+
+    /// Also resend an occupied fine voxel when a brighter colour was found for it (off by
+    /// default: the paper sends a voxel's colour when its state changes).
+    pub fn set_color_updates(&mut self, on: bool) {
+        self.color_updates = on;
     }
 
     /// The view it sends.
@@ -129,6 +137,9 @@ impl Sender {
         let mut last_coarse = None;
         let mut last_in = true;
         for c in changes {
+            if c.recolor && !self.color_updates {
+                continue;
+            }
             let coarse = c.code >> shift;
             if last_coarse != Some(coarse) {
                 last_in = self.spec.coarse_in_roi(coarse);
@@ -570,15 +581,12 @@ pub fn encode_full(scan: u32, view: &OcTree) -> Vec<u8> {
 
 fn full_node(t: &OcTree, r: super::tree::NodeRef, out: &mut Vec<u8>, colors: &mut Vec<u8>) {
     let mut b = [0u8; 2];
-    let mut inner = Vec::new();
     for i in 0..8 {
         if let Some(c) = t.child(r, i) {
             let v = t.node(c);
             let code = if v.has_children() {
-                inner.push(c);
                 3
             } else if v.log_odds >= 0.0 {
-                colors.extend_from_slice(&v.color.unwrap_or([255, 255, 255]));
                 2
             } else {
                 1
@@ -587,8 +595,16 @@ fn full_node(t: &OcTree, r: super::tree::NodeRef, out: &mut Vec<u8>, colors: &mu
         }
     }
     out.extend_from_slice(&b);
-    for c in inner {
-        full_node(t, c, out, colors);
+    // Leaves and subtrees in index order: the order a reader meets the leaves in.
+    for i in 0..8 {
+        if let Some(c) = t.child(r, i) {
+            let v = t.node(c);
+            if v.has_children() {
+                full_node(t, c, out, colors);
+            } else if v.log_odds >= 0.0 {
+                colors.extend_from_slice(&v.color.unwrap_or([255, 255, 255]));
+            }
+        }
     }
 }
 
@@ -608,7 +624,11 @@ fn decode_full(p: &mut Cursor) -> Result<Vec<Leaf>, ParseError> {
         let raw = p.take(occ * 3, "colours of the occupied leaves")?;
         let mut it = raw.chunks_exact(3);
         for l in leaves.iter_mut().filter(|l| l.2) {
-            l.3 = it.next().map(|c| [c[0], c[1], c[2]]);
+            // White is "no colour" (OctoMap's ColorOcTree default).
+            l.3 = it
+                .next()
+                .map(|c| [c[0], c[1], c[2]])
+                .filter(|c| *c != [255, 255, 255]);
         }
     }
     if p.left() != 0 {
@@ -661,8 +681,18 @@ pub fn view_of(tree: &OcTree, spec: &ViewSpec) -> OcTree {
             p.clamp_min_log
         };
         if depth <= d {
-            // A leaf as big as a coarse voxel or bigger: the same everywhere.
-            view.set_node(code, depth, ml, if occ { v.color } else { None });
+            // A leaf as big as a coarse voxel or bigger: the same state everywhere; colour only
+            // in the coarse voxels that meet the ROI (the others are sent coarse, colourless).
+            let color = if occ { v.color } else { None };
+            if color.is_none() {
+                view.set_node(code, depth, ml, None);
+                return;
+            }
+            let first = code >> shift;
+            for coarse in first..first + (1u64 << (3 * (d - depth))) {
+                let c = color.filter(|_| spec.coarse_in_roi(coarse));
+                view.set_node(coarse << shift, d, ml, c);
+            }
             return;
         }
         let coarse = code >> shift;

@@ -138,7 +138,11 @@ fn average_child_color(tree: &OcTree, r: NodeRef) -> [u8; 3] {
             }
         }
     }
-    match (sum[0].checked_div(n), sum[1].checked_div(n), sum[2].checked_div(n)) {
+    match (
+        sum[0].checked_div(n),
+        sum[1].checked_div(n),
+        sum[2].checked_div(n),
+    ) {
         (Some(r), Some(g), Some(b)) => [r as u8, g as u8, b as u8],
         _ => [255, 255, 255],
     }

@@ -126,7 +126,7 @@ impl Block {
 }
 
 /// A voxel whose state changed in a scan (OctoMap's change detection: it was unknown, or its
-/// occupancy flipped).
+/// occupancy flipped), or, with `recolor`, an occupied voxel that only got a brighter colour.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Change {
     /// Morton code of the depth-16 voxel.
@@ -135,6 +135,8 @@ pub struct Change {
     pub occupied: bool,
     /// Its colour after the scan, if it has one.
     pub color: Option<[u8; 3]>,
+    /// Only the colour changed (the voxel was and is occupied).
+    pub recolor: bool,
 }
 
 /// What inserting one scan did.
@@ -510,35 +512,34 @@ impl OcTree {
         } else {
             let chunk = pts.len().div_ceil(threads);
             let this = &*self;
-            let parts: Vec<CastPart> =
-                std::thread::scope(|sc| {
-                    let handles: Vec<_> = pts
-                        .chunks(chunk)
-                        .enumerate()
-                        .map(|(n, part)| {
-                            sc.spawn(move || {
-                                let mut set = CellSet::new();
-                                let mut o = Vec::with_capacity(part.len());
-                                let (s, b) = this.cast(
-                                    part,
-                                    n * chunk,
-                                    origin,
-                                    colors,
-                                    max_range_m,
-                                    &mut set,
-                                    &mut o,
-                                );
-                                let mut f = Vec::new();
-                                set.drain_sorted(&mut f);
-                                (f, o, s, b)
-                            })
+            let parts: Vec<CastPart> = std::thread::scope(|sc| {
+                let handles: Vec<_> = pts
+                    .chunks(chunk)
+                    .enumerate()
+                    .map(|(n, part)| {
+                        sc.spawn(move || {
+                            let mut set = CellSet::new();
+                            let mut o = Vec::with_capacity(part.len());
+                            let (s, b) = this.cast(
+                                part,
+                                n * chunk,
+                                origin,
+                                colors,
+                                max_range_m,
+                                &mut set,
+                                &mut o,
+                            );
+                            let mut f = Vec::new();
+                            set.drain_sorted(&mut f);
+                            (f, o, s, b)
                         })
-                        .collect();
-                    handles
-                        .into_iter()
-                        .map(|h| h.join().unwrap_or_default())
-                        .collect()
-                });
+                    })
+                    .collect();
+                handles
+                    .into_iter()
+                    .map(|h| h.join().unwrap_or_default())
+                    .collect()
+            });
             let mut lists = Vec::with_capacity(parts.len());
             for (f, o, s, b) in parts {
                 lists.push(f);
@@ -668,11 +669,13 @@ impl OcTree {
                 self.set_color(blk, slot, nc);
             }
             let now_occ = nv >= 0.0;
-            if just_created || was_occ != now_occ {
+            let flipped = just_created || was_occ != now_occ;
+            if flipped || (now_occ && nc != c) {
                 changes.push(Change {
                     code: u.code,
                     occupied: now_occ,
                     color: (nc[3] == 1).then_some([nc[0], nc[1], nc[2]]),
+                    recolor: !flipped,
                 });
             }
             return;
@@ -1267,5 +1270,182 @@ mod tests {
             }
         }
         assert_eq!(count, t.num_nodes());
+    }
+
+    /// The naive model: one log-odds per voxel in a hash map, OctoMap's update rule applied to
+    /// each scan's free and occupied sets (from a plain, array-indexed port of OctoMap's ray
+    /// walk), no tree, no pruning.
+    struct Naive {
+        cells: std::collections::HashMap<Key, f32>,
+    }
+
+    fn naive_ray(t: &OcTree, o: [f32; 3], e: [f32; 3], out: &mut Vec<Key>) {
+        let (Some(ko), Some(ke)) = (t.key_of(o), t.key_of(e)) else {
+            return;
+        };
+        if ko == ke {
+            return;
+        }
+        out.push(ko);
+        let mut dir = [e[0] - o[0], e[1] - o[1], e[2] - o[2]];
+        let length = norm_f32(dir) as f32;
+        for d in &mut dir {
+            *d /= length;
+        }
+        let (mut step, mut tm, mut td) = ([0i32; 3], [f64::MAX; 3], [f64::MAX; 3]);
+        for i in 0..3 {
+            step[i] = if dir[i] > 0.0 {
+                1
+            } else if dir[i] < 0.0 {
+                -1
+            } else {
+                0
+            };
+            if step[i] != 0 {
+                let border =
+                    t.key_to_coord(ko[i]) + (step[i] as f64 * t.resolution_m * 0.5) as f32 as f64;
+                tm[i] = (border - o[i] as f64) / dir[i] as f64;
+                td[i] = t.resolution_m / (dir[i] as f64).abs();
+            }
+        }
+        let mut cur = ko;
+        loop {
+            let dim = if tm[0] < tm[1] {
+                if tm[0] < tm[2] { 0 } else { 2 }
+            } else if tm[1] < tm[2] {
+                1
+            } else {
+                2
+            };
+            cur[dim] = cur[dim].wrapping_add_signed(step[dim] as i16);
+            tm[dim] += td[dim];
+            if cur == ke || tm[0].min(tm[1]).min(tm[2]) > length as f64 {
+                return;
+            }
+            out.push(cur);
+        }
+    }
+
+    impl Naive {
+        fn insert(&mut self, t: &OcTree, scan: &Scan) {
+            let (pts, origin) = world_points(scan);
+            let (mut free, mut occ) = (Vec::new(), std::collections::HashSet::new());
+            for &p in &pts {
+                naive_ray(t, origin, p, &mut free);
+                if let Some(k) = t.key_of(p) {
+                    occ.insert(k);
+                }
+            }
+            let free: std::collections::HashSet<Key> = free.into_iter().collect();
+            let p = t.params();
+            let mut upd = |k: Key, u: f32| {
+                let v = self.cells.entry(k).or_insert(0.0);
+                if (u > 0.0 && *v >= p.clamp_max_log) || (u < 0.0 && *v <= p.clamp_min_log) {
+                    return;
+                }
+                *v = (*v + u).clamp(p.clamp_min_log, p.clamp_max_log);
+            };
+            for k in free.difference(&occ) {
+                upd(*k, p.miss_log);
+            }
+            for k in &occ {
+                upd(*k, p.hit_log);
+            }
+        }
+    }
+
+    /// Every voxel's value in the tree (pruned leaves expanded), and the tree's invariants:
+    /// no node left collapsible, inner nodes the maximum of their children.
+    fn voxels(t: &OcTree) -> std::collections::HashMap<Key, f32> {
+        let mut out = std::collections::HashMap::new();
+        fn walk(
+            t: &OcTree,
+            r: NodeRef,
+            depth: u32,
+            code: u64,
+            out: &mut std::collections::HashMap<Key, f32>,
+        ) {
+            let v = t.node(r);
+            if !v.has_children() {
+                let span = 1u64 << (3 * (TREE_DEPTH - depth));
+                for c in code..code + span {
+                    out.insert(unmorton(c), v.log_odds);
+                }
+                return;
+            }
+            let kids: Vec<_> = (0..8)
+                .filter_map(|i| t.child(r, i).map(|c| (i, c)))
+                .collect();
+            let max = kids
+                .iter()
+                .map(|(_, c)| t.node(*c).log_odds)
+                .fold(-f32::MAX, f32::max);
+            assert_eq!(v.log_odds, max, "inner node is the max of its children");
+            let collapsible = kids.len() == 8
+                && kids.iter().all(|(_, c)| {
+                    !t.node(*c).has_children() && t.node(*c).log_odds == t.node(kids[0].1).log_odds
+                });
+            assert!(!collapsible, "a collapsible node was left unpruned");
+            for (i, c) in kids {
+                walk(
+                    t,
+                    c,
+                    depth + 1,
+                    code | ((i as u64) << (3 * (TREE_DEPTH - 1 - depth))),
+                    out,
+                );
+            }
+        }
+        if let Some(r) = t.root() {
+            walk(t, r, 0, 0, &mut out);
+        }
+        out
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(24))]
+        #[test]
+        fn tree_equals_the_naive_model(
+            seed in 0u64..1000,
+            scans in 1usize..5,
+            threads in 1usize..3,
+        ) {
+            let mut rng = crate::link::Rng::new(seed, 1);
+            let mut t = OcTree::new(0.25);
+            t.set_threads(threads);
+            let mut naive = Naive { cells: Default::default() };
+            for _ in 0..scans {
+                let c = [(rng.uniform() * 2.0 - 1.0) as f32, (rng.uniform() * 2.0 - 1.0) as f32, 0.3];
+                let pts = (0..9000)
+                    .map(|_| {
+                        [
+                            c[0] + (rng.uniform() * 3.0 - 1.5) as f32,
+                            c[1] + (rng.uniform() * 3.0 - 1.5) as f32,
+                            (rng.uniform() * 0.6 - 1.5) as f32,
+                        ]
+                    })
+                    .collect();
+                // A rotation about a random axis, exercising OctoMap's pose arithmetic.
+                let (a, ax) = (rng.uniform() * 0.6, [rng.uniform(), rng.uniform(), rng.uniform()]);
+                let n = (ax[0] * ax[0] + ax[1] * ax[1] + ax[2] * ax[2]).sqrt().max(1e-9);
+                let (sa, ca) = ((a / 2.0).sin() / n, (a / 2.0).cos());
+                let scan = Scan {
+                    points: pts,
+                    colors: None,
+                    pose: Pose {
+                        translation_m: c,
+                        rotation: [ca as f32, (ax[0] * sa) as f32, (ax[1] * sa) as f32, (ax[2] * sa) as f32],
+                    },
+                };
+                let up = t.insert_scan(&scan, None);
+                naive.insert(&t, &scan);
+                proptest::prop_assert_eq!(up.points, 9000);
+            }
+            let got = voxels(&t);
+            proptest::prop_assert_eq!(got.len(), naive.cells.len());
+            for (k, v) in &naive.cells {
+                proptest::prop_assert_eq!(got.get(k).map(|x| x.to_bits()), Some(v.to_bits()), "voxel {:?}", k);
+            }
+        }
     }
 }

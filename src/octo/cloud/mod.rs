@@ -504,7 +504,10 @@ mod tests {
             (CloudFormat::Pcd, write_pcd(&scan, PcdData::Binary)),
             (CloudFormat::Ply, write_ply(&scan)),
             (CloudFormat::Xyz, write_xyz(&scan)),
-            (CloudFormat::Mcap, write_clouds_mcap(std::slice::from_ref(&scan))),
+            (
+                CloudFormat::Mcap,
+                write_clouds_mcap(std::slice::from_ref(&scan)),
+            ),
         ];
         for (format, bytes) in files {
             assert_eq!(CloudFormat::sniff(&bytes), Some(format));

@@ -1355,6 +1355,35 @@ mod tests {
     }
 
     #[test]
+    fn empty_clouds_with_wide_fields() {
+        // No points: any COUNT is fine (a proptest once found this rejected), but one that
+        // overflows the point size is not.
+        for data in ["ascii", "binary", "binary_compressed"] {
+            let mut b = header("n x y z", "4 4 4 4", "F F F F", "3 1 1 1", 0, data);
+            if data == "binary_compressed" {
+                b.extend_from_slice(&[0; 8]);
+            }
+            let s = read_pcd(&b).unwrap();
+            assert_eq!(s.points, Vec::<[f32; 3]>::new());
+            assert_eq!(s.pose, pose());
+        }
+        let b = header(
+            "n x y z",
+            "8 4 4 4",
+            "F F F F",
+            "4611686018427387904 1 1 1",
+            0,
+            "binary",
+        );
+        let (at, msg) = message(read_pcd(&b));
+        assert_eq!(at, 59); // the COUNT token
+        assert!(
+            msg.contains("COUNT: expected a count whose points fit"),
+            "{msg}"
+        );
+    }
+
+    #[test]
     fn ascii_packed_colour_forms() {
         assert_eq!(parse_packed(Scalar::F32, b"16711680"), Some(0x00ff0000));
         assert_eq!(
