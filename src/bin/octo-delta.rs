@@ -174,6 +174,10 @@ struct BuildArgs {
     #[arg(long, value_name = "S", default_value_t = 1.0, requires = "link")]
     scan_period: f64,
 
+    /// With --link: one CSV row per scan: bytes, when it was ready, complete and shown.
+    #[arg(long, value_name = "FILE", requires = "link")]
+    arrivals: Option<PathBuf>,
+
     /// With --link: seed of the link's random streams.
     #[arg(long, default_value_t = 1, requires = "link")]
     seed: u64,
@@ -490,8 +494,25 @@ fn build(args: &BuildArgs) -> Result<u8> {
     if let Some(model) = link_model {
         let report =
             rovlink::octo::transfer::send_over(&model, &messages, args.scan_period, args.seed);
-        for line in report.lines() {
-            say!("{line}");
+        if let Some(path) = &args.arrivals {
+            let mut csv = String::from("scan,bytes,t_ready_s,t_complete_s,t_shown_s,latency_s\n");
+            for a in &report.arrivals {
+                csv.push_str(&format!(
+                    "{},{},{:.6},{:.6},{:.6},{:.6}\n",
+                    a.scan,
+                    a.bytes,
+                    a.t_ready_s,
+                    a.t_complete_s,
+                    a.t_applied_s,
+                    a.t_applied_s - a.t_ready_s
+                ));
+            }
+            AtomicFile::create(path)?.commit_with(csv.as_bytes())?;
+        }
+        if !args.quiet {
+            for line in report.lines() {
+                say!("{line}");
+            }
         }
     }
     Ok(EXIT_OK)
