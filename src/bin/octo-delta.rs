@@ -14,7 +14,7 @@ use rovlink::io::{AtomicFile, EXIT_OK, Input, IoError, Output};
 use rovlink::octo::cloud::{self, CloudFormat, McapOptions};
 use rovlink::octo::delta::{self, Message, Receiver, Roi, Sender, ViewSpec};
 use rovlink::octo::tree::{OcTree, TREE_DEPTH};
-use rovlink::octo::{Scan, files, graph, synth};
+use rovlink::octo::{ParseError, Scan, files, graph, synth};
 
 const TOOL: &str = "octo-delta";
 
@@ -313,10 +313,29 @@ fn format_of(path: &Path, bytes: &[u8], forced: Option<InputFormat>) -> Option<I
     })
 }
 
-fn read_scans(path: &Path, args: &BuildArgs) -> Result<Vec<Scan>> {
+/// The scans of one input, one at a time (a `.graph` file is streamed from disk, so a large
+/// survey never sits in memory whole), with how many there will be.
+type ScanSource = (Box<dyn Iterator<Item = Result<Scan, ParseError>>>, usize);
+
+fn open_scans(path: &Path, args: &BuildArgs) -> Result<ScanSource> {
+    let name = path.display().to_string();
+    let forced_graph = matches!(args.format, Some(InputFormat::Graph));
+    let by_name = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("graph"));
+    if (forced_graph || (by_name && args.format.is_none())) && !rovlink::io::is_std(Some(path)) {
+        let file = File::open(path).map_err(|source| IoError::Open {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let len = file.metadata().map(|m| m.len()).unwrap_or(u64::MAX);
+        let stream =
+            graph::ScanStream::new(file, len).map_err(|e| usage(format!("{name}: {e}")))?;
+        let n = stream.node_count() as usize;
+        return Ok((Box::new(stream), n));
+    }
     let mut input = Input::open(Some(path))?;
     let bytes = input.read_all()?;
-    let name = path.display();
     let format = format_of(path, &bytes, args.format).ok_or_else(|| {
         usage(format!(
             "{name}: unknown input format (expected .graph, .pcd, .ply, .xyz or .mcap; or --format)"
@@ -333,19 +352,23 @@ fn read_scans(path: &Path, args: &BuildArgs) -> Result<Vec<Scan>> {
         InputFormat::Xyz => cloud::read(CloudFormat::Xyz, &bytes, &opts),
         InputFormat::Mcap => cloud::read(CloudFormat::Mcap, &bytes, &opts),
     };
-    let mut scans = parsed.map_err(|e| usage(format!("{name}: {e}")))?;
-    if let Some(o) = args.origin {
-        for s in &mut scans {
-            if s.pose == rovlink::octo::Pose::IDENTITY {
-                s.pose.translation_m = o;
-                // Points stay where they are in the map frame: shift them into the sensor frame.
-                for p in &mut s.points {
-                    *p = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
-                }
-            }
+    let scans = parsed.map_err(|e| usage(format!("{name}: {e}")))?;
+    let n = scans.len();
+    Ok((Box::new(scans.into_iter().map(Ok)), n))
+}
+
+/// Inputs without a pose get the sensor origin of `--origin`: the points stay where they are in
+/// the map frame, shifted into the sensor frame.
+fn with_origin(mut scan: Scan, origin: Option<[f32; 3]>) -> Scan {
+    if let Some(o) = origin
+        && scan.pose == rovlink::octo::Pose::IDENTITY
+    {
+        scan.pose.translation_m = o;
+        for p in &mut scan.points {
+            *p = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
         }
     }
-    Ok(scans)
+    scan
 }
 
 const STATS_HEADER: &str = "scan,points,points_skipped,delta_bytes,fine_occupied,fine_free,coarse_occupied,coarse_free,full_bt_bytes,full_ot_bytes,cum_delta_bytes,cum_full_bt_bytes,cum_full_ot_bytes,insert_ms";
@@ -428,9 +451,13 @@ fn build(args: &BuildArgs) -> Result<u8> {
     let mut insert_s = 0.0f64;
     let mut messages: Vec<(u32, usize)> = Vec::new();
     for path in &args.inputs {
-        let scans = read_scans(path, args)?;
-        bar.inc_length(scans.len() as u64);
+        let (scans, count) = open_scans(path, args)?;
+        bar.inc_length(count as u64);
         for scan in scans {
+            let scan = with_origin(
+                scan.map_err(|e| usage(format!("{}: {e}", path.display())))?,
+                args.origin,
+            );
             let tree = tree.get_or_insert_with(|| {
                 let mut t = OcTree::new(args.res);
                 t.set_threads(threads);

@@ -110,22 +110,36 @@ pub fn read(bytes: &[u8]) -> Result<Graph, ParseError> {
     let mut scans = Vec::with_capacity(capped(node_count, r.left(), EMPTY_NODE_BYTES));
     let mut ids = Vec::with_capacity(scans.capacity());
     for node in 1..=node_count {
-        let at = |what: &str| format!("node {node} of {node_count}, {what}");
-        let point_count = r.u32(|| at("point count"))?;
-        let mut points = Vec::with_capacity(capped(point_count, r.left(), VECTOR_RECORD_BYTES));
-        for point in 1..=point_count {
-            points.push(r.vector(|| at(&format!("point {point} of {point_count}")))?);
-        }
-        let pose = r.pose(|what| at(&format!("pose {what}")))?;
-        let id = r.u32(|| at("id"))?;
-        scans.push(Scan {
+        let (scan, id) = read_node(&mut r, node, node_count)?;
+        scans.push(scan);
+        ids.push(id);
+    }
+    let edges = read_edges(&mut r)?;
+    Ok(Graph { scans, ids, edges })
+}
+
+/// Node `node` of `node_count`: its scan and id.
+fn read_node<S: Source>(r: &mut S, node: u32, node_count: u32) -> Result<(Scan, u32), ParseError> {
+    let at = |what: &str| format!("node {node} of {node_count}, {what}");
+    let point_count = r.u32(|| at("point count"))?;
+    let mut points = Vec::with_capacity(capped(point_count, r.left(), VECTOR_RECORD_BYTES));
+    for point in 1..=point_count {
+        points.push(r.vector(|| at(&format!("point {point} of {point_count}")))?);
+    }
+    let pose = r.pose(|what| at(&format!("pose {what}")))?;
+    let id = r.u32(|| at("id"))?;
+    Ok((
+        Scan {
             points,
             colors: None,
             pose,
-        });
-        ids.push(id);
-    }
+        },
+        id,
+    ))
+}
 
+/// The edge count and edges, then the end of the input.
+fn read_edges<S: Source>(r: &mut S) -> Result<Vec<Edge>, ParseError> {
     let edge_count = r.u32(|| "edge count".to_string())?;
     let mut edges = Vec::with_capacity(capped(edge_count, r.left(), EDGE_BYTES));
     for edge in 1..=edge_count {
@@ -141,14 +155,69 @@ pub fn read(bytes: &[u8]) -> Result<Graph, ParseError> {
             weight,
         });
     }
-
     if r.left() > 0 {
         return Err(ParseError::new(
-            r.pos as u64,
+            r.pos() as u64,
             format!("{} bytes after the last of {edge_count} edges", r.left()),
         ));
     }
-    Ok(Graph { scans, ids, edges })
+    Ok(edges)
+}
+
+/// Scans read one at a time from a byte stream (a file), so a large graph never sits in memory
+/// whole: the same checks and errors as [`read`], node by node; after the last node, the edges
+/// are read, checked and dropped. The stream's length must be known (a file's size) for the
+/// "bytes left" in errors and the cap on allocations.
+pub struct ScanStream<R: std::io::Read> {
+    src: StreamSource<R>,
+    node: u32,
+    node_count: u32,
+    finished: bool,
+}
+
+impl<R: std::io::Read> ScanStream<R> {
+    /// Starts reading a graph of `len` bytes from `reader` (its node count).
+    pub fn new(reader: R, len: u64) -> Result<Self, ParseError> {
+        let mut src = StreamSource {
+            reader: std::io::BufReader::with_capacity(1 << 16, reader),
+            pos: 0,
+            len,
+        };
+        let node_count = src.u32(|| "node count".to_string())?;
+        Ok(ScanStream {
+            src,
+            node: 0,
+            node_count,
+            finished: false,
+        })
+    }
+
+    /// Nodes the graph says it has.
+    pub fn node_count(&self) -> u32 {
+        self.node_count
+    }
+}
+
+impl<R: std::io::Read> Iterator for ScanStream<R> {
+    type Item = Result<Scan, ParseError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.finished {
+            return None;
+        }
+        if self.node == self.node_count {
+            self.finished = true;
+            return read_edges(&mut self.src).err().map(Err);
+        }
+        self.node += 1;
+        match read_node(&mut self.src, self.node, self.node_count) {
+            Ok((scan, _)) => Some(Ok(scan)),
+            Err(e) => {
+                self.finished = true;
+                Some(Err(e))
+            }
+        }
+    }
 }
 
 /// Reads the scans of a `.graph` file (its nodes, in file order), checking the whole file as
@@ -215,34 +284,17 @@ fn capped(claimed: u32, left: usize, size: usize) -> usize {
         .min(left / size)
 }
 
-/// A cursor over the input that names what it failed to read.
-struct Reader<'a> {
-    bytes: &'a [u8],
-    pos: usize,
-}
-
-impl Reader<'_> {
-    fn left(&self) -> usize {
-        self.bytes.len() - self.pos
-    }
-
+/// Where records come from: a byte slice or a stream of known length.
+trait Source {
+    /// Offset of the next byte.
+    fn pos(&self) -> usize;
+    /// Bytes left.
+    fn left(&self) -> usize;
     /// The next `N` bytes, or an error at the current offset naming `what` (built only then).
     fn array<const N: usize>(
         &mut self,
         what: impl FnOnce() -> String,
-    ) -> Result<[u8; N], ParseError> {
-        let rest = &self.bytes[self.pos..];
-        match rest.first_chunk::<N>() {
-            Some(chunk) => {
-                self.pos += N;
-                Ok(*chunk)
-            }
-            None => Err(ParseError::new(
-                self.pos as u64,
-                format!("{}: expected {N} bytes, {} left", what(), rest.len()),
-            )),
-        }
-    }
+    ) -> Result<[u8; N], ParseError>;
 
     fn u32(&mut self, what: impl FnOnce() -> String) -> Result<u32, ParseError> {
         self.array(what).map(u32::from_le_bytes)
@@ -273,6 +325,86 @@ impl Reader<'_> {
             translation_m,
             rotation,
         })
+    }
+}
+
+/// A cursor over the input that names what it failed to read.
+struct Reader<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+}
+
+impl Source for Reader<'_> {
+    fn pos(&self) -> usize {
+        self.pos
+    }
+
+    fn left(&self) -> usize {
+        self.bytes.len() - self.pos
+    }
+
+    fn array<const N: usize>(
+        &mut self,
+        what: impl FnOnce() -> String,
+    ) -> Result<[u8; N], ParseError> {
+        let rest = &self.bytes[self.pos..];
+        match rest.first_chunk::<N>() {
+            Some(chunk) => {
+                self.pos += N;
+                Ok(*chunk)
+            }
+            None => Err(ParseError::new(
+                self.pos as u64,
+                format!("{}: expected {N} bytes, {} left", what(), rest.len()),
+            )),
+        }
+    }
+}
+
+/// A buffered stream of known length.
+struct StreamSource<R: std::io::Read> {
+    reader: std::io::BufReader<R>,
+    pos: usize,
+    len: u64,
+}
+
+impl<R: std::io::Read> Source for StreamSource<R> {
+    fn pos(&self) -> usize {
+        self.pos
+    }
+
+    fn left(&self) -> usize {
+        usize::try_from(self.len.saturating_sub(self.pos as u64)).unwrap_or(usize::MAX)
+    }
+
+    fn array<const N: usize>(
+        &mut self,
+        what: impl FnOnce() -> String,
+    ) -> Result<[u8; N], ParseError> {
+        use std::io::Read;
+        let mut b = [0u8; N];
+        let mut got = 0;
+        while got < N {
+            match self.reader.read(&mut b[got..]) {
+                Ok(0) => break,
+                Ok(n) => got += n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => {
+                    return Err(ParseError::new(
+                        (self.pos + got) as u64,
+                        format!("{}: read failed: {e}", what()),
+                    ));
+                }
+            }
+        }
+        if got < N {
+            return Err(ParseError::new(
+                self.pos as u64,
+                format!("{}: expected {N} bytes, {got} left", what()),
+            ));
+        }
+        self.pos += N;
+        Ok(b)
     }
 }
 
@@ -323,6 +455,40 @@ fn put_node(out: &mut Vec<u8>, scan: &Scan, id: u32) {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn the_stream_reads_what_read_reads_and_fails_where_it_fails() {
+        let mut scans = Vec::new();
+        for n in [3usize, 0, 5] {
+            scans.push(Scan {
+                points: (0..n).map(|i| [i as f32, 0.5, -1.25]).collect(),
+                colors: None,
+                pose: Pose::IDENTITY,
+            });
+        }
+        let bytes = write(&scans);
+        let streamed: Result<Vec<Scan>, ParseError> =
+            ScanStream::new(&bytes[..], bytes.len() as u64)
+                .unwrap()
+                .collect();
+        assert_eq!(streamed.unwrap(), read_scans(&bytes).unwrap());
+        for cut in [5, 40, bytes.len() - 1] {
+            let part = &bytes[..cut];
+            let want = read_scans(part).unwrap_err();
+            let got = match ScanStream::new(part, part.len() as u64) {
+                Err(e) => e,
+                Ok(s) => s.collect::<Result<Vec<_>, _>>().unwrap_err(),
+            };
+            assert_eq!(got, want, "cut at {cut}");
+        }
+        let mut longer = bytes.clone();
+        longer.push(0);
+        let got = ScanStream::new(&longer[..], longer.len() as u64)
+            .unwrap()
+            .collect::<Result<Vec<_>, _>>()
+            .unwrap_err();
+        assert_eq!(got, read_scans(&longer).unwrap_err());
+    }
+
     use super::*;
 
     fn sample_scans() -> Vec<Scan> {
