@@ -10,14 +10,8 @@ use std::process::Command;
 use common::run;
 
 const OCTO: &str = env!("CARGO_BIN_EXE_octo-delta");
-const GEB079: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../shared/testdata/maps/geb079.bt"
-);
-const APPLE: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../shared/testdata/maps/apple.pcd"
-);
+const GEB079: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/testdata/maps/geb079.bt");
+const APPLE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/testdata/maps/apple.pcd");
 
 /// Runs one of OctoMap's tools; fails the test with a clear message when it is not installed.
 fn octomap_tool(name: &str, args: &[&str]) -> String {

@@ -411,7 +411,8 @@ pub fn decode_header(bytes: &[u8]) -> Result<(StreamHeader, usize), ParseError> 
     ))
 }
 
-fn frame(kind: u8, scan: u32, payload: &[u8]) -> Vec<u8> {
+/// Frames a payload as a message of `kind` (kind, scan number, length, payload, CRC-32).
+pub fn frame_message(kind: u8, scan: u32, payload: &[u8]) -> Vec<u8> {
     let mut out = Vec::with_capacity(payload.len() + 13);
     out.push(kind);
     out.extend_from_slice(&scan.to_le_bytes());
@@ -437,7 +438,7 @@ pub fn encode_delta(spec: &ViewSpec, scan: u32, d: &Delta) -> Vec<u8> {
             p.extend_from_slice(&e.1.unwrap_or([255, 255, 255]));
         }
     }
-    frame(KIND_DELTA, scan, &p)
+    frame_message(KIND_DELTA, scan, &p)
 }
 
 /// A message of the stream.
@@ -576,7 +577,7 @@ pub fn encode_full(scan: u32, view: &OcTree) -> Vec<u8> {
     if view.is_colored() {
         p.extend_from_slice(&colors);
     }
-    frame(KIND_FULL, scan, &p)
+    frame_message(KIND_FULL, scan, &p)
 }
 
 fn full_node(t: &OcTree, r: super::tree::NodeRef, out: &mut Vec<u8>, colors: &mut Vec<u8>) {

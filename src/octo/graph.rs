@@ -519,20 +519,11 @@ mod tests {
 
     #[test]
     fn spherical_scan_reads_as_octomap_wrote_it() {
-        let candidates = [
-            concat!(
-                env!("CARGO_MANIFEST_DIR"),
-                "/testdata/maps/spherical_scan.graph"
-            ),
-            concat!(
-                env!("CARGO_MANIFEST_DIR"),
-                "/../shared/testdata/maps/spherical_scan.graph"
-            ),
-        ];
-        let Some(bytes) = candidates.iter().find_map(|p| std::fs::read(p).ok()) else {
-            eprintln!("spherical_scan.graph not found (tried {candidates:?}): test skipped");
-            return;
-        };
+        let bytes = std::fs::read(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/testdata/maps/spherical_scan.graph"
+        ))
+        .expect("testdata/maps/spherical_scan.graph");
         let graph = read(&bytes).expect("OctoMap's own file reads");
         assert_eq!(graph.scans.len(), 1);
         assert_eq!(graph.ids, [0]);

@@ -177,6 +177,7 @@ pub fn send_over(
     let ready_at = |m: usize| SimTime::from_secs_f64(m as f64 * period_s.max(0.0));
     // Give up on a dead link: nothing can take longer than this.
     let horizon = SimTime::from_secs_f64(messages.len() as f64 * period_s.max(0.0) + 3600.0);
+    let mut stalls = 0u32;
     loop {
         let now = link.now();
         while let Some(r) = link.pop_report() {
@@ -212,7 +213,7 @@ pub fn send_over(
         for (i, s) in segs.iter_mut().enumerate().take(next_new) {
             if !s.acked
                 && let Some(t) = s.sent_at
-                && now.as_secs_f64() - t.as_secs_f64() >= rto
+                && now >= t.after_secs(rto)
             {
                 s.sent_at = None;
                 resend_queue.push_back(i);
@@ -262,7 +263,18 @@ pub fn send_over(
             }
         }
         match next {
-            Some(t) if t <= horizon => link.advance(t.max(now)),
+            Some(t) if t <= horizon => {
+                // Time must move: a loop that stands still would never end.
+                if t <= now && link.next_event_time().is_none_or(|e| e > now) {
+                    stalls += 1;
+                    if stalls > 1000 {
+                        break;
+                    }
+                } else {
+                    stalls = 0;
+                }
+                link.advance(t.max(now))
+            }
             _ => break,
         }
     }
