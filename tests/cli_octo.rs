@@ -284,3 +284,56 @@ fn points_outside_the_key_range_are_counted_not_wrapped() {
         out.stderr
     );
 }
+
+#[test]
+fn mcap_surveys_build_the_same_map_as_graphs_and_keep_colour() {
+    let dir = tempfile::tempdir().unwrap();
+    let graph = synth(dir.path(), "5");
+    let mcap = dir.path().join("survey.mcap");
+    let out = run(OCTO, &["synth", "--scans", "5", "-o", s(&mcap)], b"");
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    let (a, b, c) = (
+        dir.path().join("g.ot"),
+        dir.path().join("m.ot"),
+        dir.path().join("mc.ot"),
+    );
+    let d = s(&dir.path().join("d.odl")).to_string();
+    assert_eq!(
+        run(
+            OCTO,
+            &["build", s(&graph), "--res", "0.2", "-o", &d, "--ot", s(&a)],
+            b""
+        )
+        .code,
+        0
+    );
+    let out = run(
+        OCTO,
+        &[
+            "build",
+            s(&mcap),
+            "--res",
+            "0.2",
+            "--no-color",
+            "-o",
+            &d,
+            "--ot",
+            s(&b),
+        ],
+        b"",
+    );
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    assert!(
+        std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(),
+        "MCAP and .graph maps differ"
+    );
+    let out = run(
+        OCTO,
+        &["build", s(&mcap), "--res", "0.2", "-o", &d, "--ot", s(&c)],
+        b"",
+    );
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    let head = String::from_utf8_lossy(&std::fs::read(&c).unwrap()[..140]).into_owned();
+    assert!(head.contains("id ColorOcTree"), "{head}");
+    octomap_tool("convert_octree", &[s(&c), s(&dir.path().join("copy.ot"))]);
+}

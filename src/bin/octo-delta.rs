@@ -27,6 +27,7 @@ macro_rules! say {
 const EXAMPLES: &str = "\
 Examples:
   octo-delta synth -o survey.graph                     a synthetic seabed survey to try things on
+  octo-delta synth -o survey.mcap                      the same, coloured, as ROS 2 MCAP
   octo-delta build survey.graph --res 0.1 -o deltas.odl --stats bandwidth.csv --ot map.ot
   octo-delta build scan*.pcd --roi -2,-2,-5,2,2,0 --coarse-depth 13 -o deltas.odl
   octo-delta build survey.graph -o deltas.odl --link satellite-down   when each scan arrives
@@ -61,7 +62,7 @@ enum Command {
     Dump(DumpArgs),
     /// A whole map (.ot or .bt) as a one-message stream (the operator's "full map" request).
     Full(FullArgs),
-    /// Write a synthetic seabed survey (scans with poses) as a .graph file.
+    /// Write a synthetic seabed survey (scans with poses) as a .graph or MCAP file.
     Synth(SynthArgs),
 }
 
@@ -244,18 +245,25 @@ struct FullArgs {
 
 #[derive(ClapArgs, Debug)]
 struct SynthArgs {
-    /// The .graph file.
+    /// The survey file: a .graph (no colour), or with --format mcap (or a .mcap name) an MCAP of
+    /// coloured sensor_msgs/msg/PointCloud2 scans with geometry_msgs/msg/PoseStamped poses.
     #[arg(short, long, value_name = "FILE")]
     output: Option<PathBuf>,
+    /// Output format [default: from the file name, else graph].
+    #[arg(long, value_enum)]
+    format: Option<SynthFormat>,
     /// Number of scans [default: the survey's own].
     #[arg(long)]
     scans: Option<usize>,
     /// Seed of the scene and the path.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Write PLY files (one per scan, sensor frame) into this directory instead.
-    #[arg(long, value_name = "DIR", conflicts_with = "output")]
-    ply_dir: Option<PathBuf>,
+}
+
+#[derive(ValueEnum, Debug, Clone, Copy, PartialEq)]
+enum SynthFormat {
+    Graph,
+    Mcap,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -695,13 +703,17 @@ fn synth_cmd(args: &SynthArgs) -> Result<u8> {
         p.scans = n;
     }
     let scans = synth::survey(&p);
-    if let Some(dir) = &args.ply_dir {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("{}: cannot create", dir.display()))?;
-        for (i, s) in scans.iter().enumerate() {
-            let path = dir.join(format!("scan{i:04}.ply"));
-            AtomicFile::create(&path)?.commit_with(&cloud::write_ply(s))?;
-        }
+    let mcap = args.format == Some(SynthFormat::Mcap)
+        || (args.format.is_none()
+            && args
+                .output
+                .as_ref()
+                .and_then(|o| o.extension())
+                .is_some_and(|e| e.eq_ignore_ascii_case("mcap")));
+    if mcap {
+        let mut out = Output::open(args.output.as_deref(), true)?;
+        out.write_bytes(&cloud::write_clouds_mcap(&scans))?;
+        out.finish()?;
         return Ok(EXIT_OK);
     }
     let mut out = Output::open(args.output.as_deref(), true)?;
