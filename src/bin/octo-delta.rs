@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
-use anyhow::{Context, Result, anyhow, bail};
+use anyhow::{Result, anyhow, bail};
 use clap::{Args as ClapArgs, Parser, Subcommand, ValueEnum};
 use rovlink::io::{AtomicFile, EXIT_OK, Input, IoError, Output};
 use rovlink::octo::cloud::{self, CloudFormat, McapOptions};
