@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
-use anyhow::{Result, anyhow, bail};
+use anyhow::{Result, bail};
 use clap::{Args as ClapArgs, Parser, Subcommand, ValueEnum};
 use rovlink::io::{AtomicFile, EXIT_OK, Input, IoError, Output};
 use rovlink::octo::cloud::{self, CloudFormat, McapOptions};
@@ -30,7 +30,7 @@ Examples:
   octo-delta synth -o survey.mcap                      the same, coloured, as ROS 2 MCAP
   octo-delta build survey.graph --res 0.1 -o deltas.odl --stats bandwidth.csv --ot map.ot
   octo-delta build scan*.pcd --roi -2,-2,-5,2,2,0 --coarse-depth 13 -o deltas.odl
-  octo-delta build survey.graph -o deltas.odl --link satellite-down   when each scan arrives
+  octo-delta build survey.graph -o deltas.odl --link satellite-up   when each scan reaches shore
   octo-delta apply deltas.odl -o view.ot               the operator's view
   octo-delta dump deltas.odl --format csv              one line per message
   octo-delta full map.ot --roi -1,-1,-1,1,1,1 -o full.odl
@@ -730,13 +730,6 @@ fn run(cli: &Cli) -> Result<u8> {
         Command::Full(a) => full(a),
         Command::Synth(a) => synth_cmd(a),
     }
-    .map_err(|e| {
-        if e.downcast_ref::<UsageError>().is_some() || e.downcast_ref::<IoError>().is_some() {
-            e
-        } else {
-            anyhow!(e)
-        }
-    })
 }
 
 fn main() -> ExitCode {
