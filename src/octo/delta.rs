@@ -434,11 +434,159 @@ pub fn encode_delta(spec: &ViewSpec, scan: u32, d: &Delta) -> Vec<u8> {
     encode_codes(&d.coarse_occupied, spec.coarse_depth, &mut p);
     encode_codes(&d.coarse_free, spec.coarse_depth, &mut p);
     if colored {
-        for e in &d.fine_occupied {
-            p.extend_from_slice(&e.1.unwrap_or([255, 255, 255]));
-        }
+        let colors: Vec<[u8; 3]> = d
+            .fine_occupied
+            .iter()
+            .map(|e| e.1.unwrap_or([255, 255, 255]))
+            .collect();
+        encode_colors(&colors, &mut p);
     }
     frame_message(KIND_DELTA, scan, &p)
+}
+
+/// Rice codes of a value (0..=255) with parameter `k`: the quotient in unary (capped at
+/// [`RICE_ESCAPE`] ones, then the value in 8 plain bits), then `k` remainder bits.
+const RICE_ESCAPE: u32 = 16;
+
+fn zigzag(r: i16) -> u32 {
+    ((r << 1) ^ (r >> 15)) as u16 as u32
+}
+
+fn unzigzag(v: u32) -> i16 {
+    ((v >> 1) as i16) ^ -((v & 1) as i16)
+}
+
+/// Colour residuals: each channel minus the previous voxel's (the first voxel's from 128),
+/// modulo 256, mapped to -128..=127 and zigzagged.
+fn residuals(colors: &[[u8; 3]]) -> Vec<u32> {
+    let mut prev = [128u8; 3];
+    let mut out = Vec::with_capacity(colors.len() * 3);
+    for c in colors {
+        for ch in 0..3 {
+            out.push(zigzag(c[ch].wrapping_sub(prev[ch]) as i8 as i16));
+        }
+        prev = *c;
+    }
+    out
+}
+
+/// The code parameter that means "plain 8-bit residuals" (noisy colours).
+const RAW_K: u32 = 8;
+
+fn rice_bits(v: u32, k: u32) -> u64 {
+    if k == RAW_K {
+        return 8;
+    }
+    let q = v >> k;
+    if q < RICE_ESCAPE {
+        (q + 1 + k) as u64
+    } else {
+        (RICE_ESCAPE + 8) as u64
+    }
+}
+
+/// Colours as one byte `k` (0..=7, the Rice parameter that makes the codes shortest, or 8 for
+/// plain 8-bit residuals when no Rice code beats them) and the bit stream of the residuals' codes,
+/// MSB first, zero-padded to a byte.
+fn encode_colors(colors: &[[u8; 3]], out: &mut Vec<u8>) {
+    let res = residuals(colors);
+    let k = (0..=RAW_K)
+        .min_by_key(|&k| res.iter().map(|&v| rice_bits(v, k)).sum::<u64>())
+        .unwrap_or(0);
+    out.push(k as u8);
+    let (mut acc, mut n) = (0u64, 0u32);
+    let mut put = |bits: u64, count: u32, out: &mut Vec<u8>| {
+        acc = (acc << count) | bits;
+        n += count;
+        while n >= 8 {
+            out.push((acc >> (n - 8)) as u8);
+            n -= 8;
+        }
+        acc &= (1u64 << n) - 1;
+    };
+    for v in res {
+        let q = v >> k.min(7);
+        if k == RAW_K {
+            put(v as u64, 8, out);
+        } else if q < RICE_ESCAPE {
+            put(((1u64 << q) - 1) << 1, q + 1, out);
+            put((v & ((1 << k) - 1)) as u64, k, out);
+        } else {
+            put((1u64 << RICE_ESCAPE) - 1, RICE_ESCAPE, out);
+            put(v as u64, 8, out);
+        }
+    }
+    if n > 0 {
+        out.push((acc << (8 - n)) as u8);
+    }
+}
+
+/// Reads `count` colours coded by [`encode_colors`].
+fn decode_colors(cur: &mut Cursor, count: usize) -> Result<Vec<[u8; 3]>, ParseError> {
+    let k = cur.u8("colour code parameter")? as u32;
+    if k > RAW_K {
+        return Err(cur.err(format!("colour code parameter: expected 0..=8, found {k}")));
+    }
+    // Every residual takes at least one bit: the colours cannot need fewer bytes than this.
+    if count.saturating_mul(3) > cur.left().saturating_mul(8) {
+        return Err(cur.err(format!(
+            "colours of {count} voxels: more than {} bytes can code",
+            cur.left()
+        )));
+    }
+    let start = cur.pos;
+    let bytes = &cur.bytes[start..];
+    let mut bit = 0usize;
+    let total = bytes.len() * 8;
+    let mut read = |n: u32| -> Option<u32> {
+        let mut v = 0u32;
+        for _ in 0..n {
+            if bit >= total {
+                return None;
+            }
+            v = (v << 1) | ((bytes[bit / 8] >> (7 - bit % 8)) & 1) as u32;
+            bit += 1;
+        }
+        Some(v)
+    };
+    let mut prev = [128u8; 3];
+    let mut out = Vec::with_capacity(count);
+    let truncated = |cur: &Cursor| {
+        cur.err(format!(
+            "colours of {count} voxels: the bit stream ends early"
+        ))
+    };
+    for _ in 0..count {
+        let mut c = [0u8; 3];
+        for ch in 0..3 {
+            if k == RAW_K {
+                let v = read(8).ok_or_else(|| truncated(cur))?;
+                c[ch] = prev[ch].wrapping_add(unzigzag(v) as u8);
+                continue;
+            }
+            let mut q = 0;
+            while q < RICE_ESCAPE {
+                match read(1) {
+                    Some(1) => q += 1,
+                    Some(_) => break,
+                    None => return Err(truncated(cur)),
+                }
+            }
+            let v = if q == RICE_ESCAPE {
+                read(8).ok_or_else(|| truncated(cur))?
+            } else {
+                (q << k) | read(k).ok_or_else(|| truncated(cur))?
+            };
+            if v > 255 {
+                return Err(cur.err(format!("colour residual {v}: expected at most 255")));
+            }
+            c[ch] = prev[ch].wrapping_add(unzigzag(v) as u8);
+        }
+        prev = c;
+        out.push(c);
+    }
+    cur.pos = start + bit.div_ceil(8);
+    Ok(out)
 }
 
 /// A message of the stream.
@@ -532,9 +680,9 @@ pub fn decode_message(
                 return Err(p.err("delta flags: colours announced for an empty occupied list"));
             }
             let colors = if flags & 1 != 0 {
-                let raw = p.take(fine.len() * 3, "colours of the fine occupied voxels")?;
-                raw.chunks_exact(3)
-                    .map(|c| Some([c[0], c[1], c[2]]))
+                decode_colors(&mut p, fine.len())?
+                    .into_iter()
+                    .map(Some)
                     .collect()
             } else {
                 vec![None; fine.len()]
@@ -807,6 +955,41 @@ mod tests {
             base: 0,
         };
         assert_eq!(decode_codes(&mut cur, 16, "t").unwrap(), codes);
+    }
+
+    #[test]
+    fn colours_round_trip_and_smooth_ones_are_cheap() {
+        let mut rng = crate::link::Rng::new(5, 0);
+        let random: Vec<[u8; 3]> = (0..300)
+            .map(|_| {
+                [
+                    rng.next_u32() as u8,
+                    rng.next_u32() as u8,
+                    rng.next_u32() as u8,
+                ]
+            })
+            .collect();
+        let smooth: Vec<[u8; 3]> = (0..300u32)
+            .map(|i| [(100 + i / 10) as u8, (50 + (i % 7)) as u8, 200])
+            .collect();
+        for (colors, max_bytes) in [(random, 300 * 3 + 1), (smooth, 300)] {
+            let mut out = Vec::new();
+            encode_colors(&colors, &mut out);
+            assert!(out.len() <= max_bytes, "{} bytes", out.len());
+            let mut cur = Cursor {
+                bytes: &out,
+                pos: 0,
+                base: 0,
+            };
+            assert_eq!(decode_colors(&mut cur, colors.len()).unwrap(), colors);
+            assert_eq!(cur.pos, out.len());
+            let mut cur = Cursor {
+                bytes: &out[..out.len() - 1],
+                pos: 0,
+                base: 0,
+            };
+            assert!(decode_colors(&mut cur, colors.len()).is_err());
+        }
     }
 
     #[test]
