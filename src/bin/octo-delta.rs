@@ -129,7 +129,8 @@ struct BuildArgs {
     #[arg(short, long, value_name = "FILE")]
     output: Option<PathBuf>,
 
-    /// One CSV row per scan: points, message bytes, list sizes, what the full map would cost.
+    /// One CSV row per scan (flushed as it goes): points, message bytes, list sizes, and what
+    /// sending the full map would cost (computing the .bt size takes a copy of the map per scan).
     #[arg(long, value_name = "FILE")]
     stats: Option<PathBuf>,
 
@@ -617,11 +618,18 @@ fn dump(args: &DumpArgs) -> Result<u8> {
                             rovlink::octo::tree::unmorton(*c)
                         )?;
                     }
+                    let shift = 3 * (TREE_DEPTH - spec.coarse_depth);
                     for c in &d.coarse_occupied {
-                        writeln!(out, "  coarse occupied code {c}")?;
+                        let k = rovlink::octo::tree::unmorton(c << shift);
+                        writeln!(
+                            out,
+                            "  coarse occupied key {k:?} (depth {})",
+                            spec.coarse_depth
+                        )?;
                     }
                     for c in &d.coarse_free {
-                        writeln!(out, "  coarse free code {c}")?;
+                        let k = rovlink::octo::tree::unmorton(c << shift);
+                        writeln!(out, "  coarse free key {k:?} (depth {})", spec.coarse_depth)?;
                     }
                 }
             }
