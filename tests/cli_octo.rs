@@ -135,7 +135,7 @@ fn applied_deltas_equal_the_view_of_the_final_map() {
         assert_eq!(out.code, 0, "{}", out.stderr);
         let rows = std::fs::read_to_string(&stats).unwrap();
         assert_eq!(rows.lines().count(), 13, "{rows}");
-        assert!(rows.starts_with("scan,points,points_skipped,delta_bytes,fine_occupied,fine_free,coarse_occupied,coarse_free,full_bt_bytes,full_ot_bytes,cum_delta_bytes"));
+        assert!(rows.starts_with("scan,points,delta_bytes,fine_occupied,fine_free,coarse_occupied,coarse_free,full_bt_bytes,full_ot_bytes,cum_delta_bytes,cum_full_bt_bytes,cum_full_ot_bytes,points_skipped,insert_ms\n"));
         let (v1, v2, full) = (
             dir.path().join("v1.ot"),
             dir.path().join("v2.ot"),

@@ -380,7 +380,7 @@ fn with_origin(mut scan: Scan, origin: Option<[f32; 3]>) -> Scan {
     scan
 }
 
-const STATS_HEADER: &str = "scan,points,points_skipped,delta_bytes,fine_occupied,fine_free,coarse_occupied,coarse_free,full_bt_bytes,full_ot_bytes,cum_delta_bytes,cum_full_bt_bytes,cum_full_ot_bytes,insert_ms";
+const STATS_HEADER: &str = "scan,points,delta_bytes,fine_occupied,fine_free,coarse_occupied,coarse_free,full_bt_bytes,full_ot_bytes,cum_delta_bytes,cum_full_bt_bytes,cum_full_ot_bytes,points_skipped,insert_ms";
 
 /// CSV rows written and flushed one by one.
 struct Rows {
@@ -493,14 +493,14 @@ fn build(args: &BuildArgs) -> Result<u8> {
                 cum_bt += full_bt;
                 cum_ot += full_ot;
                 rows.line(&format!(
-                    "{scan_no},{},{},{},{},{},{},{},{full_bt},{full_ot},{cum_delta},{cum_bt},{cum_ot},{:.3}",
+                    "{scan_no},{},{},{},{},{},{},{full_bt},{full_ot},{cum_delta},{cum_bt},{cum_ot},{},{:.3}",
                     up.points,
-                    up.points_skipped,
                     msg.len(),
                     d.fine_occupied.len(),
                     d.fine_free.len(),
                     d.coarse_occupied.len(),
                     d.coarse_free.len(),
+                    up.points_skipped,
                     dt * 1e3
                 ))?;
             }
