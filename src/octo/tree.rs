@@ -581,17 +581,23 @@ impl OcTree {
         report.occupied_voxels = occ.len();
         report.free_voxels = ups.len() - occ.len();
         if !ups.is_empty() {
-            let created = self.blocks[0].mask & 1 == 0;
-            if created {
-                self.blocks[0].mask = 1;
-                self.blocks[0].value[0] = 0.0;
-                self.blocks[0].child[0] = NONE;
-                self.set_color(0, 0, [255, 255, 255, 0]);
-                self.nodes += 1;
-            }
+            let created = self.ensure_root();
             self.apply(0, 0, 0, &ups, created, &mut report.changes);
         }
         report
+    }
+
+    /// Creates the root (log-odds 0, no colour) if the tree is empty; true if it did.
+    fn ensure_root(&mut self) -> bool {
+        let created = self.blocks[0].mask & 1 == 0;
+        if created {
+            self.blocks[0].mask = 1;
+            self.blocks[0].value[0] = 0.0;
+            self.blocks[0].child[0] = NONE;
+            self.set_color(0, 0, [255, 255, 255, 0]);
+            self.nodes += 1;
+        }
+        created
     }
 
     fn set_color(&mut self, blk: u32, slot: usize, c: ColorSlot) {
@@ -829,14 +835,7 @@ impl OcTree {
     /// colour, creating the path and expanding pruned nodes as needed; then prunes and updates
     /// inner values along the path. For building views (the operator's map).
     pub fn set_node(&mut self, code: u64, depth: u32, log_odds: f32, color: Option<[u8; 3]>) {
-        let created = self.blocks[0].mask & 1 == 0;
-        if created {
-            self.blocks[0].mask = 1;
-            self.blocks[0].value[0] = 0.0;
-            self.blocks[0].child[0] = NONE;
-            self.set_color(0, 0, [255, 255, 255, 0]);
-            self.nodes += 1;
-        }
+        let created = self.ensure_root();
         self.set_recurs(
             (0, 0),
             0,
