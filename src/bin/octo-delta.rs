@@ -95,8 +95,14 @@ impl ViewArgs {
                         "--coarse-res {m}: expected a size >= the resolution {resolution_m} m"
                     )));
                 }
-                let k = (m / resolution_m).log2().round().clamp(0.0, 15.0) as u32;
-                TREE_DEPTH - k
+                let k = (m / resolution_m).log2().round();
+                if k > 15.0 {
+                    bail!(usage(format!(
+                        "--coarse-res {m}: at most 2^15 x the resolution ({} m)",
+                        resolution_m * 32768.0
+                    )));
+                }
+                TREE_DEPTH - k.max(0.0) as u32
             }
         };
         Ok(ViewSpec {
@@ -437,6 +443,15 @@ fn build(args: &BuildArgs) -> Result<u8> {
         bail!(usage(format!("--max-range {r}: expected a range > 0 m")));
     }
     let spec = args.view.spec(args.res)?;
+    if !(args.scan_period.is_finite()
+        && (0.0..=rovlink::octo::transfer::MAX_PERIOD_S).contains(&args.scan_period))
+    {
+        bail!(usage(format!(
+            "--scan-period {}: expected 0..={} s",
+            args.scan_period,
+            rovlink::octo::transfer::MAX_PERIOD_S
+        )));
+    }
     let link_model = match &args.link {
         Some(name) => {
             Some(rovlink::octo::transfer::model_by_name(name).map_err(|e| usage(e.to_string()))?)

@@ -298,8 +298,10 @@ fn decode_level(
     limit: usize,
     what: &str,
 ) -> Result<(), ParseError> {
+    let at = cur.pos;
     let mask = cur.u8(&format!("{what} path byte at level {level}"))?;
     if mask == 0 {
+        cur.pos = at;
         return Err(cur.err(format!("{what}: empty path byte at level {level}")));
     }
     for i in 0..8u64 {
@@ -551,10 +553,12 @@ fn decode_colors(cur: &mut Cursor, count: usize) -> Result<Vec<[u8; 3]>, ParseEr
     };
     let mut prev = [128u8; 3];
     let mut out = Vec::with_capacity(count);
-    let truncated = |cur: &Cursor| {
-        cur.err(format!(
-            "colours of {count} voxels: the bit stream ends early"
-        ))
+    let base = cur.base + start as u64;
+    let truncated = |_: &Cursor| {
+        ParseError::new(
+            base + bytes.len() as u64,
+            format!("colours of {count} voxels: the bit stream ends early"),
+        )
     };
     for _ in 0..count {
         let mut c = [0u8; 3];
@@ -578,12 +582,21 @@ fn decode_colors(cur: &mut Cursor, count: usize) -> Result<Vec<[u8; 3]>, ParseEr
                 (q << k) | read(k).ok_or_else(|| truncated(cur))?
             };
             if v > 255 {
-                return Err(cur.err(format!("colour residual {v}: expected at most 255")));
+                return Err(ParseError::new(
+                    base + (bit / 8) as u64,
+                    format!("colour residual {v}: expected at most 255"),
+                ));
             }
             c[ch] = prev[ch].wrapping_add(unzigzag(v) as u8);
         }
         prev = c;
         out.push(c);
+    }
+    if bit % 8 != 0 && bytes[bit / 8] & (0xff >> (bit % 8)) != 0 {
+        return Err(ParseError::new(
+            base + (bit / 8) as u64,
+            "colours: padding bits after the last code are not zero",
+        ));
     }
     cur.pos = start + bit.div_ceil(8);
     Ok(out)
@@ -668,8 +681,10 @@ pub fn decode_message(
     };
     let message = match kind {
         KIND_DELTA => {
+            let at = p.pos;
             let flags = p.u8("delta flags")?;
             if flags > 1 {
+                p.pos = at;
                 return Err(p.err(format!("delta flags: unknown bits in {flags:#04x}")));
             }
             let fine = decode_codes(&mut p, TREE_DEPTH, "fine occupied list")?;
@@ -720,7 +735,17 @@ pub fn encode_full(scan: u32, view: &OcTree) -> Vec<u8> {
     let mut p = vec![view.is_colored() as u8];
     let mut colors = Vec::new();
     if let Some(root) = view.root() {
-        full_node(view, root, &mut p, &mut colors);
+        let v = view.node(root);
+        if v.has_children() {
+            full_node(view, root, &mut p, &mut colors);
+        } else {
+            // The whole space is one leaf: flag bit 1 and its code (1 free, 2 occupied).
+            p[0] |= 2;
+            p.push(if v.log_odds >= 0.0 { 2 } else { 1 });
+            if v.log_odds >= 0.0 {
+                colors.extend_from_slice(&v.color.unwrap_or([255, 255, 255]));
+            }
+        }
     }
     if view.is_colored() {
         p.extend_from_slice(&colors);
@@ -760,12 +785,24 @@ fn full_node(t: &OcTree, r: super::tree::NodeRef, out: &mut Vec<u8>, colors: &mu
 type Leaf = (u64, u32, bool, Option<[u8; 3]>);
 
 fn decode_full(p: &mut Cursor) -> Result<Vec<Leaf>, ParseError> {
+    let at = p.pos;
     let flags = p.u8("full flags")?;
-    if flags > 1 {
+    if flags > 3 {
+        p.pos = at;
         return Err(p.err(format!("full flags: unknown bits in {flags:#04x}")));
     }
     let mut leaves = Vec::new();
-    if p.left() > 0 {
+    if flags & 2 != 0 {
+        let at = p.pos;
+        match p.u8("root leaf code")? {
+            1 => leaves.push((0, 0, false, None)),
+            2 => leaves.push((0, 0, true, None)),
+            other => {
+                p.pos = at;
+                return Err(p.err(format!("root leaf code: expected 1 or 2, found {other}")));
+            }
+        }
+    } else if p.left() > 0 {
         full_level(p, 0, 0, &mut leaves)?;
     }
     if flags & 1 != 0 {
@@ -833,15 +870,7 @@ pub fn view_of(tree: &OcTree, spec: &ViewSpec) -> OcTree {
             // A leaf as big as a coarse voxel or bigger: the same state everywhere; colour only
             // in the coarse voxels that meet the ROI (the others are sent coarse, colourless).
             let color = if occ { v.color } else { None };
-            if color.is_none() {
-                view.set_node(code, depth, ml, None);
-                return;
-            }
-            let first = code >> shift;
-            for coarse in first..first + (1u64 << (3 * (d - depth))) {
-                let c = color.filter(|_| spec.coarse_in_roi(coarse));
-                view.set_node(coarse << shift, d, ml, c);
-            }
+            big_leaf(&mut view, spec, code, depth, ml, color);
             return;
         }
         let coarse = code >> shift;
@@ -860,6 +889,45 @@ pub fn view_of(tree: &OcTree, spec: &ViewSpec) -> OcTree {
         }
     });
     view
+}
+
+/// Sets a leaf of `depth <= coarse_depth` in the view: in one piece where it lies wholly inside
+/// or wholly outside the ROI, split into octants only where it straddles the ROI's boundary
+/// (down to coarse voxels), so the work follows the ROI's surface, not the leaf's volume.
+fn big_leaf(
+    view: &mut OcTree,
+    spec: &ViewSpec,
+    code: u64,
+    depth: u32,
+    ml: f32,
+    color: Option<[u8; 3]>,
+) {
+    let Some(roi) = spec.roi.filter(|_| color.is_some()) else {
+        view.set_node(code, depth, ml, color);
+        return;
+    };
+    let k = unmorton(code);
+    let edge = spec.resolution_m * (1u64 << (TREE_DEPTH - depth)) as f64;
+    let (mut inside, mut outside) = (true, false);
+    for i in 0..3 {
+        let lo = (k[i] as i64 - 32768) as f64 * spec.resolution_m;
+        let hi = lo + edge;
+        inside &= roi.min_m[i] <= lo && hi <= roi.max_m[i];
+        outside |= lo > roi.max_m[i] || hi < roi.min_m[i];
+    }
+    if inside || outside || depth == spec.coarse_depth {
+        let c = if depth == spec.coarse_depth {
+            color.filter(|_| spec.coarse_in_roi(code >> spec.shift()))
+        } else {
+            color.filter(|_| inside)
+        };
+        view.set_node(code, depth, ml, c);
+        return;
+    }
+    let shift = 3 * (TREE_DEPTH - 1 - depth);
+    for i in 0..8u64 {
+        big_leaf(view, spec, code | (i << shift), depth + 1, ml, color);
+    }
 }
 
 /// The operator side: a view built from the messages it received.
@@ -1086,6 +1154,34 @@ mod tests {
                 .for_each_leaf(|code, d, v| c.push((code, d, v.log_odds >= 0.0)));
             assert_eq!(c, b);
         }
+    }
+
+    #[test]
+    fn a_huge_coloured_leaf_is_set_in_one_piece_or_split_along_the_roi_only() {
+        let mut tree = OcTree::new(0.1);
+        tree.enable_color();
+        tree.set_node(0, 1, 2.0, Some([10, 20, 30]));
+        let spec = ViewSpec {
+            resolution_m: 0.1,
+            coarse_depth: 16,
+            roi: None,
+        };
+        let v = view_of(&tree, &spec);
+        assert_eq!(v.num_nodes(), tree.num_nodes());
+        let roi = Some(Roi {
+            min_m: [-1.0, -1.0, -1.0],
+            max_m: [1.0, 1.0, 1.0],
+        });
+        let v = view_of(
+            &tree,
+            &ViewSpec {
+                resolution_m: 0.1,
+                coarse_depth: 13,
+                roi,
+            },
+        );
+        // Split along the ROI's faces only: far fewer nodes than 8^12 coarse voxels.
+        assert!(v.num_nodes() < 200_000, "{} nodes", v.num_nodes());
     }
 
     #[test]

@@ -151,7 +151,9 @@ fn average_child_color(tree: &OcTree, r: NodeRef) -> [u8; 3] {
 /// The `.bt` file of a tree, as `graph2tree` writes it: a maximum-likelihood copy, pruned twice
 /// (OctoMap's `prune()` stops at the first depth where nothing collapses).
 pub fn write_bt(tree: &OcTree) -> Vec<u8> {
+    // A .bt holds no colour: prune a colour-blind copy, as an OcTree would be.
     let mut ml = tree.clone();
+    ml.drop_colors();
     ml.to_max_likelihood(2);
     let mut out = header(BT_HEADER, "OcTree", ml.num_nodes(), ml.resolution_m());
     if let Some(root) = ml.root() {
@@ -277,12 +279,8 @@ pub fn read_header(bytes: &[u8]) -> Result<MapHeader, ParseError> {
                 }
                 res = Some(r)
             }
-            other => {
-                return Err(ParseError::new(
-                    at,
-                    format!("header: unknown field {other:?} (expected id, size, res or data)"),
-                ));
-            }
+            // OctoMap warns about other lines and reads on.
+            _ => {}
         }
     }
     let id = id.ok_or_else(|| ParseError::new(pos as u64, "header has no `id` line"))?;
@@ -434,7 +432,8 @@ fn bt_node(
         .iter()
         .enumerate()
         .fold(0u8, |m, (i, &c)| if c != 0 { m | (1 << i) } else { m });
-    nodes.push((0.0, mask));
+    // An inner record without children reads as OctoMap's maximum of no children, -FLT_MAX.
+    nodes.push((if mask == 0 { -f32::MAX } else { 0.0 }, mask));
     for c in codes {
         match c {
             1 => nodes.push((clamp.0, 0)),

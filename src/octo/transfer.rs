@@ -18,6 +18,8 @@ pub const SEGMENT_BYTES: usize = 1400;
 pub const SEGMENT_HEADER_BYTES: usize = 8;
 /// Acknowledgement frame bytes.
 pub const ACK_BYTES: usize = 8;
+/// Longest time between scans a transfer accepts, s (a day).
+pub const MAX_PERIOD_S: f64 = 86_400.0;
 /// Share of the link rate the reliable stream may use.
 pub const SHAPING: f64 = 0.85;
 
@@ -135,8 +137,11 @@ pub fn send_over(
         model: model.name.clone(),
         ..TransferReport::default()
     };
-    let Ok(mut link) = Link::new(model.clone(), reverse_of(model), seed, Distance::Fixed(0.0))
-    else {
+    let link = Link::new(model.clone(), reverse_of(model), seed, Distance::Fixed(0.0));
+    let (Ok(mut link), true) = (
+        link,
+        period_s.is_finite() && (0.0..=MAX_PERIOD_S).contains(&period_s),
+    ) else {
         report.undelivered = messages.len();
         return report;
     };

@@ -22,7 +22,10 @@
 //!
 //! Colour (the second paper's rule): an occupied voxel keeps the brightest colour (highest
 //! luma) of the points that fell in it. Leaves with different colours are not pruned together,
-//! as in OctoMap's `ColorOcTree`.
+//! so no voxel's colour is lost; OctoMap 1.9's `ColorOcTree` prunes by value alone and keeps
+//! the first child's colour, so a coloured tree's structure (not its occupancy) differs from
+//! what OctoMap would build. A `.bt` (no colour) is written from a colour-blind copy, exactly as
+//! for an `OcTree`.
 
 use super::cellset::CellSet;
 use super::{Pose, Scan};
@@ -307,6 +310,11 @@ impl OcTree {
         }
     }
 
+    /// Forgets the colours (the tree becomes an `OcTree`); nodes are not re-pruned.
+    pub fn drop_colors(&mut self) {
+        self.colors = None;
+    }
+
     /// Whether the tree keeps colours.
     pub fn is_colored(&self) -> bool {
         self.colors.is_some()
@@ -501,7 +509,8 @@ impl OcTree {
         };
         let mut free: Vec<u64> = Vec::new();
         let mut occ: Vec<(u64, ColorSlot)> = Vec::with_capacity(pts.len());
-        let threads = if pts.len() >= 8192 { self.threads } else { 1 };
+        // At least 4096 points a thread, at most 64 threads.
+        let threads = self.threads.min(pts.len() / 4096).clamp(1, 64);
         if threads <= 1 {
             let mut set = std::mem::take(&mut self.scratch);
             let (s, b) = self.cast(&pts, 0, origin, colors, max_range_m, &mut set, &mut occ);
