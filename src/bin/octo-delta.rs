@@ -212,7 +212,7 @@ enum InputFormat {
 struct ApplyArgs {
     /// The delta stream ("-" for standard input).
     input: Option<PathBuf>,
-    /// The view, as a .ot file.
+    /// The view, as a .ot file ("-" for standard output).
     #[arg(short, long, value_name = "FILE", required = true)]
     output: PathBuf,
     /// Apply only the first N messages.
@@ -329,8 +329,13 @@ fn format_of(path: &Path, bytes: &[u8], forced: Option<InputFormat>) -> Option<I
 }
 
 /// The scans of one input, one at a time (a `.graph` file is streamed from disk, so a large
-/// survey never sits in memory whole), with how many there will be.
-type ScanSource = (Box<dyn Iterator<Item = Result<Scan, ParseError>>>, usize);
+/// survey never sits in memory whole), how many there will be, and whether the format carries
+/// poses (`.graph`, MCAP) or not (PCD without VIEWPOINT, PLY, XYZ: `--origin` applies).
+type ScanSource = (
+    Box<dyn Iterator<Item = Result<Scan, ParseError>>>,
+    usize,
+    bool,
+);
 
 fn open_scans(path: &Path, args: &BuildArgs) -> Result<ScanSource> {
     let name = path.display().to_string();
@@ -347,7 +352,7 @@ fn open_scans(path: &Path, args: &BuildArgs) -> Result<ScanSource> {
         let stream =
             graph::ScanStream::new(file, len).map_err(|e| usage(format!("{name}: {e}")))?;
         let n = stream.node_count() as usize;
-        return Ok((Box::new(stream), n));
+        return Ok((Box::new(stream), n, true));
     }
     let mut input = Input::open(Some(path))?;
     let bytes = input.read_all()?;
@@ -369,7 +374,8 @@ fn open_scans(path: &Path, args: &BuildArgs) -> Result<ScanSource> {
     };
     let scans = parsed.map_err(|e| usage(format!("{name}: {e}")))?;
     let n = scans.len();
-    Ok((Box::new(scans.into_iter().map(Ok)), n))
+    let posed = matches!(format, InputFormat::Graph | InputFormat::Mcap);
+    Ok((Box::new(scans.into_iter().map(Ok)), n, posed))
 }
 
 /// Inputs without a pose get the sensor origin of `--origin`: the points stay where they are in
@@ -443,6 +449,14 @@ fn build(args: &BuildArgs) -> Result<u8> {
         bail!(usage(format!("--max-range {r}: expected a range > 0 m")));
     }
     let spec = args.view.spec(args.res)?;
+    for (flag, path) in [
+        ("--ot", &args.ot),
+        ("--bt", &args.bt),
+        ("--stats", &args.stats),
+        ("--arrivals", &args.arrivals),
+    ] {
+        file_only(flag, path)?;
+    }
     if !(args.scan_period.is_finite()
         && (0.0..=rovlink::octo::transfer::MAX_PERIOD_S).contains(&args.scan_period))
     {
@@ -475,12 +489,12 @@ fn build(args: &BuildArgs) -> Result<u8> {
     let mut insert_s = 0.0f64;
     let mut messages: Vec<(u32, usize)> = Vec::new();
     for path in &args.inputs {
-        let (scans, count) = open_scans(path, args)?;
+        let (scans, count, posed) = open_scans(path, args)?;
         bar.inc_length(count as u64);
         for scan in scans {
             let scan = with_origin(
                 scan.map_err(|e| usage(format!("{}: {e}", path.display())))?,
-                args.origin,
+                args.origin.filter(|_| !posed),
             );
             let tree = tree.get_or_insert_with(|| {
                 let mut t = OcTree::new(args.res);
@@ -581,8 +595,23 @@ fn apply(args: &ApplyArgs) -> Result<u8> {
     for m in msgs.iter().take(args.messages.unwrap_or(usize::MAX)) {
         rx.apply(&m.message);
     }
-    AtomicFile::create(&args.output)?.commit_with(&files::write_ot(rx.view()))?;
+    let mut out = Output::open(Some(&args.output), true)?;
+    out.write_bytes(&files::write_ot(rx.view()))?;
+    out.finish()?;
     Ok(EXIT_OK)
+}
+
+/// Side outputs are files: `-` (standard output) belongs to the main output.
+fn file_only(flag: &str, path: &Option<PathBuf>) -> Result<()> {
+    if path
+        .as_deref()
+        .is_some_and(|p| rovlink::io::is_std(Some(p)))
+    {
+        bail!(usage(format!(
+            "{flag} -: this output must be a file (standard output is for -o)"
+        )));
+    }
+    Ok(())
 }
 
 fn dump(args: &DumpArgs) -> Result<u8> {
@@ -683,8 +712,8 @@ fn dump(args: &DumpArgs) -> Result<u8> {
                     v["voxels"] = serde_json::json!({
                         "fine_occupied": d.fine_occupied.iter().map(|(c, col)| serde_json::json!({"key": rovlink::octo::tree::unmorton(*c), "rgb": col})).collect::<Vec<_>>(),
                         "fine_free": d.fine_free.iter().map(|c| rovlink::octo::tree::unmorton(*c)).collect::<Vec<_>>(),
-                        "coarse_occupied": d.coarse_occupied,
-                        "coarse_free": d.coarse_free,
+                        "coarse_occupied": d.coarse_occupied.iter().map(|c| rovlink::octo::tree::unmorton(c << (3 * (TREE_DEPTH - spec.coarse_depth)))).collect::<Vec<_>>(),
+                        "coarse_free": d.coarse_free.iter().map(|c| rovlink::octo::tree::unmorton(c << (3 * (TREE_DEPTH - spec.coarse_depth)))).collect::<Vec<_>>(),
                     });
                 }
                 writeln!(out, "{v}")?;

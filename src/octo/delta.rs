@@ -592,7 +592,7 @@ fn decode_colors(cur: &mut Cursor, count: usize) -> Result<Vec<[u8; 3]>, ParseEr
         prev = c;
         out.push(c);
     }
-    if bit % 8 != 0 && bytes[bit / 8] & (0xff >> (bit % 8)) != 0 {
+    if !bit.is_multiple_of(8) && bytes[bit / 8] & (0xff >> (bit % 8)) != 0 {
         return Err(ParseError::new(
             base + (bit / 8) as u64,
             "colours: padding bits after the last code are not zero",
@@ -909,11 +909,11 @@ fn big_leaf(
     let k = unmorton(code);
     let edge = spec.resolution_m * (1u64 << (TREE_DEPTH - depth)) as f64;
     let (mut inside, mut outside) = (true, false);
-    for i in 0..3 {
-        let lo = (k[i] as i64 - 32768) as f64 * spec.resolution_m;
+    for ((&key, &min), &max) in k.iter().zip(&roi.min_m).zip(&roi.max_m) {
+        let lo = (key as i64 - 32768) as f64 * spec.resolution_m;
         let hi = lo + edge;
-        inside &= roi.min_m[i] <= lo && hi <= roi.max_m[i];
-        outside |= lo > roi.max_m[i] || hi < roi.min_m[i];
+        inside &= min <= lo && hi <= max;
+        outside |= lo > max || hi < min;
     }
     if inside || outside || depth == spec.coarse_depth {
         let c = if depth == spec.coarse_depth {

@@ -71,7 +71,8 @@ pub struct TransferReport {
     pub resends: u64,
     /// Bytes put on the link (segments, resends and acknowledgements included).
     pub link_bytes: u64,
-    /// Messages never completed (the link lost everything for too long).
+    /// Messages never shown: never completed (the link lost everything for too long), or after
+    /// one that never completed (messages are applied in order).
     pub undelivered: usize,
 }
 
@@ -285,7 +286,8 @@ pub fn send_over(
     }
     let mut applied = 0.0f64;
     for (m, &(scan, bytes)) in messages.iter().enumerate() {
-        match complete[m] {
+        // Delivery is in order: after a message that never completed, nothing can be shown.
+        match complete[m].filter(|_| report.undelivered == 0) {
             Some(t) => {
                 applied = applied.max(t);
                 report.arrivals.push(Arrival {

@@ -459,6 +459,11 @@ impl OcTree {
         let (mut skipped, mut beyond) = (0, 0);
         for (j, &p) in pts.iter().enumerate() {
             let i = first + j;
+            if !(p[0].is_finite() && p[1].is_finite() && p[2].is_finite()) {
+                // OctoMap casts no ray for it either (its key is out of range).
+                skipped += 1;
+                continue;
+            }
             let diff = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
             let within = max_range_m.is_none_or(|r| r < 0.0 || norm_f32(diff) <= r);
             if within {
