@@ -478,7 +478,8 @@ fn build(args: &BuildArgs) -> Result<u8> {
     let mut tree: Option<OcTree> = None;
     let mut sender = Sender::new(spec);
     sender.set_color_updates(args.color_updates);
-    out.write_bytes(&delta::encode_header(&spec))?;
+    let header = delta::encode_header(&spec);
+    out.write_bytes(&header)?;
     let threads = args
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get().min(8)));
@@ -553,7 +554,7 @@ fn build(args: &BuildArgs) -> Result<u8> {
             insert_s,
             tree.num_nodes(),
             files::ot_size(&tree),
-            cum_delta + delta::encode_header(&spec).len() as u64
+            cum_delta + header.len() as u64
         );
     }
     if let Some(model) = link_model {
@@ -662,9 +663,8 @@ fn dump(args: &DumpArgs) -> Result<u8> {
                             rovlink::octo::tree::unmorton(*c)
                         )?;
                     }
-                    let shift = 3 * (TREE_DEPTH - spec.coarse_depth);
                     for c in &d.coarse_occupied {
-                        let k = rovlink::octo::tree::unmorton(c << shift);
+                        let k = spec.coarse_key(*c);
                         writeln!(
                             out,
                             "  coarse occupied key {k:?} (depth {})",
@@ -672,7 +672,7 @@ fn dump(args: &DumpArgs) -> Result<u8> {
                         )?;
                     }
                     for c in &d.coarse_free {
-                        let k = rovlink::octo::tree::unmorton(c << shift);
+                        let k = spec.coarse_key(*c);
                         writeln!(out, "  coarse free key {k:?} (depth {})", spec.coarse_depth)?;
                     }
                 }
@@ -712,8 +712,8 @@ fn dump(args: &DumpArgs) -> Result<u8> {
                     v["voxels"] = serde_json::json!({
                         "fine_occupied": d.fine_occupied.iter().map(|(c, col)| serde_json::json!({"key": rovlink::octo::tree::unmorton(*c), "rgb": col})).collect::<Vec<_>>(),
                         "fine_free": d.fine_free.iter().map(|c| rovlink::octo::tree::unmorton(*c)).collect::<Vec<_>>(),
-                        "coarse_occupied": d.coarse_occupied.iter().map(|c| rovlink::octo::tree::unmorton(c << (3 * (TREE_DEPTH - spec.coarse_depth)))).collect::<Vec<_>>(),
-                        "coarse_free": d.coarse_free.iter().map(|c| rovlink::octo::tree::unmorton(c << (3 * (TREE_DEPTH - spec.coarse_depth)))).collect::<Vec<_>>(),
+                        "coarse_occupied": d.coarse_occupied.iter().map(|c| spec.coarse_key(*c)).collect::<Vec<_>>(),
+                        "coarse_free": d.coarse_free.iter().map(|c| spec.coarse_key(*c)).collect::<Vec<_>>(),
                     });
                 }
                 writeln!(out, "{v}")?;

@@ -19,10 +19,9 @@
 //! Decoding never panics on any input; errors name the offset and what was expected, and
 //! allocation is bounded by the input (every coded node costs at least one byte).
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 use super::ParseError;
-use super::files::BT_HEADER;
 use super::tree::{Change, OcTree, Params, TREE_DEPTH, unmorton};
 
 /// Stream magic.
@@ -69,8 +68,14 @@ impl ViewSpec {
         })
     }
 
-    fn shift(&self) -> u32 {
+    /// Bits a depth-16 Morton code is shifted right to give its coarse voxel's code.
+    pub fn coarse_shift(&self) -> u32 {
         3 * (TREE_DEPTH - self.coarse_depth)
+    }
+
+    /// The key of the first fine voxel of a coarse voxel (code at `coarse_depth`).
+    pub fn coarse_key(&self, coarse: u64) -> super::tree::Key {
+        unmorton(coarse << self.coarse_shift())
     }
 }
 
@@ -133,7 +138,7 @@ impl Sender {
     /// The delta of one scan: `changes` from [`OcTree::insert_scan`] (in Morton order) on `tree`.
     pub fn delta(&mut self, tree: &OcTree, changes: &[Change]) -> Delta {
         let mut d = Delta::default();
-        let shift = self.spec.shift();
+        let shift = self.spec.coarse_shift();
         let mut last_coarse = None;
         let mut last_in = true;
         for c in changes {
@@ -754,20 +759,7 @@ pub fn encode_full(scan: u32, view: &OcTree) -> Vec<u8> {
 }
 
 fn full_node(t: &OcTree, r: super::tree::NodeRef, out: &mut Vec<u8>, colors: &mut Vec<u8>) {
-    let mut b = [0u8; 2];
-    for i in 0..8 {
-        if let Some(c) = t.child(r, i) {
-            let v = t.node(c);
-            let code = if v.has_children() {
-                3
-            } else if v.log_odds >= 0.0 {
-                2
-            } else {
-                1
-            };
-            b[i / 4] |= code << (2 * (i % 4));
-        }
-    }
+    let b = super::files::bt_record(t, r);
     out.extend_from_slice(&b);
     // Leaves and subtrees in index order: the order a reader meets the leaves in.
     for i in 0..8 {
@@ -857,8 +849,8 @@ pub fn view_of(tree: &OcTree, spec: &ViewSpec) -> OcTree {
     }
     let p = Params::default();
     let d = spec.coarse_depth;
-    let shift = 3 * (TREE_DEPTH - d);
-    let mut coarse_done: HashMap<u64, ()> = HashMap::new();
+    let shift = spec.coarse_shift();
+    let mut coarse_done: HashSet<u64> = HashSet::new();
     tree.for_each_leaf(|code, depth, v| {
         let occ = v.log_odds >= 0.0;
         let ml = if occ {
@@ -876,7 +868,7 @@ pub fn view_of(tree: &OcTree, spec: &ViewSpec) -> OcTree {
         let coarse = code >> shift;
         if spec.coarse_in_roi(coarse) {
             view.set_node(code, depth, ml, if occ { v.color } else { None });
-        } else if coarse_done.insert(coarse, ()).is_none() {
+        } else if coarse_done.insert(coarse) {
             let cocc = tree
                 .search(code, d)
                 .is_some_and(|(n, _)| tree.node(n).log_odds >= 0.0);
@@ -917,7 +909,7 @@ fn big_leaf(
     }
     if inside || outside || depth == spec.coarse_depth {
         let c = if depth == spec.coarse_depth {
-            color.filter(|_| spec.coarse_in_roi(code >> spec.shift()))
+            color.filter(|_| spec.coarse_in_roi(code >> spec.coarse_shift()))
         } else {
             color.filter(|_| inside)
         };
@@ -957,7 +949,7 @@ impl Receiver {
     /// Applies one message.
     pub fn apply(&mut self, m: &Message) {
         let p = Params::default();
-        let shift = 3 * (TREE_DEPTH - self.spec.coarse_depth);
+        let shift = self.spec.coarse_shift();
         self.messages += 1;
         match m {
             Message::Delta { delta, .. } => {
@@ -996,10 +988,6 @@ impl Receiver {
         }
     }
 }
-
-/// Keeps the `.bt` header constant reachable for documentation links.
-#[doc(hidden)]
-pub const _BT: &str = BT_HEADER;
 
 #[cfg(test)]
 mod tests {

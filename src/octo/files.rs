@@ -162,7 +162,9 @@ pub fn write_bt(tree: &OcTree) -> Vec<u8> {
     out
 }
 
-fn write_bt_node(tree: &OcTree, r: NodeRef, out: &mut Vec<u8>) {
+/// A node's `.bt` record: child i's 2-bit code (0 unknown, 1 free leaf, 2 occupied leaf, 3 inner)
+/// at bits `2 * (i % 4)` of byte `i / 4`.
+pub(crate) fn bt_record(tree: &OcTree, r: NodeRef) -> [u8; 2] {
     let mut bytes = [0u8; 2];
     for i in 0..8 {
         if let Some(c) = tree.child(r, i) {
@@ -177,7 +179,11 @@ fn write_bt_node(tree: &OcTree, r: NodeRef, out: &mut Vec<u8>) {
             bytes[i / 4] |= code << (2 * (i % 4));
         }
     }
-    out.extend_from_slice(&bytes);
+    bytes
+}
+
+fn write_bt_node(tree: &OcTree, r: NodeRef, out: &mut Vec<u8>) {
+    out.extend_from_slice(&bt_record(tree, r));
     for i in 0..8 {
         if let Some(c) = tree.child(r, i)
             && tree.node(c).has_children()

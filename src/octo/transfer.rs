@@ -9,7 +9,6 @@
 //! band: every acknowledgement is a small frame over the reverse link. The receiver applies
 //! messages in order, so a scan's changes are shown once it and every earlier one are complete.
 
-use super::tree::TREE_DEPTH;
 use crate::link::{Distance, Link, Model, ModelError, Side, SimTime};
 
 /// Largest segment on the link, bytes (payload and segment header).
@@ -22,8 +21,6 @@ pub const ACK_BYTES: usize = 8;
 pub const MAX_PERIOD_S: f64 = 86_400.0;
 /// Share of the link rate the reliable stream may use.
 pub const SHAPING: f64 = 0.85;
-
-const _: () = assert!(TREE_DEPTH == 16);
 
 /// A link model by preset name or model file path; the reverse direction (acknowledgements)
 /// uses the paired satellite preset, or the same model.

@@ -644,13 +644,55 @@ impl OcTree {
 
     /// Whether an update would leave a leaf of value `v` and colour `c` unchanged.
     fn is_noop(&self, v: f32, c: ColorSlot, u: &Upd) -> bool {
-        let p = &self.params;
-        let occ_noop = if u.hit {
-            v >= p.clamp_max_log
+        self.at_clamp(v, u.hit) && (u.color[3] == 0 || (c[3] == 1 && !brighter(u.color, c)))
+    }
+
+    /// OctoMap's early abort: a value already clamped in the update's direction stays as it is.
+    fn at_clamp(&self, v: f32, hit: bool) -> bool {
+        if hit {
+            v >= self.params.clamp_max_log
         } else {
-            v <= p.clamp_min_log
-        };
-        occ_noop && (u.color[3] == 0 || (c[3] == 1 && !brighter(u.color, c)))
+            v <= self.params.clamp_min_log
+        }
+    }
+
+    /// The block of a node's children, allocated if it has none yet. A node that existed
+    /// (`expand`: a pruned leaf, known space) gets eight children copying its value and colour;
+    /// a node just created gets an empty block.
+    fn children_block(&mut self, blk: u32, slot: usize, expand: bool) -> u32 {
+        let cb = self.blocks[blk as usize].child[slot];
+        if cb != NONE {
+            return cb;
+        }
+        let v = self.blocks[blk as usize].value[slot];
+        let c = self.color(blk, slot);
+        let cb = self.alloc_block();
+        self.blocks[blk as usize].child[slot] = cb;
+        if expand {
+            let b = &mut self.blocks[cb as usize];
+            b.value = [v; 8];
+            b.mask = 0xff;
+            if let Some(cs) = &mut self.colors {
+                cs[cb as usize] = [c; 8];
+            }
+            self.nodes += 8;
+        }
+        cb
+    }
+
+    /// Creates child `digit` of block `cb` (log-odds 0, no colour) if it does not exist; true if
+    /// it did not.
+    fn create_child(&mut self, cb: u32, digit: usize) -> bool {
+        let b = &mut self.blocks[cb as usize];
+        let created = b.mask & (1 << digit) == 0;
+        if created {
+            b.mask |= 1 << digit;
+            b.value[digit] = 0.0;
+            b.child[digit] = NONE;
+            self.set_color(cb, digit, [255, 255, 255, 0]);
+            self.nodes += 1;
+        }
+        created
     }
 
     fn apply(
@@ -669,12 +711,7 @@ impl OcTree {
             let p = self.params;
             let was_occ = v >= 0.0;
             let mut nv = v;
-            let noop = if u.hit {
-                v >= p.clamp_max_log
-            } else {
-                v <= p.clamp_min_log
-            };
-            if !noop {
+            if !self.at_clamp(v, u.hit) {
                 nv = v + if u.hit { p.hit_log } else { p.miss_log };
                 if nv < p.clamp_min_log {
                     nv = p.clamp_min_log;
@@ -700,28 +737,15 @@ impl OcTree {
             }
             return;
         }
-        let mut child_blk = self.blocks[blk as usize].child[slot];
-        if child_blk == NONE {
-            if just_created {
-                child_blk = self.alloc_block();
-            } else {
-                // A pruned node: expand it unless no update would change anything.
-                let v = self.blocks[blk as usize].value[slot];
-                let c = self.color(blk, slot);
-                if ups.iter().all(|u| self.is_noop(v, c, u)) {
-                    return;
-                }
-                child_blk = self.alloc_block();
-                let b = &mut self.blocks[child_blk as usize];
-                b.value = [v; 8];
-                b.mask = 0xff;
-                if let Some(cs) = &mut self.colors {
-                    cs[child_blk as usize] = [c; 8];
-                }
-                self.nodes += 8;
+        if self.blocks[blk as usize].child[slot] == NONE && !just_created {
+            // A pruned node: expand it unless no update would change anything.
+            let v = self.blocks[blk as usize].value[slot];
+            let c = self.color(blk, slot);
+            if ups.iter().all(|u| self.is_noop(v, c, u)) {
+                return;
             }
-            self.blocks[blk as usize].child[slot] = child_blk;
         }
+        let child_blk = self.children_block(blk, slot, !just_created);
         let shift = 3 * (TREE_DEPTH - 1 - depth);
         let mut start = 0;
         while start < ups.len() {
@@ -730,14 +754,7 @@ impl OcTree {
             while end < ups.len() && ((ups[end].code >> shift) & 7) as usize == digit {
                 end += 1;
             }
-            let b = &mut self.blocks[child_blk as usize];
-            let created = b.mask & (1 << digit) == 0;
-            if created {
-                b.mask |= 1 << digit;
-                b.value[digit] = 0.0;
-                b.child[digit] = NONE;
-                self.nodes += 1;
-            }
+            let created = self.create_child(child_blk, digit);
             self.apply(
                 child_blk,
                 digit,
@@ -880,33 +897,9 @@ impl OcTree {
             self.set_color(blk, slot, c);
             return;
         }
-        let mut cb = self.blocks[blk as usize].child[slot];
-        if cb == NONE {
-            let pv = self.blocks[blk as usize].value[slot];
-            let pc = self.color(blk, slot);
-            cb = self.alloc_block();
-            self.blocks[blk as usize].child[slot] = cb;
-            if !just_created {
-                // A pruned leaf (known space) expands into eight copies of itself.
-                let b = &mut self.blocks[cb as usize];
-                b.value = [pv; 8];
-                b.mask = 0xff;
-                if let Some(cs) = &mut self.colors {
-                    cs[cb as usize] = [pc; 8];
-                }
-                self.nodes += 8;
-            }
-        }
+        let cb = self.children_block(blk, slot, !just_created);
         let digit = ((code >> (3 * (TREE_DEPTH - 1 - depth))) & 7) as usize;
-        let created = self.blocks[cb as usize].mask & (1 << digit) == 0;
-        if created {
-            let b = &mut self.blocks[cb as usize];
-            b.mask |= 1 << digit;
-            b.value[digit] = 0.0;
-            b.child[digit] = NONE;
-            self.set_color(cb, digit, [255, 255, 255, 0]);
-            self.nodes += 1;
-        }
+        let created = self.create_child(cb, digit);
         self.set_recurs((cb, digit), depth + 1, created, code, target, v, c);
         self.prune_or_max(blk, slot, cb);
     }
