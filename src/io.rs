@@ -122,27 +122,6 @@ pub fn warn(tool: &str, message: &str) {
     let _ = writeln!(io::stderr(), "{tool}: {message}");
 }
 
-/// Exits with a usage error (code 2) when an option that only applies together with `parent`
-/// was given without it. clap's own `requires` is not enforced next to a positional argument
-/// that conflicts with `parent`, hence this check.
-pub fn only_with<A: clap::CommandFactory>(
-    parent_given: bool,
-    parent: &str,
-    options: &[(&str, bool)],
-) {
-    if parent_given {
-        return;
-    }
-    if let Some((flag, _)) = options.iter().find(|(_, given)| *given) {
-        A::command()
-            .error(
-                clap::error::ErrorKind::MissingRequiredArgument,
-                format!("{flag} only applies with {parent}"),
-            )
-            .exit();
-    }
-}
-
 /// What is wrong with a table of numbers ([`read_number_table`]).
 #[derive(Debug, thiserror::Error)]
 #[error("line {line}: field `{field}`: {problem}")]
@@ -346,7 +325,16 @@ impl AtomicFile {
             .write(true)
             .create_new(true)
             .open(&temp)
-            .map_err(open_err)?;
+            .map_err(|e| {
+                let dir = temp.parent().map(|d| d.display().to_string());
+                let dir = dir.filter(|d| !d.is_empty()).unwrap_or_else(|| ".".into());
+                open_err(io::Error::new(
+                    e.kind(),
+                    format!(
+                        "cannot create a temporary file in {dir} to replace it atomically: {e}"
+                    ),
+                ))
+            })?;
         Ok(AtomicFile {
             target: target.to_path_buf(),
             dest,

@@ -7,13 +7,27 @@
 //! Modules, one concept each:
 //! - [`wire`]: the link frame, the ROV and operator messages, their JSON Lines text form and a
 //!   streaming deframer. The byte layouts are a contract (`shared/design/wire.md`).
+//! - [`debt`]: the progressive wavelet image codec with a region of interest, and the image
+//!   files it reads and writes.
+//! - [`link`]: link models (the paper's modems, netem-like links), the virtual-time scheduler,
+//!   the simulated link and its real-time emulator.
+//! - [`gll`]: device adapters (transparent modems, EvoLogics, UDP) behind one endpoint trait,
+//!   and the one way to open a device.
+//! - [`measure`]: probes and Table 3's figures, from a simulated or a real link.
+//! - [`rcp`]: the remote-control protocol's operator and ROV engines, sessions and their logs.
+//! - [`vehicle`]: the ROV's kinematic model.
 //! - [`octo`]: an OctoMap-compatible occupancy octree, point-cloud readers and the map-delta
 //!   stream.
-//! - [`io`]: the command-line conventions every tool shares (`-` for stdin/stdout, atomic output
-//!   files, refusing binary output to a terminal, error messages that name the file).
+//! - [`stats`]: running statistics (mean, deviation, jitter estimators).
+//! - [`io`]: files and streams as every tool uses them (`-` for stdin/stdout, atomic output
+//!   files, errors that name the file, the exit-code table).
+//! - [`cli`]: the command-line layer the binaries share, and the only module that uses clap:
+//!   range-checked flag values, output claiming, row writers, the stop flag, progress, the
+//!   link-model and port flag groups.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod cli;
 pub mod debt;
 pub mod gll;
 pub mod io;

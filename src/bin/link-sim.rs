@@ -10,11 +10,12 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use clap::Parser;
+use rovlink::cli::model::ModelArgs;
 use rovlink::io::{AtomicFile, EXIT_CHECK_FAILED, EXIT_OK, Input, IoError, Output};
 use rovlink::link::channel::DirectionStats;
 use rovlink::link::pipe::{self, Pace};
 use rovlink::link::realtime::{Ended, Endpoints, Framing, PortSpec, RunInfo};
-use rovlink::link::{Distance, Link, Model, ModelArgs, Report, Side};
+use rovlink::link::{Distance, Link, Model, Report, Side};
 use rovlink::wire::{DeframeEvent, Deframer};
 
 /// The tool's name, prefixed to everything it says on stderr.

@@ -11,11 +11,13 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
 use clap::Parser;
+use rovlink::cli::model::ModelArgs;
+use rovlink::cli::port::PortArgs;
 use rovlink::gll::Endpoint;
-use rovlink::gll::port_args::{PortArgs, PortError};
+use rovlink::gll::PortError;
 use rovlink::io::{AtomicFile, EXIT_CHECK_FAILED, EXIT_OK, IoError};
 use rovlink::link::pipe::{self, Pace};
-use rovlink::link::{Distance, Link, ModelArgs};
+use rovlink::link::{Distance, Link};
 use rovlink::measure::live::{self, Ended, Plan, Ports};
 use rovlink::measure::{MAX_PROBE_BYTES, MIN_PROBE_BYTES, ROW_HEADER, Row, Summary, probe};
 

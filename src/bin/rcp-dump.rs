@@ -424,14 +424,17 @@ fn run(args: &Args) -> Result<u8> {
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
-    rovlink::io::only_with::<Args>(
+    let args: Args = rovlink::cli::parse(TOOL);
+    if let Err(err) = rovlink::cli::only_with(
         args.port.is_some(),
         "--port DEV",
         &[
             ("--baud", args.baud.is_some()),
             ("--idle-ms", args.idle_ms.is_some()),
         ],
-    );
+    ) {
+        rovlink::io::warn(TOOL, &err.0);
+        return ExitCode::from(rovlink::io::EXIT_BAD_INPUT);
+    }
     rovlink::io::finish_main(TOOL, run(&args))
 }

@@ -184,8 +184,8 @@ fn run(args: &Args) -> Result<u8> {
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
-    rovlink::io::only_with::<Args>(
+    let args: Args = rovlink::cli::parse(TOOL);
+    if let Err(err) = rovlink::cli::only_with(
         args.image.is_some(),
         "--image FILE",
         &[
@@ -194,6 +194,9 @@ fn main() -> ExitCode {
             ("--dst", args.dst.is_some()),
             ("--isn", args.isn.is_some()),
         ],
-    );
+    ) {
+        rovlink::io::warn(TOOL, &err.0);
+        return ExitCode::from(rovlink::io::EXIT_BAD_INPUT);
+    }
     rovlink::io::finish_main(TOOL, run(&args))
 }

@@ -11,9 +11,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
-use rovlink::gll::port_args::{PortArgs, PortError};
+use rovlink::cli::model::ModelArgs;
+use rovlink::cli::port::PortArgs;
+use rovlink::gll::PortError;
 use rovlink::io::{AtomicFile, EXIT_CHECK_FAILED, EXIT_OK, IoError};
-use rovlink::link::ModelArgs;
 use rovlink::rcp::mcap_log::McapLog;
 use rovlink::rcp::operator::Joystick;
 use rovlink::rcp::realtime::{self, Ended, Role};

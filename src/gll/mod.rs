@@ -13,8 +13,10 @@
 //! The simulated link needs no adapter: in virtual time the tools drive a [`crate::link::Link`]
 //! directly.
 
+pub mod device;
 pub mod evologics;
-pub mod port_args;
+
+pub use device::{Dialect, PortError, PortOptions};
 
 use std::io::{self, Read, Write};
 use std::net::{SocketAddr, UdpSocket};

@@ -23,6 +23,6 @@ pub mod sched;
 
 pub use channel::{Fate, Link, Report, Side};
 pub use distance::Distance;
-pub use model::{Model, ModelArgs, ModelError};
+pub use model::{Model, ModelError};
 pub use rng::Rng;
 pub use sched::{Scheduler, SimTime};

@@ -22,7 +22,7 @@
 //!
 //! Presets ([`Model::preset`]) give the paper's modems and the satellite link of the second
 //! paper. Model files are the JSON form of [`Model`]; every field is also a command-line flag
-//! ([`ModelArgs`]), so a file and a command line say the same things.
+//! (`rovlink::cli::model::ModelArgs`), so a file and a command line say the same things.
 //!
 //! Parsing never panics: a malformed file is a [`ModelError`] naming the field and the problem.
 
@@ -41,7 +41,7 @@ pub const PRESETS: [&str; 5] = [
 
 /// The shape of the intrinsic-delay jitter. Every shape has mean 0 and the model's `jitter_ms`
 /// as its standard deviation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum JitterDistribution {
     /// No jitter: every frame waits exactly the intrinsic delay.
@@ -55,7 +55,7 @@ pub enum JitterDistribution {
 }
 
 /// What a bit error does to a frame.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ErrorMode {
     /// The frame is lost (a modem that checks its own CRC).
@@ -433,7 +433,7 @@ impl Model {
 }
 
 /// Parses netem's `P,R[,BAD[,GOOD]]` (percent) for `--gilbert-elliott`.
-fn parse_gilbert_elliott(text: &str) -> Result<GilbertElliott, String> {
+pub fn parse_gilbert_elliott(text: &str) -> Result<GilbertElliott, String> {
     let values: Vec<f64> = text
         .split(',')
         .map(|part| {
@@ -454,125 +454,6 @@ fn parse_gilbert_elliott(text: &str) -> Result<GilbertElliott, String> {
         loss_bad_percent: values.get(2).copied().unwrap_or(100.0),
         loss_good_percent: values.get(3).copied().unwrap_or(0.0),
     })
-}
-
-/// The model flags every tool that runs a link shares: a preset or a file, then any field
-/// overridden. Each override flag is the JSON field's name with dashes.
-#[derive(Debug, Clone, Default, clap::Args)]
-pub struct ModelArgs {
-    /// Built-in model: s100, s2cr-burst, s2cr-ack, satellite-up, satellite-down [default: s100].
-    #[arg(
-        long,
-        value_name = "NAME",
-        conflicts_with = "model_file",
-        help_heading = "Link model"
-    )]
-    pub model: Option<String>,
-    /// Model file (JSON; `--print-model NAME` prints one to start from).
-    #[arg(long, value_name = "FILE", help_heading = "Link model")]
-    pub model_file: Option<PathBuf>,
-    /// Bit rate on the air, bit/s.
-    #[arg(long, value_name = "BPS", help_heading = "Link model")]
-    pub bitrate_bps: Option<f64>,
-    /// Intrinsic (processing) delay before transmission, ms.
-    #[arg(long, value_name = "MS", help_heading = "Link model")]
-    pub intrinsic_delay_ms: Option<f64>,
-    /// Shape of the delay jitter.
-    #[arg(long, value_enum, value_name = "SHAPE", help_heading = "Link model")]
-    pub jitter_distribution: Option<JitterDistribution>,
-    /// Standard deviation of the delay jitter, ms.
-    #[arg(long, value_name = "MS", help_heading = "Link model")]
-    pub jitter_ms: Option<f64>,
-    /// Propagation delay at zero distance, ms.
-    #[arg(long, value_name = "MS", help_heading = "Link model")]
-    pub propagation_min_ms: Option<f64>,
-    /// Propagation delay per metre, ms/m.
-    #[arg(long, value_name = "MS_PER_M", help_heading = "Link model")]
-    pub propagation_ms_per_m: Option<f64>,
-    /// Nearest distance at which frames are heard, m.
-    #[arg(long, value_name = "M", help_heading = "Link model")]
-    pub range_min_m: Option<f64>,
-    /// Farthest distance at which frames are heard, m.
-    #[arg(long, value_name = "M", help_heading = "Link model")]
-    pub range_max_m: Option<f64>,
-    /// Bit error rate, e.g. 7e-4.
-    #[arg(long, value_name = "P", help_heading = "Link model")]
-    pub ber: Option<f64>,
-    /// What a frame with bit errors becomes: dropped, or delivered with the bits flipped.
-    #[arg(long, value_enum, value_name = "MODE", help_heading = "Link model")]
-    pub errors: Option<ErrorMode>,
-    /// Half duplex (a modem cannot hear while it transmits): true or false.
-    #[arg(long, value_name = "BOOL", help_heading = "Link model")]
-    pub half_duplex: Option<bool>,
-    /// Transmit FIFO capacity, bytes.
-    #[arg(long, value_name = "BYTES", help_heading = "Link model")]
-    pub fifo_bytes: Option<u64>,
-    /// Let jitter reorder frames.
-    #[arg(long, help_heading = "Link model")]
-    pub reorder: bool,
-    /// Random loss, percent.
-    #[arg(long, value_name = "PCT", help_heading = "Link model")]
-    pub loss_percent: Option<f64>,
-    /// Gilbert-Elliott burst loss, percent: P,R[,BAD[,GOOD]] as netem's gemodel.
-    #[arg(long, value_name = "P,R[,BAD[,GOOD]]", value_parser = parse_gilbert_elliott, help_heading = "Link model")]
-    pub gilbert_elliott: Option<GilbertElliott>,
-    /// Corruption (one bit flipped), percent.
-    #[arg(long, value_name = "PCT", help_heading = "Link model")]
-    pub corrupt_percent: Option<f64>,
-    /// Duplication, percent.
-    #[arg(long, value_name = "PCT", help_heading = "Link model")]
-    pub duplicate_percent: Option<f64>,
-    /// Rate limit, bit/s (netem's rate; applies when below the bit rate).
-    #[arg(long, value_name = "BPS", help_heading = "Link model")]
-    pub rate_limit_bps: Option<f64>,
-}
-
-impl ModelArgs {
-    /// The model the flags describe: the preset or file, with every given field overridden,
-    /// checked.
-    pub fn resolve(&self) -> Result<Model, ModelError> {
-        let mut model = match (&self.model_file, &self.model) {
-            (Some(path), _) => Model::from_file(path)?,
-            (None, Some(name)) => Model::preset(name)?,
-            (None, None) => Model::preset("s100")?,
-        };
-        self.apply(&mut model);
-        model.validate()?;
-        Ok(model)
-    }
-
-    /// Overrides the fields given on the command line.
-    pub fn apply(&self, model: &mut Model) {
-        fn set<T: Clone>(target: &mut T, value: &Option<T>) {
-            if let Some(value) = value {
-                *target = value.clone();
-            }
-        }
-        set(&mut model.bitrate_bps, &self.bitrate_bps);
-        set(&mut model.intrinsic_delay_ms, &self.intrinsic_delay_ms);
-        set(&mut model.jitter_distribution, &self.jitter_distribution);
-        set(&mut model.jitter_ms, &self.jitter_ms);
-        set(&mut model.propagation_min_ms, &self.propagation_min_ms);
-        set(&mut model.propagation_ms_per_m, &self.propagation_ms_per_m);
-        set(&mut model.range_min_m, &self.range_min_m);
-        if self.range_max_m.is_some() {
-            model.range_max_m = self.range_max_m;
-        }
-        set(&mut model.ber, &self.ber);
-        set(&mut model.errors, &self.errors);
-        set(&mut model.half_duplex, &self.half_duplex);
-        set(&mut model.fifo_bytes, &self.fifo_bytes);
-        model.reorder |= self.reorder;
-        set(&mut model.loss_percent, &self.loss_percent);
-        if self.gilbert_elliott.is_some() {
-            model.gilbert_elliott = self.gilbert_elliott;
-        }
-        set(&mut model.corrupt_percent, &self.corrupt_percent);
-        set(&mut model.duplicate_percent, &self.duplicate_percent);
-        if self.rate_limit_bps.is_some() {
-            model.rate_limit_bps = self.rate_limit_bps;
-        }
-    }
 }
 
 #[cfg(test)]
@@ -656,29 +537,6 @@ mod tests {
             let message = Model::from_json(text).unwrap_err().to_string();
             assert!(message.starts_with(expected), "{text}: {message}");
         }
-    }
-
-    #[test]
-    fn command_line_overrides_every_field_it_names() {
-        let args = ModelArgs {
-            model: Some("s2cr-burst".into()),
-            ber: Some(1e-3),
-            reorder: true,
-            gilbert_elliott: Some(parse_gilbert_elliott("1,30").unwrap()),
-            range_max_m: Some(100.0),
-            ..ModelArgs::default()
-        };
-        let model = args.resolve().unwrap();
-        assert_eq!(model.ber, 1e-3);
-        assert!(model.reorder);
-        assert_eq!(model.range_max_m, Some(100.0));
-        let ge = model.gilbert_elliott.unwrap();
-        assert_eq!(
-            (ge.p_percent, ge.r_percent, ge.loss_bad_percent),
-            (1.0, 30.0, 100.0)
-        );
-        assert!(parse_gilbert_elliott("1").is_err());
-        assert!(parse_gilbert_elliott("1,x").is_err());
     }
 
     #[test]

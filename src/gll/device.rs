@@ -1,5 +1,5 @@
-//! The flags every tool that talks to a real modem shares (`modem-bench`, `tdma-run`), and the
-//! one function that turns a device name into an [`Endpoint`].
+//! Opening a device: the one function every tool uses to turn a device name into an
+//! [`Endpoint`], with the options the command line's port flags give.
 //!
 //! A device is a serial port or pseudo-terminal path, `tcp:HOST:PORT` (a modem's TCP console,
 //! EvoLogics' usual interface) or `udp:BIND_ADDR=PEER_ADDR` (one datagram per packet).
@@ -9,52 +9,60 @@ use std::net::SocketAddr;
 use super::evologics::{EvoLogics, SendMode};
 use super::{Endpoint, GllError, Pacing, Transparent, Udp, open_serial};
 
-/// How a modem is spoken to.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+/// How a modem is spoken to: the one dialect enum of every tool that opens a port.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Dialect {
     /// Bytes in, bytes out (S100-like, or link-sim --pty): packets are wire.md frames.
+    #[default]
     Transparent,
-    /// EvoLogics AT commands: AT*SEND bursts (or --instant for AT*SENDIM), RECV notifications.
+    /// EvoLogics AT commands: AT*SEND bursts (or instant AT*SENDIM), RECV notifications.
     Evologics,
 }
 
-/// The modem flags, flattened into a tool's arguments.
-#[derive(clap::Args, Debug, Clone, PartialEq)]
-pub struct PortArgs {
-    /// How the modems are spoken to.
-    #[arg(long, value_enum, default_value_t = Dialect::Transparent, help_heading = "Real modems")]
+impl Dialect {
+    /// Every dialect with its command-line name.
+    pub const ALL: [(Dialect, &'static str); 2] = [
+        (Dialect::Transparent, "transparent"),
+        (Dialect::Evologics, "evologics"),
+    ];
+
+    /// The command-line name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Dialect::Transparent => "transparent",
+            Dialect::Evologics => "evologics",
+        }
+    }
+}
+
+/// How a device is opened and spoken to (the command line's `cli::port::PortArgs`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PortOptions {
+    /// How the modem is spoken to.
     pub dialect: Dialect,
-
-    /// EvoLogics: send instant messages (AT*SENDIM, up to 64 bytes) instead of bursts.
-    #[arg(long, help_heading = "Real modems")]
+    /// EvoLogics: send instant messages (AT*SENDIM) instead of bursts.
     pub instant: bool,
-
     /// EvoLogics: the destination address of the packets.
-    #[arg(
-        long,
-        value_name = "ADDR",
-        default_value_t = 2,
-        help_heading = "Real modems"
-    )]
     pub address: u32,
-
-    /// Baud rate of the serial ports.
-    #[arg(long, default_value_t = 9600, value_parser = clap::value_parser!(u32).range(1..), help_heading = "Real modems")]
+    /// Baud rate of serial ports.
     pub baud: u32,
-
-    /// Transparent modems: write each packet in chunks of this many bytes, paced at --chunk-rate-bps
-    /// (the S100 driver sends 45-byte chunks at the air rate, without flow control).
-    #[arg(long, value_name = "BYTES", value_parser = clap::value_parser!(u64).range(1..), help_heading = "Real modems")]
+    /// Transparent modems: write each packet in chunks of this many bytes.
     pub chunk_bytes: Option<u64>,
-
     /// The rate chunk pauses are computed from, bit/s.
-    #[arg(
-        long,
-        value_name = "BPS",
-        default_value_t = 1900.0,
-        help_heading = "Real modems"
-    )]
     pub chunk_rate_bps: f64,
+}
+
+impl Default for PortOptions {
+    fn default() -> PortOptions {
+        PortOptions {
+            dialect: Dialect::Transparent,
+            instant: false,
+            address: 2,
+            baud: 9600,
+            chunk_bytes: None,
+            chunk_rate_bps: 1900.0,
+        }
+    }
 }
 
 /// Why a device could not be opened.
@@ -68,7 +76,7 @@ pub enum PortError {
     Open(#[from] GllError),
 }
 
-impl PortArgs {
+impl PortOptions {
     /// True when any flag differs from its default (they only mean something with a device).
     pub fn any_set(&self) -> bool {
         self.dialect != Dialect::Transparent || self.instant || self.chunk_bytes.is_some()
