@@ -40,11 +40,36 @@ macro_rules! say {
 
 /// Parses the command line: `--help` and `--version` print and exit 0; any other problem is
 /// one line on standard error (`tool: --ipg: expected 1 ms ..= 10 min, found 1e-9`), exit 2.
+///
+/// Negative numbers are values, never flags (`--x -5` reaches `--x`'s range check and says
+/// what it expected), in every subcommand too.
 pub fn parse<A: clap::Parser>(tool: &str) -> A {
-    match A::try_parse() {
+    match try_parse_from::<A, _, _>(std::env::args_os()) {
         Ok(args) => args,
         Err(err) => exit_with(tool, err),
     }
+}
+
+/// [`parse`] without exiting, from any argument list (tests use it).
+pub fn try_parse_from<A, I, T>(args: I) -> Result<A, clap::Error>
+where
+    A: clap::Parser,
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    fn negatives(cmd: clap::Command) -> clap::Command {
+        let names: Vec<String> = cmd
+            .get_subcommands()
+            .map(|s| s.get_name().to_string())
+            .collect();
+        let mut cmd = cmd.allow_negative_numbers(true);
+        for name in names {
+            cmd = cmd.mut_subcommand(name, negatives);
+        }
+        cmd
+    }
+    let mut matches = negatives(A::command()).try_get_matches_from(args)?;
+    A::from_arg_matches_mut(&mut matches)
 }
 
 /// Prints a clap error as [`parse`] does and exits.
@@ -144,7 +169,7 @@ mod tests {
             one_line(&err),
             "--ipg: expected 1 ms ..= 10 min, found 1e-9"
         );
-        let err = Tool::try_parse_from(["t", "--count=-5"]).unwrap_err();
+        let err = try_parse_from::<Tool, _, _>(["t", "--count", "-5"]).unwrap_err();
         assert!(one_line(&err).starts_with("--count: expected a whole number"));
         let err = Tool::try_parse_from(["t", "--bogus"]).unwrap_err();
         let line = one_line(&err);
