@@ -295,25 +295,46 @@ pub fn bytes(min: u64, max: u64) -> CountParser {
     }
 }
 
-/// A comma-separated list of reals, each in `item`'s range, 1 ..= `max_len` of them.
+/// What a list element is parsed with: a range of reals or of whole numbers.
+pub trait Item: Copy + Send + Sync + 'static {
+    /// The parsed value.
+    type Value: Clone + Send + Sync + 'static;
+    /// Parses and checks one element.
+    fn parse_item(&self, text: &str) -> Result<Self::Value, String>;
+}
+
+impl Item for Range {
+    type Value = f64;
+    fn parse_item(&self, text: &str) -> Result<f64, String> {
+        self.parse(text)
+    }
+}
+
+impl Item for CountParser {
+    type Value = u64;
+    fn parse_item(&self, text: &str) -> Result<u64, String> {
+        self.parse(text)
+    }
+}
+
+/// A comma-separated list, each element checked by `item`, 1 ..= `max_len` of them.
 #[derive(Debug, Clone, Copy)]
-pub struct ListParser {
-    /// The range of each element.
-    pub item: Range,
+pub struct ListParser<I> {
+    /// How each element is checked.
+    pub item: I,
     /// The most elements allowed.
     pub max_len: usize,
 }
 
-impl ListParser {
+impl<I: Item> ListParser<I> {
     /// Parses and checks a list written by a user.
-    pub fn parse(&self, text: &str) -> Result<Vec<f64>, String> {
-        let values = split_list(text, self.max_len)?;
-        values
+    pub fn parse(&self, text: &str) -> Result<Vec<I::Value>, String> {
+        split_list(text, self.max_len)?
             .iter()
             .enumerate()
             .map(|(i, part)| {
                 self.item
-                    .parse(part)
+                    .parse_item(part)
                     .map_err(|e| format!("element {}: {e}", i + 1))
             })
             .collect()
@@ -336,70 +357,31 @@ fn split_list(text: &str, max_len: usize) -> Result<Vec<&str>, String> {
     Ok(parts)
 }
 
-impl clap::builder::TypedValueParser for ListParser {
-    type Value = Vec<f64>;
+impl<I: Item> clap::builder::TypedValueParser for ListParser<I> {
+    type Value = Vec<I::Value>;
 
     fn parse_ref(
         &self,
         cmd: &clap::Command,
         arg: Option<&clap::Arg>,
         value: &std::ffi::OsStr,
-    ) -> Result<Vec<f64>, clap::Error> {
+    ) -> Result<Vec<I::Value>, clap::Error> {
         let this = *self;
         delegate(move |text: &str| this.parse(text), cmd, arg, value)
     }
 }
 
-/// A comma list of reals in `item` (see [`ListParser`]); for example
-/// `list(seconds(0.0, WEEK_S), 1000)`.
-pub fn list(item: RealParser, max_len: usize) -> ListParser {
+/// A comma list of reals in `item`'s range; for example `list(seconds(0.0, WEEK_S), 1000)`.
+pub fn list(item: RealParser, max_len: usize) -> ListParser<Range> {
     ListParser {
         item: item.0,
         max_len,
     }
 }
 
-/// A comma-separated list of whole numbers, each in `item`'s range.
-#[derive(Debug, Clone, Copy)]
-pub struct CountListParser {
-    /// The range of each element.
-    pub item: CountParser,
-    /// The most elements allowed.
-    pub max_len: usize,
-}
-
-impl clap::builder::TypedValueParser for CountListParser {
-    type Value = Vec<u64>;
-
-    fn parse_ref(
-        &self,
-        cmd: &clap::Command,
-        arg: Option<&clap::Arg>,
-        value: &std::ffi::OsStr,
-    ) -> Result<Vec<u64>, clap::Error> {
-        let this = *self;
-        delegate(move |text: &str| this.parse(text), cmd, arg, value)
-    }
-}
-
-impl CountListParser {
-    /// Parses and checks a list written by a user.
-    pub fn parse(&self, text: &str) -> Result<Vec<u64>, String> {
-        split_list(text, self.max_len)?
-            .iter()
-            .enumerate()
-            .map(|(i, part)| {
-                self.item
-                    .parse(part)
-                    .map_err(|e| format!("element {}: {e}", i + 1))
-            })
-            .collect()
-    }
-}
-
-/// A comma list of whole numbers in `item`.
-pub fn count_list(item: CountParser, max_len: usize) -> CountListParser {
-    CountListParser { item, max_len }
+/// A comma list of whole numbers in `item`'s range.
+pub fn count_list(item: CountParser, max_len: usize) -> ListParser<CountParser> {
+    ListParser { item, max_len }
 }
 
 /// A parser of exactly `N` comma-separated reals, each in one range (points, boxes).
