@@ -4,6 +4,8 @@
 //! executed, and every image the ROV starts is completed by the operator (except the one still
 //! in flight when the session ends).
 
+use std::sync::atomic::AtomicBool;
+
 use proptest::prelude::*;
 use rovlink::link::Model;
 use rovlink::rcp::operator::Joystick;
@@ -62,7 +64,7 @@ proptest! {
 
     #[test]
     fn orders_run_exactly_once_and_images_complete_under_20_percent_loss(config in session()) {
-        let metrics = session::run(&config, &mut Quiet).unwrap();
+        let metrics = session::run(&config, &mut Quiet, &AtomicBool::new(false)).unwrap();
         prop_assert_eq!(metrics.orders_executed_twice, 0, "{:?}", metrics);
         prop_assert_eq!(metrics.orders_acknowledged_unexecuted, 0, "{:?}", metrics);
         prop_assert!(metrics.orders_acknowledged <= metrics.orders_sent);

@@ -15,6 +15,7 @@ use rovlink::cli::model::ModelArgs;
 use rovlink::cli::port::PortArgs;
 use rovlink::gll::PortError;
 use rovlink::io::{AtomicFile, EXIT_CHECK_FAILED, EXIT_OK, IoError};
+use rovlink::rcp::camera;
 use rovlink::rcp::mcap_log::McapLog;
 use rovlink::rcp::operator::Joystick;
 use rovlink::rcp::realtime::{self, Ended, Role};
@@ -239,42 +240,20 @@ fn load_images(path: Option<&Path>) -> Result<Vec<rovlink::debt::Image>> {
     let Some(path) = path else {
         return Ok((0..4).map(|k| test_image(320, 240, k)).collect());
     };
-    let mut files = Vec::new();
-    if path.is_dir() {
-        let entries = std::fs::read_dir(path).map_err(|source| IoError::Open {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        for entry in entries.flatten() {
-            files.push(entry.path());
-        }
-        files.sort();
-    } else {
-        files.push(path.to_path_buf());
+    let pictures = camera::load(path).map_err(|e| bad(e.to_string()))?;
+    if let Some(first) = pictures.scaled.first() {
+        say!(
+            "{} picture(s) larger than DEBT's {side}x{side} scaled down to fit ({}: {}x{} to {}x{})",
+            pictures.scaled.len(),
+            first.path.display(),
+            first.from.0,
+            first.from.1,
+            first.to.0,
+            first.to.1,
+            side = rovlink::debt::MAX_SIDE
+        );
     }
-    let mut images = Vec::new();
-    for file in files {
-        let Ok(picture) = image::open(&file) else {
-            if path.is_dir() {
-                continue; // not an image: skipped
-            }
-            bail!(bad(format!(
-                "{}: not an image this tool reads",
-                file.display()
-            )));
-        };
-        let rgb = picture.to_rgb8();
-        images.push(rovlink::debt::Image {
-            width: rgb.width() as usize,
-            height: rgb.height() as usize,
-            channels: 3,
-            data: rgb.into_raw(),
-        });
-    }
-    if images.is_empty() {
-        bail!(bad(format!("{}: no image found", path.display())));
-    }
-    Ok(images)
+    Ok(pictures.images)
 }
 
 /// Writes the chosen outputs as the session goes: events, track, MCAP, images, progress.
@@ -492,6 +471,19 @@ fn run(args: &Args) -> Result<u8> {
                 .into()
         ));
     }
+    let config = SessionConfig {
+        model: model.clone(),
+        seed: args.seed,
+        ipg_s,
+        duration_s: args.duration,
+        buoy_m: buoy,
+        start_m: start,
+        script,
+        waypoints,
+        settings,
+        images,
+    };
+    config.validate().map_err(|e| bad(e.to_string()))?;
     // Every output file is created before the session starts, so a bad path fails at once.
     let metrics_file = args
         .metrics
@@ -510,6 +502,12 @@ fn run(args: &Args) -> Result<u8> {
     )?;
     let track = with_header(&args.track, TRACK_HEADER)?;
     if let Some(dir) = &args.images_out {
+        if dir.exists() && !dir.is_dir() {
+            bail!(bad(format!(
+                "--images-out: {}: not a directory",
+                dir.display()
+            )));
+        }
         std::fs::create_dir_all(dir).map_err(|source| IoError::Open {
             path: dir.clone(),
             source,
@@ -527,18 +525,6 @@ fn run(args: &Args) -> Result<u8> {
         .as_deref()
         .map(|path| McapLog::create(path, base_ns))
         .transpose()?;
-    let config = SessionConfig {
-        model: model.clone(),
-        seed: args.seed,
-        ipg_s,
-        duration_s: args.duration,
-        buoy_m: buoy,
-        start_m: start,
-        script,
-        waypoints,
-        settings,
-        images,
-    };
     let mut outputs = Outputs {
         events,
         track,
@@ -550,12 +536,12 @@ fn run(args: &Args) -> Result<u8> {
         error: None,
     };
     let wall = std::time::Instant::now();
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = Arc::clone(&stop);
+    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+        .context("cannot install the Ctrl-C handler")?;
     let (metrics, code) = match (role, &args.port) {
         (Some(role), Some(device)) => {
-            let stop = Arc::new(AtomicBool::new(false));
-            let flag = Arc::clone(&stop);
-            ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
-                .context("cannot install the Ctrl-C handler")?;
             let mut endpoint = args.port_args.open(device).map_err(|e| match e {
                 PortError::Usage(message) => bad(message),
                 PortError::Open(error) => error.into(),
@@ -590,7 +576,8 @@ fn run(args: &Args) -> Result<u8> {
             (metrics, code)
         }
         _ => {
-            let metrics = session::run(&config, &mut outputs)?;
+            let metrics =
+                session::run(&config, &mut outputs, &stop).map_err(|e| bad(e.to_string()))?;
             say!(
                 "{:.0} s over {} (seed {}), IPG {:.1} ms, {:.3} s of wall time",
                 args.duration,

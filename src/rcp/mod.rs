@@ -4,8 +4,10 @@
 //! The semantics are wire.md's: orders with one-bit ids acknowledged by the ROV's EOID toggle
 //! (so an order is never executed twice), images sent trunk by trunk with a received-trunk
 //! bitmap and RIT resends, EISN/ISN toggles, CI/IC cancellation, heartbeats and the recovery
-//! algorithm. [`session`] runs both ends and a link in virtual time.
+//! algorithm. [`session`] runs both ends and a link in virtual time, [`realtime`] one end over a
+//! port; [`camera`] reads the ROV camera's pictures, [`mcap_log`] logs a session for Foxglove.
 
+pub mod camera;
 pub mod mcap_log;
 pub mod operator;
 pub mod realtime;

@@ -344,6 +344,11 @@ impl Rov {
         let picture = &self.images[self.next_image % self.images.len()];
         self.next_image += 1;
         let trunks = trunks_of(picture, &self.settings);
+        if trunks.is_empty() {
+            // A picture the codec refuses (e.g. larger than DEBT holds): nothing to send.
+            self.image = None;
+            return;
+        }
         self.events.push(Event::ImageStarted {
             trunks: trunks.len(),
             bytes: trunks.iter().map(Vec::len).sum(),
@@ -374,7 +379,10 @@ impl Rov {
             yaw_deg: (self.vehicle.heading_deg.round() as u16) % 360,
         };
         let (mut ft, mut lt, mut itsn, mut trunk) = (false, false, 0u8, Vec::new());
-        if let (false, Some(image)) = (self.ci, self.image.as_mut()) {
+        if let (false, Some(image)) = (
+            self.ci,
+            self.image.as_mut().filter(|image| !image.trunks.is_empty()),
+        ) {
             let n = image.trunks.len();
             let k = if image.first_pass < n {
                 image.first_pass += 1;
@@ -408,5 +416,31 @@ fn idle() -> Command {
         sway: 0.0,
         heave: 0.0,
         yaw: 0.0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rcp::operator::Operator;
+
+    #[test]
+    fn a_picture_the_codec_refuses_sends_status_without_panicking() {
+        // Wider than DEBT holds: trunks_of yields nothing (src/rcp/rov.rs used to index trunk
+        // n - 1 of none).
+        let picture = crate::rcp::test_image(4097, 2, 0);
+        let mut rov = Rov::new(RovConfig::default(), [1.0, 0.0, 0.0], vec![picture]);
+        let mut operator = Operator::new(1, 640_000_000);
+        for slot in 0..3u64 {
+            let t = SimTime(slot * 640_000_000);
+            let (frame, _) = operator.poll(t);
+            let reply = rov.receive(t, &frame).expect("a reply to every slot");
+            operator.receive(t, &reply);
+        }
+        assert!(
+            !rov.take_events()
+                .iter()
+                .any(|e| matches!(e, Event::ImageStarted { .. }))
+        );
     }
 }

@@ -6,6 +6,8 @@
 //! ROV's distance to the buoy (the operator's modem) sets the link's distance at every vehicle
 //! step, so the range model cuts the link when the vehicle strays.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use serde::Serialize;
 
 use super::operator::{Joystick, Operator, SlotContent};
@@ -60,6 +62,173 @@ pub struct SessionConfig {
     pub settings: ImageSettings,
     /// The camera's pictures, cycled.
     pub images: Vec<debt::Image>,
+}
+
+/// The shortest inter-packet gap, s (a slot shorter than a millisecond carries no frame).
+pub const MIN_IPG_S: f64 = 1e-3;
+/// The longest inter-packet gap, s (10 minutes).
+pub const MAX_IPG_S: f64 = 600.0;
+/// The longest session, s (a week).
+pub const MAX_DURATION_S: f64 = 7.0 * 86_400.0;
+/// The farthest a buoy or a start position may be from the site's origin along any axis, m: no
+/// real site is 100 km across.
+pub const MAX_POSITION_M: f64 = 100_000.0;
+/// The farthest a waypoint may be along any axis, m: what a GoTo order carries (i16 cm).
+pub const MAX_WAYPOINT_M: f64 = 327.67;
+/// The smallest encoded image, bytes.
+pub const MIN_IMAGE_BYTES: u16 = 16;
+
+/// A session setting out of its range: `what`, what it must be, what it is.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{what}: expected {expected}, found {found}")]
+pub struct ConfigError {
+    /// The setting, e.g. `IPG` or `waypoint 3`.
+    pub what: String,
+    /// Its range, with units.
+    pub expected: String,
+    /// The value given, with units.
+    pub found: String,
+}
+
+fn out_of_range(
+    what: impl Into<String>,
+    expected: impl Into<String>,
+    found: String,
+) -> ConfigError {
+    ConfigError {
+        what: what.into(),
+        expected: expected.into(),
+        found,
+    }
+}
+
+/// A number as a user would write it: `1e300`, not 301 digits.
+fn number(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || (1e-4..1e15).contains(&v.abs()) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
+/// Checks a position: finite, at most `limit_m` from the origin along each axis.
+fn check_position(
+    what: impl Into<String>,
+    position_m: [f64; 3],
+    limit_m: f64,
+) -> Result<(), ConfigError> {
+    if position_m
+        .iter()
+        .all(|v| v.is_finite() && v.abs() <= limit_m)
+    {
+        return Ok(());
+    }
+    let [x, y, z] = position_m;
+    Err(out_of_range(
+        what,
+        format!("X,Y,Z each in -{limit_m} m ..= {limit_m} m"),
+        format!("{},{},{} m", number(x), number(y), number(z)),
+    ))
+}
+
+/// Checks a scripted time: finite, 0 ..= [`MAX_DURATION_S`], not before the previous one.
+fn check_time(what: impl Into<String>, t_s: f64, previous_s: f64) -> Result<(), ConfigError> {
+    if t_s.is_finite() && (0.0..=MAX_DURATION_S).contains(&t_s) && t_s >= previous_s {
+        return Ok(());
+    }
+    Err(out_of_range(
+        what,
+        format!("a time in {previous_s} s ..= {MAX_DURATION_S} s (sorted)"),
+        format!("{} s", number(t_s)),
+    ))
+}
+
+impl SessionConfig {
+    /// Checks every setting against its range; the first one out of range is the error. The
+    /// model is checked when the link is built.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if !(self.duration_s.is_finite()
+            && self.duration_s > 0.0
+            && self.duration_s <= MAX_DURATION_S)
+        {
+            return Err(out_of_range(
+                "duration",
+                format!("more than 0 s, at most {MAX_DURATION_S} s (a week)"),
+                format!("{} s", number(self.duration_s)),
+            ));
+        }
+        check_position("buoy position", self.buoy_m, MAX_POSITION_M)?;
+        check_position("start position", self.start_m, MAX_POSITION_M)?;
+        if !(self.ipg_s.is_finite() && (MIN_IPG_S..=MAX_IPG_S).contains(&self.ipg_s)) {
+            return Err(out_of_range(
+                "IPG",
+                "1 ms ..= 10 min",
+                format!("{} ms", number(self.ipg_s * 1e3)),
+            ));
+        }
+        let mut previous_s = 0.0;
+        for (k, change) in self.script.iter().enumerate() {
+            let what = format!("joystick change {}", k + 1);
+            check_time(what.clone(), change.t_s, previous_s)?;
+            previous_s = change.t_s;
+            let j = change.joystick;
+            for v in [j.vx, j.vy, j.vz, j.vyaw] {
+                if !(v.is_finite() && v.abs() <= 100.0) {
+                    return Err(out_of_range(
+                        what,
+                        "vx,vy,vz,vyaw each in -100 % ..= 100 % of full thrust",
+                        format!("{} %", number(v)),
+                    ));
+                }
+            }
+        }
+        let mut previous_s = 0.0;
+        for (k, waypoint) in self.waypoints.iter().enumerate() {
+            let what = format!("waypoint {}", k + 1);
+            check_time(what.clone(), waypoint.t_s, previous_s)?;
+            previous_s = waypoint.t_s;
+            check_position(what.clone(), waypoint.position_m, MAX_WAYPOINT_M)?;
+            if !waypoint.heading_deg.is_finite() {
+                return Err(out_of_range(
+                    what,
+                    "a finite heading in degrees",
+                    format!("{} degrees", waypoint.heading_deg),
+                ));
+            }
+        }
+        let settings = &self.settings;
+        let max_trunk = crate::wire::rov::MAX_TRUNK_BYTES;
+        if settings.trunk_bytes == 0 || usize::from(settings.trunk_bytes) > max_trunk {
+            return Err(out_of_range(
+                "trunk size",
+                format!("1 ..= {max_trunk} bytes (what a ROV frame carries)"),
+                format!("{} bytes", settings.trunk_bytes),
+            ));
+        }
+        if settings.size_bytes < MIN_IMAGE_BYTES {
+            return Err(out_of_range(
+                "image size",
+                format!("{MIN_IMAGE_BYTES} ..= 65535 bytes"),
+                format!("{} bytes", settings.size_bytes),
+            ));
+        }
+        for (k, image) in self.images.iter().enumerate() {
+            let side = debt::MAX_SIDE;
+            if image.width == 0
+                || image.height == 0
+                || image.width > side
+                || image.height > side
+                || image.data.len() != image.width * image.height * image.channels
+            {
+                return Err(out_of_range(
+                    format!("camera picture {}", k + 1),
+                    format!("1x1 ..= {side}x{side} pixels (what DEBT holds)"),
+                    format!("{}x{} pixels", image.width, image.height),
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// The IPG wire.md derives from a model: both frames' air times, twice the intrinsic delay
@@ -131,9 +300,15 @@ pub struct Metrics {
     /// Real time, operator: standard deviation of that time, ms.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub round_trip_jitter_ms: Option<f64>,
-    /// Session length, s.
+    /// Session length, s: the time reached when the run was interrupted.
     pub duration_s: f64,
+    /// Why the run ended early (e.g. `SIGTERM`); absent when it ran its whole duration.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub interrupted: Option<String>,
 }
+
+/// What [`run`] says when `stop` ended it, until the caller names the cause.
+pub const STOPPED: &str = "stopped";
 
 /// One frame's row of `--events` (the data of the paper's Fig. 10).
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -248,8 +423,26 @@ pub(crate) fn kind_of(bytes: &[u8]) -> &'static str {
     }
 }
 
-/// Runs a session; `observer` sees frames, images and poses as they happen.
-pub fn run(config: &SessionConfig, observer: &mut dyn Observer) -> Result<Metrics, ModelError> {
+/// Why a session could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum SessionError {
+    /// A setting out of its range.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// The link model is invalid.
+    #[error(transparent)]
+    Model(#[from] ModelError),
+}
+
+/// Runs a session after [`SessionConfig::validate`]; `observer` sees frames, images and poses
+/// as they happen. `stop` is checked at every event: once set, the run ends there, and the
+/// metrics cover the virtual time reached, with `interrupted` set to [`STOPPED`].
+pub fn run(
+    config: &SessionConfig,
+    observer: &mut dyn Observer,
+    stop: &AtomicBool,
+) -> Result<Metrics, SessionError> {
+    config.validate()?;
     let mut link = Link::symmetric(config.model.clone(), config.seed, Distance::Fixed(1.0))?;
     let rov_config = RovConfig {
         settings: config.settings,
@@ -272,6 +465,7 @@ pub fn run(config: &SessionConfig, observer: &mut dyn Observer) -> Result<Metric
     // no longer has its bytes.
     let mut kinds: std::collections::HashMap<(Side, u64), &'static str> =
         std::collections::HashMap::new();
+    let mut interrupted_at = None;
 
     loop {
         let next_script = script.peek().map(|c| SimTime::from_secs_f64(c.t_s));
@@ -287,6 +481,10 @@ pub fn run(config: &SessionConfig, observer: &mut dyn Observer) -> Result<Metric
             break;
         };
         if t > end {
+            break;
+        }
+        if stop.load(Ordering::Relaxed) {
+            interrupted_at = Some(link.now());
             break;
         }
         if link.next_event_time() == Some(t) {
@@ -401,10 +599,17 @@ pub fn run(config: &SessionConfig, observer: &mut dyn Observer) -> Result<Metric
             observer.pose(&rov.pose(t.as_secs_f64()));
         }
     }
+    let duration_s = match interrupted_at {
+        Some(t) => {
+            metrics.interrupted = Some(STOPPED.to_string());
+            t.as_secs_f64()
+        }
+        None => config.duration_s,
+    };
     metrics.measured_by = "simulation";
-    metrics.duration_s = config.duration_s;
-    metrics.operator_to_rov = directions[0].metrics(config.duration_s);
-    metrics.rov_to_operator = directions[1].metrics(config.duration_s);
+    metrics.duration_s = duration_s;
+    metrics.operator_to_rov = directions[0].metrics(duration_s);
+    metrics.rov_to_operator = directions[1].metrics(duration_s);
     metrics.image_period_s = image_period_s(&image_times);
     Ok(metrics)
 }
@@ -443,7 +648,7 @@ mod tests {
         let mut model = Model::preset("s100").unwrap();
         model.jitter_distribution = JitterDistribution::None;
         let mut images = Images::default();
-        let metrics = run(&config(model, 200.0), &mut images).unwrap();
+        let metrics = run(&config(model, 200.0), &mut images, &AtomicBool::new(false)).unwrap();
         // 2000 bytes rounded up to 52 trunks of 39 bytes, one per 0.64 s slot.
         let trunks = 2000usize.div_ceil(39);
         assert_eq!(trunks, 52);
@@ -462,7 +667,12 @@ mod tests {
 
     #[test]
     fn s100_session_matches_table_4_at_ber_0() {
-        let metrics = run(&config(Model::preset("s100").unwrap(), 600.0), &mut Quiet).unwrap();
+        let metrics = run(
+            &config(Model::preset("s100").unwrap(), 600.0),
+            &mut Quiet,
+            &AtomicBool::new(false),
+        )
+        .unwrap();
         let (r, o) = (&metrics.rov_to_operator, &metrics.operator_to_rov);
         assert!((r.throughput_kbps / 0.72 - 1.0).abs() < 0.05, "{r:?}");
         assert!((o.throughput_kbps / 0.2 - 1.0).abs() < 0.05, "{o:?}");
@@ -486,7 +696,7 @@ mod tests {
                     heading_deg: (k * 40) as f64,
                 })
                 .collect();
-            let metrics = run(&cfg, &mut Quiet).unwrap();
+            let metrics = run(&cfg, &mut Quiet, &AtomicBool::new(false)).unwrap();
             assert_eq!(metrics.orders_executed_twice, 0, "seed {seed}: {metrics:?}");
             assert_eq!(
                 metrics.orders_acknowledged_unexecuted, 0,
@@ -518,8 +728,129 @@ mod tests {
                 heading_deg: 0.0,
             },
         ];
-        let metrics = run(&cfg, &mut Quiet).unwrap();
+        let metrics = run(&cfg, &mut Quiet, &AtomicBool::new(false)).unwrap();
         assert!(metrics.link_losses >= 1, "{metrics:?}");
         assert!(metrics.link_recoveries >= 1, "{metrics:?}");
+    }
+
+    /// Sets the stop flag at the `after`-th frame, as a signal handler would.
+    struct StopAfter<'a> {
+        frames: u64,
+        after: u64,
+        stop: &'a AtomicBool,
+    }
+
+    impl Observer for StopAfter<'_> {
+        fn frame(&mut self, _event: &FrameEvent) {
+            self.frames += 1;
+            if self.frames == self.after {
+                self.stop.store(true, Ordering::Relaxed);
+            }
+        }
+    }
+
+    #[test]
+    fn a_stop_ends_the_run_at_the_next_event_with_the_figures_so_far() {
+        let stop = AtomicBool::new(false);
+        let mut observer = StopAfter {
+            frames: 0,
+            after: 100,
+            stop: &stop,
+        };
+        let metrics = run(
+            &config(Model::preset("s100").unwrap(), MAX_DURATION_S),
+            &mut observer,
+            &stop,
+        )
+        .unwrap();
+        assert_eq!(metrics.interrupted.as_deref(), Some(STOPPED));
+        assert_eq!(observer.frames, 100);
+        // 100 frames, two a 0.64 s slot: about 32 s of a week.
+        assert!((20.0..60.0).contains(&metrics.duration_s), "{metrics:?}");
+        let sent = metrics.operator_to_rov.frames_sent + metrics.rov_to_operator.frames_sent;
+        assert_eq!(sent, 100);
+        let json = serde_json::to_value(&metrics).unwrap();
+        assert_eq!(json["interrupted"], STOPPED);
+        let whole = run(
+            &config(Model::preset("s100").unwrap(), 5.0),
+            &mut Quiet,
+            &AtomicBool::new(false),
+        )
+        .unwrap();
+        assert!(
+            serde_json::to_value(&whole)
+                .unwrap()
+                .get("interrupted")
+                .is_none()
+        );
+    }
+
+    #[test]
+    fn settings_out_of_range_are_refused_with_units() {
+        let good = config(Model::preset("s100").unwrap(), 10.0);
+        assert_eq!(good.validate(), Ok(()));
+        type Change = Box<dyn Fn(&mut SessionConfig)>;
+        let cases: Vec<(Change, &str)> = vec![
+            (
+                Box::new(|c| c.ipg_s = 1e-12),
+                "IPG: expected 1 ms ..= 10 min, found 1e-9 ms",
+            ),
+            (Box::new(|c| c.ipg_s = f64::NAN), "IPG"),
+            (
+                Box::new(|c| c.duration_s = 1e300),
+                "duration: expected more than 0 s",
+            ),
+            (Box::new(|c| c.duration_s = 0.0), "duration"),
+            (
+                Box::new(|c| c.buoy_m = [1e300, 0.0, 0.0]),
+                "buoy position: expected X,Y,Z each in -100000 m ..= 100000 m",
+            ),
+            (
+                Box::new(|c| c.start_m = [0.0, f64::INFINITY, 0.0]),
+                "start position",
+            ),
+            (
+                Box::new(|c| c.settings.trunk_bytes = 243),
+                "trunk size: expected 1 ..= 242 bytes",
+            ),
+            (Box::new(|c| c.settings.trunk_bytes = 0), "trunk size"),
+            (
+                Box::new(|c| c.settings.size_bytes = 0),
+                "image size: expected 16 ..= 65535 bytes, found 0 bytes",
+            ),
+            (
+                Box::new(|c| {
+                    c.waypoints = vec![Waypoint {
+                        t_s: 1.0,
+                        position_m: [400.0, 0.0, 0.0],
+                        heading_deg: 0.0,
+                    }]
+                }),
+                "waypoint 1: expected X,Y,Z each in -327.67 m ..= 327.67 m",
+            ),
+            (
+                Box::new(|c| {
+                    c.script = vec![JoystickChange {
+                        t_s: f64::NAN,
+                        joystick: Joystick::default(),
+                    }]
+                }),
+                "joystick change 1: expected a time",
+            ),
+            (
+                Box::new(|c| c.images = vec![super::super::test_image(4097, 2, 0)]),
+                "camera picture 1: expected 1x1 ..= 4096x4096 pixels",
+            ),
+        ];
+        for (change, message) in cases {
+            let mut bad = good.clone();
+            change(&mut bad);
+            let error = bad.validate().unwrap_err().to_string();
+            assert!(error.starts_with(message), "{error}");
+            assert!(matches!(
+                run(&bad, &mut Quiet, &AtomicBool::new(false)),
+                Err(SessionError::Config(_))
+            ));
+        }
     }
 }
