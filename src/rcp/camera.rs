@@ -48,14 +48,10 @@ pub enum CameraError {
         source: image::ImageError,
     },
     /// A file too big to read.
-    #[error(
-        "{path}: {bytes} bytes: an image file for the camera holds at most {MAX_FILE_BYTES} bytes"
-    )]
+    #[error("{path}: more than {MAX_FILE_BYTES} bytes: too big for a camera picture")]
     FileTooBig {
         /// The file.
         path: PathBuf,
-        /// Its size.
-        bytes: u64,
     },
     /// A picture too big to decode.
     #[error(
@@ -105,6 +101,23 @@ pub struct Pictures {
     pub images: Vec<debt::Image>,
     /// The pictures that were scaled down, to say so.
     pub scaled: Vec<Scaled>,
+}
+
+impl Pictures {
+    /// What to say once when pictures were scaled down, naming the first.
+    pub fn note(&self) -> Option<String> {
+        let first = self.scaled.first()?;
+        let side = debt::MAX_SIDE;
+        Some(format!(
+            "{} picture(s) larger than DEBT's {side}x{side} scaled down to fit ({}: {}x{} to {}x{})",
+            self.scaled.len(),
+            first.path.display(),
+            first.from.0,
+            first.from.1,
+            first.to.0,
+            first.to.1,
+        ))
+    }
 }
 
 /// Reads one image file, or every image file of a directory (other files are skipped).
@@ -162,14 +175,11 @@ fn picture(path: &Path, named: bool) -> Result<Option<(debt::Image, Option<Scale
         path: path.to_path_buf(),
         source,
     };
-    let bytes = std::fs::metadata(path).map_err(read_error)?.len();
-    if bytes > MAX_FILE_BYTES {
+    let Some(data) = super::read_at_most(path, MAX_FILE_BYTES).map_err(read_error)? else {
         return Err(CameraError::FileTooBig {
             path: path.to_path_buf(),
-            bytes,
         });
-    }
-    let data = std::fs::read(path).map_err(read_error)?;
+    };
     let reader = image::ImageReader::new(Cursor::new(&data))
         .with_guessed_format()
         .map_err(read_error)?;

@@ -21,9 +21,12 @@ use std::collections::BTreeMap;
 use base64::Engine;
 use serde_json::json;
 
+use mcap::write::NoSeek;
+
 use super::PoseSample;
 use super::session::{FrameEvent, Observer};
-use crate::io::{AtomicFile, IoError};
+use crate::cli::output::Dest;
+use crate::io::{IoError, Output};
 
 /// What went wrong writing the log.
 #[derive(Debug, thiserror::Error)]
@@ -90,10 +93,11 @@ const TOPICS: [(&str, &str, &str); 7] = [
 ];
 
 /// An [`Observer`] that writes the session into an MCAP file, committed by [`McapLog::finish`]
-/// (nothing is left at the path when the run fails before).
+/// (nothing is left at the path when the run fails before), or to standard output. The writer
+/// never seeks (chunks are assembled in memory), so a pipe is as good as a file.
 pub struct McapLog {
     path: String,
-    writer: Option<mcap::Writer<AtomicFile>>,
+    writer: Option<mcap::Writer<NoSeek<Output>>>,
     channels: Vec<u16>,
     sequence: u32,
     base_ns: u64,
@@ -103,19 +107,21 @@ pub struct McapLog {
 }
 
 impl McapLog {
-    /// Creates the log at `path`; log times are `base_ns` plus the session's time.
-    pub fn create(path: &std::path::Path, base_ns: u64) -> Result<McapLog, McapLogError> {
-        let name = path.display().to_string();
+    /// Creates the log at `dest` (a file, or standard output); log times are `base_ns` plus
+    /// the session's time.
+    pub fn create(dest: &Dest, base_ns: u64) -> Result<McapLog, McapLogError> {
+        let name = dest.name();
         let wrap = |source| McapLogError::Mcap {
             path: name.clone(),
             source,
         };
-        let file = AtomicFile::create(path)?;
+        let out = dest.open()?;
         let options = mcap::WriteOptions::new()
             .profile("")
             .library(concat!("rovlink ", env!("CARGO_PKG_VERSION")))
-            .compression(None);
-        let mut writer = options.create(file).map_err(wrap)?;
+            .compression(None)
+            .disable_seeking(true);
+        let mut writer = options.create(NoSeek::new(out)).map_err(wrap)?;
         let mut channels = Vec::new();
         for (topic, schema, text) in TOPICS {
             let schema_id = writer
@@ -150,7 +156,7 @@ impl McapLog {
             path: self.path.clone(),
             source,
         })?;
-        writer.into_inner().commit()?;
+        writer.into_inner().into_inner().finish()?;
         Ok(())
     }
 
@@ -221,6 +227,11 @@ fn velocity_json(timestamp: &serde_json::Value, v: [f64; 4]) -> serde_json::Valu
 }
 
 impl Observer for McapLog {
+    /// True once a write failed: later messages are dropped, [`McapLog::finish`] reports it.
+    fn failed(&self) -> bool {
+        self.error.is_some()
+    }
+
     fn frame(&mut self, e: &FrameEvent) {
         let t_s = e.t_received_s.or(e.t_sent_s).unwrap_or(0.0);
         let (ns, timestamp) = self.stamp(t_s);

@@ -5,18 +5,35 @@
 //! (so an order is never executed twice), images sent trunk by trunk with a received-trunk
 //! bitmap and RIT resends, EISN/ISN toggles, CI/IC cancellation, heartbeats and the recovery
 //! algorithm. [`session`] runs both ends and a link in virtual time, [`realtime`] one end over a
-//! port; [`camera`] reads the ROV camera's pictures, [`mcap_log`] logs a session for Foxglove.
+//! port; [`camera`] reads the ROV camera's pictures and [`script`] what the operator plays;
+//! [`outputs`] writes a session's CSV rows, images and [`mcap_log`] (Foxglove) as it goes.
 
 pub mod camera;
 pub mod mcap_log;
 pub mod operator;
+pub mod outputs;
 pub mod realtime;
 pub mod rov;
+pub mod script;
 pub mod session;
 
 use crate::debt;
 use crate::wire::operator::{Order, Roi};
 use crate::wire::{Message, MessageRepr};
+
+/// A file's bytes, read through a limit (a device such as /dev/zero has no size to check
+/// first): `None` when it holds more than `max_bytes`.
+pub(crate) fn read_at_most(
+    path: &std::path::Path,
+    max_bytes: u64,
+) -> std::io::Result<Option<Vec<u8>>> {
+    use std::io::Read;
+    let mut data = Vec::new();
+    std::fs::File::open(path)?
+        .take(max_bytes + 1)
+        .read_to_end(&mut data)?;
+    Ok((data.len() as u64 <= max_bytes).then_some(data))
+}
 
 /// Something an engine did that a report or a test wants to know.
 #[derive(Debug, Clone, PartialEq)]

@@ -182,7 +182,7 @@ impl End<'_> {
         let mut last_status: Option<crate::wire::rov::BasicStatus> = None;
         let mut drained = false;
         loop {
-            if stop.load(Ordering::SeqCst) {
+            if stop.load(Ordering::SeqCst) || observer.failed() {
                 return Ok(false);
             }
             let now = clock.now();
@@ -295,7 +295,7 @@ impl End<'_> {
         };
         let mut last = SimTime::ZERO;
         loop {
-            if stop.load(Ordering::SeqCst) {
+            if stop.load(Ordering::SeqCst) || observer.failed() {
                 return Ok(false);
             }
             let now = clock.now().max(last);

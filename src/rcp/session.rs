@@ -143,6 +143,43 @@ fn check_time(what: impl Into<String>, t_s: f64, previous_s: f64) -> Result<(), 
     ))
 }
 
+impl JoystickChange {
+    /// Checks the time (0 ..= a week) and each axis (-100 % ..= 100 %); `what` names it.
+    pub fn check(&self, what: impl Into<String>) -> Result<(), ConfigError> {
+        let what = what.into();
+        check_time(what.clone(), self.t_s, 0.0)?;
+        let j = self.joystick;
+        for v in [j.vx, j.vy, j.vz, j.vyaw] {
+            if !(v.is_finite() && v.abs() <= 100.0) {
+                return Err(out_of_range(
+                    what,
+                    "vx,vy,vz,vyaw each in -100 % ..= 100 % of full thrust",
+                    format!("{} %", number(v)),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Waypoint {
+    /// Checks the time (0 ..= a week), the target (within a GoTo order's
+    /// ±[`MAX_WAYPOINT_M`]) and the heading (finite); `what` names it.
+    pub fn check(&self, what: impl Into<String>) -> Result<(), ConfigError> {
+        let what = what.into();
+        check_time(what.clone(), self.t_s, 0.0)?;
+        check_position(what.clone(), self.position_m, MAX_WAYPOINT_M)?;
+        if !self.heading_deg.is_finite() {
+            return Err(out_of_range(
+                what,
+                "a finite heading in degrees",
+                format!("{} degrees", self.heading_deg),
+            ));
+        }
+        Ok(())
+    }
+}
+
 impl SessionConfig {
     /// Checks every setting against its range; the first one out of range is the error. The
     /// model is checked when the link is built.
@@ -171,30 +208,14 @@ impl SessionConfig {
             let what = format!("joystick change {}", k + 1);
             check_time(what.clone(), change.t_s, previous_s)?;
             previous_s = change.t_s;
-            let j = change.joystick;
-            for v in [j.vx, j.vy, j.vz, j.vyaw] {
-                if !(v.is_finite() && v.abs() <= 100.0) {
-                    return Err(out_of_range(
-                        what,
-                        "vx,vy,vz,vyaw each in -100 % ..= 100 % of full thrust",
-                        format!("{} %", number(v)),
-                    ));
-                }
-            }
+            change.check(what)?;
         }
         let mut previous_s = 0.0;
         for (k, waypoint) in self.waypoints.iter().enumerate() {
             let what = format!("waypoint {}", k + 1);
             check_time(what.clone(), waypoint.t_s, previous_s)?;
             previous_s = waypoint.t_s;
-            check_position(what.clone(), waypoint.position_m, MAX_WAYPOINT_M)?;
-            if !waypoint.heading_deg.is_finite() {
-                return Err(out_of_range(
-                    what,
-                    "a finite heading in degrees",
-                    format!("{} degrees", waypoint.heading_deg),
-                ));
-            }
+            waypoint.check(what)?;
         }
         let settings = &self.settings;
         let max_trunk = crate::wire::rov::MAX_TRUNK_BYTES;
@@ -243,6 +264,24 @@ pub fn auto_ipg_s(
         + model.air_time_s(rov_frame_bytes)
         + 2.0 * (model.intrinsic_delay_ms * 1e-3 + model.propagation_s(distance_m))
         + 3.0 * model.jitter_ms * 1e-3
+}
+
+/// [`auto_ipg_s`] for a session: the operator's 16-byte frame, the ROV's frame with a trunk of
+/// `settings.trunk_bytes`, the distance between `start_m` and `buoy_m`.
+pub fn auto_ipg_for(
+    model: &Model,
+    settings: &ImageSettings,
+    start_m: [f64; 3],
+    buoy_m: [f64; 3],
+) -> f64 {
+    let rov_frame_bytes = crate::wire::frame::OVERHEAD_BYTES
+        + crate::wire::rov::FIXED_BYTES
+        + usize::from(settings.trunk_bytes);
+    let distance_m = (0..3)
+        .map(|k| (start_m[k] - buoy_m[k]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    auto_ipg_s(model, 16, rov_frame_bytes, distance_m)
 }
 
 /// One direction's figures.
@@ -337,6 +376,11 @@ pub trait Observer {
     /// The vehicle after a step (the ROV's side), or as the last status reported it (an
     /// operator in real time).
     fn pose(&mut self, _pose: &PoseSample) {}
+    /// True once the observer can record nothing more (an output failed): the run ends at the
+    /// next event, as if stopped.
+    fn failed(&self) -> bool {
+        false
+    }
 }
 
 /// An observer that observes nothing.
@@ -485,6 +529,9 @@ pub fn run(
         }
         if stop.load(Ordering::Relaxed) {
             interrupted_at = Some(link.now());
+            break;
+        }
+        if observer.failed() {
             break;
         }
         if link.next_event_time() == Some(t) {

@@ -1,0 +1,160 @@
+//! tdma-run: a whole teleoperation session, operator and ROV: both ends over a link model in
+//! virtual time, or one end in real time over a serial port, pseudo-terminal or UDP.
+//!
+//! The pipeline is the library's: [`rovlink::rcp::session`] (virtual time),
+//! [`rovlink::rcp::realtime`] (one end), [`rovlink::rcp::outputs`] (what is written as it goes).
+#![forbid(unsafe_code)]
+
+mod cli;
+
+use std::path::Path;
+use std::process::ExitCode;
+
+use anyhow::Result;
+use rovlink::cli::output::{Kind, Outputs};
+use rovlink::cli::{UsageError, progress, stop};
+use rovlink::io::{EXIT_CHECK_FAILED, EXIT_OK};
+use rovlink::rcp::outputs::{Destinations, Recorder, summary, wall_clock_ns, write_metrics};
+use rovlink::rcp::realtime::{self, Ended, Role};
+use rovlink::rcp::session::{self, SessionConfig};
+use rovlink::rcp::{camera, script, test_image};
+use rovlink::say;
+
+use cli::{Args, RoleArg};
+
+/// The tool's name, prefixed to everything it says on stderr.
+const TOOL: &str = "tdma-run";
+
+fn main() -> ExitCode {
+    let args: Args = rovlink::cli::parse(TOOL);
+    rovlink::cli::finish(TOOL, run(&args))
+}
+
+/// The camera's pictures: the built-in ones, or the files at `path`.
+fn pictures(path: Option<&Path>) -> Result<Vec<rovlink::debt::Image>> {
+    let Some(path) = path else {
+        return Ok((0..4).map(|k| test_image(320, 240, k)).collect());
+    };
+    let pictures = camera::load(path)?;
+    if let Some(note) = pictures.note() {
+        say!("{note}");
+    }
+    Ok(pictures.images)
+}
+
+fn run(args: &Args) -> Result<u8> {
+    stop::install()?;
+    // Every output is claimed before any work, so bad usage leaves no file.
+    let mut outs = Outputs::new();
+    let inputs = [
+        &args.script,
+        &args.waypoints,
+        &args.images,
+        &args.model.model_file,
+    ];
+    outs.inputs(inputs.into_iter().flatten().map(|p| p.as_path()));
+    let metrics_dest = outs.claim_opt("--metrics", args.metrics.as_deref(), Kind::Text)?;
+    let dests = Destinations {
+        events: outs.claim_opt("--events", args.events.as_deref(), Kind::Text)?,
+        track: outs.claim_opt("--track", args.track.as_deref(), Kind::Text)?,
+        mcap: outs.claim_opt("--mcap", args.mcap.as_deref(), Kind::Binary)?,
+        images_out: (args.images_out.as_deref())
+            .map(|dir| outs.claim_dir("--images-out", dir))
+            .transpose()?,
+    };
+    let role = args.role.map(RoleArg::role);
+    if role.is_none() && args.port_args.any_set() {
+        return Err(UsageError(
+            "--dialect, --instant and --chunk-bytes apply to real modems (--role with --port)"
+                .into(),
+        )
+        .into());
+    }
+    let model = args.model.resolve()?;
+    let (script, waypoints) = script::load(args.script.as_deref(), args.waypoints.as_deref())?;
+    let settings = args.settings();
+    let ipg_s = args.ipg_s(&model, &settings);
+    let config = SessionConfig {
+        model: model.clone(),
+        seed: args.seed,
+        ipg_s,
+        duration_s: args.duration,
+        buoy_m: args.buoy,
+        start_m: args.start,
+        script,
+        waypoints,
+        settings,
+        images: pictures(args.images.as_deref())?,
+    };
+    config.validate()?;
+    let base_ns = if role.is_some() { wall_clock_ns() } else { 0 };
+    let template = "{spinner} {pos}/{len} s [{bar:30}] {msg}";
+    let bar = progress::bar(role.is_none(), args.duration.ceil() as u64, template);
+    let mut recorder = Recorder::new(dests, args.buoy, base_ns, bar)?;
+    let wall = std::time::Instant::now();
+    let (mut metrics, code) = match (role, &args.port) {
+        (Some(role), Some(device)) => {
+            let mut endpoint = args.port_args.open(device)?;
+            let what = match role {
+                Role::Operator => format!("operator: IPG {:.1} ms", ipg_s * 1e3),
+                Role::Rov => "ROV: answering every slot".into(),
+            };
+            say!(
+                "{what} on {device}, {:.0} s (Ctrl-C stops and keeps the outputs)",
+                args.duration
+            );
+            let (metrics, ended) = realtime::run(
+                role,
+                &config,
+                endpoint.as_mut(),
+                stop::flag(),
+                &mut recorder,
+            );
+            let code = match ended {
+                Ended::Done => EXIT_OK,
+                Ended::Stopped => {
+                    say!("stopped after {:.1} s", metrics.duration_s);
+                    EXIT_OK
+                }
+                Ended::Failed(error) => {
+                    say!(
+                        "{error} after {:.1} s; outputs so far kept",
+                        metrics.duration_s
+                    );
+                    EXIT_CHECK_FAILED
+                }
+            };
+            (metrics, code)
+        }
+        _ => {
+            let metrics = session::run(&config, &mut recorder, stop::flag())?;
+            let model_name = match model.name.as_str() {
+                "" => "a model file",
+                name => name,
+            };
+            say!(
+                "{:.0} s over {model_name} (seed {}), IPG {:.1} ms, {:.3} s of wall time",
+                metrics.duration_s,
+                args.seed,
+                ipg_s * 1e3,
+                wall.elapsed().as_secs_f64()
+            );
+            (metrics, stop::code_or(EXIT_OK))
+        }
+    };
+    recorder.finish()?;
+    if let Some(note) = stop::note() {
+        metrics.interrupted = stop::signal_name().map(str::to_string);
+        say!(
+            "{note} at {:.1} s: the outputs hold what was done",
+            metrics.duration_s
+        );
+    }
+    if let Some(dest) = metrics_dest {
+        write_metrics(&dest, &metrics)?;
+    }
+    for line in summary(&metrics) {
+        say!("{line}");
+    }
+    Ok(code)
+}
