@@ -8,7 +8,7 @@
 //! [`MAX_TOTAL_BYTES`] of pixels in all are refused before they are decoded, so a crafted header
 //! never makes the camera allocate gigabytes.
 
-use std::io::Cursor;
+use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
 use crate::debt;
@@ -175,12 +175,10 @@ fn picture(path: &Path, named: bool) -> Result<Option<(debt::Image, Option<Scale
         path: path.to_path_buf(),
         source,
     };
-    let Some(data) = super::read_at_most(path, MAX_FILE_BYTES).map_err(read_error)? else {
-        return Err(CameraError::FileTooBig {
-            path: path.to_path_buf(),
-        });
-    };
-    let reader = image::ImageReader::new(Cursor::new(&data))
+    // The header first, read from the file as far as the decoder needs: nothing else is read
+    // from a file that is not an image or too big a picture.
+    let file = std::fs::File::open(path).map_err(read_error)?;
+    let reader = image::ImageReader::new(BufReader::new(file))
         .with_guessed_format()
         .map_err(read_error)?;
     if reader.format().is_none() {
@@ -203,6 +201,11 @@ fn picture(path: &Path, named: bool) -> Result<Option<(debt::Image, Option<Scale
             height,
         });
     }
+    let Some(data) = super::read_at_most(path, MAX_FILE_BYTES).map_err(read_error)? else {
+        return Err(CameraError::FileTooBig {
+            path: path.to_path_buf(),
+        });
+    };
     let image = debt::picture::from_file_bytes(&data).map_err(decode_error)?;
     let from = (image.width, image.height);
     if from.0 <= debt::MAX_SIDE && from.1 <= debt::MAX_SIDE {

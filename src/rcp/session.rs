@@ -480,7 +480,8 @@ pub enum SessionError {
 
 /// Runs a session after [`SessionConfig::validate`]; `observer` sees frames, images and poses
 /// as they happen. `stop` is checked at every event: once set, the run ends there, and the
-/// metrics cover the virtual time reached, with `interrupted` set to [`STOPPED`].
+/// metrics cover the virtual time reached, with `interrupted` set to [`STOPPED`]. The run also
+/// ends early once the observer has [`failed`](Observer::failed).
 pub fn run(
     config: &SessionConfig,
     observer: &mut dyn Observer,
@@ -509,7 +510,7 @@ pub fn run(
     // no longer has its bytes.
     let mut kinds: std::collections::HashMap<(Side, u64), &'static str> =
         std::collections::HashMap::new();
-    let mut interrupted_at = None;
+    let (mut interrupted_at, mut failed_at) = (None, None);
 
     loop {
         let next_script = script.peek().map(|c| SimTime::from_secs_f64(c.t_s));
@@ -532,6 +533,7 @@ pub fn run(
             break;
         }
         if observer.failed() {
+            failed_at = Some(link.now());
             break;
         }
         if link.next_event_time() == Some(t) {
@@ -646,13 +648,12 @@ pub fn run(
             observer.pose(&rov.pose(t.as_secs_f64()));
         }
     }
-    let duration_s = match interrupted_at {
-        Some(t) => {
-            metrics.interrupted = Some(STOPPED.to_string());
-            t.as_secs_f64()
-        }
-        None => config.duration_s,
-    };
+    if interrupted_at.is_some() {
+        metrics.interrupted = Some(STOPPED.to_string());
+    }
+    let duration_s = interrupted_at
+        .or(failed_at)
+        .map_or(config.duration_s, SimTime::as_secs_f64);
     metrics.measured_by = "simulation";
     metrics.duration_s = duration_s;
     metrics.operator_to_rov = directions[0].metrics(duration_s);

@@ -91,7 +91,7 @@ fn run(args: &Args) -> Result<u8> {
     let template = "{spinner} {pos}/{len} s [{bar:30}] {msg}";
     let bar = progress::bar(role.is_none(), args.duration.ceil() as u64, template);
     let mut recorder = Recorder::new(dests, args.buoy, base_ns, bar)?;
-    let wall = std::time::Instant::now();
+    let (wall, mut done) = (std::time::Instant::now(), None);
     let (mut metrics, code) = match (role, &args.port) {
         (Some(role), Some(device)) => {
             let mut endpoint = args.port_args.open(device)?;
@@ -132,17 +132,20 @@ fn run(args: &Args) -> Result<u8> {
                 "" => "a model file",
                 name => name,
             };
-            say!(
+            done = Some(format!(
                 "{:.0} s over {model_name} (seed {}), IPG {:.1} ms, {:.3} s of wall time",
                 metrics.duration_s,
                 args.seed,
                 ipg_s * 1e3,
                 wall.elapsed().as_secs_f64()
-            );
+            ));
             (metrics, stop::code_or(EXIT_OK))
         }
     };
     recorder.finish()?;
+    if let Some(line) = done {
+        say!("{line}");
+    }
     if let Some(note) = stop::note() {
         metrics.interrupted = stop::signal_name().map(str::to_string);
         say!(

@@ -1,0 +1,393 @@
+//! tdma-run as a hostile user runs it: every numeric flag at NaN, inf, 0, negative and huge;
+//! empty, random and truncated inputs; outputs that are inputs, /dev/full, two outputs on
+//! standard output; camera pictures larger than DEBT holds; SIGTERM and SIGINT in the middle of
+//! a long simulation; `| head -1`. Exit codes 0, 1, 2 (130/143 when interrupted), never a panic
+//! or a signal death, never a hang; no output file left on exit 2, no temporary file ever.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use common::hostile::{
+    BAD_NUMBERS, assert_contract, assert_whole_csv, garbage, head_one, run, run_in, run_signalled,
+    temp_files,
+};
+use nix::sys::signal::Signal;
+
+const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
+const LIMIT: Duration = Duration::from_secs(60);
+
+fn tdma(args: &[&str]) -> common::hostile::Run {
+    run(TDMA_RUN, args, b"", LIMIT)
+}
+
+/// A PNG of `width` x `height` grey-blue pixels.
+fn png(width: usize, height: usize) -> Vec<u8> {
+    rovlink::debt::picture::to_png(&rovlink::debt::Image {
+        width,
+        height,
+        channels: 3,
+        data: vec![90; width * height * 3],
+    })
+    .unwrap()
+}
+
+/// A 1x1 PNG whose header says `width` x `height` (the pixel data does not follow).
+fn png_header(width: u32, height: u32) -> Vec<u8> {
+    let mut bytes = png(1, 1);
+    bytes[16..20].copy_from_slice(&width.to_be_bytes());
+    bytes[20..24].copy_from_slice(&height.to_be_bytes());
+    let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&bytes[12..29]);
+    bytes[29..33].copy_from_slice(&crc.to_be_bytes());
+    bytes
+}
+
+fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+fn s(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+#[test]
+fn every_numeric_flag_at_nan_inf_zero_negative_and_huge() {
+    let flags: [(&str, &str); 13] = [
+        ("--ipg", "{}"),
+        ("--duration", "{}"),
+        ("--seed", "{}"),
+        ("--buoy", "{},0,0"),
+        ("--start", "0,{},0"),
+        ("--image-size", "{}"),
+        ("--trunk", "{}"),
+        ("--roi", "{},0,100,100"),
+        ("--ber", "{}"),
+        ("--loss-percent", "{}"),
+        ("--bitrate-bps", "{}"),
+        ("--jitter-ms", "{}"),
+        ("--fifo-bytes", "{}"),
+    ];
+    for (flag, shape) in flags {
+        for bad in BAD_NUMBERS {
+            let value = shape.replace("{}", bad);
+            // --flag=VALUE: clap takes `-inf` after a space as a flag, not a value.
+            let arg = format!("{flag}={value}");
+            let mut args = vec![arg.as_str()];
+            if flag != "--duration" {
+                args.extend(["--duration", "2"]);
+            }
+            let out = tdma(&args);
+            assert_contract(&out, &[0, 2], &format!("{flag} {value}"));
+            if out.code == Some(2) {
+                assert!(
+                    out.stderr.starts_with(&format!("tdma-run: {flag}: ")),
+                    "{flag} {value}: {}",
+                    out.stderr
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn the_issue_s_unbounded_values_are_refused_with_units() {
+    let cases: [(&[&str], &str); 6] = [
+        (
+            &["--ipg", "1e-9"],
+            "tdma-run: --ipg: expected 1 ms ..= 10 min, found 1e-9",
+        ),
+        (
+            &["--duration", "1e300"],
+            "tdma-run: --duration: expected more than 0 s, up to 7 d, found 1e300",
+        ),
+        (
+            &["--trunk", "243"],
+            "tdma-run: --trunk: expected 1 ..= 242 bytes, found 243",
+        ),
+        (
+            &["--trunk", "255"],
+            "tdma-run: --trunk: expected 1 ..= 242 bytes",
+        ),
+        (
+            &["--image-size", "0"],
+            "tdma-run: --image-size: expected 16 ..= 65535 bytes, found 0",
+        ),
+        (
+            &["--buoy", "1e300,0,0"],
+            "tdma-run: --buoy: number 1: expected -100000 m ..= 100000 m, found 1e300",
+        ),
+    ];
+    for (args, message) in cases {
+        let out = tdma(args);
+        assert_contract(&out, &[2], &args.join(" "));
+        assert!(out.stderr.starts_with(message), "{args:?}: {}", out.stderr);
+        assert_eq!(out.stderr.lines().count(), 1, "{}", out.stderr);
+    }
+    // The trunk at its maximum still runs: a 260-byte ROV frame.
+    let out = tdma(&["--trunk", "242", "--duration", "5"]);
+    assert_contract(&out, &[0], "--trunk 242");
+}
+
+#[test]
+fn a_picture_wider_than_debt_holds_is_scaled_down_and_a_huge_one_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let wide = write(dir.path(), "wide.png", &png(5000, 10));
+    let out = tdma(&["--images", s(&wide), "--duration", "10"]);
+    assert_contract(&out, &[0], "5000x10 picture");
+    assert_eq!(
+        out.stderr.matches("scaled down").count(),
+        1,
+        "{}",
+        out.stderr
+    );
+    assert!(
+        out.stderr.contains("wide.png: 5000x10 to 4096x9"),
+        "{}",
+        out.stderr
+    );
+
+    let huge = write(dir.path(), "huge.png", &png_header(20_000, 20_000));
+    let started = std::time::Instant::now();
+    let metrics = dir.path().join("m.json");
+    let out = tdma(&["--images", s(&huge), "--metrics", s(&metrics)]);
+    assert_contract(&out, &[2], "20000x20000 picture");
+    assert!(
+        out.stderr.contains("huge.png: 20000x20000 pixels"),
+        "{}",
+        out.stderr
+    );
+    assert!(started.elapsed() < Duration::from_secs(10));
+    assert!(!metrics.exists());
+}
+
+#[test]
+fn empty_random_and_truncated_inputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let kodim = std::fs::read(common::testdata("kodim23-64x48.png")).unwrap();
+    let inputs = [
+        ("empty", Vec::new()),
+        ("random", garbage(4096, 14)),
+        ("truncated-png", kodim[..kodim.len() / 2].to_vec()),
+        ("png-header-only", kodim[..40].to_vec()),
+        (
+            "truncated-csv",
+            b"t_s,x_m,y_m,z_m,heading_deg\n5,2,0,1,0\n40,8,0".to_vec(),
+        ),
+        ("script-header-only", b"t_s,vx,vy,vz,vyaw\n".to_vec()),
+    ];
+    for (name, bytes) in &inputs {
+        let path = write(dir.path(), name, bytes);
+        for flag in ["--script", "--waypoints", "--images", "--model-file"] {
+            let events = dir.path().join("events.csv");
+            let out = tdma(&[flag, s(&path), "--duration", "3", "--events", s(&events)]);
+            assert_contract(&out, &[0, 2], &format!("{flag} {name}"));
+            if out.code == Some(2) {
+                assert!(
+                    out.stderr.contains(name),
+                    "{flag} {name}: the error names the file: {}",
+                    out.stderr
+                );
+                assert!(!events.exists(), "{flag} {name}: output left on exit 2");
+            }
+            let _ = std::fs::remove_file(&events);
+        }
+    }
+    // A device without end as an input is read through a limit, never whole.
+    for flag in ["--script", "--images"] {
+        let out = tdma(&[flag, "/dev/zero", "--duration", "2"]);
+        assert_contract(&out, &[2], &format!("{flag} /dev/zero"));
+    }
+    assert!(temp_files(dir.path()).is_empty());
+}
+
+#[test]
+fn an_output_that_is_an_input_is_refused_and_the_input_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let waypoints_text = b"t_s,x_m,y_m,z_m,heading_deg\n5,2,0,1,0\n";
+    let waypoints = write(dir.path(), "wp.csv", waypoints_text);
+    let picture = write(dir.path(), "cam.png", &png(32, 24));
+    for flag in ["--events", "--track", "--metrics", "--mcap"] {
+        for input in [&waypoints, &picture] {
+            let out = tdma(&[
+                "--waypoints",
+                s(&waypoints),
+                "--images",
+                s(&picture),
+                "--duration",
+                "2",
+                flag,
+                s(input),
+            ]);
+            assert_contract(&out, &[2], &format!("{flag} = an input"));
+            assert!(
+                out.stderr.contains("refusing to overwrite an input"),
+                "{}",
+                out.stderr
+            );
+        }
+    }
+    assert_eq!(std::fs::read(&waypoints).unwrap(), waypoints_text);
+    assert_eq!(std::fs::read(&picture).unwrap(), png(32, 24));
+}
+
+#[test]
+fn full_disks_missing_directories_and_two_outputs_on_stdout() {
+    for flag in ["--events", "--track", "--metrics", "--mcap"] {
+        let out = tdma(&["--duration", "5", flag, "/dev/full"]);
+        assert_contract(&out, &[2], &format!("{flag} /dev/full"));
+        assert!(out.stderr.contains("/dev/full"), "{}", out.stderr);
+    }
+    let out = tdma(&["--images-out", "/dev/full", "--duration", "2"]);
+    assert_contract(&out, &[2], "--images-out /dev/full");
+    assert!(
+        out.stderr.contains("/dev/full is not a directory"),
+        "{}",
+        out.stderr
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("no/such/e.csv");
+    let out = tdma(&["--events", s(&missing)]);
+    assert_contract(&out, &[2], "missing directory");
+    assert!(out.stderr.contains("does not exist"), "{}", out.stderr);
+    let out = tdma(&["--events", "-", "--mcap", "-", "--duration", "2"]);
+    assert_contract(&out, &[2], "two outputs on stdout");
+    assert!(
+        out.stderr.contains("both write to standard output"),
+        "{}",
+        out.stderr
+    );
+    assert!(out.stdout.is_empty());
+}
+
+#[test]
+fn every_output_goes_to_stdout_when_asked() {
+    let out = tdma(&["--duration", "20", "--mcap", "-"]);
+    assert_contract(&out, &[0], "--mcap -");
+    assert!(mcap::Summary::read(&out.stdout).unwrap().is_some());
+    assert!(mcap::MessageStream::new(&out.stdout).unwrap().count() > 100);
+    let out = tdma(&["--duration", "10", "--metrics", "-"]);
+    assert_contract(&out, &[0], "--metrics -");
+    let metrics: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(metrics["measured_by"], "simulation");
+    for flag in ["--events", "--track"] {
+        let out = tdma(&["--duration", "10", flag, "-"]);
+        assert_contract(&out, &[0], flag);
+        let text = String::from_utf8(out.stdout).unwrap();
+        assert!(
+            text.lines().count() > 5 && text.ends_with('\n'),
+            "{flag}: {text}"
+        );
+        let out = head_one(TDMA_RUN, &["--duration", "600", flag, "-"], b"", LIMIT);
+        assert_contract(&out, &[0], &format!("{flag} - | head -1"));
+        assert!(out.stderr.is_empty(), "{flag} | head -1: {}", out.stderr);
+    }
+}
+
+/// Runs a simulation of a week with every output and sends `signal` after `after`.
+fn interrupted(signal: Signal, code: i32) {
+    let dir = tempfile::tempdir().unwrap();
+    let args = [
+        "--duration",
+        "604800",
+        "--mcap",
+        "s.mcap",
+        "--events",
+        "e.csv",
+        "--track",
+        "t.csv",
+        "--metrics",
+        "m.json",
+        "--images-out",
+        "received",
+    ];
+    let out = run_signalled(
+        dir.path(),
+        TDMA_RUN,
+        &args,
+        Duration::from_millis(2500),
+        signal,
+        LIMIT,
+    );
+    assert_contract(&out, &[code], &format!("{signal:?} mid-run"));
+    assert!(
+        temp_files(dir.path()).is_empty(),
+        "{:?}",
+        temp_files(dir.path())
+    );
+    let name = format!("{signal:?}");
+    assert!(
+        out.stderr.contains(&format!("interrupted by {name}")),
+        "{}",
+        out.stderr
+    );
+    assert!(out.stderr.contains("throughput kbit/s"), "{}", out.stderr);
+    for csv in ["e.csv", "t.csv"] {
+        assert_whole_csv(&dir.path().join(csv));
+    }
+    let metrics: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("m.json")).unwrap()).unwrap();
+    assert_eq!(metrics["interrupted"], name.as_str());
+    let duration_s = metrics["duration_s"].as_f64().unwrap();
+    assert!(duration_s > 0.0 && duration_s < 604_800.0, "{metrics}");
+    let events = std::fs::read_to_string(dir.path().join("e.csv")).unwrap();
+    let sent = metrics["rov_to_operator"]["frames_sent"].as_u64().unwrap()
+        + metrics["operator_to_rov"]["frames_sent"].as_u64().unwrap();
+    assert_eq!(
+        events.lines().count() as u64,
+        sent + 1,
+        "one row per frame sent"
+    );
+    let mcap = std::fs::read(dir.path().join("s.mcap")).unwrap();
+    let summary = mcap::Summary::read(&mcap)
+        .unwrap()
+        .expect("a summary section");
+    assert!(summary.stats.is_some_and(|s| s.message_count > 0));
+    for message in mcap::MessageStream::new(&mcap).unwrap() {
+        message.unwrap();
+    }
+    if let Ok(entries) = std::fs::read_dir(dir.path().join("received")) {
+        for entry in entries {
+            let bytes = std::fs::read(entry.unwrap().path()).unwrap();
+            rovlink::debt::picture::from_file_bytes(&bytes).unwrap();
+        }
+    }
+}
+
+#[test]
+fn sigterm_mid_run_leaves_complete_outputs_and_exit_143() {
+    interrupted(Signal::SIGTERM, 143);
+}
+
+#[test]
+fn sigint_mid_run_exits_130() {
+    interrupted(Signal::SIGINT, 130);
+}
+
+#[test]
+fn bad_usage_leaves_no_file_at_all() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_in(
+        dir.path(),
+        TDMA_RUN,
+        &[
+            "--events",
+            "e.csv",
+            "--track",
+            "t.csv",
+            "--mcap",
+            "s.mcap",
+            "--metrics",
+            "m.json",
+            "--waypoints",
+            "missing.csv",
+        ],
+        b"",
+        LIMIT,
+    );
+    assert_contract(&out, &[2], "missing waypoints");
+    assert!(out.stderr.contains("missing.csv"), "{}", out.stderr);
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
