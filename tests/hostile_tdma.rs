@@ -391,3 +391,32 @@ fn bad_usage_leaves_no_file_at_all() {
     assert!(out.stderr.contains("missing.csv"), "{}", out.stderr);
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
 }
+
+/// Resident memory of a process, kB.
+fn rss_kb(pid: u32) -> u64 {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap();
+    let line = status.lines().find(|l| l.starts_with("VmRSS:")).unwrap();
+    line.split_whitespace().nth(1).unwrap().parse().unwrap()
+}
+
+#[test]
+fn memory_stays_flat_at_the_shortest_ipg() {
+    // At 1 ms slots the S100 drops most frames; each lost slot carrying an order used to stay
+    // in a map for the whole session (about 3 MB/s).
+    let mut child = std::process::Command::new(TDMA_RUN)
+        .args(["--ipg", "1", "--duration", "604800"])
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_secs(2));
+    let early = rss_kb(child.id());
+    std::thread::sleep(Duration::from_secs(3));
+    let late = rss_kb(child.id());
+    let _ = nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(child.id() as i32),
+        Signal::SIGTERM,
+    );
+    let status = common::wait_for_exit(&mut child, LIMIT);
+    assert_eq!(status.code(), Some(143));
+    assert!(late < early + 2048, "{early} kB, 3 s later {late} kB");
+}

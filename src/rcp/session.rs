@@ -561,11 +561,17 @@ pub fn run(
                     fate: report.fate.as_str(),
                 };
                 observer.frame(&event);
+                // The order a slot carried is forgotten at its first report, whatever its fate
+                // (a lost slot's entry would otherwise stay for the whole session).
+                let order = if from_operator && !report.duplicate {
+                    slot_orders.remove(&report.seq)
+                } else {
+                    None
+                };
                 if report.fate != Fate::Delivered {
                     continue;
                 }
                 if from_operator {
-                    let order = slot_orders.remove(&report.seq);
                     if let Some(reply) = rov.receive(link.now(), &report.bytes) {
                         let kind = kind_of(&reply);
                         let seq = link.offer(Side::B, reply);
