@@ -211,6 +211,19 @@ pub struct Args {
 }
 
 impl Args {
+    /// The input files, for the outputs' same-file check.
+    pub fn inputs(&self) -> impl Iterator<Item = &std::path::Path> {
+        [
+            &self.script,
+            &self.waypoints,
+            &self.images,
+            &self.model.model_file,
+        ]
+        .into_iter()
+        .flatten()
+        .map(PathBuf::as_path)
+    }
+
     /// The image settings the flags give (the parsers bound each to its type).
     pub fn settings(&self) -> ImageSettings {
         ImageSettings {

@@ -12,7 +12,7 @@ use std::process::ExitCode;
 
 use anyhow::Result;
 use rovlink::cli::output::{Kind, Outputs};
-use rovlink::cli::{UsageError, progress, stop};
+use rovlink::cli::{progress, stop};
 use rovlink::io::{EXIT_CHECK_FAILED, EXIT_OK};
 use rovlink::rcp::outputs::{Destinations, Recorder, summary, wall_clock_ns, write_metrics};
 use rovlink::rcp::realtime::{self, Ended, Role};
@@ -46,13 +46,7 @@ fn run(args: &Args) -> Result<u8> {
     stop::install()?;
     // Every output is claimed before any work, so bad usage leaves no file.
     let mut outs = Outputs::new();
-    let inputs = [
-        &args.script,
-        &args.waypoints,
-        &args.images,
-        &args.model.model_file,
-    ];
-    outs.inputs(inputs.into_iter().flatten().map(|p| p.as_path()));
+    outs.inputs(args.inputs());
     let metrics_dest = outs.claim_opt("--metrics", args.metrics.as_deref(), Kind::Text)?;
     let dests = Destinations {
         events: outs.claim_opt("--events", args.events.as_deref(), Kind::Text)?,
@@ -63,13 +57,12 @@ fn run(args: &Args) -> Result<u8> {
             .transpose()?,
     };
     let role = args.role.map(RoleArg::role);
-    if role.is_none() && args.port_args.any_set() {
-        return Err(UsageError(
-            "--dialect, --instant and --chunk-bytes apply to real modems (--role with --port)"
-                .into(),
-        )
-        .into());
-    }
+    let port_flags = "each of --dialect, --instant and --chunk-bytes";
+    rovlink::cli::only_with(
+        role.is_some(),
+        "--role",
+        &[(port_flags, args.port_args.any_set())],
+    )?;
     let model = args.model.resolve()?;
     let (script, waypoints) = script::load(args.script.as_deref(), args.waypoints.as_deref())?;
     let settings = args.settings();
