@@ -200,6 +200,11 @@ fn empty_random_and_truncated_inputs() {
         let out = tdma(&[flag, "/dev/zero", "--duration", "2"]);
         assert_contract(&out, &[2], &format!("{flag} /dev/zero"));
     }
+    // A FIFO with no writer would block whoever opens it: a picture must be a regular file.
+    let fifo = dir.path().join("fifo.png");
+    nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).unwrap();
+    let out = tdma(&["--images", s(&fifo), "--duration", "2"]);
+    assert_contract(&out, &[2], "--images FIFO");
     assert!(temp_files(dir.path()).is_empty());
 }
 

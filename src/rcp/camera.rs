@@ -39,6 +39,12 @@ pub enum CameraError {
         /// The file.
         path: PathBuf,
     },
+    /// A picture given by name that is not a regular file (a FIFO, a device).
+    #[error("{path}: not a regular file: the camera reads image files")]
+    NotAFile {
+        /// The path.
+        path: PathBuf,
+    },
     /// An image file that does not decode.
     #[error("{path}: {source}")]
     Decode {
@@ -175,6 +181,15 @@ fn picture(path: &Path, named: bool) -> Result<Option<(debt::Image, Option<Scale
         path: path.to_path_buf(),
         source,
     };
+    // Only regular files: a FIFO would block, a device such as /dev/zero never ends.
+    if !std::fs::metadata(path).map_err(read_error)?.is_file() {
+        if named {
+            return Err(CameraError::NotAFile {
+                path: path.to_path_buf(),
+            });
+        }
+        return Ok(None);
+    }
     // The header first, read from the file as far as the decoder needs: nothing else is read
     // from a file that is not an image or too big a picture.
     let file = std::fs::File::open(path).map_err(read_error)?;
