@@ -425,3 +425,37 @@ fn memory_stays_flat_at_the_shortest_ipg() {
     assert_eq!(status.code(), Some(143));
     assert!(late < early + 2048, "{early} kB, 3 s later {late} kB");
 }
+
+#[test]
+fn ctrl_c_ends_a_real_time_run_with_exit_0_and_its_summary() {
+    let (_master, slave) = common::open_pty();
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_signalled(
+        dir.path(),
+        TDMA_RUN,
+        &[
+            "--role",
+            "rov",
+            "--port",
+            &slave,
+            "--duration",
+            "600",
+            "--metrics",
+            "m.json",
+            "--events",
+            "e.csv",
+        ],
+        Duration::from_millis(1500),
+        Signal::SIGINT,
+        LIMIT,
+    );
+    assert_contract(&out, &[0], "SIGINT on a real-time ROV");
+    assert!(out.stderr.contains("stopped after"), "{}", out.stderr);
+    assert!(out.stderr.contains("images started"), "{}", out.stderr);
+    let metrics: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("m.json")).unwrap()).unwrap();
+    assert_eq!(metrics["measured_by"], "rov");
+    assert_eq!(metrics["interrupted"], "SIGINT");
+    assert_whole_csv(&dir.path().join("e.csv"));
+    assert!(temp_files(dir.path()).is_empty());
+}
