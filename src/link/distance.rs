@@ -1,11 +1,14 @@
 //! The distance between the two ends of a link over time: fixed, or a track read from a file.
 //!
 //! A track is a CSV file with a header row and the columns `t_s,distance_m`: times in seconds
-//! from the start of the run (non-decreasing), distances in metres (non-negative). Between two
-//! points the distance is interpolated linearly; before the first and after the last it holds.
+//! from the start of the run (non-decreasing), distances in metres (0 ..= 1e9, as a model's
+//! range). Between two points the distance is interpolated linearly; before the first and after
+//! the last it holds.
 //! Reading never panics: a malformed file is a [`DistanceError`] with the line and the field.
 
 use std::path::{Path, PathBuf};
+
+use super::model::MAX_RANGE_M;
 
 /// Distance between the two sides over time.
 #[derive(Debug, Clone, PartialEq)]
@@ -61,6 +64,13 @@ impl Distance {
                     line,
                     "t_s",
                     format!("{t} is before the previous row's {last}: times must not decrease"),
+                ));
+            }
+            if d > MAX_RANGE_M {
+                return Err(DistanceError::at(
+                    line,
+                    "distance_m",
+                    format!("expected 0 ..= 1e9 m (a million km), found {d:e}"),
                 ));
             }
             points.push((t, d));
@@ -153,7 +163,11 @@ mod tests {
 
     #[test]
     fn bad_tracks_name_the_line_and_field() {
-        let cases: [(&[u8], &str); 5] = [
+        let cases: [(&[u8], &str); 6] = [
+            (
+                b"t_s,distance_m\n0,1\n1,1e300\n",
+                "line 3: field `distance_m`: expected 0 ..= 1e9 m (a million km), found 1e300",
+            ),
             (b"t,d\n0,1\n", "line 1: field `t_s`: missing column"),
             (
                 b"t_s,distance_m\n0,1\n1,x\n",

@@ -24,6 +24,12 @@
 //! paper. Model files are the JSON form of [`Model`]; every field is also a command-line flag
 //! (`rovlink::cli::model::ModelArgs`), so a file and a command line say the same things.
 //!
+//! Every figure has a range ([`Model::validate`]) that no real modem or link exceeds: bit rates
+//! 1 bit/s ..= 10 Gbit/s, delays and jitter up to an hour, propagation up to 10 ms/m, ranges up
+//! to a million km, FIFOs up to 64 MiB. Within them every time a run computes stays far inside
+//! virtual time (2^64 ns, 584 years): a frame's fate is decided at most about 20 years of
+//! virtual time after it is offered (a full 64 MiB FIFO at 1 bit/s), so nothing saturates.
+//!
 //! Parsing never panics: a malformed file is a [`ModelError`] naming the field and the problem.
 
 use std::path::{Path, PathBuf};
@@ -38,6 +44,21 @@ pub const PRESETS: [&str; 5] = [
     "satellite-up",
     "satellite-down",
 ];
+
+/// The lowest bit rate a model may have, bit/s (`bitrate_bps`, `rate_limit_bps`): the slowest
+/// acoustic modems run at tens of bit/s.
+pub const MIN_BITRATE_BPS: f64 = 1.0;
+/// The highest bit rate a model may have, bit/s: 10 Gbit/s.
+pub const MAX_BITRATE_BPS: f64 = 1e10;
+/// The longest intrinsic delay, jitter or fixed propagation a model may have, ms: one hour
+/// (a satellite hop is 310 ms, an acoustic modem's processing under a second, Mars 22 min).
+pub const MAX_DELAY_MS: f64 = 3_600_000.0;
+/// The slowest propagation a model may have, ms per metre (sound in water is 0.67, in air 2.9).
+pub const MAX_PROPAGATION_MS_PER_M: f64 = 10.0;
+/// The farthest range (and distance) a model may have, m: a million km.
+pub const MAX_RANGE_M: f64 = 1e9;
+/// The largest transmit FIFO a model may have, bytes: 64 MiB (modems hold kilobytes).
+pub const MAX_FIFO_BYTES: u64 = 64 << 20;
 
 /// The shape of the intrinsic-delay jitter. Every shape has mean 0 and the model's `jitter_ms`
 /// as its standard deviation.
@@ -332,7 +353,9 @@ impl Model {
         text
     }
 
-    /// Checks every field against its meaning; the error names the first bad field.
+    /// Checks every field against its meaning and its range ([`MIN_BITRATE_BPS`] and the other
+    /// limits: wider than any real modem or link, narrow enough that no time of a run leaves
+    /// virtual time); the error names the first bad field, the range with its units and the value.
     pub fn validate(&self) -> Result<(), ModelError> {
         fn bad(field: &str, problem: String) -> Result<(), ModelError> {
             Err(ModelError::Field {
@@ -340,38 +363,43 @@ impl Model {
                 problem,
             })
         }
-        let positive = |field: &str, value: f64| {
-            if value.is_finite() && value > 0.0 {
+        let within = |field: &str, value: f64, min: f64, max: f64, range: &str| {
+            if value.is_finite() && (min..=max).contains(&value) {
                 Ok(())
             } else {
-                bad(field, format!("expected a number > 0, found {value}"))
+                bad(field, format!("expected {range}, found {}", shown(value)))
             }
         };
-        let non_negative = |field: &str, value: f64| {
-            if value.is_finite() && value >= 0.0 {
-                Ok(())
-            } else {
-                bad(field, format!("expected a number >= 0, found {value}"))
-            }
+        let rate = |field: &str, value: f64| {
+            within(
+                field,
+                value,
+                MIN_BITRATE_BPS,
+                MAX_BITRATE_BPS,
+                "1 bit/s ..= 10 Gbit/s (1e10)",
+            )
         };
-        let percent = |field: &str, value: f64| {
-            if (0.0..=100.0).contains(&value) {
-                Ok(())
-            } else {
-                bad(
-                    field,
-                    format!("expected a percentage 0..100, found {value}"),
-                )
-            }
+        let delay = |field: &str, value: f64| {
+            within(field, value, 0.0, MAX_DELAY_MS, "0 ..= 3600000 ms (1 h)")
         };
-        positive("bitrate_bps", self.bitrate_bps)?;
-        non_negative("intrinsic_delay_ms", self.intrinsic_delay_ms)?;
-        non_negative("jitter_ms", self.jitter_ms)?;
-        non_negative("propagation_min_ms", self.propagation_min_ms)?;
-        non_negative("propagation_ms_per_m", self.propagation_ms_per_m)?;
-        non_negative("range_min_m", self.range_min_m)?;
+        let metres = |field: &str, value: f64| {
+            within(field, value, 0.0, MAX_RANGE_M, "0 ..= 1e9 m (a million km)")
+        };
+        let percent = |field: &str, value: f64| within(field, value, 0.0, 100.0, "0 ..= 100 %");
+        rate("bitrate_bps", self.bitrate_bps)?;
+        delay("intrinsic_delay_ms", self.intrinsic_delay_ms)?;
+        delay("jitter_ms", self.jitter_ms)?;
+        delay("propagation_min_ms", self.propagation_min_ms)?;
+        within(
+            "propagation_ms_per_m",
+            self.propagation_ms_per_m,
+            0.0,
+            MAX_PROPAGATION_MS_PER_M,
+            "0 ..= 10 ms/m (sound in water is 0.67)",
+        )?;
+        metres("range_min_m", self.range_min_m)?;
         if let Some(max) = self.range_max_m {
-            non_negative("range_max_m", max)?;
+            metres("range_max_m", max)?;
             if max < self.range_min_m {
                 return bad(
                     "range_max_m",
@@ -385,8 +413,14 @@ impl Model {
                 format!("expected a probability 0 <= ber < 1, found {}", self.ber),
             );
         }
-        if self.fifo_bytes == 0 {
-            return bad("fifo_bytes", "expected at least 1 byte, found 0".into());
+        if !(1..=MAX_FIFO_BYTES).contains(&self.fifo_bytes) {
+            return bad(
+                "fifo_bytes",
+                format!(
+                    "expected 1 ..= {MAX_FIFO_BYTES} bytes (64 MiB), found {}",
+                    self.fifo_bytes
+                ),
+            );
         }
         percent("loss_percent", self.loss_percent)?;
         percent("corrupt_percent", self.corrupt_percent)?;
@@ -397,8 +431,8 @@ impl Model {
             percent("gilbert_elliott.loss_bad_percent", ge.loss_bad_percent)?;
             percent("gilbert_elliott.loss_good_percent", ge.loss_good_percent)?;
         }
-        if let Some(rate) = self.rate_limit_bps {
-            positive("rate_limit_bps", rate)?;
+        if let Some(limit) = self.rate_limit_bps {
+            rate("rate_limit_bps", limit)?;
         }
         Ok(())
     }
@@ -429,6 +463,15 @@ impl Model {
     /// Probability that a frame of `bytes` bytes has at least one bit error: 1 - (1 - BER)^bits.
     pub fn packet_error_rate(&self, bytes: usize) -> f64 {
         1.0 - (1.0 - self.ber).powf(bytes as f64 * 8.0)
+    }
+}
+
+/// A number as a message shows it: plain when it reads well, in exponent form when tiny or huge.
+fn shown(value: f64) -> String {
+    if value == 0.0 || !value.is_finite() || (1e-4..1e16).contains(&value.abs()) {
+        format!("{value}")
+    } else {
+        format!("{value:e}")
     }
 }
 
@@ -473,7 +516,7 @@ mod tests {
     fn numbers_read_back_exactly() {
         // Found by fuzzing: without exact float parsing this came back one ulp off.
         let mut model = Model::preset("satellite-up").unwrap();
-        model.bitrate_bps = 7.333333333333335e111;
+        model.bitrate_bps = 7333.333333333335;
         model.jitter_ms = 0.1 + 0.2;
         assert_eq!(Model::from_json(&model.to_json()).unwrap(), model);
     }
@@ -498,7 +541,7 @@ mod tests {
         let cases = [
             (
                 r#"{"bitrate_bps": -3, "intrinsic_delay_ms": 5}"#,
-                "field `bitrate_bps`: expected a number > 0, found -3",
+                "field `bitrate_bps`: expected 1 bit/s ..= 10 Gbit/s (1e10), found -3",
             ),
             (
                 r#"{"bitrate_bps": 9, "intrinsic_delay_ms": "x"}"#,
@@ -518,7 +561,7 @@ mod tests {
             ),
             (
                 r#"{"bitrate_bps": 9, "intrinsic_delay_ms": 1, "gilbert_elliott": {"p_percent": 1, "r_percent": 400}}"#,
-                "field `gilbert_elliott.r_percent`: expected a percentage 0..100, found 400",
+                "field `gilbert_elliott.r_percent`: expected 0 ..= 100 %, found 400",
             ),
             (
                 r#"{"bitrate_bps": 9, "intrinsic_delay_ms": 1, "range_min_m": 5, "range_max_m": 2}"#,
@@ -540,6 +583,58 @@ mod tests {
     }
 
     #[test]
+    fn figures_beyond_any_real_link_are_refused_with_their_range() {
+        // Issue 14: these saturated virtual time at 2^64 ns without a word.
+        let cases = [
+            (
+                r#""bitrate_bps": 1e-300, "intrinsic_delay_ms": 5"#,
+                "field `bitrate_bps`: expected 1 bit/s ..= 10 Gbit/s (1e10), found 1e-300",
+            ),
+            (
+                r#""bitrate_bps": 1e11, "intrinsic_delay_ms": 5"#,
+                "field `bitrate_bps`: expected 1 bit/s ..= 10 Gbit/s (1e10), found 100000000000",
+            ),
+            (
+                r#""bitrate_bps": 9, "intrinsic_delay_ms": 1, "jitter_ms": 1e300"#,
+                "field `jitter_ms`: expected 0 ..= 3600000 ms (1 h), found 1e300",
+            ),
+            (
+                r#""bitrate_bps": 9, "intrinsic_delay_ms": 3600001"#,
+                "field `intrinsic_delay_ms`: expected 0 ..= 3600000 ms (1 h), found 3600001",
+            ),
+            (
+                r#""bitrate_bps": 9, "intrinsic_delay_ms": 1, "propagation_ms_per_m": 11"#,
+                "field `propagation_ms_per_m`: expected 0 ..= 10 ms/m",
+            ),
+            (
+                r#""bitrate_bps": 9, "intrinsic_delay_ms": 1, "range_max_m": 2e9"#,
+                "field `range_max_m`: expected 0 ..= 1e9 m",
+            ),
+            (
+                r#""bitrate_bps": 9, "intrinsic_delay_ms": 1, "fifo_bytes": 18446744073709551615"#,
+                "field `fifo_bytes`: expected 1 ..= 67108864 bytes (64 MiB)",
+            ),
+            (
+                r#""bitrate_bps": 9, "intrinsic_delay_ms": 1, "rate_limit_bps": 0.5"#,
+                "field `rate_limit_bps`: expected 1 bit/s",
+            ),
+        ];
+        for (fields, expected) in cases {
+            let text = format!("{{{fields}}}");
+            let message = Model::from_json(&text).unwrap_err().to_string();
+            assert!(message.starts_with(expected), "{text}: {message}");
+        }
+        // The edges themselves are real (if extreme) links.
+        let mut model = Model::preset("s100").unwrap();
+        model.bitrate_bps = MIN_BITRATE_BPS;
+        model.intrinsic_delay_ms = MAX_DELAY_MS;
+        model.jitter_ms = MAX_DELAY_MS;
+        model.propagation_ms_per_m = MAX_PROPAGATION_MS_PER_M;
+        model.range_max_m = Some(MAX_RANGE_M);
+        model.fifo_bytes = MAX_FIFO_BYTES;
+        model.validate().unwrap();
+    }
+
     fn unknown_preset_lists_the_presets() {
         let message = Model::preset("s200").unwrap_err().to_string();
         assert!(message.contains("s100, s2cr-burst"), "{message}");
