@@ -35,6 +35,7 @@ fn run(model: Model, seed: u64, count: u64) -> (Running, u64, u64, f64) {
     pipe::run::<()>(
         &mut link,
         Pace::BackToBack,
+        &std::sync::atomic::AtomicBool::new(false),
         |_| {
             sent += 1;
             Ok((sent <= count).then(|| frame.clone()))

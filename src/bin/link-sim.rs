@@ -6,17 +6,18 @@ use std::io::Write;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use rovlink::cli::model::ModelArgs;
-use rovlink::io::{AtomicFile, EXIT_CHECK_FAILED, EXIT_OK, Input, IoError, Output};
-use rovlink::link::channel::DirectionStats;
-use rovlink::link::pipe::{self, Pace};
-use rovlink::link::realtime::{Ended, Endpoints, Framing, PortSpec, RunInfo};
-use rovlink::link::{Distance, Link, Model, Report, Side};
-use rovlink::wire::{DeframeEvent, Deframer};
+use rovlink::io::{AtomicFile, EXIT_CHECK_FAILED, EXIT_OK, IoError, Output};
+use rovlink::link::pipe::{self, FrameReader, Pace};
+use rovlink::link::realtime::{Ended, Endpoints, Framing, PortSpec};
+use rovlink::link::stats::{Counters, Mode, RunFacts, TraceRow, real_time_lines};
+use rovlink::link::{Distance, Link, Report};
 
 /// The tool's name, prefixed to everything it says on stderr.
 const TOOL: &str = "link-sim";
@@ -310,110 +311,8 @@ fn port_specs(args: &Args) -> Option<[PortSpec; 2]> {
     None
 }
 
-/// One trace row; `with_side` adds the sending side (real time, where both sides send).
-fn trace_row(report: &Report, with_side: bool) -> String {
-    let time = |t: Option<rovlink::link::SimTime>| {
-        t.map_or(String::new(), |t| format!("{:.9}", t.as_secs_f64()))
-    };
-    let mut row = format!(
-        "{},{},{:.9},{},{},{}",
-        report.seq,
-        report.len,
-        report.t_offered.as_secs_f64(),
-        time(report.t_tx_start),
-        time(report.t_rx),
-        report.fate.as_str()
-    );
-    if with_side {
-        row.push(',');
-        row.push_str(report.from.name());
-    }
-    row.push('\n');
-    row
-}
-
-/// The trace's header in the pipe (one direction, A to B).
-const TRACE_HEADER: &str = "seq,bytes,t_offered_s,t_tx_start_s,t_rx_s,fate\n";
-/// The trace's header in real time (both directions: the sending side is the last column).
-const TRACE_HEADER_SIDES: &str = "seq,bytes,t_offered_s,t_tx_start_s,t_rx_s,fate,side\n";
-
-/// The counters of both directions.
-#[derive(Default)]
-struct Counters {
-    directions: [DirectionStats; 2],
-}
-
-impl Counters {
-    fn record(&mut self, report: &Report) {
-        self.directions[report.from.index()].record(report);
-    }
-
-    fn summary(&self, mode: &str, seed: u64, duration_s: f64, link: &Link) {
-        let (forward, reverse) = (link.model(Side::A), link.model(Side::B));
-        let models = if forward == reverse {
-            format!("model {}", model_name(forward))
-        } else {
-            format!(
-                "models {} (A->B), {} (B->A)",
-                model_name(forward),
-                model_name(reverse)
-            )
-        };
-        say!("{mode}: {models}, seed {seed}, {duration_s:.3} s of link time");
-        for (side, stats) in [Side::A, Side::B].iter().zip(&self.directions) {
-            if stats.frames_offered > 0 || mode != "pipe" {
-                say!(
-                    "{}",
-                    stats.summary_line(&format!("{}->{}", side.name(), side.other().name()))
-                );
-            }
-        }
-        if link.in_flight() > 0 {
-            say!(
-                "{} frames still in flight when the run ended",
-                link.in_flight()
-            );
-        }
-    }
-}
-
-fn model_name(model: &Model) -> String {
-    if model.name.is_empty() {
-        "(unnamed)".into()
-    } else {
-        model.name.clone()
-    }
-}
-
-fn stats_json(
-    args: &Args,
-    counters: &Counters,
-    link: &Link,
-    mode: &str,
-    duration_s: f64,
-    info: Option<&RunInfo>,
-) -> serde_json::Value {
-    let mut json = serde_json::json!({
-        "mode": mode,
-        "seed": args.seed,
-        "duration_s": duration_s,
-        "a_to_b": counters.directions[0].to_json(),
-        "b_to_a": counters.directions[1].to_json(),
-        "in_flight_at_end": link.in_flight(),
-        "model_a_to_b": link.model(Side::A),
-        "model_b_to_a": link.model(Side::B),
-    });
-    if let Some(info) = info {
-        json["real_time"] = serde_json::json!({
-            "bytes_read": {"a": info.bytes_read[0], "b": info.bytes_read[1]},
-            "bytes_skipped": {"a": info.bytes_skipped[0], "b": info.bytes_skipped[1]},
-            "deliveries_not_taken": {"a": info.not_taken[0], "b": info.not_taken[1]},
-            "delivery_lateness_ms_p50": info.lateness_quantile_ms(0.5),
-            "delivery_lateness_ms_p99": info.lateness_quantile_ms(0.99),
-            "delivery_lateness_ms_max": info.lateness_quantile_ms(1.0),
-        });
-    }
-    json
+fn say_lines(lines: Vec<String>) {
+    lines.iter().for_each(|line| say!("{line}"));
 }
 
 fn run_pipe(args: &Args, mut link: Link) -> Result<u8> {
@@ -424,8 +323,16 @@ fn run_pipe(args: &Args, mut link: Link) -> Result<u8> {
             "--interval: expected milliseconds > 0, found {ms}"
         ))),
     };
-    let mut input = Input::open(args.input.as_deref())?;
     let input_name = rovlink::io::display_name(args.input.as_deref(), "<stdin>");
+    let input: Box<dyn std::io::Read + Send> = match &args.input {
+        Some(path) if !rovlink::io::is_std(Some(path)) => {
+            Box::new(File::open(path).map_err(|source| IoError::Open {
+                path: path.clone(),
+                source,
+            })?)
+        }
+        _ => Box::new(std::io::stdin()),
+    };
     let mut output = Output::open(args.output.as_deref(), true)?;
     let mut trace = match &args.trace {
         Some(path) => {
@@ -439,46 +346,43 @@ fn run_pipe(args: &Args, mut link: Link) -> Result<u8> {
     let stats_file = args.stats.as_deref().map(AtomicFile::create).transpose()?;
     let wall = Instant::now();
     let mut counters = Counters::default();
-    let mut deframer = Deframer::new();
-    let mut frames = std::collections::VecDeque::new();
-    let mut chunk = vec![0u8; 64 * 1024];
-    let mut eof = false;
-    let mut bytes_in: u64 = 0;
-    let mut source = |_| -> Result<Option<Vec<u8>>> {
-        while frames.is_empty() && !eof {
-            let n = input.read_chunk(&mut chunk)?;
-            if n == 0 {
-                deframer.finish();
-                eof = true;
-            } else {
-                bytes_in += n as u64;
-                deframer.push(&chunk[..n]);
-            }
-            while let Some(event) = deframer.next_event() {
-                if let DeframeEvent::Frame { frame, .. } = event {
-                    frames.push_back(frame.into_inner().to_vec());
-                }
-            }
-        }
-        Ok(frames.pop_front())
-    };
+    let mut frames = FrameReader::new(input);
+    let stop = AtomicBool::new(false);
     let output_name = output.name();
-    let mut sink = |report: Report| -> Result<()> {
-        counters.record(&report);
-        if let Some(trace) = trace.as_mut() {
-            trace.write_bytes(trace_row(&report, false).as_bytes())?;
-        }
-        if report.fate.arrived() {
-            output.write_bytes(&report.bytes)?;
-        }
-        Ok(())
-    };
-    pipe::run(&mut link, pace, &mut source, &mut sink)?;
-    let skipped = deframer.stats();
+    let ended = pipe::run(
+        &mut link,
+        pace,
+        &stop,
+        |_| -> Result<Option<Vec<u8>>> {
+            frames.next_frame(&stop).map_err(|source| {
+                anyhow::Error::new(IoError::Read {
+                    name: input_name.clone(),
+                    source,
+                })
+            })
+        },
+        |report: Report| -> Result<()> {
+            counters.record(&report);
+            if let Some(trace) = trace.as_mut() {
+                trace.write_bytes(TraceRow::new(&report, Mode::Pipe).to_csv_line().as_bytes())?;
+            }
+            if report.fate.arrived() {
+                output.write_bytes(&report.bytes)?;
+            }
+            Ok(())
+        },
+    )?;
+    if ended == pipe::Ended::Horizon {
+        bail!(usage(format!(
+            "{input_name}: more frames than 100 years of virtual time hold at this --interval"
+        )));
+    }
+    let skipped = frames.stats();
     if skipped.bytes_skipped > 0 {
         if skipped.frames == 0 {
             bail!(BadInput(format!(
-                "{input_name}: no link frame in {bytes_in} bytes (expected wire.md frames starting with 0x55 and a valid CRC)"
+                "{input_name}: no link frame in {} bytes (expected wire.md frames starting with 0x55 and a valid CRC)",
+                skipped.bytes_in
             )));
         }
         say!(
@@ -494,13 +398,16 @@ fn run_pipe(args: &Args, mut link: Link) -> Result<u8> {
     if let Some(trace) = trace {
         trace.commit()?;
     }
-    let duration_s = link.now().as_secs_f64();
-    counters.summary("pipe", args.seed, duration_s, &link);
+    let facts = RunFacts {
+        mode: Mode::Pipe,
+        seed: args.seed,
+        duration_s: link.now().as_secs_f64(),
+        interrupted: None,
+    };
+    say_lines(counters.summary_lines(&facts, &link));
     say!("{:.3} s of wall time", wall.elapsed().as_secs_f64());
     if let Some(file) = stats_file {
-        file.commit_json(&stats_json(
-            args, &counters, &link, "pipe", duration_s, None,
-        ))?;
+        file.commit_json(&counters.stats_json(&facts, &link, None))?;
     }
     Ok(EXIT_OK)
 }
@@ -521,6 +428,11 @@ fn raise_priority_check() -> bool {
         Err(_) => false,
     }
 }
+
+/// The trace's header in the pipe (one direction, A to B).
+const TRACE_HEADER: &str = "seq,bytes,t_offered_s,t_tx_start_s,t_rx_s,fate\n";
+/// The trace's header in real time (both directions: the sending side is the last column).
+const TRACE_HEADER_SIDES: &str = "seq,bytes,t_offered_s,t_tx_start_s,t_rx_s,fate,side\n";
 
 fn run_realtime(args: &Args, mut link: Link, specs: [PortSpec; 2]) -> Result<u8> {
     let framing = if args.raw {
@@ -550,8 +462,10 @@ fn run_realtime(args: &Args, mut link: Link, specs: [PortSpec; 2]) -> Result<u8>
     let stats_file = args.stats.as_deref().map(AtomicFile::create).transpose()?;
     let realtime_priority = args.rt_priority && raise_priority_check();
     let endpoints = Endpoints::open(specs, realtime_priority)?;
-    let stopper = endpoints.stopper();
-    ctrlc::set_handler(move || stopper.stop()).context("cannot install the signal handler")?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = Arc::clone(&stop);
+    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+        .context("cannot install the signal handler")?;
     if args.pty {
         let mut out = std::io::stdout().lock();
         let names = endpoints.names();
@@ -571,11 +485,15 @@ fn run_realtime(args: &Args, mut link: Link, specs: [PortSpec; 2]) -> Result<u8>
     let mut trace_error = None;
     let mut emulator = rovlink::link::dialect::EvoLogicsEmulator::new();
     let dialect = (args.dialect == Dialect::Evologics).then_some(&mut emulator);
-    let (ended, info) = endpoints.run(&mut link, framing, dialect, |report| {
+    let (ended, info) = endpoints.run(&mut link, framing, dialect, &stop, |report| {
         counters.record(report);
         if let Some((file, name)) = trace.as_mut()
             && trace_error.is_none()
-            && let Err(source) = file.write_all(trace_row(report, true).as_bytes())
+            && let Err(source) = file.write_all(
+                TraceRow::new(report, Mode::RealTime)
+                    .to_csv_line()
+                    .as_bytes(),
+            )
         {
             trace_error = Some(IoError::Write {
                 name: name.clone(),
@@ -583,34 +501,16 @@ fn run_realtime(args: &Args, mut link: Link, specs: [PortSpec; 2]) -> Result<u8>
             });
         }
     });
-    let duration_s = link.now().as_secs_f64();
-    counters.summary("real time", args.seed, duration_s, &link);
-    if let (Some(p50), Some(p99)) = (
-        info.lateness_quantile_ms(0.5),
-        info.lateness_quantile_ms(0.99),
-    ) {
-        say!(
-            "deliveries handed to the port {p50:.3} ms (median), {p99:.3} ms (p99) after their model time"
-        );
-    }
-    for side in [Side::A, Side::B] {
-        if info.not_taken[side.index()] > 0 {
-            say!(
-                "side {}: {} deliveries not taken (its program was not reading)",
-                side.name(),
-                info.not_taken[side.index()]
-            );
-        }
-    }
+    let facts = RunFacts {
+        mode: Mode::RealTime,
+        seed: args.seed,
+        duration_s: link.now().as_secs_f64(),
+        interrupted: None,
+    };
+    say_lines(counters.summary_lines(&facts, &link));
+    say_lines(real_time_lines(&info));
     if let Some(file) = stats_file {
-        file.commit_json(&stats_json(
-            args,
-            &counters,
-            &link,
-            "real time",
-            duration_s,
-            Some(&info),
-        ))?;
+        file.commit_json(&counters.stats_json(&facts, &link, Some(&info)))?;
     }
     if let Some(err) = trace_error {
         return Err(err.into());

@@ -16,10 +16,11 @@ use rovlink::cli::port::PortArgs;
 use rovlink::gll::Endpoint;
 use rovlink::gll::PortError;
 use rovlink::io::{AtomicFile, EXIT_CHECK_FAILED, EXIT_OK, IoError};
-use rovlink::link::pipe::{self, Pace};
+use rovlink::link::pipe::Pace;
 use rovlink::link::{Distance, Link};
 use rovlink::measure::live::{self, Ended, Plan, Ports};
-use rovlink::measure::{MAX_PROBE_BYTES, MIN_PROBE_BYTES, ROW_HEADER, Row, Summary, probe};
+use rovlink::measure::sim;
+use rovlink::measure::{ROW_HEADER, Row, Summary, Tally, probe_total};
 
 /// The tool's name, prefixed to everything it says on stderr.
 const TOOL: &str = "modem-bench";
@@ -172,11 +173,11 @@ fn usage(message: String) -> anyhow::Error {
     anyhow::Error::new(UsageError(message))
 }
 
-/// Where rows go: written and flushed one by one, every row kept.
+/// Where rows go: written and flushed one by one, and counted into the summary.
 struct RowSink {
     out: Box<dyn Write>,
     name: String,
-    rows: Vec<Row>,
+    tally: Tally,
 }
 
 impl RowSink {
@@ -194,7 +195,7 @@ impl RowSink {
         let mut sink = RowSink {
             out,
             name,
-            rows: Vec::new(),
+            tally: Tally::new(),
         };
         sink.line(ROW_HEADER)?;
         Ok(sink)
@@ -211,7 +212,7 @@ impl RowSink {
 
     fn push(&mut self, row: Row) -> Result<(), IoError> {
         self.line(&row.to_csv())?;
-        self.rows.push(row);
+        self.tally.push(&row);
         Ok(())
     }
 }
@@ -222,17 +223,7 @@ fn run(args: &Args) -> Result<u8> {
     } else {
         vec![args.size.unwrap_or(57)]
     };
-    if let Some(bad) = sizes
-        .iter()
-        .find(|s| !(MIN_PROBE_BYTES..=MAX_PROBE_BYTES).contains(s))
-    {
-        bail!(usage(format!(
-            "--size/--sizes: {bad} bytes is outside {MIN_PROBE_BYTES}..={MAX_PROBE_BYTES} (a frame with the probe's sequence number and send time)"
-        )));
-    }
-    if args.count == 0 {
-        bail!(usage("--count: expected at least 1 packet per size".into()));
-    }
+    let total = probe_total(&sizes, args.count)?;
     if let Some(ms) = args.interval
         && !(ms.is_finite() && ms > 0.0)
     {
@@ -255,7 +246,6 @@ fn run(args: &Args) -> Result<u8> {
         .transpose()?;
     let fit_file = args.fit.as_deref().map(AtomicFile::create).transpose()?;
     let mut sink = RowSink::open(args.output.as_deref())?;
-    let total = sizes.len() as u64 * u64::from(args.count);
     let progress = progress_bar(args.quiet, total);
 
     let (code, assumed_rate) = if real {
@@ -267,7 +257,7 @@ fn run(args: &Args) -> Result<u8> {
     };
     progress.finish_and_clear();
 
-    let summary = Summary::from_rows(&sink.rows);
+    let summary = sink.tally.summary();
     if !args.quiet {
         print_summary(&summary);
     }
@@ -338,42 +328,18 @@ fn run_sim(
         Some(ms) => Pace::IntervalNs((ms * 1e6).round() as u64),
         None => Pace::BackToBack,
     };
-    let total = sizes.len() as u64 * u64::from(args.count);
-    let mut seq: u64 = 0;
-    let mut done: u64 = 0;
-    pipe::run(
-        &mut link,
+    let plan = sim::Plan {
+        sizes: sizes.to_vec(),
+        count_per_size: args.count,
         pace,
-        |t| -> Result<Option<Vec<u8>>> {
-            if seq == total {
-                return Ok(None);
-            }
-            let size = sizes[(seq % sizes.len() as u64) as usize];
-            let bytes = probe(seq as u32, size, t.0 / 1000);
-            seq += 1;
-            Ok(bytes)
-        },
-        |report| -> Result<()> {
-            if report.duplicate {
-                return Ok(());
-            }
-            let t_tx_s = report.t_offered.as_secs_f64();
-            let t_rx_s = report.t_rx.map(|t| t.as_secs_f64());
-            sink.push(Row {
-                seq: report.seq as u32,
-                size_bytes: report.len,
-                t_tx_s,
-                t_rx_s,
-                delay_ms: t_rx_s.map(|rx| (rx - t_tx_s) * 1e3),
-                delivered: report.fate.arrived(),
-                corrupted: report.fate == rovlink::link::Fate::Corrupted,
-            })?;
-            done += 1;
-            if done.is_multiple_of(1024) {
-                progress.set_position(done);
-            }
-            Ok(())
-        },
+    };
+    let stop = AtomicBool::new(false);
+    sim::run::<anyhow::Error>(
+        &mut link,
+        &plan,
+        &stop,
+        |row| Ok(sink.push(row)?),
+        |done| progress.set_position(done),
     )?;
     Ok(rate)
 }
@@ -451,7 +417,7 @@ fn run_real(
         Ended::Failed { error, unresolved } => {
             say!(
                 "{error}; {} rows kept, {unresolved} packets on their way not recorded",
-                sink.rows.len()
+                sink.tally.count()
             );
             Ok(EXIT_CHECK_FAILED)
         }

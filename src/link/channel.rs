@@ -821,6 +821,7 @@ mod tests {
         pipe::run::<()>(
             &mut link,
             pace,
+            &std::sync::atomic::AtomicBool::new(false),
             |_| {
                 sent += 1;
                 Ok((sent <= count).then(|| {
@@ -1123,6 +1124,7 @@ mod tests {
         pipe::run::<()>(
             &mut link,
             Pace::IntervalNs(100_000_000),
+            &std::sync::atomic::AtomicBool::new(false),
             |_| {
                 sent += 1;
                 Ok((sent <= 50_000).then(|| vec![0; 57]))

@@ -10,7 +10,8 @@
 //!
 //! A [`Model`] holds one direction's figures (bit rate, delays, jitter, range, errors, netem's
 //! extras); a [`Link`] runs two of them as a state machine given time, which the virtual-time
-//! driver ([`pipe`]) and the real-time driver ([`realtime`]) both drive.
+//! driver ([`pipe`]) and the real-time driver ([`realtime`]) both drive; [`stats`] holds what a
+//! run reports (trace rows, counters, summary, `--stats` JSON).
 
 pub mod channel;
 pub mod dialect;
@@ -20,6 +21,7 @@ pub mod pipe;
 pub mod realtime;
 pub mod rng;
 pub mod sched;
+pub mod stats;
 
 pub use channel::{Fate, Link, Report, Side};
 pub use distance::Distance;

@@ -9,9 +9,25 @@
 //!
 //! Frames are pulled from the source only when they are offered, and reports are pushed to the
 //! sink as soon as they are decided, so memory holds only the frames in flight.
+//!
+//! [`FrameReader`] is the source of link-sim's pipe: the wire.md frames of a byte stream, read
+//! on a thread of their own so that a stop request is seen even while the input is silent.
+
+use std::collections::VecDeque;
+use std::io::{self, Read};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::time::Duration;
+
+use crate::wire::{DeframeEvent, DeframeStats, Deframer};
 
 use super::channel::{Link, Report, Side};
 use super::sched::SimTime;
+
+/// The latest time a frame is offered at: 100 years of virtual time. With a model's figures in
+/// their ranges a fate is decided within about 20 years of its offer, so every time of a run
+/// stays well inside [`SimTime`]'s 584 years and nothing saturates.
+pub const HORIZON: SimTime = SimTime(100 * 365 * 24 * 3600 * 1_000_000_000);
 
 /// When frames are offered.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -22,25 +38,55 @@ pub enum Pace {
     IntervalNs(u64),
 }
 
+/// How a run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Ended {
+    /// The source ran out and every frame's fate was reported.
+    Done,
+    /// The stop flag was set: the run ended at the next event, with the reports decided so far
+    /// handed over; frames still in flight ([`Link::in_flight`]) were not reported.
+    Stopped,
+    /// The next offer would have come after [`HORIZON`]: no more frames were taken from the
+    /// source, and every frame offered was reported.
+    Horizon,
+}
+
 /// Offers every frame `source` yields from side A of `link`, in virtual time at `pace`, and
 /// hands each report to `sink` (in the order fates are decided) until the last frame's fate is
 /// known. `source` is called at each offer time, with that time, and returns the frame to offer
-/// (`None` ends the input). Errors from the source or the sink stop the run and are returned.
+/// (`None` ends the input). `stop` is checked at every event and every offer. Errors from the
+/// source or the sink stop the run and are returned.
 pub fn run<E>(
     link: &mut Link,
     pace: Pace,
+    stop: &AtomicBool,
     mut source: impl FnMut(SimTime) -> Result<Option<Vec<u8>>, E>,
     mut sink: impl FnMut(Report) -> Result<(), E>,
-) -> Result<(), E> {
+) -> Result<Ended, E> {
     let mut exhausted = false;
+    let mut past_horizon = false;
     let mut offered: u64 = 0;
     loop {
+        if stop.load(Ordering::Relaxed) {
+            while let Some(report) = link.pop_report() {
+                sink(report)?;
+            }
+            return Ok(Ended::Stopped);
+        }
         if !exhausted {
             let offer_at = match pace {
                 Pace::BackToBack => link.tx_idle(Side::A).then(|| link.now()),
-                Pace::IntervalNs(interval) => Some(SimTime(offered.saturating_mul(interval))),
+                Pace::IntervalNs(interval) => Some(
+                    offered
+                        .checked_mul(interval)
+                        .map_or(SimTime(u64::MAX), SimTime),
+                ),
             };
             match offer_at {
+                Some(t) if t > HORIZON => {
+                    exhausted = true;
+                    past_horizon = true;
+                }
                 // Events due at the offer time come first: a transmitter freed at t takes a
                 // frame offered at t. (Back to back with nothing pending: the link is idle.)
                 Some(t) if link.next_event_time().is_none_or(|due| due > t) => {
@@ -61,10 +107,185 @@ pub fn run<E>(
             while let Some(report) = link.pop_report() {
                 sink(report)?;
             }
-            return Ok(());
+            return Ok(if past_horizon {
+                Ended::Horizon
+            } else {
+                Ended::Done
+            });
         }
         while let Some(report) = link.pop_report() {
             sink(report)?;
         }
+    }
+}
+
+/// Bytes read from the input per chunk.
+const CHUNK_BYTES: usize = 64 * 1024;
+
+/// How often a reader waiting for input looks at the stop flag.
+const STOP_POLL: Duration = Duration::from_millis(50);
+
+/// The wire.md frames of a byte stream, in order; bytes that are not part of a good frame are
+/// skipped and counted ([`FrameReader::stats`]).
+pub struct FrameReader {
+    chunks: Receiver<io::Result<Vec<u8>>>,
+    deframer: Deframer,
+    frames: VecDeque<Vec<u8>>,
+    eof: bool,
+}
+
+impl FrameReader {
+    /// Reads `input` on a thread of its own (interrupted reads are retried; the thread ends at
+    /// the end of the input or at the first error).
+    pub fn new(mut input: impl Read + Send + 'static) -> FrameReader {
+        let (sender, chunks) = mpsc::sync_channel(4);
+        std::thread::spawn(move || {
+            let mut buf = vec![0u8; CHUNK_BYTES];
+            loop {
+                let chunk = match input.read(&mut buf) {
+                    Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                    Err(e) => Err(e),
+                    Ok(n) => Ok(buf[..n].to_vec()),
+                };
+                let last = !matches!(&chunk, Ok(bytes) if !bytes.is_empty());
+                if sender.send(chunk).is_err() || last {
+                    return;
+                }
+            }
+        });
+        FrameReader {
+            chunks,
+            deframer: Deframer::new(),
+            frames: VecDeque::new(),
+            eof: false,
+        }
+    }
+
+    /// The next frame; `None` at the end of the input, or as soon as `stop` is set (within
+    /// 50 ms, even while the input is silent). A read error is returned as it is.
+    pub fn next_frame(&mut self, stop: &AtomicBool) -> io::Result<Option<Vec<u8>>> {
+        while self.frames.is_empty() && !self.eof {
+            if stop.load(Ordering::Relaxed) {
+                return Ok(None);
+            }
+            match self.chunks.recv_timeout(STOP_POLL) {
+                Ok(Ok(bytes)) if !bytes.is_empty() => self.deframer.push(&bytes),
+                Ok(Ok(_)) | Err(RecvTimeoutError::Disconnected) => {
+                    self.deframer.finish();
+                    self.eof = true;
+                }
+                Ok(Err(error)) => return Err(error),
+                Err(RecvTimeoutError::Timeout) => continue,
+            }
+            while let Some(event) = self.deframer.next_event() {
+                if let DeframeEvent::Frame { frame, .. } = event {
+                    self.frames.push_back(frame.into_inner().to_vec());
+                }
+            }
+        }
+        Ok(self.frames.pop_front())
+    }
+
+    /// What the deframer has seen so far: bytes read, good frames, bytes skipped.
+    pub fn stats(&self) -> DeframeStats {
+        self.deframer.stats()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::link::{Distance, Model};
+
+    fn link() -> Link {
+        Link::symmetric(Model::preset("s100").unwrap(), 1, Distance::Fixed(1.0)).unwrap()
+    }
+
+    #[test]
+    fn frames_come_out_of_a_byte_stream_with_the_junk_counted() {
+        let frame = crate::wire::frame::build(1, 2, b"hello").unwrap();
+        let mut bytes = b"junk".to_vec();
+        bytes.extend_from_slice(&frame);
+        bytes.extend_from_slice(&frame);
+        let mut reader = FrameReader::new(io::Cursor::new(bytes));
+        let stop = AtomicBool::new(false);
+        assert_eq!(reader.next_frame(&stop).unwrap(), Some(frame.clone()));
+        assert_eq!(reader.next_frame(&stop).unwrap(), Some(frame));
+        assert_eq!(reader.next_frame(&stop).unwrap(), None);
+        let stats = reader.stats();
+        assert_eq!((stats.frames, stats.bytes_skipped), (2, 4));
+    }
+
+    #[test]
+    fn a_silent_input_does_not_hold_up_a_stop() {
+        let (_keep_open, silent) = std::os::unix::net::UnixStream::pair().unwrap();
+        let mut reader = FrameReader::new(silent);
+        let stop = AtomicBool::new(false);
+        let start = std::time::Instant::now();
+        std::thread::scope(|scope| {
+            scope.spawn(|| {
+                std::thread::sleep(Duration::from_millis(100));
+                stop.store(true, Ordering::Relaxed);
+            });
+            assert_eq!(reader.next_frame(&stop).unwrap(), None);
+        });
+        assert!(start.elapsed() < Duration::from_secs(1));
+    }
+
+    #[test]
+    fn a_set_stop_flag_ends_the_run_at_the_next_event() {
+        let stop = AtomicBool::new(false);
+        let mut link = link();
+        let mut offered = 0u64;
+        let mut reports = 0u64;
+        let ended = run::<()>(
+            &mut link,
+            Pace::BackToBack,
+            &stop,
+            |_| {
+                offered += 1;
+                Ok(Some(vec![0; 57])) // an endless source
+            },
+            |_| {
+                reports += 1;
+                if reports == 10 {
+                    stop.store(true, Ordering::Relaxed);
+                }
+                Ok(())
+            },
+        )
+        .unwrap();
+        assert_eq!(ended, Ended::Stopped);
+        assert_eq!(reports, 10);
+        assert!(offered <= 12, "{offered} offered");
+    }
+
+    #[test]
+    fn offers_end_at_the_horizon_instead_of_saturating_time() {
+        let stop = AtomicBool::new(false);
+        let mut link = link();
+        let mut offered = 0u64;
+        let mut last_rx = SimTime::ZERO;
+        // Ten minutes between frames: the horizon comes after 5 256 000 offers; a year apart,
+        // after 101.
+        let year_ns = 365 * 24 * 3600 * 1_000_000_000;
+        let ended = run::<()>(
+            &mut link,
+            Pace::IntervalNs(year_ns),
+            &stop,
+            |_| {
+                offered += 1;
+                Ok(Some(vec![0; 57]))
+            },
+            |report| {
+                last_rx = last_rx.max(report.t_rx.unwrap_or(SimTime::ZERO));
+                Ok(())
+            },
+        )
+        .unwrap();
+        assert_eq!(ended, Ended::Horizon);
+        assert_eq!(offered, 101);
+        assert!(last_rx > SimTime(100 * year_ns) && last_rx < SimTime(101 * year_ns));
+        assert_eq!(link.in_flight(), 0);
     }
 }

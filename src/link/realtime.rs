@@ -10,12 +10,14 @@
 //! other side at the time the model scheduled.
 //!
 //! The run ends when a side closes or fails (which side, and why, is in [`Ended`]) or when
-//! [`Stopper::stop`] is called (from a signal handler, say).
+//! the stop flag given to [`Endpoints::run`] is set (by a signal handler, say): it is checked at
+//! every turn of the loop, at least every 200 ms.
 
 use std::fs::File;
 use std::io::{self, Read, Write};
 use std::net::{SocketAddr, UdpSocket};
 use std::os::unix::fs::OpenOptionsExt;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::thread;
@@ -28,6 +30,7 @@ use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
 use super::channel::{Link, Report, Side};
 use super::dialect::EvoLogicsEmulator;
 use super::sched::SimTime;
+use crate::stats::Quantiles;
 use crate::wire::{DeframeEvent, Deframer};
 
 /// Frames a side's writer may hold before deliveries to it are counted as not taken.
@@ -89,7 +92,7 @@ pub struct OpenError {
 /// How a real-time run ended.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Ended {
-    /// [`Stopper::stop`] was called.
+    /// The stop flag was set (or every reader is gone).
     Stopped,
     /// A side's port closed or failed.
     Closed {
@@ -111,15 +114,15 @@ pub struct RunInfo {
     pub bytes_read: [u64; 2],
     /// Bytes that were not part of any frame, per side (frame framing only).
     pub bytes_skipped: [u64; 2],
-    /// How late each delivery was handed to its writer, microseconds after the model's time;
-    /// sorted ascending when the run returns.
-    pub lateness_us: Vec<u32>,
+    /// How late each delivery was handed to its writer after the model's time (fixed memory,
+    /// however long the run).
+    pub lateness: Quantiles,
 }
 
 impl RunInfo {
     /// The `q` quantile (0..=1) of the delivery lateness in milliseconds (none without deliveries).
     pub fn lateness_quantile_ms(&self, q: f64) -> Option<f64> {
-        crate::stats::quantile_sorted(&self.lateness_us, q).map(|us| us as f64 * 1e-3)
+        self.lateness.quantile_ms(q)
     }
 }
 
@@ -135,18 +138,6 @@ enum Message {
         side: Side,
         reason: String,
     },
-    Stop,
-}
-
-/// Stops a run from another thread (a signal handler).
-#[derive(Clone)]
-pub struct Stopper(Sender<Message>);
-
-impl Stopper {
-    /// Ends the run at the next turn of its loop.
-    pub fn stop(&self) {
-        let _ = self.0.send(Message::Stop);
-    }
 }
 
 /// Where a side's deliveries go.
@@ -159,7 +150,6 @@ pub struct Endpoints {
     names: [String; 2],
     writers: [Writer; 2],
     inbox: Receiver<Message>,
-    sender: Sender<Message>,
     /// Pseudo-terminal slaves kept open so the pair lives while programs come and go.
     _slaves: Vec<File>,
     /// Run the threads under real-time scheduling.
@@ -191,7 +181,7 @@ impl Endpoints {
         let [spec_a, spec_b] = specs;
         let rt = realtime_priority;
         let (name_a, writer_a, slave_a) = open_side(Side::A, spec_a, sender.clone(), rt)?;
-        let (name_b, writer_b, slave_b) = open_side(Side::B, spec_b, sender.clone(), rt)?;
+        let (name_b, writer_b, slave_b) = open_side(Side::B, spec_b, sender, rt)?;
         let names = [name_a, name_b];
         let writers = [writer_a, writer_b];
         let slaves = slave_a.into_iter().chain(slave_b).collect();
@@ -199,7 +189,6 @@ impl Endpoints {
             names,
             writers,
             inbox,
-            sender,
             _slaves: slaves,
             realtime_priority,
         })
@@ -224,33 +213,17 @@ impl Endpoints {
         }
     }
 
-    /// A handle that stops the run.
-    pub fn stopper(&self) -> Stopper {
-        Stopper(self.sender.clone())
-    }
-
     /// Runs `link` between the two sides until one closes or the run is stopped. `on_report`
     /// sees every report when the model decides it (delivered frames are then written), with
     /// the link's clock anchored at the start of the call. With a `dialect`, the sides speak
     /// the EvoLogics AT commands instead of sending bare packets (`framing` is then unused).
+    /// The run ends ([`Ended::Stopped`]) within 200 ms of `stop` being set.
     pub fn run(
         &self,
         link: &mut Link,
         framing: Framing,
-        dialect: Option<&mut EvoLogicsEmulator>,
-        on_report: impl FnMut(&Report),
-    ) -> (Ended, RunInfo) {
-        let (ended, mut info) = self.forward(link, framing, dialect, on_report);
-        info.lateness_us.sort_unstable();
-        (ended, info)
-    }
-
-    /// The loop of [`Endpoints::run`].
-    fn forward(
-        &self,
-        link: &mut Link,
-        framing: Framing,
         mut dialect: Option<&mut EvoLogicsEmulator>,
+        stop: &AtomicBool,
         mut on_report: impl FnMut(&Report),
     ) -> (Ended, RunInfo) {
         if self.realtime_priority {
@@ -261,12 +234,15 @@ impl Endpoints {
         let mut info = RunInfo::default();
         let mut framers = [Framer::new(framing), Framer::new(framing)];
         loop {
+            if stop.load(Ordering::Relaxed) {
+                return (Ended::Stopped, info);
+            }
             let now = clock(Instant::now());
             link.advance(now);
             while let Some(report) = link.pop_report() {
                 if let (Some(t_rx), true) = (report.t_rx, report.fate.arrived()) {
                     let late_us = now.0.saturating_sub(t_rx.0) / 1000;
-                    info.lateness_us.push(late_us.min(u32::MAX as u64) as u32);
+                    info.lateness.push_us(late_us);
                 }
                 let to = report.from.other();
                 match dialect.as_deref_mut() {
@@ -333,7 +309,7 @@ impl Endpoints {
                     let name = self.names[side.index()].clone();
                     return (Ended::Closed { side, name, reason }, info);
                 }
-                Ok(Message::Stop) | Err(RecvTimeoutError::Disconnected) => {
+                Err(RecvTimeoutError::Disconnected) => {
                     return (Ended::Stopped, info);
                 }
                 Err(RecvTimeoutError::Timeout) => {}

@@ -7,19 +7,28 @@
 //! arrives; the send time lets a receiver on another host compute a delay without the sender's
 //! log.
 //!
-//! [`Summary::from_rows`] gives the delay statistics, RFC 3550's interarrival jitter, the
-//! inter-arrival times and throughput, and, over a sweep of packet sizes, a least-squares fit of
-//! delay on size: `delay = intrinsic + size x 8 / bitrate`, the way Table 3's bit rate and
-//! intrinsic delay were obtained.
+//! A [`Tally`] takes the rows as they come and gives the [`Summary`]: the delay statistics,
+//! RFC 3550's interarrival jitter, the inter-arrival times and throughput, and, over a sweep of
+//! packet sizes, a least-squares fit of delay on size: `delay = intrinsic + size x 8 / bitrate`,
+//! the way Table 3's bit rate and intrinsic delay were obtained. Its memory does not grow with
+//! the number of rows: counts, mean and standard deviation are exact (Welford), the delay
+//! quantiles come from a fixed-size sketch and are within 0.1 % of the exact nearest-rank
+//! quantile, or 1 µs when that is larger ([`crate::stats::Quantiles`]).
+//!
+//! Campaigns run in real time over modems ([`live`]) or in virtual time over a link model
+//! ([`sim`]); both hand each row over as soon as it is known and stop at a flag.
 //!
 //! Parsing a received probe never panics: anything that is not a probe is `None`.
 
 pub mod live;
+pub mod sim;
 
 use serde::Serialize;
 
 use crate::link::model::{JitterDistribution, Model};
-use crate::stats::{Running, quantile_sorted};
+use std::collections::BTreeMap;
+
+use crate::stats::{Quantiles, Running};
 use crate::wire::frame::{self, Frame, OVERHEAD_BYTES};
 
 /// Bytes of the probe header inside the payload: sequence number and send time.
@@ -74,6 +83,51 @@ pub fn read_probe(bytes: &[u8]) -> Option<ProbeInfo> {
         t_tx_us: u64::from_be_bytes(time),
         size: frame.total_len(),
     })
+}
+
+/// The most probes a campaign sends: sequence numbers are 32 bits.
+pub const MAX_PROBES: u64 = 1 << 32;
+
+/// A campaign that cannot be run as asked.
+#[derive(Debug, thiserror::Error)]
+pub enum PlanError {
+    /// A probe size outside what a probe can be.
+    #[error(
+        "--size/--sizes: {0} bytes is outside {MIN_PROBE_BYTES}..={MAX_PROBE_BYTES} (a frame with the probe's sequence number and send time)"
+    )]
+    Size(usize),
+    /// No size, or no packet per size.
+    #[error("--count: expected at least 1 packet per size")]
+    Empty,
+    /// More probes than sequence numbers.
+    #[error(
+        "--count x --sizes: {0} probes in all, more than the 4294967296 that 32-bit sequence numbers tell apart"
+    )]
+    TooMany(u64),
+    /// A simulated campaign longer than virtual time holds.
+    #[error(
+        "the campaign would last about {years:.0} years of virtual time (at most 100): fewer --count, a shorter --interval or a faster model"
+    )]
+    TooLong {
+        /// Its estimated length, years.
+        years: f64,
+    },
+}
+
+/// Checks a campaign's sizes and count; returns the number of probes in all.
+pub fn probe_total(sizes: &[usize], count_per_size: u32) -> Result<u64, PlanError> {
+    if let Some(&bad) = sizes
+        .iter()
+        .find(|s| !(MIN_PROBE_BYTES..=MAX_PROBE_BYTES).contains(*s))
+    {
+        return Err(PlanError::Size(bad));
+    }
+    let total = sizes.len() as u64 * u64::from(count_per_size);
+    match total {
+        0 => Err(PlanError::Empty),
+        t if t > MAX_PROBES => Err(PlanError::TooMany(t)),
+        t => Ok(t),
+    }
 }
 
 /// One packet of a campaign: the row of `packets.csv`.
@@ -131,24 +185,52 @@ pub struct Fit {
 impl Fit {
     /// Fits `(size_bytes, delay_ms)` points; none with fewer than two distinct sizes.
     pub fn from_points(points: impl IntoIterator<Item = (f64, f64)>) -> Option<Fit> {
-        let points: Vec<(f64, f64)> = points.into_iter().collect();
-        let (mut n, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for &(x, y) in &points {
-            n += 1.0;
-            sx += x;
-            sy += y;
-            sxx += x * x;
-            sxy += x * y;
+        let mut groups: BTreeMap<u64, (f64, Running)> = BTreeMap::new();
+        for (x, y) in points {
+            groups
+                .entry(x.to_bits())
+                .or_insert((x, Running::new()))
+                .1
+                .push(y);
         }
-        let denominator = n * sxx - sx * sx;
-        if n < 2.0 || denominator.abs() <= 1e-9 * n * sxx.max(1.0) {
+        Fit::from_groups(groups.values().map(|(x, ys)| (*x, ys)))
+    }
+
+    /// Fits points given as groups of equal size: each size with the running figures of its
+    /// delays. The same line as the fit of every point, in memory for the groups only, and
+    /// without the cancellation of raw sums of squares.
+    pub fn from_groups<'a>(
+        groups: impl IntoIterator<Item = (f64, &'a Running)> + Clone,
+    ) -> Option<Fit> {
+        let (mut n, mut sum_x, mut sum_y) = (0.0, 0.0, 0.0);
+        for (x, ys) in groups.clone() {
+            let count = ys.count() as f64;
+            n += count;
+            sum_x += count * x;
+            sum_y += count * ys.mean();
+        }
+        if n < 2.0 {
             return None;
         }
-        let slope = (n * sxy - sx * sy) / denominator;
-        let intercept = (sy - slope * sx) / n;
-        let squares: f64 = points
-            .iter()
-            .map(|&(x, y)| (y - intercept - slope * x).powi(2))
+        let (mean_x, mean_y) = (sum_x / n, sum_y / n);
+        let (mut sxx, mut sxy, mut sum_x2) = (0.0, 0.0, 0.0);
+        for (x, ys) in groups.clone() {
+            let count = ys.count() as f64;
+            sxx += count * (x - mean_x).powi(2);
+            sxy += count * (x - mean_x) * (ys.mean() - mean_y);
+            sum_x2 += count * x * x;
+        }
+        if sxx <= 1e-9 * sum_x2.max(1.0) {
+            return None;
+        }
+        let slope = sxy / sxx;
+        let intercept = mean_y - slope * mean_x;
+        let squares: f64 = groups
+            .into_iter()
+            .map(|(x, ys)| {
+                ys.sum_squared_deviations()
+                    + ys.count() as f64 * (ys.mean() - intercept - slope * x).powi(2)
+            })
             .sum();
         Some(Fit {
             intercept_ms: intercept,
@@ -180,9 +262,9 @@ pub struct Summary {
     pub loss_ratio: f64,
     /// Mean delay, ms.
     pub delay_ms_mean: Option<f64>,
-    /// Median delay, ms.
+    /// Median delay, ms (nearest rank, from a sketch: within 0.1 % or 1 µs).
     pub delay_ms_p50: Option<f64>,
-    /// 99th percentile of the delay, ms.
+    /// 99th percentile of the delay, ms (as the median).
     pub delay_ms_p99: Option<f64>,
     /// Standard deviation of the delay, ms (the paper's jitter).
     pub jitter_ms: Option<f64>,
@@ -203,6 +285,9 @@ pub struct Summary {
     pub fit_jitter_ms: Option<f64>,
     /// Per size: packets, delivered, mean delay, jitter.
     pub sizes: Vec<SizeSummary>,
+    /// Why the campaign ended early (`interrupted by SIGINT`): the figures cover the packets
+    /// up to then. None for a campaign that ran to its end.
+    pub interrupted: Option<String>,
 }
 
 /// The figures of one packet size.
@@ -220,99 +305,149 @@ pub struct SizeSummary {
     pub jitter_ms: Option<f64>,
 }
 
-impl Summary {
-    /// Computes the figures from the rows (in any order).
-    pub fn from_rows(rows: &[Row]) -> Summary {
-        let count = rows.len() as u64;
-        let arrived: Vec<&Row> = rows.iter().filter(|r| r.delivered).collect();
-        let delivered = arrived.len() as u64;
-        let corrupted = rows.iter().filter(|r| r.corrupted).count() as u64;
-        let mut delay = Running::new();
-        let mut delays: Vec<f64> = Vec::with_capacity(arrived.len());
-        for row in &arrived {
-            if let Some(d) = row.delay_ms {
-                delay.push(d);
-                delays.push(d);
-            }
-        }
-        delays.sort_by(f64::total_cmp);
-        let some = |v: f64| (delay.count() > 0).then_some(v);
+/// The figures of one packet size while rows come in.
+#[derive(Debug, Clone, Default)]
+struct SizeTally {
+    count: u64,
+    delivered: u64,
+    delay: Running,
+}
 
-        // RFC 3550 A.8: J += (|D(i-1, i)| - J) / 16 over packets in arrival order.
-        let mut by_arrival: Vec<&Row> = arrived
-            .iter()
-            .copied()
-            .filter(|r| r.t_rx_s.is_some())
-            .collect();
-        by_arrival.sort_by(|a, b| a.t_rx_s.unwrap_or(0.0).total_cmp(&b.t_rx_s.unwrap_or(0.0)));
-        let mut rfc_jitter = 0.0;
-        let mut iat = Running::new();
-        for pair in by_arrival.windows(2) {
-            let transit = |r: &Row| r.delay_ms.unwrap_or(0.0);
-            rfc_jitter += ((transit(pair[1]) - transit(pair[0])).abs() - rfc_jitter) / 16.0;
-            iat.push((pair[1].t_rx_s.unwrap_or(0.0) - pair[0].t_rx_s.unwrap_or(0.0)) * 1e3);
+/// A campaign's figures accumulated one row at a time, in memory that does not grow with the
+/// number of rows: counters, Welford's running mean and standard deviation ([`Running`]), a
+/// fixed-size quantile sketch ([`Quantiles`]: within 0.1 % or 1 µs) and one tally per packet
+/// size (at most 246 sizes: [`MIN_PROBE_BYTES`]..=[`MAX_PROBE_BYTES`]).
+///
+/// Rows of delivered packets are expected in arrival order, the order both campaigns
+/// ([`live::run`], [`sim::run`]) hand them over: RFC 3550's jitter and the inter-arrival times
+/// follow that order.
+#[derive(Debug, Clone, Default)]
+pub struct Tally {
+    count: u64,
+    delivered: u64,
+    corrupted: u64,
+    delay: Running,
+    delay_quantiles: Quantiles,
+    rfc_jitter_ms: f64,
+    last_arrival: Option<(f64, f64)>,
+    iat_ms: Running,
+    first_tx_s: Option<f64>,
+    last_rx_s: Option<f64>,
+    bits_delivered: f64,
+    sizes: BTreeMap<usize, SizeTally>,
+}
+
+impl Tally {
+    /// No rows yet.
+    pub fn new() -> Tally {
+        Tally::default()
+    }
+
+    /// Counts a row.
+    pub fn push(&mut self, row: &Row) {
+        self.count += 1;
+        self.first_tx_s = Some(self.first_tx_s.map_or(row.t_tx_s, |t| t.min(row.t_tx_s)));
+        let size = self.sizes.entry(row.size_bytes).or_default();
+        size.count += 1;
+        if !row.delivered {
+            return;
         }
-        let throughput_bps = match (
-            rows.iter().map(|r| r.t_tx_s).reduce(f64::min),
-            by_arrival.last().and_then(|r| r.t_rx_s),
-        ) {
-            (Some(first), Some(last)) if last > first => Some(
-                arrived
-                    .iter()
-                    .map(|r| r.size_bytes as f64 * 8.0)
-                    .sum::<f64>()
-                    / (last - first),
-            ),
+        self.delivered += 1;
+        size.delivered += 1;
+        self.corrupted += u64::from(row.corrupted);
+        self.bits_delivered += row.size_bytes as f64 * 8.0;
+        if let Some(delay) = row.delay_ms {
+            self.delay.push(delay);
+            self.delay_quantiles.push_ms(delay);
+            size.delay.push(delay);
+        }
+        if let Some(t_rx) = row.t_rx_s {
+            // RFC 3550 A.8: J += (|D(i-1, i)| - J) / 16 over packets in arrival order.
+            let transit = row.delay_ms.unwrap_or(0.0);
+            if let Some((last_rx, last_transit)) = self.last_arrival {
+                self.rfc_jitter_ms += ((transit - last_transit).abs() - self.rfc_jitter_ms) / 16.0;
+                self.iat_ms.push((t_rx - last_rx) * 1e3);
+            }
+            self.last_arrival = Some((t_rx, transit));
+            self.last_rx_s = Some(self.last_rx_s.map_or(t_rx, |t| t.max(t_rx)));
+        }
+    }
+
+    /// Rows counted.
+    pub fn count(&self) -> u64 {
+        self.count
+    }
+
+    /// Bytes the tally holds: the same after ten rows as after a billion (the per-size
+    /// tallies aside, one per distinct size).
+    pub fn memory_bytes(&self) -> usize {
+        std::mem::size_of::<Tally>()
+            + self.delay_quantiles.cells() * std::mem::size_of::<u64>()
+            + self.sizes.len() * (std::mem::size_of::<(usize, SizeTally)>() + 16)
+    }
+
+    /// The figures of the rows so far.
+    pub fn summary(&self) -> Summary {
+        let count = self.count;
+        let delay = &self.delay;
+        let fit = Fit::from_groups(
+            self.sizes
+                .iter()
+                .filter(|(_, s)| s.delay.count() > 0)
+                .map(|(&size, s)| (size as f64, &s.delay)),
+        );
+        let throughput_bps = match (self.first_tx_s, self.last_rx_s) {
+            (Some(first), Some(last)) if last > first => Some(self.bits_delivered / (last - first)),
             _ => None,
         };
-        let fit = Fit::from_points(
-            arrived
-                .iter()
-                .filter_map(|r| r.delay_ms.map(|d| (r.size_bytes as f64, d))),
-        );
-        let mut sizes: Vec<usize> = rows.iter().map(|r| r.size_bytes).collect();
-        sizes.sort_unstable();
-        sizes.dedup();
-        let sizes = sizes
-            .into_iter()
-            .map(|size| {
-                let mut d = Running::new();
-                let of_size: Vec<&Row> = rows.iter().filter(|r| r.size_bytes == size).collect();
-                of_size
-                    .iter()
-                    .filter_map(|r| r.delay_ms)
-                    .for_each(|v| d.push(v));
-                SizeSummary {
-                    size_bytes: size,
-                    count: of_size.len() as u64,
-                    delivered: of_size.iter().filter(|r| r.delivered).count() as u64,
-                    delay_ms_mean: (d.count() > 0).then(|| d.mean()),
-                    jitter_ms: (d.count() > 1).then(|| d.std()),
-                }
+        let sizes = self
+            .sizes
+            .iter()
+            .map(|(&size, s)| SizeSummary {
+                size_bytes: size,
+                count: s.count,
+                delivered: s.delivered,
+                delay_ms_mean: (s.delay.count() > 0).then(|| s.delay.mean()),
+                jitter_ms: (s.delay.count() > 1).then(|| s.delay.std()),
             })
             .collect();
         Summary {
             count,
-            delivered,
-            corrupted,
+            delivered: self.delivered,
+            corrupted: self.corrupted,
             loss_ratio: if count == 0 {
                 0.0
             } else {
-                1.0 - delivered as f64 / count as f64
+                1.0 - self.delivered as f64 / count as f64
             },
-            delay_ms_mean: some(delay.mean()),
-            delay_ms_p50: quantile_sorted(&delays, 0.5),
-            delay_ms_p99: quantile_sorted(&delays, 0.99),
+            delay_ms_mean: (delay.count() > 0).then(|| delay.mean()),
+            delay_ms_p50: self.delay_quantiles.quantile_ms(0.5),
+            delay_ms_p99: self.delay_quantiles.quantile_ms(0.99),
             jitter_ms: (delay.count() > 1).then(|| delay.std()),
-            jitter_rfc3550_ms: (by_arrival.len() > 1).then_some(rfc_jitter),
-            iat_ms_mean: (iat.count() > 0).then(|| iat.mean()),
-            iat_ms_std: (iat.count() > 1).then(|| iat.std()),
+            jitter_rfc3550_ms: (self.iat_ms.count() > 0).then_some(self.rfc_jitter_ms),
+            iat_ms_mean: (self.iat_ms.count() > 0).then(|| self.iat_ms.mean()),
+            iat_ms_std: (self.iat_ms.count() > 1).then(|| self.iat_ms.std()),
             throughput_bps,
             fit_bitrate_bps: fit.and_then(|f| f.bitrate_bps()),
             fit_intrinsic_delay_ms: fit.map(|f| f.intercept_ms),
             fit_jitter_ms: fit.map(|f| f.residual_std_ms),
             sizes,
+            interrupted: None,
         }
+    }
+}
+
+impl Summary {
+    /// The figures of rows in any order (delivered ones are taken in arrival order).
+    pub fn from_rows(rows: &[Row]) -> Summary {
+        let mut by_arrival: Vec<&Row> = rows.iter().collect();
+        by_arrival.sort_by(|a, b| {
+            let key = |r: &Row| r.t_rx_s.unwrap_or(f64::INFINITY);
+            key(a).total_cmp(&key(b))
+        });
+        let mut tally = Tally::new();
+        by_arrival.into_iter().for_each(|row| tally.push(row));
+        tally.summary()
     }
 
     /// The jitter to put in a model: the mean of the per-size standard deviations (the delay's
@@ -436,7 +571,9 @@ mod tests {
         assert_eq!((s.count, s.delivered), (4, 3));
         assert!((s.loss_ratio - 0.25).abs() < 1e-12);
         assert!((s.delay_ms_mean.unwrap() - 325.0).abs() < 1e-9);
-        assert_eq!(s.delay_ms_p50, Some(325.0));
+        // From the sketch: within 0.1 %.
+        assert!((s.delay_ms_p50.unwrap() / 325.0 - 1.0).abs() < 1e-3);
+        assert!(s.interrupted.is_none());
         assert!((s.jitter_ms.unwrap() - 5.0).abs() < 1e-9);
         // Arrivals at 0.320, 1.330, 3.325 s.
         assert!((s.iat_ms_mean.unwrap() - 1502.5).abs() < 1e-6);
@@ -444,6 +581,90 @@ mod tests {
         assert!((s.jitter_rfc3550_ms.unwrap() - (0.625 + 4.375 / 16.0)).abs() < 1e-9);
         assert!((s.throughput_bps.unwrap() - 3.0 * 456.0 / 3.325).abs() < 1e-6);
         assert_eq!(s.fit_bitrate_bps, None);
+    }
+
+    #[test]
+    fn the_tally_keeps_no_row_and_matches_exact_figures() {
+        // Issue 14: modem-bench --sim kept every row for its summary (4.5 MB/s).
+        let mut tally = Tally::new();
+        let mut exact = Running::new();
+        let mut delays = Vec::new();
+        let mut after_thousand = 0;
+        for k in 0..1_000_000u32 {
+            let size = [16usize, 57, 100][k as usize % 3];
+            let delay = 85.0 + size as f64 * 4.2 + f64::from(k % 1000) * 0.37;
+            let lost = k % 7 == 0;
+            let row = row(k, size, f64::from(k) * 0.3, (!lost).then_some(delay));
+            tally.push(&row);
+            if !lost {
+                exact.push(delay);
+                delays.push(delay);
+            }
+            if k == 999 {
+                after_thousand = tally.memory_bytes();
+            }
+        }
+        assert_eq!(
+            tally.memory_bytes(),
+            after_thousand,
+            "memory grew with the rows"
+        );
+        assert!(after_thousand < 300 * 1024, "{after_thousand} bytes");
+        let s = tally.summary();
+        assert_eq!(s.count, 1_000_000);
+        assert_eq!(s.delivered, exact.count());
+        assert!((s.delay_ms_mean.unwrap() - exact.mean()).abs() < 1e-9);
+        assert!((s.jitter_ms.unwrap() - exact.std()).abs() < 1e-9);
+        delays.sort_by(f64::total_cmp);
+        for (q, sketched) in [(0.5, s.delay_ms_p50), (0.99, s.delay_ms_p99)] {
+            let exact = crate::stats::quantile_sorted(&delays, q).unwrap();
+            let sketched = sketched.unwrap();
+            assert!(
+                (sketched - exact).abs() <= exact * 1e-3,
+                "{q}: {sketched} against {exact}"
+            );
+        }
+        // The grouped fit is the least-squares line of every point, computed in two passes.
+        let points: Vec<(f64, f64)> = (0..1_000_000u32)
+            .filter(|k| k % 7 != 0)
+            .map(|k| {
+                let size = [16usize, 57, 100][k as usize % 3];
+                (
+                    size as f64,
+                    85.0 + size as f64 * 4.2 + f64::from(k % 1000) * 0.37,
+                )
+            })
+            .collect();
+        let n = points.len() as f64;
+        let mean_x = points.iter().map(|p| p.0).sum::<f64>() / n;
+        let mean_y = points.iter().map(|p| p.1).sum::<f64>() / n;
+        let sxx: f64 = points.iter().map(|p| (p.0 - mean_x).powi(2)).sum();
+        let sxy: f64 = points.iter().map(|p| (p.0 - mean_x) * (p.1 - mean_y)).sum();
+        let slope = sxy / sxx;
+        let intercept = mean_y - slope * mean_x;
+        let residual: f64 = points
+            .iter()
+            .map(|p| (p.1 - intercept - slope * p.0).powi(2))
+            .sum();
+        let residual_std = (residual / (n - 2.0)).sqrt();
+        assert!((s.fit_intrinsic_delay_ms.unwrap() - intercept).abs() < 1e-6);
+        assert!((s.fit_bitrate_bps.unwrap() - 8000.0 / slope).abs() < 1e-6);
+        assert!((s.fit_jitter_ms.unwrap() - residual_std).abs() < 1e-6);
+    }
+
+    #[test]
+    fn plans_are_checked() {
+        assert_eq!(probe_total(&[16, 57], 10).unwrap(), 20);
+        let message = probe_total(&[10], 5).unwrap_err().to_string();
+        assert!(
+            message.contains("10 bytes is outside 15..=260"),
+            "{message}"
+        );
+        assert!(matches!(probe_total(&[57], 0), Err(PlanError::Empty)));
+        assert!(matches!(
+            probe_total(&[16; 5], 1_000_000_000),
+            Err(PlanError::TooMany(_))
+        ));
     }
 
     #[test]
