@@ -120,7 +120,8 @@ fn bad_arguments_are_refused() {
     let out = run(MODEM_BENCH, &["--sim", "s100", "--size", "10"], b"");
     assert_eq!(out.code, 2);
     assert!(
-        out.stderr.contains("10 bytes is outside 15..=260"),
+        out.stderr
+            .contains("--size: expected 15 ..= 260 bytes, found 10"),
         "{}",
         out.stderr
     );

@@ -437,6 +437,15 @@ impl Model {
         Ok(())
     }
 
+    /// The model's main figures in one line: `1900.0 bit/s, intrinsic delay 85.00 ms, jitter
+    /// 13.20 ms, BER 0.000e0`.
+    pub fn figures(&self) -> String {
+        format!(
+            "{:.1} bit/s, intrinsic delay {:.2} ms, jitter {:.2} ms, BER {:.3e}",
+            self.bitrate_bps, self.intrinsic_delay_ms, self.jitter_ms, self.ber
+        )
+    }
+
     /// The rate frames go on air at, bit/s: the bit rate, or the rate limit when lower.
     pub fn effective_rate_bps(&self) -> f64 {
         match self.rate_limit_bps {
@@ -635,6 +644,7 @@ mod tests {
         model.validate().unwrap();
     }
 
+    #[test]
     fn unknown_preset_lists_the_presets() {
         let message = Model::preset("s200").unwrap_err().to_string();
         assert!(message.contains("s100, s2cr-burst"), "{message}");

@@ -15,10 +15,12 @@
 
 use std::collections::VecDeque;
 use std::io::{self, Read};
+use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::time::Duration;
 
+use crate::io::IoError;
 use crate::wire::{DeframeEvent, DeframeStats, Deframer};
 
 use super::channel::{Link, Report, Side};
@@ -49,6 +51,23 @@ pub enum Ended {
     /// The next offer would have come after [`HORIZON`]: no more frames were taken from the
     /// source, and every frame offered was reported.
     Horizon,
+}
+
+/// A run that reached [`HORIZON`]: bad input for a tool (exit 2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "the input holds more frames than 100 years of virtual time at this pace (the rest was not read)"
+)]
+pub struct PastHorizon;
+
+impl Ended {
+    /// The outcome, or [`PastHorizon`] for [`Ended::Horizon`].
+    pub fn within_horizon(self) -> Result<Ended, PastHorizon> {
+        match self {
+            Ended::Horizon => Err(PastHorizon),
+            other => Ok(other),
+        }
+    }
 }
 
 /// Offers every frame `source` yields from side A of `link`, in virtual time at `pace`, and
@@ -126,18 +145,51 @@ const CHUNK_BYTES: usize = 64 * 1024;
 const STOP_POLL: Duration = Duration::from_millis(50);
 
 /// The wire.md frames of a byte stream, in order; bytes that are not part of a good frame are
-/// skipped and counted ([`FrameReader::stats`]).
+/// skipped and counted ([`FrameReader::stats`], [`FrameReader::skipped_note`]).
 pub struct FrameReader {
+    name: String,
     chunks: Receiver<io::Result<Vec<u8>>>,
     deframer: Deframer,
     frames: VecDeque<Vec<u8>>,
     eof: bool,
 }
 
+/// Input the pipe cannot use.
+#[derive(Debug, thiserror::Error)]
+pub enum InputError {
+    /// The input could not be opened or read.
+    #[error(transparent)]
+    Io(#[from] IoError),
+    /// Bytes, but not one good frame among them.
+    #[error(
+        "{name}: no link frame in {bytes} bytes (expected wire.md frames starting with 0x55 and a valid CRC)"
+    )]
+    NoFrames {
+        /// The input's name.
+        name: String,
+        /// Bytes read.
+        bytes: u64,
+    },
+}
+
 impl FrameReader {
-    /// Reads `input` on a thread of its own (interrupted reads are retried; the thread ends at
-    /// the end of the input or at the first error).
-    pub fn new(mut input: impl Read + Send + 'static) -> FrameReader {
+    /// Opens a file, or standard input for `None` or `-`, and reads it ([`FrameReader::new`]).
+    pub fn open(path: Option<&Path>) -> Result<FrameReader, IoError> {
+        match path.filter(|p| !crate::io::is_std(Some(p))) {
+            Some(path) => {
+                let file = std::fs::File::open(path).map_err(|source| IoError::Open {
+                    path: path.to_path_buf(),
+                    source,
+                })?;
+                Ok(FrameReader::new(path.display().to_string(), file))
+            }
+            None => Ok(FrameReader::new("<stdin>".into(), io::stdin())),
+        }
+    }
+
+    /// Reads `input`, called `name` in messages, on a thread of its own (interrupted reads are
+    /// retried; the thread ends at the end of the input or at the first error).
+    pub fn new(name: String, mut input: impl Read + Send + 'static) -> FrameReader {
         let (sender, chunks) = mpsc::sync_channel(4);
         std::thread::spawn(move || {
             let mut buf = vec![0u8; CHUNK_BYTES];
@@ -154,6 +206,7 @@ impl FrameReader {
             }
         });
         FrameReader {
+            name,
             chunks,
             deframer: Deframer::new(),
             frames: VecDeque::new(),
@@ -162,8 +215,8 @@ impl FrameReader {
     }
 
     /// The next frame; `None` at the end of the input, or as soon as `stop` is set (within
-    /// 50 ms, even while the input is silent). A read error is returned as it is.
-    pub fn next_frame(&mut self, stop: &AtomicBool) -> io::Result<Option<Vec<u8>>> {
+    /// 50 ms, even while the input is silent). A read error names the input.
+    pub fn next_frame(&mut self, stop: &AtomicBool) -> Result<Option<Vec<u8>>, IoError> {
         while self.frames.is_empty() && !self.eof {
             if stop.load(Ordering::Relaxed) {
                 return Ok(None);
@@ -174,7 +227,12 @@ impl FrameReader {
                     self.deframer.finish();
                     self.eof = true;
                 }
-                Ok(Err(error)) => return Err(error),
+                Ok(Err(source)) => {
+                    return Err(IoError::Read {
+                        name: self.name.clone(),
+                        source,
+                    });
+                }
                 Err(RecvTimeoutError::Timeout) => continue,
             }
             while let Some(event) = self.deframer.next_event() {
@@ -189,6 +247,25 @@ impl FrameReader {
     /// What the deframer has seen so far: bytes read, good frames, bytes skipped.
     pub fn stats(&self) -> DeframeStats {
         self.deframer.stats()
+    }
+
+    /// The input's verdict once read: an error when it held bytes but no good frame, a line
+    /// for the summary when some bytes were skipped, nothing when every byte was a frame.
+    pub fn skipped_note(&self) -> Result<Option<String>, InputError> {
+        let stats = self.stats();
+        if stats.bytes_skipped == 0 {
+            return Ok(None);
+        }
+        if stats.frames == 0 {
+            return Err(InputError::NoFrames {
+                name: self.name.clone(),
+                bytes: stats.bytes_in,
+            });
+        }
+        Ok(Some(format!(
+            "{}: skipped {} bytes that were not good frames ({} CRC failures, {} truncated)",
+            self.name, stats.bytes_skipped, stats.crc_failures, stats.truncated
+        )))
     }
 }
 
@@ -207,19 +284,28 @@ mod tests {
         let mut bytes = b"junk".to_vec();
         bytes.extend_from_slice(&frame);
         bytes.extend_from_slice(&frame);
-        let mut reader = FrameReader::new(io::Cursor::new(bytes));
+        let mut reader = FrameReader::new("t.bin".into(), io::Cursor::new(bytes));
         let stop = AtomicBool::new(false);
         assert_eq!(reader.next_frame(&stop).unwrap(), Some(frame.clone()));
         assert_eq!(reader.next_frame(&stop).unwrap(), Some(frame));
         assert_eq!(reader.next_frame(&stop).unwrap(), None);
         let stats = reader.stats();
         assert_eq!((stats.frames, stats.bytes_skipped), (2, 4));
+        let note = reader.skipped_note().unwrap().unwrap();
+        assert!(note.starts_with("t.bin: skipped 4 bytes"), "{note}");
+        let mut junk = FrameReader::new("j.bin".into(), io::Cursor::new(vec![0x55; 27]));
+        assert_eq!(junk.next_frame(&stop).unwrap(), None);
+        let message = junk.skipped_note().unwrap_err().to_string();
+        assert!(
+            message.starts_with("j.bin: no link frame in 27 bytes"),
+            "{message}"
+        );
     }
 
     #[test]
     fn a_silent_input_does_not_hold_up_a_stop() {
         let (_keep_open, silent) = std::os::unix::net::UnixStream::pair().unwrap();
-        let mut reader = FrameReader::new(silent);
+        let mut reader = FrameReader::new("silent".into(), silent);
         let stop = AtomicBool::new(false);
         let start = std::time::Instant::now();
         std::thread::scope(|scope| {

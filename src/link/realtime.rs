@@ -173,6 +173,15 @@ pub fn raise_priority() -> Result<(), String> {
     .map_err(|e| format!("{e:?}"))
 }
 
+/// Whether this process may use real-time scheduling: tried on a throwaway thread
+/// ([`raise_priority`]); the error says why not.
+pub fn priority_allowed() -> Result<(), String> {
+    match thread::spawn(raise_priority).join() {
+        Ok(result) => result,
+        Err(_) => Err("the trial thread failed".into()),
+    }
+}
+
 impl Endpoints {
     /// Opens both sides and starts their reader and writer threads; with `realtime_priority`
     /// every thread of the link asks for real-time scheduling ([`raise_priority`]).

@@ -75,26 +75,6 @@ impl<'a> TraceRow<'a> {
             with_side: mode == Mode::RealTime,
         }
     }
-
-    /// The row as a CSV line, newline included.
-    pub fn to_csv_line(&self) -> String {
-        let r = self.report;
-        let mut line = format!(
-            "{},{},{},{},{},{}",
-            r.seq,
-            r.len,
-            seconds(Some(r.t_offered)),
-            seconds(r.t_tx_start),
-            seconds(r.t_rx),
-            r.fate.as_str()
-        );
-        if self.with_side {
-            line.push(',');
-            line.push_str(r.from.name());
-        }
-        line.push('\n');
-        line
-    }
 }
 
 /// A time as the trace writes it: seconds with nine decimals, empty when absent.
@@ -275,14 +255,21 @@ mod tests {
 
     #[test]
     fn trace_rows_have_nine_decimals_and_empty_absent_times() {
+        let csv_line = |row: TraceRow<'_>| {
+            let mut csv = csv::WriterBuilder::new()
+                .has_headers(false)
+                .from_writer(Vec::new());
+            csv.serialize(row).unwrap();
+            String::from_utf8(csv.into_inner().unwrap()).unwrap()
+        };
         let delivered = report(Fate::Delivered, Some(1_825_000_001), Side::A);
         assert_eq!(
-            TraceRow::new(&delivered, Mode::Pipe).to_csv_line(),
+            csv_line(TraceRow::new(&delivered, Mode::Pipe)),
             "7,57,1.500000000,1.585000000,1.825000001,delivered\n"
         );
         let lost = report(Fate::Range, None, Side::B);
         assert_eq!(
-            TraceRow::new(&lost, Mode::RealTime).to_csv_line(),
+            csv_line(TraceRow::new(&lost, Mode::RealTime)),
             "7,57,1.500000000,1.585000000,,range,B\n"
         );
         let json = serde_json::to_value(TraceRow::new(&lost, Mode::RealTime)).unwrap();

@@ -31,6 +31,17 @@ impl Plan {
     pub fn total(&self) -> u64 {
         self.sizes.len() as u64 * u64::from(self.count_per_size)
     }
+
+    /// What the campaign will do, for people: probes, pace and about how long it takes.
+    pub fn describe(&self) -> String {
+        let interval_s = self.interval.as_secs_f64();
+        let length_s = self.total() as f64 * interval_s + self.timeout.as_secs_f64().min(5.0);
+        format!(
+            "sending {} packets, one every {:.0} ms (about {length_s:.0} s)",
+            self.total(),
+            interval_s * 1e3
+        )
+    }
 }
 
 /// The endpoints of a campaign.
@@ -72,6 +83,18 @@ pub struct Extras {
     pub foreign: u64,
     /// Probes received a second time.
     pub duplicates: u64,
+}
+
+impl Extras {
+    /// A line for the summary when anything unexpected arrived.
+    pub fn note(&self) -> Option<String> {
+        (self.foreign > 0 || self.duplicates > 0).then(|| {
+            format!(
+                "{} packets received that were not this run's probes, {} probes received twice",
+                self.foreign, self.duplicates
+            )
+        })
+    }
 }
 
 /// Runs the campaign; `on_row` gets each row when known, `on_progress` the number of probes

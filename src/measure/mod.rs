@@ -131,7 +131,10 @@ pub fn probe_total(sizes: &[usize], count_per_size: u32) -> Result<u64, PlanErro
 }
 
 /// One packet of a campaign: the row of `packets.csv`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+///
+/// It serialises with the columns of [`ROW_COLUMNS`], times rounded to the microsecond (the
+/// resolution of a probe's send time) and delays to the microsecond too.
+#[derive(Debug, Clone, PartialEq)]
 pub struct Row {
     /// Sequence number, from 0 across the whole campaign.
     pub seq: u32,
@@ -149,24 +152,34 @@ pub struct Row {
     pub corrupted: bool,
 }
 
-/// The CSV header of [`Row`].
-pub const ROW_HEADER: &str = "seq,size_bytes,t_tx_s,t_rx_s,delay_ms,delivered,corrupted";
+/// The columns of [`Row`], in order: the header of `packets.csv`.
+pub const ROW_COLUMNS: [&str; 7] = [
+    "seq",
+    "size_bytes",
+    "t_tx_s",
+    "t_rx_s",
+    "delay_ms",
+    "delivered",
+    "corrupted",
+];
 
-impl Row {
-    /// The row as a CSV line (no newline).
-    pub fn to_csv(&self) -> String {
-        let opt =
-            |v: Option<f64>, digits: usize| v.map_or(String::new(), |v| format!("{v:.digits$}"));
-        format!(
-            "{},{},{:.6},{},{},{},{}",
-            self.seq,
-            self.size_bytes,
-            self.t_tx_s,
-            opt(self.t_rx_s, 6),
-            opt(self.delay_ms, 3),
-            self.delivered,
-            self.corrupted
-        )
+/// `value` rounded to `per_unit`ths.
+fn rounded(value: f64, per_unit: f64) -> f64 {
+    (value * per_unit).round() / per_unit
+}
+
+impl Serialize for Row {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct;
+        let mut row = serializer.serialize_struct("Row", ROW_COLUMNS.len())?;
+        row.serialize_field("seq", &self.seq)?;
+        row.serialize_field("size_bytes", &self.size_bytes)?;
+        row.serialize_field("t_tx_s", &rounded(self.t_tx_s, 1e6))?;
+        row.serialize_field("t_rx_s", &self.t_rx_s.map(|t| rounded(t, 1e6)))?;
+        row.serialize_field("delay_ms", &self.delay_ms.map(|d| rounded(d, 1e3)))?;
+        row.serialize_field("delivered", &self.delivered)?;
+        row.serialize_field("corrupted", &self.corrupted)?;
+        row.end()
     }
 }
 
@@ -450,6 +463,54 @@ impl Summary {
         tally.summary()
     }
 
+    /// The summary for people, one line each: counts and loss, delay figures, inter-arrival
+    /// times and throughput, the fit, each size of a sweep, and why the run ended early.
+    pub fn lines(&self) -> Vec<String> {
+        let ms = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
+        let mut lines = vec![
+            format!(
+                "{} packets, {} delivered ({} corrupted), loss ratio {:.4}",
+                self.count, self.delivered, self.corrupted, self.loss_ratio
+            ),
+            format!(
+                "delay ms: mean {}  p50 {}  p99 {}  jitter (std) {}  RFC 3550 jitter {}",
+                ms(self.delay_ms_mean),
+                ms(self.delay_ms_p50),
+                ms(self.delay_ms_p99),
+                ms(self.jitter_ms),
+                ms(self.jitter_rfc3550_ms)
+            ),
+            format!(
+                "inter-arrival ms: mean {}  std {};  throughput {} bit/s",
+                ms(self.iat_ms_mean),
+                ms(self.iat_ms_std),
+                ms(self.throughput_bps)
+            ),
+        ];
+        if let (Some(rate), Some(intrinsic)) = (self.fit_bitrate_bps, self.fit_intrinsic_delay_ms) {
+            lines.push(format!(
+                "fit of delay on size: bit rate {rate:.1} bit/s, intrinsic delay {intrinsic:.2} ms, jitter around the fit {} ms",
+                ms(self.fit_jitter_ms)
+            ));
+        }
+        if self.sizes.len() > 1 {
+            lines.extend(self.sizes.iter().map(|size| {
+                format!(
+                    "  {:>4} bytes: {} sent, {} delivered, delay {} ms, jitter {} ms",
+                    size.size_bytes,
+                    size.count,
+                    size.delivered,
+                    ms(size.delay_ms_mean),
+                    ms(size.jitter_ms)
+                )
+            }));
+        }
+        if let Some(note) = &self.interrupted {
+            lines.push(format!("{note}: the figures cover the packets until then"));
+        }
+        lines
+    }
+
     /// The jitter to put in a model: the mean of the per-size standard deviations (the delay's
     /// spread around each size's own mean, so the size sweep itself does not count as jitter).
     pub fn jitter_within_sizes_ms(&self) -> Option<f64> {
@@ -650,6 +711,31 @@ mod tests {
         assert!((s.fit_intrinsic_delay_ms.unwrap() - intercept).abs() < 1e-6);
         assert!((s.fit_bitrate_bps.unwrap() - 8000.0 / slope).abs() < 1e-6);
         assert!((s.fit_jitter_ms.unwrap() - residual_std).abs() < 1e-6);
+    }
+
+    #[test]
+    fn rows_serialise_rounded_to_the_microsecond() {
+        let row = Row {
+            seq: 3,
+            size_bytes: 57,
+            t_tx_s: 0.240_000_000_4,
+            t_rx_s: Some(0.565_000_000_4),
+            delay_ms: Some(325.000_000_4),
+            delivered: true,
+            corrupted: false,
+        };
+        let json = serde_json::to_value(&row).unwrap();
+        let keys: Vec<&str> = json.as_object().unwrap().keys().map(|k| &k[..]).collect();
+        assert_eq!(keys, ROW_COLUMNS);
+        assert_eq!(json["t_tx_s"], 0.24);
+        assert_eq!(json["delay_ms"], 325.0);
+        let lost = Row {
+            t_rx_s: None,
+            delay_ms: None,
+            delivered: false,
+            ..row
+        };
+        assert!(serde_json::to_value(&lost).unwrap()["t_rx_s"].is_null());
     }
 
     #[test]

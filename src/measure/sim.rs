@@ -29,20 +29,19 @@ pub struct Plan {
 
 impl Plan {
     /// Checks the plan against the link it will run on: sizes, count, and a length that fits
-    /// in virtual time ([`HORIZON`], estimated from the air time of every probe or the
-    /// interval, whichever is longer); returns the number of probes.
+    /// in virtual time ([`HORIZON`]; estimated from the interval, or back to back from each
+    /// probe's intrinsic delay and air time); returns the number of probes.
     pub fn check(&self, link: &Link) -> Result<u64, PlanError> {
         let total = probe_total(&self.sizes, self.count_per_size)?;
         let model = link.model(Side::A);
-        let interval_s = match self.pace {
-            Pace::BackToBack => 0.0,
-            Pace::IntervalNs(ns) => ns as f64 * 1e-9,
+        let round_s: f64 = match self.pace {
+            Pace::IntervalNs(ns) => ns as f64 * 1e-9 * self.sizes.len() as f64,
+            Pace::BackToBack => self
+                .sizes
+                .iter()
+                .map(|&size| model.air_time_s(size) + model.intrinsic_delay_ms * 1e-3)
+                .sum(),
         };
-        let round_s: f64 = self
-            .sizes
-            .iter()
-            .map(|&size| model.air_time_s(size).max(interval_s))
-            .sum();
         let length_s = round_s * f64::from(self.count_per_size);
         if length_s > HORIZON.as_secs_f64() {
             return Err(PlanError::TooLong {
@@ -63,14 +62,13 @@ pub enum Ended {
         /// Probes sent whose fate was not decided yet.
         unresolved: u64,
     },
-    /// Virtual time reached [`HORIZON`] before every probe was sent (a plan that passed
-    /// [`Plan::check`] does not): the rows cover the probes sent.
-    Horizon,
 }
 
 /// Runs the campaign on `link`; `on_row` gets each row when its fate is decided (a duplicated
 /// delivery is not a row), `on_progress` the number of rows so far, every 1024 rows. The plan is
-/// checked first ([`Plan::check`]). An error from `on_row` stops the run and is returned.
+/// checked first ([`Plan::check`]); a campaign whose jitter still carries it past [`HORIZON`]
+/// ends there with [`PlanError::TooLong`], its rows so far handed over. An error from `on_row`
+/// stops the run and is returned.
 pub fn run<E: From<PlanError>>(
     link: &mut Link,
     plan: &Plan,
@@ -126,7 +124,7 @@ pub fn run<E: From<PlanError>>(
         pipe::Ended::Stopped => Ended::Stopped {
             unresolved: link.in_flight() as u64,
         },
-        pipe::Ended::Horizon => Ended::Horizon,
+        pipe::Ended::Horizon => return Err(PlanError::TooLong { years: 100.0 }.into()),
     })
 }
 

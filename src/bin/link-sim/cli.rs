@@ -1,0 +1,324 @@
+//! link-sim's command line: its flags (doc comments are the help), their ranges, and what they
+//! mean for the library (ports, framing, pace).
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use clap::Parser;
+use rovlink::cli::UsageError;
+use rovlink::cli::model::ModelArgs;
+use rovlink::cli::output::{Dest, Kind, Outputs};
+use rovlink::cli::rows::{RowFormat, RowWriter};
+use rovlink::cli::value::{self, CountParser};
+use rovlink::gll::Dialect;
+use rovlink::link::model::MAX_RANGE_M;
+use rovlink::link::pipe::Pace;
+use rovlink::link::realtime::{Framing, PortSpec};
+use rovlink::link::stats::Mode;
+use rovlink::link::{Distance, Link};
+
+const EXAMPLES: &str = "\
+Examples:
+  link-sim --model s100 < frames.bin > out.bin          frames through an S100 link in virtual time
+  link-sim --model s100 --ber 7e-4 --trace t.csv --stats s.json < frames.bin > out.bin
+  link-sim --print-model s2cr-burst > m.json            a preset as a file to edit
+  link-sim --model-file m.json --interval 500 < frames.bin > out.bin
+  link-sim --model s100 --pty                           two pseudo-terminals (paths on stdout, A then B)
+  link-sim --model s100 --a /dev/ttyUSB0 --b /dev/ttyUSB1 --baud 9600
+  link-sim --model satellite-up --reverse-model satellite-down --udp-a 127.0.0.1:9001 --udp-b 127.0.0.1:9002
+  link-sim --model s100 --pty --raw --idle-ms 20 --distance-file dive.csv
+  link-sim --model s2cr-burst --pty --dialect evologics  programs speak AT*SEND / RECV to it
+
+Modes: with no port option, frames (wire.md) from INPUT or stdin go from side A to side B in
+virtual time and the frames that arrive go to stdout (or -o), in arrival order. With --pty,
+--a/--b or --udp-a/--udp-b, the link runs in real time between the two sides until a side
+closes (exit 1), or SIGINT/SIGTERM/SIGHUP (exit 0).
+
+Trace (--trace): one row per frame, in the order fates are decided:
+  seq,bytes,t_offered_s,t_tx_start_s,t_rx_s,fate      (real time adds a last column: side)
+fate: delivered, corrupted, ber, collision, overflow, range, loss (a duplicated frame has a
+second row with the same seq). t_tx_start_s is when the frame went on air; times are seconds
+from the start. Every model field can be set in the file or as a flag. `-` as --trace or
+--stats writes standard output (only one output may).
+
+Exit codes: 0 ok, 1 a side's port closed or failed, 2 bad usage or input; the pipe stopped by
+SIGINT, SIGTERM or SIGHUP: 130, 143 or 129, with every output holding what was done and the
+summary saying it was interrupted.";
+
+/// Simulate an underwater modem link (or a netem-like link) between two ports, or on a pipe.
+///
+/// The model (a preset or a JSON file, every field overridable by a flag) gives each frame its
+/// air time, intrinsic delay and jitter, propagation, range, bit errors, collisions and losses.
+/// The same seed gives the same bytes and the same trace.
+#[derive(Parser, Debug)]
+#[command(version, after_help = EXAMPLES)]
+pub struct Args {
+    /// Frame byte stream for the virtual-time pipe; `-` or nothing reads standard input.
+    pub input: Option<PathBuf>,
+
+    /// Output of the pipe: the frames that arrive; `-` or nothing writes standard output.
+    #[arg(short, long, value_name = "FILE")]
+    pub output: Option<PathBuf>,
+
+    /// Print the model (the preset NAME, or --model/--model-file with the flags applied) as JSON and exit.
+    #[arg(long, value_name = "NAME", num_args = 0..=1, default_missing_value = "")]
+    pub print_model: Option<String>,
+
+    #[command(flatten)]
+    pub model: ModelArgs,
+
+    /// The model of frames from B to A, when it differs (a preset); the flags apply to it too.
+    #[arg(
+        long,
+        value_name = "NAME",
+        conflicts_with = "reverse_model_file",
+        help_heading = "Link model"
+    )]
+    pub reverse_model: Option<String>,
+
+    /// The model of frames from B to A, as a file.
+    #[arg(long, value_name = "FILE", help_heading = "Link model")]
+    pub reverse_model_file: Option<PathBuf>,
+
+    /// Seed of every random stream.
+    #[arg(long, default_value_t = 1, value_parser = value::count(0, u64::MAX))]
+    pub seed: u64,
+
+    /// Distance between the two sides, m (0 ..= 1e9).
+    #[arg(long, value_name = "M", default_value_t = 1.0, conflicts_with = "distance_file",
+          value_parser = value::real(0.0, MAX_RANGE_M, "m"))]
+    pub distance: f64,
+
+    /// Distance over time: CSV with columns t_s,distance_m (linear between rows).
+    #[arg(long, value_name = "FILE")]
+    pub distance_file: Option<PathBuf>,
+
+    /// Pipe: offer one frame every MS milliseconds instead of back to back (1 µs ..= 1 h).
+    #[arg(long, value_name = "MS", value_parser = value::millis(1e-3, 3_600_000.0))]
+    pub interval: Option<f64>,
+
+    /// Write one CSV row per frame here (`-`: standard output), each row flushed as it goes.
+    #[arg(long, value_name = "FILE")]
+    pub trace: Option<PathBuf>,
+
+    /// Write the counters of both directions as JSON here (`-`: standard output) when the run ends.
+    #[arg(long, value_name = "FILE")]
+    pub stats: Option<PathBuf>,
+
+    /// Real time: create a pseudo-terminal pair and print its two paths (A, then B).
+    #[arg(long, help_heading = "Real time", conflicts_with_all = ["a", "udp_a"])]
+    pub pty: bool,
+
+    /// Real time: side A's serial port (or pseudo-terminal).
+    #[arg(long, value_name = "DEV", requires = "b", help_heading = "Real time")]
+    pub a: Option<String>,
+
+    /// Real time: side B's serial port.
+    #[arg(long, value_name = "DEV", requires = "a", help_heading = "Real time")]
+    pub b: Option<String>,
+
+    /// Baud rate of --a and --b (50 ..= 4000000).
+    #[arg(long, default_value_t = 9600, help_heading = "Real time",
+          value_parser = clap::value_parser!(u32).range(50..=4_000_000))]
+    pub baud: u32,
+
+    /// Real time: side A's UDP address (bound here; each datagram is a frame).
+    #[arg(
+        long,
+        value_name = "ADDR:PORT",
+        requires = "udp_b",
+        conflicts_with = "a",
+        help_heading = "Real time"
+    )]
+    pub udp_a: Option<SocketAddr>,
+
+    /// Real time: side B's UDP address.
+    #[arg(
+        long,
+        value_name = "ADDR:PORT",
+        requires = "udp_a",
+        help_heading = "Real time"
+    )]
+    pub udp_b: Option<SocketAddr>,
+
+    /// Where side A's program listens [default: the source of its last datagram].
+    #[arg(
+        long,
+        value_name = "ADDR:PORT",
+        requires = "udp_a",
+        help_heading = "Real time"
+    )]
+    pub udp_a_peer: Option<SocketAddr>,
+
+    /// Where side B's program listens [default: the source of its last datagram].
+    #[arg(
+        long,
+        value_name = "ADDR:PORT",
+        requires = "udp_b",
+        help_heading = "Real time"
+    )]
+    pub udp_b_peer: Option<SocketAddr>,
+
+    /// Real time: run link-sim's threads under real-time (SCHED_FIFO) scheduling, when allowed
+    /// (root or CAP_SYS_NICE), so other processes cannot delay deliveries. Measure before relying
+    /// on it (scripts/pty-latency.py): on a virtual machine whose processor time is stolen by
+    /// the host it does not help, and the kernel's own pseudo-terminal work can then wait.
+    #[arg(long, help_heading = "Real time")]
+    pub rt_priority: bool,
+
+    /// Real time: what the programs on the ports speak: bare packets, or the EvoLogics AT
+    /// dialect (AT*SEND / AT*SENDIM in, RECV / RECVIM / DELIVEREDIM / FAILEDIM out; side A is
+    /// address 1, side B address 2).
+    #[arg(long, value_enum, default_value_t = Dialect::Transparent, help_heading = "Real time")]
+    pub dialect: Dialect,
+
+    /// Real time: packets are bytes separated by silence (a modem's transparent mode), not
+    /// wire.md frames.
+    #[arg(long, requires = "idle_ms", help_heading = "Real time")]
+    pub raw: bool,
+
+    /// Silence that ends a packet with --raw; with frames, the silence after which an
+    /// incomplete frame is given up (1 ..= 600000) [default with frames: 1000].
+    #[arg(long, value_name = "MS", help_heading = "Real time",
+          value_parser = CountParser { min: 1, max: 600_000, unit: "ms" })]
+    pub idle_ms: Option<u64>,
+}
+
+/// The outputs of a run, claimed before it starts.
+pub struct Claimed {
+    /// The pipe's frames (none in real time).
+    pub output: Option<Dest>,
+    /// The trace, as rows.
+    pub trace: Option<RowWriter>,
+    /// The stats document.
+    pub stats: Option<Dest>,
+}
+
+impl Args {
+    /// The model flags `--print-model` prints (with its preset, when it names one).
+    pub fn printed_model(&self) -> Option<ModelArgs> {
+        let name = self.print_model.as_ref()?;
+        let mut model = self.model.clone();
+        if !name.is_empty() {
+            (model.model, model.model_file) = (Some(name.clone()), None);
+        }
+        Some(model)
+    }
+
+    /// Checks that the flags fit the mode and claims every output (inputs registered first,
+    /// so that none is overwritten): nothing is created yet.
+    pub fn claim(&self, mode: Mode) -> Result<Claimed, UsageError> {
+        let pipe_only = self.interval.is_some() || self.output.is_some() || self.input.is_some();
+        match mode {
+            Mode::Pipe if self.raw => {
+                return Err(UsageError(
+                    "--raw applies to real-time ports, not the pipe".into(),
+                ));
+            }
+            Mode::RealTime if pipe_only => {
+                return Err(UsageError(
+                    "INPUT, --output and --interval apply to the pipe, not to real-time ports"
+                        .into(),
+                ));
+            }
+            _ => {}
+        }
+        let mut outs = Outputs::new();
+        let inputs = [
+            &self.input,
+            &self.model.model_file,
+            &self.reverse_model_file,
+            &self.distance_file,
+        ];
+        outs.inputs(inputs.into_iter().flatten().map(PathBuf::as_path));
+        if self.pty {
+            outs.claim_stdout("--pty", Kind::Text)?;
+        }
+        let trace = outs.claim_opt("--trace", self.trace.as_deref(), Kind::Text)?;
+        let stats = outs.claim_opt("--stats", self.stats.as_deref(), Kind::Text)?;
+        let output = match mode {
+            Mode::Pipe => {
+                let path = self.output.as_deref().unwrap_or(Path::new("-"));
+                Some(outs.claim("-o", path, Kind::Binary)?)
+            }
+            Mode::RealTime => None,
+        };
+        Ok(Claimed {
+            output,
+            trace: trace.map(|dest| RowWriter::new(dest, RowFormat::Csv, mode.trace_columns())),
+            stats,
+        })
+    }
+
+    /// The link the flags describe: both models, the seed, the distance.
+    pub fn link(&self) -> anyhow::Result<Link> {
+        let forward = self.model.resolve()?;
+        let reverse = match self.reverse_model_args() {
+            Some(reverse) => reverse.resolve()?,
+            None => forward.clone(),
+        };
+        let distance = match &self.distance_file {
+            Some(path) => Distance::from_csv_file(path)?,
+            None => Distance::Fixed(self.distance),
+        };
+        Ok(Link::new(forward, reverse, self.seed, distance)?)
+    }
+
+    /// The two sides of a real-time run; none for the pipe.
+    pub fn port_specs(&self) -> Option<[PortSpec; 2]> {
+        if self.pty {
+            return Some([PortSpec::Pty, PortSpec::Pty]);
+        }
+        if let (Some(a), Some(b)) = (&self.a, &self.b) {
+            let serial = |path: &String| PortSpec::Serial {
+                path: path.clone(),
+                baud: self.baud,
+            };
+            return Some([serial(a), serial(b)]);
+        }
+        if let (Some(a), Some(b)) = (self.udp_a, self.udp_b) {
+            return Some([
+                PortSpec::Udp {
+                    bind: a,
+                    peer: self.udp_a_peer,
+                },
+                PortSpec::Udp {
+                    bind: b,
+                    peer: self.udp_b_peer,
+                },
+            ]);
+        }
+        None
+    }
+
+    /// How a real-time run cuts bytes into packets.
+    pub fn framing(&self) -> Framing {
+        if self.raw {
+            Framing::Raw {
+                idle: Duration::from_millis(self.idle_ms.unwrap_or(20)),
+            }
+        } else {
+            Framing::Frames {
+                give_up: Duration::from_millis(self.idle_ms.unwrap_or(1000)),
+            }
+        }
+    }
+
+    /// When the pipe offers frames.
+    pub fn pace(&self) -> Pace {
+        match self.interval {
+            None => Pace::BackToBack,
+            Some(ms) => Pace::IntervalNs((ms * 1e6).round() as u64),
+        }
+    }
+
+    /// The model flags for the reverse direction, when it has its own preset or file.
+    fn reverse_model_args(&self) -> Option<ModelArgs> {
+        (self.reverse_model.is_some() || self.reverse_model_file.is_some()).then(|| ModelArgs {
+            model: self.reverse_model.clone(),
+            model_file: self.reverse_model_file.clone(),
+            ..self.model.clone()
+        })
+    }
+}
