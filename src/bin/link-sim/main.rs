@@ -144,13 +144,14 @@ fn finish(
         duration_s: link.now().as_secs_f64(),
         interrupted: note.as_deref(),
     };
-    let lines = counters.summary_lines(&facts, link);
-    lines.iter().chain(&extra).for_each(|line| say!("{line}"));
+    // The file first, so that a file that cannot be written is the one line said.
     if let Some(dest) = out.stats {
         let mut file = dest.open()?;
         let json = counters.stats_json(&facts, link, info);
         file.write_bytes(format!("{json:#}\n").as_bytes())?;
         file.finish()?;
     }
+    let lines = counters.summary_lines(&facts, link);
+    lines.iter().chain(&extra).for_each(|line| say!("{line}"));
     Ok(())
 }

@@ -50,35 +50,40 @@ fn run(args: &Args) -> Result<u8> {
     rows.finish()?;
     let mut summary = tally.summary();
     summary.interrupted = stop::note();
+    // Files first, so that a file that cannot be written is the one line said.
+    if let Some(dest) = &out.summary {
+        write_file(dest, format!("{:#}\n", serde_json::to_value(&summary)?))?;
+    }
+    let fitted = out.fit.map(|dest| {
+        let name = dest.path().and_then(|p| p.file_stem());
+        let name = name.map_or("fitted".into(), |s| s.to_string_lossy().into_owned());
+        (summary.to_model(&name, assumed_rate), dest)
+    });
+    if let Some((Some(model), dest)) = &fitted {
+        write_file(dest, model.to_json())?;
+    }
     if !args.quiet {
         summary.lines().iter().for_each(|line| say!("{line}"));
     }
-    if let Some(dest) = out.summary {
-        write_json(&dest, &serde_json::to_value(&summary)?)?;
-    }
-    if let Some(dest) = out.fit {
-        let name = dest.path().and_then(|p| p.file_stem());
-        let name = name.map_or("fitted".into(), |s| s.to_string_lossy().into_owned());
-        let Some(model) = summary.to_model(&name, assumed_rate) else {
+    match fitted {
+        Some((Some(model), dest)) if !args.quiet => {
+            say!("model written to {}: {}", dest.name(), model.figures());
+        }
+        Some((None, _)) => {
             let (delivered, count) = (summary.delivered, summary.count);
             bail!(CheckFailed(format!(
                 "--fit: no model from this measurement ({delivered} of {count} packets delivered)"
             )));
-        };
-        let mut file = dest.open()?;
-        file.write_bytes(model.to_json().as_bytes())?;
-        file.finish()?;
-        if !args.quiet {
-            say!("model written to {}: {}", dest.name(), model.figures());
         }
+        _ => {}
     }
     Ok(code)
 }
 
-/// Writes a JSON document as a whole file (or on standard output).
-fn write_json(dest: &Dest, json: &serde_json::Value) -> Result<()> {
+/// Writes a whole file (or standard output).
+fn write_file(dest: &Dest, text: String) -> Result<()> {
     let mut file = dest.open()?;
-    file.write_bytes(format!("{json:#}\n").as_bytes())?;
+    file.write_bytes(text.as_bytes())?;
     Ok(file.finish()?)
 }
 
