@@ -363,6 +363,28 @@ fn link_sim_pipe_stops_at_a_signal_while_its_input_is_silent() {
 }
 
 #[test]
+fn link_sim_pipe_stops_at_a_signal_while_waiting_for_a_named_pipe_writer() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("frames.fifo");
+    nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).unwrap();
+    let args = ["frames.fifo", "-o", "out.bin", "--stats", "s.json"];
+    let out = run_signalled(
+        dir.path(),
+        LINK_SIM,
+        &args,
+        Duration::from_millis(300),
+        Signal::SIGTERM,
+        LIMIT,
+    );
+    assert_contract(&out, &[143], "a named pipe without a writer");
+    assert_eq!(
+        json(&dir.path().join("s.json"))["a_to_b"]["frames_offered"],
+        0
+    );
+    assert!(temp_files(dir.path()).is_empty());
+}
+
+#[test]
 fn link_sim_real_time_keeps_exit_0_on_a_signal() {
     let mut child = Command::new(LINK_SIM)
         .args(["--pty"])

@@ -15,6 +15,7 @@
 
 use std::collections::VecDeque;
 use std::io::{self, Read};
+use std::os::unix::fs::FileTypeExt;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
@@ -148,7 +149,7 @@ const STOP_POLL: Duration = Duration::from_millis(50);
 /// skipped and counted ([`FrameReader::stats`], [`FrameReader::skipped_note`]).
 pub struct FrameReader {
     name: String,
-    chunks: Receiver<io::Result<Vec<u8>>>,
+    chunks: Receiver<Result<Vec<u8>, IoError>>,
     deframer: Deframer,
     frames: VecDeque<Vec<u8>>,
     eof: bool,
@@ -174,29 +175,58 @@ pub enum InputError {
 
 impl FrameReader {
     /// Opens a file, or standard input for `None` or `-`, and reads it ([`FrameReader::new`]).
+    /// A named pipe is opened on the reading thread, so that waiting for its writer does not
+    /// hold up a stop either (a failure to open it then comes with the first frame).
     pub fn open(path: Option<&Path>) -> Result<FrameReader, IoError> {
-        match path.filter(|p| !crate::io::is_std(Some(p))) {
-            Some(path) => {
-                let file = std::fs::File::open(path).map_err(|source| IoError::Open {
-                    path: path.to_path_buf(),
-                    source,
-                })?;
-                Ok(FrameReader::new(path.display().to_string(), file))
-            }
-            None => Ok(FrameReader::new("<stdin>".into(), io::stdin())),
+        let Some(path) = path.filter(|p| !crate::io::is_std(Some(p))) else {
+            return Ok(FrameReader::new("<stdin>".into(), io::stdin()));
+        };
+        let owned = path.to_path_buf();
+        let open = move || {
+            std::fs::File::open(&owned).map_err(|source| IoError::Open {
+                path: owned.clone(),
+                source,
+            })
+        };
+        let name = path.display().to_string();
+        let fifo = std::fs::metadata(path).is_ok_and(|m| m.file_type().is_fifo());
+        if fifo {
+            Ok(FrameReader::spawn(name, open))
+        } else {
+            let file = open()?;
+            Ok(FrameReader::new(name, file))
         }
     }
 
     /// Reads `input`, called `name` in messages, on a thread of its own (interrupted reads are
     /// retried; the thread ends at the end of the input or at the first error).
-    pub fn new(name: String, mut input: impl Read + Send + 'static) -> FrameReader {
+    pub fn new(name: String, input: impl Read + Send + 'static) -> FrameReader {
+        FrameReader::spawn(name, move || Ok(input))
+    }
+
+    /// Opens the input with `open` on the reading thread, then reads it as [`FrameReader::new`].
+    fn spawn<R: Read>(
+        name: String,
+        open: impl FnOnce() -> Result<R, IoError> + Send + 'static,
+    ) -> FrameReader {
         let (sender, chunks) = mpsc::sync_channel(4);
+        let thread_name = name.clone();
         std::thread::spawn(move || {
+            let mut input = match open() {
+                Ok(input) => input,
+                Err(error) => {
+                    let _ = sender.send(Err(error));
+                    return;
+                }
+            };
             let mut buf = vec![0u8; CHUNK_BYTES];
             loop {
                 let chunk = match input.read(&mut buf) {
                     Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
-                    Err(e) => Err(e),
+                    Err(source) => Err(IoError::Read {
+                        name: thread_name.clone(),
+                        source,
+                    }),
                     Ok(n) => Ok(buf[..n].to_vec()),
                 };
                 let last = !matches!(&chunk, Ok(bytes) if !bytes.is_empty());
@@ -215,7 +245,7 @@ impl FrameReader {
     }
 
     /// The next frame; `None` at the end of the input, or as soon as `stop` is set (within
-    /// 50 ms, even while the input is silent). A read error names the input.
+    /// 50 ms, even while the input is silent). A read (or open) error names the input.
     pub fn next_frame(&mut self, stop: &AtomicBool) -> Result<Option<Vec<u8>>, IoError> {
         while self.frames.is_empty() && !self.eof {
             if stop.load(Ordering::Relaxed) {
@@ -227,12 +257,7 @@ impl FrameReader {
                     self.deframer.finish();
                     self.eof = true;
                 }
-                Ok(Err(source)) => {
-                    return Err(IoError::Read {
-                        name: self.name.clone(),
-                        source,
-                    });
-                }
+                Ok(Err(error)) => return Err(error),
                 Err(RecvTimeoutError::Timeout) => continue,
             }
             while let Some(event) = self.deframer.next_event() {
