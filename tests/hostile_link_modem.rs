@@ -43,6 +43,37 @@ fn error_line(run: &Run, tool: &str) -> String {
     lines[0].to_string()
 }
 
+/// Runs `bin` with each of `flags` at every hostile value (`--flag=value`: whether `-inf` after
+/// a flag is a value is clap's matter, not a range's), plus the arguments `base` gives for the
+/// flag: exit 0 or 2, never a hang, and an exit-2 message naming the flag (or the model field it
+/// sets, as in `range_max_m` below `range_min_m`), with nothing on standard output.
+fn hostile_values(bin: &str, flags: &[&str], input: &[u8], base: impl Fn(&str) -> Vec<&str>) {
+    let tool = Path::new(bin)
+        .file_name()
+        .unwrap()
+        .to_string_lossy()
+        .into_owned();
+    for flag in flags {
+        for value in BAD_NUMBERS {
+            let what = format!("{tool} {flag} {value}");
+            let pair = format!("{flag}={value}");
+            let mut args = base(flag);
+            args.push(&pair);
+            let out = run(bin, &args, input, LIMIT);
+            assert_contract(&out, &[0, 2], &what);
+            if out.code == Some(2) {
+                let line = error_line(&out, &tool);
+                let field = flag[2..].replace('-', "_");
+                assert!(
+                    line.contains(flag) || line.contains(&field),
+                    "{what}: {line}"
+                );
+                assert!(out.stdout.is_empty(), "{what}: output on exit 2");
+            }
+        }
+    }
+}
+
 fn json(path: &Path) -> serde_json::Value {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}: {text}", path.display()))
@@ -182,29 +213,11 @@ fn link_sim_numeric_flags_at_hostile_values() {
         "--rate-limit-bps",
         "--gilbert-elliott",
     ];
-    for flag in flags {
-        for value in BAD_NUMBERS {
-            let what = format!("link-sim {flag} {value}");
-            // --baud and --idle-ms belong to real time: with --pty they would start a run.
-            // `--flag=value`: `--flag -inf` is a clap matter (is `-inf` a flag?), not a range.
-            let pair = format!("{flag}={value}");
-            let mut args = vec![pair.as_str()];
-            if flag == "--idle-ms" {
-                args.push("--raw");
-            }
-            let out = run(LINK_SIM, &args, &input, LIMIT);
-            assert_contract(&out, &[0, 2], &what);
-            if out.code == Some(2) {
-                // The flag, or the model's field it sets (`range_max_m` below `range_min_m`).
-                let line = error_line(&out, "link-sim");
-                let field = flag[2..].replace('-', "_");
-                assert!(
-                    line.contains(flag) || line.contains(&field),
-                    "{what}: {line}"
-                );
-            }
-        }
-    }
+    // --baud and --idle-ms belong to real time: alone they leave the pipe running.
+    hostile_values(LINK_SIM, &flags, &input, |flag| match flag {
+        "--idle-ms" => vec!["--raw"],
+        _ => vec![],
+    });
     // The cases: each refused before anything runs, with the range and its unit.
     for (flag, value, expected) in [
         (
@@ -427,26 +440,10 @@ fn modem_bench_numeric_flags_at_hostile_values() {
         "--fifo-bytes",
         "--loss-percent",
     ];
-    for flag in flags {
-        for value in BAD_NUMBERS {
-            let what = format!("modem-bench {flag} {value}");
-            let pair = format!("{flag}={value}");
-            let mut args = vec!["--sim", "s100", pair.as_str(), "-q"];
-            if flag != "--count" {
-                args.extend(["--count", "5"]);
-            }
-            let out = run(MODEM_BENCH, &args, b"", LIMIT);
-            assert_contract(&out, &[0, 2], &what);
-            if out.code == Some(2) {
-                assert!(
-                    error_line(&out, "modem-bench").contains(flag),
-                    "{what}: {}",
-                    out.stderr
-                );
-                assert!(out.stdout.is_empty(), "{what}: rows on exit 2");
-            }
-        }
-    }
+    hostile_values(MODEM_BENCH, &flags, b"", |flag| match flag {
+        "--count" => vec!["--sim", "s100", "-q"],
+        _ => vec!["--sim", "s100", "-q", "--count", "5"],
+    });
     // Counts up to 10^9 are accepted; campaigns longer than virtual time holds are refused.
     for args in [
         &[
