@@ -13,7 +13,7 @@ use super::model::MAX_RANGE_M;
 /// Distance between the two sides over time.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Distance {
-    /// Always the same, m (a driver may change it with [`Link::set_distance`]).
+    /// Always the same, m (a driver may change it with [`super::Link::set_distance`]).
     Fixed(f64),
     /// `(t_s, distance_m)` points sorted by time, linearly interpolated, held at both ends.
     Track(Vec<(f64, f64)>),
