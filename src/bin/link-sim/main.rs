@@ -35,11 +35,7 @@ fn run(args: &Args) -> Result<u8> {
         return Ok(out.finish().map(|()| EXIT_OK)?);
     }
     let specs = args.port_specs();
-    let mode = if specs.is_some() {
-        Mode::RealTime
-    } else {
-        Mode::Pipe
-    };
+    let mode = specs.as_ref().map_or(Mode::Pipe, |_| Mode::RealTime);
     let claimed = args.claim(mode)?;
     let link = args.link()?;
     stop::install()?;
@@ -70,8 +66,11 @@ fn run_pipe(args: &Args, mut link: Link, mut out: Claimed) -> Result<u8> {
         },
     )?
     .within_horizon()?;
-    if let Some(note) = frames.skipped_note()? {
-        say!("{note}");
+    // An input cut short by a signal is no verdict on its bytes.
+    match frames.skipped_note() {
+        Ok(Some(note)) => say!("{note}"),
+        Err(error) if !stop::requested() => return Err(error.into()),
+        _ => {}
     }
     output.finish()?;
     let extra = format!("{:.3} s of wall time", wall.elapsed().as_secs_f64());
