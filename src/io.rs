@@ -122,6 +122,23 @@ pub fn warn(tool: &str, message: &str) {
     let _ = writeln!(io::stderr(), "{tool}: {message}");
 }
 
+/// Reads a whole file of at most `max_bytes`: a bigger one (or an endless one such as
+/// `/dev/zero`) is an error of kind `InvalidData` saying so, after reading `max_bytes + 1`
+/// bytes at most, so no file can make a tool run out of memory.
+pub fn read_at_most(path: &Path, max_bytes: u64) -> io::Result<Vec<u8>> {
+    let mut data = Vec::new();
+    File::open(path)?
+        .take(max_bytes.saturating_add(1))
+        .read_to_end(&mut data)?;
+    if data.len() as u64 > max_bytes {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidData,
+            format!("more than {max_bytes} bytes: not a file this tool reads"),
+        ));
+    }
+    Ok(data)
+}
+
 /// What is wrong with a table of numbers ([`read_number_table`]).
 #[derive(Debug, thiserror::Error)]
 #[error("line {line}: field `{field}`: {problem}")]

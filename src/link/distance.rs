@@ -10,6 +10,9 @@ use std::path::{Path, PathBuf};
 
 use super::model::MAX_RANGE_M;
 
+/// Largest distance-track file read, bytes (a week of 0.1 s rows is about 100 MB).
+pub const MAX_TRACK_FILE_BYTES: u64 = 256 << 20;
+
 /// Distance between the two sides over time.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Distance {
@@ -85,11 +88,13 @@ impl Distance {
         Ok(Distance::Track(points))
     }
 
-    /// Reads a track file; errors name the file.
+    /// Reads a track file (at most [`MAX_TRACK_FILE_BYTES`]); errors name the file.
     pub fn from_csv_file(path: &Path) -> Result<Distance, DistanceError> {
-        let text = std::fs::read(path).map_err(|e| DistanceError::Read {
-            path: path.to_path_buf(),
-            reason: e.to_string(),
+        let text = crate::io::read_at_most(path, MAX_TRACK_FILE_BYTES).map_err(|e| {
+            DistanceError::Read {
+                path: path.to_path_buf(),
+                reason: e.to_string(),
+            }
         })?;
         Distance::from_csv(&text).map_err(|e| match e {
             DistanceError::Line {

@@ -45,6 +45,8 @@ pub const PRESETS: [&str; 5] = [
     "satellite-down",
 ];
 
+/// Largest model file read, bytes (a model is a few hundred).
+pub const MAX_MODEL_FILE_BYTES: u64 = 1 << 20;
 /// The lowest bit rate a model may have, bit/s (`bitrate_bps`, `rate_limit_bps`): the slowest
 /// acoustic modems run at tens of bit/s.
 pub const MIN_BITRATE_BPS: f64 = 1.0;
@@ -335,9 +337,11 @@ impl Model {
 
     /// Reads a model file; errors name the file.
     pub fn from_file(path: &Path) -> Result<Model, ModelError> {
-        let text = std::fs::read(path).map_err(|source| ModelError::Read {
-            path: path.to_path_buf(),
-            source,
+        let text = crate::io::read_at_most(path, MAX_MODEL_FILE_BYTES).map_err(|source| {
+            ModelError::Read {
+                path: path.to_path_buf(),
+                source,
+            }
         })?;
         let text = String::from_utf8_lossy(&text);
         Model::from_json(&text).map_err(|err| ModelError::File {

@@ -21,18 +21,17 @@ use crate::debt;
 use crate::wire::operator::{Order, Roi};
 use crate::wire::{Message, MessageRepr};
 
-/// A file's bytes, read through a limit (a device such as /dev/zero has no size to check
-/// first): `None` when it holds more than `max_bytes`.
+/// A file's bytes through [`crate::io::read_at_most`]: `None` when it holds more than
+/// `max_bytes`.
 pub(crate) fn read_at_most(
     path: &std::path::Path,
     max_bytes: u64,
 ) -> std::io::Result<Option<Vec<u8>>> {
-    use std::io::Read;
-    let mut data = Vec::new();
-    std::fs::File::open(path)?
-        .take(max_bytes + 1)
-        .read_to_end(&mut data)?;
-    Ok((data.len() as u64 <= max_bytes).then_some(data))
+    match crate::io::read_at_most(path, max_bytes) {
+        Ok(data) => Ok(Some(data)),
+        Err(e) if e.kind() == std::io::ErrorKind::InvalidData => Ok(None),
+        Err(e) => Err(e),
+    }
 }
 
 /// Something an engine did that a report or a test wants to know.
