@@ -27,8 +27,13 @@
 //! what OctoMap would build. A `.bt` (no colour) is written from a colour-blind copy, exactly as
 //! for an `OcTree`.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use super::cellset::CellSet;
 use super::{Pose, Scan};
+
+/// How many points a scan's rays are cast between two looks at the stop flag.
+const STOP_CHECK_POINTS: usize = 2048;
 
 /// Tree depth: 16 levels below the root.
 pub const TREE_DEPTH: u32 = 16;
@@ -280,6 +285,34 @@ fn norm_f32(v: [f32; 3]) -> f64 {
     ((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) as f64).sqrt()
 }
 
+/// The unit direction and the length of the ray from `origin` to `end` (two different points),
+/// as OctoMap computes them: in `f32`, the squared length summed in `f32`.
+///
+/// That arithmetic breaks down at the extremes: a squared length below `f32`'s smallest
+/// subnormal (points within ~1e-23 m of the origin) underflows to 0, one above ~3e38
+/// overflows to infinity, and the direction comes out infinite or NaN (OctoMap's own ray walk
+/// then never ends). There, and only there, both are computed in `f64` from the differences
+/// scaled by their largest component, which neither underflows nor overflows.
+fn ray_direction(origin: [f32; 3], end: [f32; 3]) -> ([f64; 3], f64) {
+    let mut dir = [end[0] - origin[0], end[1] - origin[1], end[2] - origin[2]];
+    let length = norm_f32(dir) as f32;
+    for d in &mut dir {
+        *d /= length;
+    }
+    if length > 0.0 && length.is_finite() && dir.iter().all(|d| d.is_finite()) {
+        return (dir.map(f64::from), length as f64);
+    }
+    let diff = [0, 1, 2].map(|i| end[i] as f64 - origin[i] as f64);
+    let largest = diff.iter().fold(0.0f64, |m, d| m.max(d.abs()));
+    if !(largest > 0.0 && largest.is_finite()) {
+        // The same point twice (or a non-finite one): no direction, no length.
+        return ([0.0; 3], 0.0);
+    }
+    let scaled = diff.map(|d| d / largest);
+    let norm = (scaled[0] * scaled[0] + scaled[1] * scaled[1] + scaled[2] * scaled[2]).sqrt();
+    (scaled.map(|d| d / norm), norm * largest)
+}
+
 impl OcTree {
     /// An empty tree of voxel edge `resolution_m` metres with OctoMap's default sensor model.
     pub fn new(resolution_m: f64) -> Self {
@@ -380,11 +413,7 @@ impl OcTree {
             return true;
         }
         out.insert(ko);
-        let mut dir = [end[0] - origin[0], end[1] - origin[1], end[2] - origin[2]];
-        let length = norm_f32(dir) as f32;
-        for d in &mut dir {
-            *d /= length;
-        }
+        let (dir, length) = ray_direction(origin, end);
         let mut step = [0i32; 3];
         let mut t_max = [f64::MAX; 3];
         let mut t_delta = [f64::MAX; 3];
@@ -398,11 +427,15 @@ impl OcTree {
             if step[i] != 0 {
                 let mut border = self.key_to_coord(cur[i]);
                 border += (step[i] as f64 * self.resolution_m * 0.5) as f32 as f64;
-                t_max[i] = (border - origin[i] as f64) / dir[i] as f64;
-                t_delta[i] = self.resolution_m / (dir[i] as f64).abs();
+                t_max[i] = (border - origin[i] as f64) / dir[i];
+                t_delta[i] = self.resolution_m / dir[i].abs();
             }
         }
-        let length = length as f64;
+        // A ray crosses one cell border per step, so it reaches the end's cell in as many
+        // steps as the keys differ along the three axes; a few more allow for rounding. The
+        // bound makes the walk end for any input, whatever the arithmetic above gave.
+        let key_steps: u32 = (0..3).map(|i| ko[i].abs_diff(ke[i]) as u32).sum();
+        let mut steps_left = key_steps + 3;
         // One variable per axis (not arrays indexed by the moving axis): the loop then keeps
         // everything in registers.
         let [mut tx, mut ty, mut tz] = t_max;
@@ -435,6 +468,10 @@ impl OcTree {
             if dist > length {
                 return true;
             }
+            steps_left -= 1;
+            if steps_left == 0 {
+                return true;
+            }
             out.insert([kx, ky, kz]);
         }
     }
@@ -455,9 +492,13 @@ impl OcTree {
         max_range_m: Option<f64>,
         free: &mut CellSet,
         occ: &mut Vec<(u64, ColorSlot)>,
-    ) -> (usize, usize) {
+        stop: Option<&AtomicBool>,
+    ) -> Option<(usize, usize)> {
         let (mut skipped, mut beyond) = (0, 0);
         for (j, &p) in pts.iter().enumerate() {
+            if j % STOP_CHECK_POINTS == 0 && stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
+                return None;
+            }
             let i = first + j;
             if !(p[0].is_finite() && p[1].is_finite() && p[2].is_finite()) {
                 // OctoMap casts no ray for it either (its key is out of range).
@@ -496,12 +537,26 @@ impl OcTree {
                 self.ray_keys(origin, end, free);
             }
         }
-        (skipped, beyond)
+        Some((skipped, beyond))
     }
 
     /// Inserts one scan as `graph2tree` does (`insertPointCloud` with the scan's pose, no lazy
     /// evaluation, no discretisation), with an optional maximum range, and returns what changed.
     pub fn insert_scan(&mut self, scan: &Scan, max_range_m: Option<f64>) -> ScanUpdate {
+        let never = AtomicBool::new(false);
+        self.insert_scan_until(scan, max_range_m, &never)
+            .unwrap_or_default()
+    }
+
+    /// [`insert_scan`](Self::insert_scan), abandoned (`None`, the tree unchanged) when `stop`
+    /// is set before its rays are cast: checked every few thousand points, so a large scan
+    /// stops within milliseconds.
+    pub fn insert_scan_until(
+        &mut self,
+        scan: &Scan,
+        max_range_m: Option<f64>,
+        stop: &AtomicBool,
+    ) -> Option<ScanUpdate> {
         let (pts, origin) = world_points(scan);
         let mut report = ScanUpdate {
             points: pts.len(),
@@ -518,7 +573,21 @@ impl OcTree {
         let threads = self.threads.min(pts.len() / 4096).clamp(1, 64);
         if threads <= 1 {
             let mut set = std::mem::take(&mut self.scratch);
-            let (s, b) = self.cast(&pts, 0, origin, colors, max_range_m, &mut set, &mut occ);
+            let cast = self.cast(
+                &pts,
+                0,
+                origin,
+                colors,
+                max_range_m,
+                &mut set,
+                &mut occ,
+                Some(stop),
+            );
+            let Some((s, b)) = cast else {
+                set.clear();
+                self.scratch = set;
+                return None;
+            };
             set.drain_sorted(&mut free);
             self.scratch = set;
             report.points_skipped = s;
@@ -526,7 +595,7 @@ impl OcTree {
         } else {
             let chunk = pts.len().div_ceil(threads);
             let this = &*self;
-            let parts: Vec<CastPart> = std::thread::scope(|sc| {
+            let parts: Vec<Option<CastPart>> = std::thread::scope(|sc| {
                 let handles: Vec<_> = pts
                     .chunks(chunk)
                     .enumerate()
@@ -542,18 +611,20 @@ impl OcTree {
                                 max_range_m,
                                 &mut set,
                                 &mut o,
-                            );
+                                Some(stop),
+                            )?;
                             let mut f = Vec::new();
                             set.drain_sorted(&mut f);
-                            (f, o, s, b)
+                            Some((f, o, s, b))
                         })
                     })
                     .collect();
                 handles
                     .into_iter()
-                    .map(|h| h.join().unwrap_or_default())
+                    .map(|h| h.join().unwrap_or_else(|_| Some(CastPart::default())))
                     .collect()
             });
+            let parts: Vec<CastPart> = parts.into_iter().collect::<Option<_>>()?;
             let mut lists = Vec::with_capacity(parts.len());
             for (f, o, s, b) in parts {
                 lists.push(f);
@@ -598,7 +669,7 @@ impl OcTree {
             let created = self.ensure_root();
             self.apply(0, 0, 0, &ups, created, &mut report.changes);
         }
-        report
+        Some(report)
     }
 
     /// Creates the root (log-odds 0, no colour) if the tree is empty; true if it did.
@@ -1452,6 +1523,82 @@ mod tests {
             for (k, v) in &naive.cells {
                 proptest::prop_assert_eq!(got.get(k).map(|x| x.to_bits()), Some(v.to_bits()), "voxel {:?}", k);
             }
+        }
+    }
+
+    /// Runs `f` on a thread and fails the test if it has not finished within `limit`.
+    fn within<T: Send + 'static>(
+        limit: std::time::Duration,
+        f: impl FnOnce() -> T + Send + 'static,
+    ) -> T {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let _ = tx.send(f());
+        });
+        rx.recv_timeout(limit)
+            .expect("the insertion did not finish in time (a ray walk that never ends)")
+    }
+
+    fn scan_at(origin: [f32; 3], points: Vec<[f32; 3]>) -> Scan {
+        // The points are given in the map frame: into the sensor frame of a pose at `origin`.
+        Scan {
+            points: points
+                .into_iter()
+                .map(|p| [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]])
+                .collect(),
+            colors: None,
+            pose: Pose {
+                translation_m: origin,
+                rotation: [1.0, 0.0, 0.0, 0.0],
+            },
+        }
+    }
+
+    #[test]
+    fn ray_whose_squared_length_underflows_ends() {
+        // Issue 14: (-1e-30, -1e-30, -1e-30) from the origin: the f32 squared length is 0, the
+        // direction -inf, and OctoMap's walk stepped along z forever.
+        let up = within(std::time::Duration::from_secs(10), || {
+            let mut t = OcTree::new(0.1);
+            let up = t.insert_scan(&scan_at([0.0; 3], vec![[-1e-30; 3]]), None);
+            (up.points, up.occupied_voxels, up.free_voxels, t.num_nodes())
+        });
+        // The end cell (key 32767 on each axis) is occupied, the origin's cell free.
+        assert_eq!((up.0, up.1, up.2), (1, 1, 1));
+        assert!(up.3 > 0);
+    }
+
+    #[test]
+    fn degenerate_rays_end_and_stay_near_their_cells() {
+        let limit = std::time::Duration::from_secs(10);
+        let cases: Vec<([f32; 3], [f32; 3], f64)> = vec![
+            ([0.0; 3], [1e-30, 0.0, 0.0], 0.1),
+            ([0.0; 3], [-1e-45, 1e-45, -1e-45], 0.1),
+            ([0.0; 3], [f32::MIN_POSITIVE, 0.0, -f32::MIN_POSITIVE], 1e-3),
+            ([1e-38, -1e-38, 0.0], [-1e-38, 1e-38, 1e-38], 0.05),
+            // Squares that overflow f32: coordinates near the key range of a huge resolution.
+            ([-3e37, -3e37, -3e37], [3e37, 3e37, 3e37], 1e33),
+            ([0.0; 3], [2e19, -2e19, 2e19], 1e15),
+        ];
+        for (origin, end, res) in cases {
+            let (ko, ke, cells) = within(limit, move || {
+                let t = OcTree::new(res);
+                let mut set = CellSet::new();
+                t.ray_keys(origin, end, &mut set);
+                let mut cells = Vec::new();
+                set.drain_sorted(&mut cells);
+                (t.key_of(origin), t.key_of(end), cells)
+            });
+            let (Some(ko), Some(ke)) = (ko, ke) else {
+                continue;
+            };
+            // At most one cell per key step, plus the origin's.
+            let steps: usize = (0..3).map(|i| ko[i].abs_diff(ke[i]) as usize).sum();
+            assert!(
+                cells.len() <= steps + 4,
+                "{origin:?} -> {end:?}: {} cells",
+                cells.len()
+            );
         }
     }
 }
