@@ -12,6 +12,8 @@
 //! - [`cloud`]: point-cloud readers (PCD, PLY, XYZ, MCAP with ROS 2 `PointCloud2`).
 //! - [`graph`]: OctoMap's `.graph` scan-graph files, read and written.
 //! - [`synth`]: a synthetic seabed survey, scans to test and benchmark with.
+//! - [`pipeline`]: octo-delta's build loop and its other commands as library calls, with the
+//!   configuration checks (ranges with units) and a stop flag.
 //!
 //! Parsers of untrusted bytes in this module never panic, on any input: they return a
 //! [`ParseError`] that carries the byte offset (or line) where the input stopped making sense.
@@ -21,6 +23,7 @@ pub mod cloud;
 pub mod delta;
 pub mod files;
 pub mod graph;
+pub mod pipeline;
 pub mod synth;
 pub mod transfer;
 pub mod tree;

@@ -123,7 +123,75 @@ impl Default for SurveyParams {
     }
 }
 
+/// Most scans in a synthetic survey (it is built in memory: 10 000 default scans are about
+/// 1.8 GB of points).
+pub const MAX_SCANS: usize = 10_000;
+/// Most rays across or down the image.
+pub const MAX_RAYS: usize = 4096;
+/// Most points in a whole survey (scans x rays), 2^27: about 2 GB in memory.
+pub const MAX_POINTS: u64 = 1 << 27;
+/// Most rocks on the seabed.
+pub const MAX_ROCKS: usize = 100_000;
+
 impl SurveyParams {
+    /// Checks every number against a range no survey needs to leave (finite, the sign, a
+    /// maximum); the error names the option (`--scans` for [`scans`](Self::scans)) and the
+    /// range with its unit. [`survey`] itself clamps instead, so it never fails.
+    pub fn validate(&self) -> Result<(), super::pipeline::ConfigError> {
+        use super::pipeline::{ConfigError, check_range};
+        let count = |option, v: usize, lo: usize, hi: usize, unit: &str| {
+            if (lo..=hi).contains(&v) {
+                Ok(())
+            } else {
+                Err(ConfigError {
+                    option,
+                    expected: format!("{lo} ..= {hi} {unit}"),
+                    found: v.to_string(),
+                })
+            }
+        };
+        count("--scans", self.scans, 1, MAX_SCANS, "scans")?;
+        count("rays_x", self.rays_x, 1, MAX_RAYS, "rays")?;
+        count("rays_y", self.rays_y, 1, MAX_RAYS, "rays")?;
+        count("rocks", self.rocks, 0, MAX_ROCKS, "rocks")?;
+        let points = self.scans as u64 * self.rays_x as u64 * self.rays_y as u64;
+        if points > MAX_POINTS {
+            return Err(ConfigError {
+                option: "--scans",
+                expected: format!(
+                    "at most {MAX_POINTS} points in the survey ({} scans of {} x {} rays)",
+                    MAX_POINTS / (self.rays_x as u64 * self.rays_y as u64),
+                    self.rays_x,
+                    self.rays_y
+                ),
+                found: format!("{} scans, {points} points", self.scans),
+            });
+        }
+        check_range("fov_x_deg", self.fov_x_deg, 1.0, 170.0, "deg")?;
+        check_range("fov_y_deg", self.fov_y_deg, 1.0, 170.0, "deg")?;
+        check_range("tilt_deg", self.tilt_deg, 0.0, 90.0, "deg")?;
+        check_range("area_m", self.area_m, 0.0, 1e4, "m")?;
+        check_range("altitude_m", self.altitude_m, 0.05, 1e4, "m")?;
+        check_range(
+            "revisit_altitude_m",
+            self.revisit_altitude_m,
+            0.05,
+            1e4,
+            "m",
+        )?;
+        check_range("max_range_m", self.max_range_m, 0.01, 1e4, "m")?;
+        check_range("revisit_fraction", self.revisit_fraction, 0.0, 1.0, "")?;
+        check_range("range_noise_m", self.range_noise_m, 0.0, 1e3, "m")?;
+        check_range(
+            "attitude_jitter_deg",
+            self.attitude_jitter_deg,
+            0.0,
+            90.0,
+            "deg",
+        )?;
+        Ok(())
+    }
+
     /// How many of the scans (the first ones) explore; the others revisit.
     pub fn explore_scans(&self) -> usize {
         let revisit = clamp_or(self.revisit_fraction, 0.0, 1.0, 0.0);
@@ -1065,6 +1133,57 @@ fn cameras(cfg: &Config, scene: &Scene) -> Vec<Camera> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn numbers_beyond_any_survey_are_refused_before_allocating() {
+        // Issue 14: --scans 4294967296 aborted allocating 72 GB.
+        let p = SurveyParams {
+            scans: 4_294_967_296,
+            ..SurveyParams::default()
+        };
+        assert_eq!(
+            p.validate().unwrap_err().to_string(),
+            "--scans: expected 1 ..= 10000 scans, found 4294967296"
+        );
+        for bad in [
+            SurveyParams {
+                scans: 0,
+                ..SurveyParams::default()
+            },
+            SurveyParams {
+                rays_x: 0,
+                ..SurveyParams::default()
+            },
+            SurveyParams {
+                rays_x: 4096,
+                rays_y: 4096,
+                ..SurveyParams::default()
+            },
+            SurveyParams {
+                area_m: f64::NAN,
+                ..SurveyParams::default()
+            },
+            SurveyParams {
+                max_range_m: f64::INFINITY,
+                ..SurveyParams::default()
+            },
+            SurveyParams {
+                revisit_fraction: -0.5,
+                ..SurveyParams::default()
+            },
+        ] {
+            assert!(bad.validate().is_err(), "{bad:?}");
+        }
+        assert_eq!(SurveyParams::default().validate(), Ok(()));
+        assert_eq!(
+            SurveyParams {
+                scans: MAX_SCANS,
+                ..SurveyParams::default()
+            }
+            .validate(),
+            Ok(())
+        );
+    }
+
     use super::*;
     use std::collections::HashSet;
 
