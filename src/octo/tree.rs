@@ -380,7 +380,8 @@ impl OcTree {
         if !(scaled.is_finite()) {
             return None;
         }
-        let k = scaled as i64 + KEY_CENTER;
+        // `as` saturates beyond i64; the addition must too (a coordinate of 1e38 at 0.1 mm).
+        let k = (scaled as i64).saturating_add(KEY_CENTER);
         if (0..2 * KEY_CENTER).contains(&k) {
             Some(k as u16)
         } else {
