@@ -476,7 +476,7 @@ impl Built {
             r.stream_bytes
         );
         if r.interrupted {
-            s.push_str(&format!("; {interrupted}: stopped after scan {}", r.scans));
+            s.push_str(&format!("; {interrupted} after {} scans", r.scans));
         }
         s
     }
@@ -1020,7 +1020,7 @@ mod tests {
         assert!(
             built
                 .summary("interrupted by SIGTERM")
-                .ends_with("interrupted by SIGTERM: stopped after scan 1")
+                .ends_with("; interrupted by SIGTERM after 1 scans")
         );
     }
 

@@ -1,0 +1,154 @@
+//! octo-delta: an OctoMap-compatible occupancy map built from point clouds, whose changes stream
+//! over a narrow link (fine and coloured inside a region of interest, coarse outside). The work
+//! is `rovlink::octo::pipeline`'s; this binary parses, claims its outputs and reports.
+#![forbid(unsafe_code)]
+
+mod cli;
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::Result;
+use cli::{ApplyArgs, BuildArgs, Cli, Command, DumpArgs, FullArgs, SynthArgs};
+use rovlink::cli::output::{Dest, Kind, Outputs};
+use rovlink::cli::rows::{RowFormat, RowWriter};
+use rovlink::cli::{UsageError, progress, stop};
+use rovlink::io::{EXIT_OK, Input};
+use rovlink::octo::pipeline::{self, Hooks, SinkError, StatsRow};
+use rovlink::octo::{files, transfer};
+use rovlink::say;
+
+const TOOL: &str = "octo-delta";
+
+fn main() -> ExitCode {
+    let outcome = match rovlink::cli::parse::<Cli>(TOOL).command {
+        Command::Build(a) => build(&a),
+        Command::Apply(a) => apply(&a),
+        Command::Dump(a) => dump(&a),
+        Command::Full(a) => full(&a),
+        Command::Synth(a) => synth_cmd(&a),
+    };
+    rovlink::cli::finish(TOOL, outcome)
+}
+
+/// An input's bytes and the name its errors carry.
+fn read(path: &Path) -> Result<(Vec<u8>, String)> {
+    let mut input = Input::open(Some(path))?;
+    Ok((input.read_all()?, input.name.clone()))
+}
+
+/// Writes a claimed whole-file output.
+fn write_whole(dest: &Dest, bytes: &[u8]) -> Result<()> {
+    let mut out = dest.open()?;
+    out.write_bytes(bytes)?;
+    Ok(out.finish()?)
+}
+
+fn build(a: &BuildArgs) -> Result<u8> {
+    let cfg = a.config();
+    cfg.validate()?;
+    let link = a.link.as_deref().map(transfer::model_by_name).transpose();
+    let link = link.map_err(|e| UsageError(format!("--link: {e}")))?;
+    let mut outs = Outputs::new();
+    outs.inputs(a.inputs.iter().map(PathBuf::as_path));
+    let stream = outs.claim("-o", &a.output, Kind::Binary)?;
+    let bt = outs.claim_opt("--bt", a.bt.as_deref(), Kind::Binary)?;
+    let ot = outs.claim_opt("--ot", a.ot.as_deref(), Kind::Binary)?;
+    let stats = outs.claim_opt("--stats", a.stats.as_deref(), Kind::Text)?;
+    let arrivals = outs.claim_opt("--arrivals", a.arrivals.as_deref(), Kind::Text)?;
+    stop::install()?;
+    let mut out = stream.open()?;
+    let mut rows = stats.map(|d| RowWriter::new(d, RowFormat::Csv, &pipeline::STATS_COLUMNS));
+    let bar = progress::bar(a.quiet, 0, cli::PROGRESS);
+    let built = {
+        let mut sink = |r: &StatsRow| -> Result<(), SinkError> {
+            rows.as_mut()
+                .map_or(Ok(()), |w| w.row(r))
+                .map_err(Into::into)
+        };
+        let mut show = |done: u64, known: u64| {
+            bar.set_length(known);
+            bar.set_position(done);
+        };
+        let wants_stats = a.stats.is_some();
+        let mut hooks = Hooks {
+            stop: stop::flag(),
+            stats: wants_stats.then_some(&mut sink as _),
+            progress: Some(&mut show),
+        };
+        pipeline::build(&cfg, &a.inputs, &mut out, &stream.name(), &mut hooks)?
+    };
+    bar.finish_and_clear();
+    // Every output holds what was done, also when a signal stopped the build.
+    bt.map(|d| write_whole(&d, &files::write_bt(&built.tree)))
+        .transpose()?;
+    ot.map(|d| write_whole(&d, &files::write_ot(&built.tree)))
+        .transpose()?;
+    out.finish()?;
+    rows.map(RowWriter::finish).transpose()?;
+    if !a.quiet || built.report.interrupted {
+        let note = stop::note().unwrap_or_else(|| "interrupted".into());
+        say!("{}", built.summary(&note));
+    }
+    if let Some(model) = link {
+        let report = transfer::send_over(&model, &built.report.messages, a.scan_period, a.seed);
+        if let Some(d) = arrivals {
+            let mut w = RowWriter::new(d, RowFormat::Csv, &pipeline::ARRIVAL_COLUMNS);
+            for row in pipeline::arrival_rows(&report) {
+                w.row(&row)?;
+            }
+            w.finish()?;
+        }
+        if !a.quiet {
+            report.lines().iter().for_each(|line| say!("{line}"));
+        }
+    }
+    Ok(stop::code_or(EXIT_OK))
+}
+
+fn apply(a: &ApplyArgs) -> Result<u8> {
+    let mut outs = Outputs::new();
+    outs.input(Some(&a.input));
+    let dest = outs.claim("-o", &a.output, Kind::Binary)?;
+    let (bytes, name) = read(&a.input)?;
+    let messages = a.messages.map_or(usize::MAX, |n| n as usize);
+    let view = pipeline::apply(&bytes, &name, messages)?;
+    write_whole(&dest, &files::write_ot(&view))?;
+    Ok(EXIT_OK)
+}
+
+fn dump(a: &DumpArgs) -> Result<u8> {
+    let mut outs = Outputs::new();
+    outs.input(Some(&a.input));
+    let dest = outs.claim("-o", &a.output, Kind::Text)?;
+    let (bytes, name) = read(&a.input)?;
+    let mut out = dest.open()?;
+    pipeline::dump(&bytes, &name, a.format, a.voxels, &mut out)?;
+    out.finish()?;
+    Ok(EXIT_OK)
+}
+
+fn full(a: &FullArgs) -> Result<u8> {
+    let mut outs = Outputs::new();
+    outs.input(Some(&a.input));
+    let dest = outs.claim("-o", &a.output, Kind::Binary)?;
+    let (bytes, name) = read(&a.input)?;
+    write_whole(
+        &dest,
+        &pipeline::full(&bytes, &name, a.view.coarse(), a.view.roi)?,
+    )?;
+    Ok(EXIT_OK)
+}
+
+fn synth_cmd(a: &SynthArgs) -> Result<u8> {
+    let params = a.params();
+    params.validate()?;
+    let dest = Outputs::new().claim("-o", &a.output, Kind::Binary)?;
+    stop::install()?;
+    let bytes = pipeline::synth(&params, a.mcap())?;
+    // The survey is made whole before anything is written: a stopped run writes nothing.
+    if !stop::requested() {
+        write_whole(&dest, &bytes)?;
+    }
+    Ok(stop::code_or(EXIT_OK))
+}
