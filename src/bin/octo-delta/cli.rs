@@ -93,13 +93,13 @@ pub struct ViewArgs {
 
     /// Depth of the coarse voxels sent outside the ROI (1..=16; 13 = 8x the fine edge).
     #[arg(long, value_name = "D", default_value_t = 13,
-          value_parser = value::count(1, 16), conflicts_with = "coarse_res")]
+          value_parser = value::count(1, 16), conflicts_with = "coarse_res", allow_hyphen_values = true)]
     pub coarse_depth: u64,
 
     /// Coarse voxel edge in metres instead of a depth (rounded to the nearest power-of-two
     /// multiple of --res, at most 2^15 x --res).
     #[arg(long, value_name = "M",
-          value_parser = value::positive(RESOLUTION_MAX_M * COARSE_FACTOR_MAX, "m"))]
+          value_parser = value::positive(RESOLUTION_MAX_M * COARSE_FACTOR_MAX, "m"), allow_hyphen_values = true)]
     pub coarse_res: Option<f64>,
 }
 
@@ -122,7 +122,7 @@ pub struct BuildArgs {
 
     /// Voxel edge in metres.
     #[arg(long, value_name = "M", default_value_t = 0.1,
-          value_parser = value::real(RESOLUTION_MIN_M, RESOLUTION_MAX_M, "m"))]
+          value_parser = value::real(RESOLUTION_MIN_M, RESOLUTION_MAX_M, "m"), allow_hyphen_values = true)]
     pub res: f64,
 
     #[command(flatten)]
@@ -130,7 +130,7 @@ pub struct BuildArgs {
 
     /// Rays longer than this (metres) mark free space up to this range only, no hit (OctoMap's
     /// maxrange) [default: no limit].
-    #[arg(long, value_name = "M", value_parser = value::positive(MAX_RANGE_M, "m"))]
+    #[arg(long, value_name = "M", value_parser = value::positive(MAX_RANGE_M, "m"), allow_hyphen_values = true)]
     pub max_range: Option<f64>,
 
     /// The delta stream [default: standard output].
@@ -184,7 +184,7 @@ pub struct BuildArgs {
 
     /// With --link: seconds between scans.
     #[arg(long, value_name = "S", default_value_t = 1.0, requires = "link",
-          value_parser = value::seconds(0.0, transfer::MAX_PERIOD_S))]
+          value_parser = value::seconds(0.0, transfer::MAX_PERIOD_S), allow_hyphen_values = true)]
     pub scan_period: f64,
 
     /// With --link: one CSV row per scan: bytes, when it was ready, complete and shown.
@@ -192,12 +192,17 @@ pub struct BuildArgs {
     pub arrivals: Option<PathBuf>,
 
     /// With --link: seed of the link's random streams.
-    #[arg(long, default_value_t = 1, requires = "link")]
+    #[arg(
+        long,
+        default_value_t = 1,
+        requires = "link",
+        allow_hyphen_values = true
+    )]
     pub seed: u64,
 
     /// Threads casting each scan's rays [default: the machine's cores, at most 8].
     #[arg(long, value_name = "N", value_parser = value::CountParser {
-        min: 1, max: THREADS_MAX as u64, unit: "threads" })]
+        min: 1, max: THREADS_MAX as u64, unit: "threads" }, allow_hyphen_values = true)]
     pub threads: Option<u64>,
 
     /// No progress bar, no summary.
@@ -235,7 +240,7 @@ pub struct ApplyArgs {
     #[arg(short, long, value_name = "FILE", required = true)]
     pub output: PathBuf,
     /// Apply only the first N messages.
-    #[arg(long, value_name = "N", value_parser = value::count(0, MAX_COUNT))]
+    #[arg(long, value_name = "N", value_parser = value::count(0, MAX_COUNT), allow_hyphen_values = true)]
     pub messages: Option<u64>,
 }
 
@@ -278,10 +283,10 @@ pub struct SynthArgs {
     pub format: Option<SynthFormat>,
     /// Number of scans [default: the survey's own, 80].
     #[arg(long, value_parser = value::CountParser {
-        min: 1, max: synth::MAX_SCANS as u64, unit: "scans" })]
+        min: 1, max: synth::MAX_SCANS as u64, unit: "scans" }, allow_hyphen_values = true)]
     pub scans: Option<u64>,
     /// Seed of the scene and the path.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_hyphen_values = true)]
     pub seed: u64,
 }
 

@@ -31,10 +31,14 @@ fn main() -> ExitCode {
     rovlink::cli::finish(TOOL, outcome)
 }
 
-/// An input's bytes and the name its errors carry.
-fn read(path: &Path) -> Result<(Vec<u8>, String)> {
-    let mut input = Input::open(Some(path))?;
-    Ok((input.read_all()?, input.name.clone()))
+/// Claims the output of a one-input command, then reads the input: its bytes and the name its
+/// errors carry.
+fn claim_and_read(input: &Path, output: &Path, kind: Kind) -> Result<(Dest, Vec<u8>, String)> {
+    let mut outs = Outputs::new();
+    outs.input(Some(input));
+    let dest = outs.claim("-o", output, kind)?;
+    let mut input = Input::open(Some(input))?;
+    Ok((dest, input.read_all()?, input.name.clone()))
 }
 
 /// Writes a claimed whole-file output.
@@ -60,31 +64,38 @@ fn build(a: &BuildArgs) -> Result<u8> {
     let mut out = stream.open()?;
     let mut rows = stats.map(|d| RowWriter::new(d, RowFormat::Csv, &pipeline::STATS_COLUMNS));
     let bar = progress::bar(a.quiet, 0, cli::PROGRESS);
-    let built = {
+    let outcome = (|| -> Result<pipeline::Built> {
         let mut sink = |r: &StatsRow| -> Result<(), SinkError> {
-            rows.as_mut()
-                .map_or(Ok(()), |w| w.row(r))
-                .map_err(Into::into)
+            Ok(rows.as_mut().map_or(Ok(()), |w| w.row(r))?)
         };
         let mut show = |done: u64, known: u64| {
             bar.set_length(known);
             bar.set_position(done);
         };
-        let wants_stats = a.stats.is_some();
         let mut hooks = Hooks {
             stop: stop::flag(),
-            stats: wants_stats.then_some(&mut sink as _),
+            stats: a.stats.is_some().then_some(&mut sink as _),
             progress: Some(&mut show),
         };
-        pipeline::build(&cfg, &a.inputs, &mut out, &stream.name(), &mut hooks)?
-    };
-    bar.finish_and_clear();
-    // Every output holds what was done, also when a signal stopped the build.
-    bt.map(|d| write_whole(&d, &files::write_bt(&built.tree)))
-        .transpose()?;
-    ot.map(|d| write_whole(&d, &files::write_ot(&built.tree)))
-        .transpose()?;
-    out.finish()?;
+        let built = pipeline::build(&cfg, &a.inputs, &mut out, &stream.name(), &mut hooks)?;
+        bar.finish_and_clear();
+        // Every output holds what was done, also when a signal stopped the build.
+        bt.map(|d| write_whole(&d, &files::write_bt(&built.tree)))
+            .transpose()?;
+        ot.map(|d| write_whole(&d, &files::write_ot(&built.tree)))
+            .transpose()?;
+        out.finish()?;
+        Ok(built)
+    })();
+    // A failed run (bad input found late, a full disk) leaves no stats file either.
+    let written = rows.as_ref().filter(|w| w.rows() > 0);
+    if outcome.is_err()
+        && let Some(path) = written.and_then(|w| w.dest().path())
+        && std::fs::symlink_metadata(path).is_ok_and(|m| m.is_file())
+    {
+        let _ = std::fs::remove_file(path);
+    }
+    let built = outcome?;
     rows.map(RowWriter::finish).transpose()?;
     if !a.quiet || built.report.interrupted {
         let note = stop::note().unwrap_or_else(|| "interrupted".into());
@@ -94,9 +105,9 @@ fn build(a: &BuildArgs) -> Result<u8> {
         let report = transfer::send_over(&model, &built.report.messages, a.scan_period, a.seed);
         if let Some(d) = arrivals {
             let mut w = RowWriter::new(d, RowFormat::Csv, &pipeline::ARRIVAL_COLUMNS);
-            for row in pipeline::arrival_rows(&report) {
-                w.row(&row)?;
-            }
+            pipeline::arrival_rows(&report)
+                .iter()
+                .try_for_each(|r| w.row(r))?;
             w.finish()?;
         }
         if !a.quiet {
@@ -107,21 +118,14 @@ fn build(a: &BuildArgs) -> Result<u8> {
 }
 
 fn apply(a: &ApplyArgs) -> Result<u8> {
-    let mut outs = Outputs::new();
-    outs.input(Some(&a.input));
-    let dest = outs.claim("-o", &a.output, Kind::Binary)?;
-    let (bytes, name) = read(&a.input)?;
-    let messages = a.messages.map_or(usize::MAX, |n| n as usize);
-    let view = pipeline::apply(&bytes, &name, messages)?;
+    let (dest, bytes, name) = claim_and_read(&a.input, &a.output, Kind::Binary)?;
+    let view = pipeline::apply(&bytes, &name, a.messages.map_or(usize::MAX, |n| n as usize))?;
     write_whole(&dest, &files::write_ot(&view))?;
     Ok(EXIT_OK)
 }
 
 fn dump(a: &DumpArgs) -> Result<u8> {
-    let mut outs = Outputs::new();
-    outs.input(Some(&a.input));
-    let dest = outs.claim("-o", &a.output, Kind::Text)?;
-    let (bytes, name) = read(&a.input)?;
+    let (dest, bytes, name) = claim_and_read(&a.input, &a.output, Kind::Text)?;
     let mut out = dest.open()?;
     pipeline::dump(&bytes, &name, a.format, a.voxels, &mut out)?;
     out.finish()?;
@@ -129,10 +133,7 @@ fn dump(a: &DumpArgs) -> Result<u8> {
 }
 
 fn full(a: &FullArgs) -> Result<u8> {
-    let mut outs = Outputs::new();
-    outs.input(Some(&a.input));
-    let dest = outs.claim("-o", &a.output, Kind::Binary)?;
-    let (bytes, name) = read(&a.input)?;
+    let (dest, bytes, name) = claim_and_read(&a.input, &a.output, Kind::Binary)?;
     write_whole(
         &dest,
         &pipeline::full(&bytes, &name, a.view.coarse(), a.view.roi)?,

@@ -1,0 +1,501 @@
+//! octo-delta as a hostile user runs it: empty, random and truncated inputs of every format for
+//! every subcommand; every numeric flag at NaN, inf, 0, negative and huge; outputs that are
+//! inputs; `/dev/full`; two outputs on standard output; SIGTERM and SIGINT in the middle of a
+//! build; `| head -1`; and the issue's defects (a point whose squared distance underflows, a
+//! survey of 2^32 scans). The contract: exit 0 or 2 (130/143 when interrupted), never a panic
+//! or a signal death, never a hang; exit 2 is one line naming the file or the flag and leaves
+//! no output file; an interrupted build leaves whole, valid outputs and no temporary file.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::hostile::{
+    Run, assert_contract, assert_whole_csv, garbage, head_one, run, run_in, temp_files,
+};
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+use rovlink::octo::cloud::{PcdData, write_pcd, write_ply, write_xyz};
+use rovlink::octo::{Pose, Scan};
+
+const OCTO: &str = env!("CARGO_BIN_EXE_octo-delta");
+const LIMIT: Duration = Duration::from_secs(60);
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Runs octo-delta in `dir` with the contract's limit.
+fn octo(dir: &Path, args: &[&str]) -> Run {
+    run_in(dir, OCTO, args, b"", LIMIT)
+}
+
+fn ok(run: &Run, what: &str) {
+    assert_contract(run, &[0], what);
+}
+
+/// Exit 2 with one line on stderr, prefixed with the tool's name and containing `needle`.
+fn refused(run: &Run, needle: &str, what: &str) {
+    assert_contract(run, &[2], what);
+    let lines: Vec<&str> = run.stderr.lines().collect();
+    assert_eq!(lines.len(), 1, "{what}: not one line: {:?}", run.stderr);
+    assert!(
+        lines[0].starts_with("octo-delta: ") && lines[0].contains(needle),
+        "{what}: {:?} does not name {needle:?}",
+        lines[0]
+    );
+}
+
+fn a_scan() -> Scan {
+    Scan {
+        points: vec![[1.0, 0.0, -0.5], [0.5, 0.7, -1.0], [-0.3, 0.2, -2.0]],
+        colors: Some(vec![[200, 10, 10], [10, 200, 10], [10, 10, 200]]),
+        pose: Pose::IDENTITY,
+    }
+}
+
+/// Valid inputs of every kind in `dir`: clouds, a survey (.graph and .mcap), a stream, maps.
+fn fixtures(dir: &Path) -> Vec<PathBuf> {
+    let scan = a_scan();
+    std::fs::write(dir.join("c.pcd"), write_pcd(&scan, PcdData::Binary)).unwrap();
+    std::fs::write(dir.join("c.ply"), write_ply(&scan)).unwrap();
+    std::fs::write(dir.join("c.xyz"), write_xyz(&scan)).unwrap();
+    ok(
+        &octo(dir, &["synth", "--scans", "2", "-o", "s.graph"]),
+        "synth graph",
+    );
+    ok(
+        &octo(dir, &["synth", "--scans", "2", "-o", "s.mcap"]),
+        "synth mcap",
+    );
+    ok(
+        &octo(
+            dir,
+            &[
+                "build", "s.graph", "-q", "-o", "s.odl", "--ot", "s.ot", "--bt", "s.bt",
+            ],
+        ),
+        "build fixtures",
+    );
+    [
+        "c.pcd", "c.ply", "c.xyz", "s.graph", "s.mcap", "s.odl", "s.ot", "s.bt",
+    ]
+    .iter()
+    .map(|n| dir.join(n))
+    .collect()
+}
+
+/// The command reading `input` whose output `out` must not exist after an exit 2.
+fn reader_of(input: &Path) -> Vec<String> {
+    let ext = input.extension().unwrap().to_str().unwrap();
+    let i = input.display().to_string();
+    let v: Vec<&str> = match ext {
+        "odl" => vec!["apply", &i, "-o", "out"],
+        "ot" | "bt" => vec!["full", &i, "-o", "out"],
+        _ => vec![
+            "build", &i, "--origin", "0,0,0", "-o", "out", "--stats", "st.csv",
+        ],
+    };
+    v.into_iter().map(String::from).collect()
+}
+
+#[test]
+fn empty_random_and_truncated_inputs_are_errors_or_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let files = fixtures(dir.path());
+    let work = tempfile::tempdir().unwrap();
+    for (k, file) in files.iter().enumerate() {
+        let bytes = std::fs::read(file).unwrap();
+        let name = file.file_name().unwrap().to_str().unwrap();
+        let mut variants: Vec<(String, Vec<u8>)> = vec![
+            ("empty".into(), Vec::new()),
+            ("random".into(), garbage(700, k as u64 + 1)),
+            ("random after the first bytes".into(), {
+                let mut b = bytes[..bytes.len().min(24)].to_vec();
+                b.extend(garbage(300, k as u64 + 50));
+                b
+            }),
+        ];
+        for cut in [1, bytes.len() / 3, bytes.len() / 2, bytes.len() - 1] {
+            variants.push((format!("cut at {cut}"), bytes[..cut].to_vec()));
+        }
+        for (what, data) in variants {
+            let input = work.path().join(name);
+            std::fs::write(&input, &data).unwrap();
+            let args = reader_of(&input);
+            let args: Vec<&str> = args.iter().map(String::as_str).collect();
+            for sub in [args.clone(), vec!["dump", s(&input)]] {
+                let what = format!("{} {name} {what}", sub[0]);
+                let r = octo(work.path(), &sub);
+                assert_contract(&r, &[0, 2], &what);
+                if r.code == Some(2) {
+                    assert_eq!(r.stderr.lines().count(), 1, "{what}: {}", r.stderr);
+                    assert!(!work.path().join("out").exists(), "{what}: left its output");
+                    assert!(!work.path().join("st.csv").exists(), "{what}: left --stats");
+                }
+                let _ = std::fs::remove_file(work.path().join("out"));
+                let _ = std::fs::remove_file(work.path().join("st.csv"));
+            }
+            assert!(temp_files(work.path()).is_empty());
+        }
+    }
+    // No format to be found: named, exit 2.
+    std::fs::write(work.path().join("x.bin"), garbage(100, 9)).unwrap();
+    refused(
+        &octo(work.path(), &["build", "x.bin", "-o", "out"]),
+        "x.bin: unknown input format",
+        "unknown format",
+    );
+    refused(
+        &octo(work.path(), &["build", "missing.xyz", "-o", "out"]),
+        "missing.xyz",
+        "missing input",
+    );
+    assert!(!work.path().join("out").exists());
+}
+
+#[test]
+fn every_numeric_flag_at_bad_values_is_refused_with_its_range() {
+    let dir = tempfile::tempdir().unwrap();
+    fixtures(dir.path());
+    let build = ["build", "c.xyz", "--origin", "0,0,0", "-o", "out"];
+    let link = ["--link", "satellite-up"];
+    // (command, flag, values refused besides NaN, inf, -inf, 1e300, -1e300, -1)
+    let cases: Vec<(Vec<&str>, &str, Vec<&str>)> = vec![
+        (build.to_vec(), "--res", vec!["0", "1e-9", "5000"]),
+        (build.to_vec(), "--max-range", vec!["0", "1e9"]),
+        (
+            build.to_vec(),
+            "--coarse-depth",
+            vec!["0", "17", "4294967296"],
+        ),
+        (build.to_vec(), "--coarse-res", vec!["0", "0.05", "1e7"]),
+        (
+            build.to_vec(),
+            "--threads",
+            vec!["0", "65", "18446744073709551616"],
+        ),
+        (
+            [&build[..], &link[..]].concat(),
+            "--scan-period",
+            vec!["1e6"],
+        ),
+        (
+            [&build[..], &link[..]].concat(),
+            "--seed",
+            vec!["18446744073709551616"],
+        ),
+        (
+            vec!["apply", "s.odl", "-o", "out"],
+            "--messages",
+            vec!["1e10"],
+        ),
+        (
+            vec!["full", "s.ot", "-o", "out"],
+            "--coarse-depth",
+            vec!["0", "99"],
+        ),
+        (vec!["full", "s.ot", "-o", "out"], "--coarse-res", vec!["0"]),
+        (
+            vec!["synth", "-o", "out"],
+            "--scans",
+            vec!["0", "10001", "4294967296"],
+        ),
+        (
+            vec!["synth", "-o", "out"],
+            "--seed",
+            vec!["18446744073709551616"],
+        ),
+    ];
+    for (base, flag, extra) in cases {
+        for value in ["NaN", "inf", "-inf", "1e300", "-1e300", "-1"]
+            .into_iter()
+            .chain(extra)
+        {
+            let mut args = base.clone();
+            args.extend([flag, value]);
+            let what = format!("{} {flag} {value}", base[0]);
+            refused(&octo(dir.path(), &args), flag, &what);
+            assert!(!dir.path().join("out").exists(), "{what}: left its output");
+        }
+    }
+    // Points and boxes: each number checked, and the box's order.
+    for (flag, value) in [
+        ("--origin", "0,nan,0"),
+        ("--origin", "1e300,0,0"),
+        ("--origin", "0,0"),
+        ("--roi", "0,0,0,1,1,inf"),
+        ("--roi", "1,1,1,0,0,0"),
+        ("--roi", "-1e30,0,0,1,1,1"),
+    ] {
+        let mut args = build.to_vec();
+        args.retain(|a| *a != "--origin" && *a != "0,0,0");
+        args.extend([flag, value]);
+        refused(&octo(dir.path(), &args), flag, &format!("{flag} {value}"));
+    }
+    // Values at the edges of the ranges work.
+    for (flag, value) in [
+        ("--res", "0.0001"),
+        ("--res", "1000"),
+        ("--max-range", "100000"),
+        ("--coarse-depth", "1"),
+        ("--threads", "64"),
+    ] {
+        let mut args = build.to_vec();
+        args.extend([flag, value, "-q"]);
+        ok(&octo(dir.path(), &args), &format!("{flag} {value}"));
+    }
+}
+
+#[test]
+fn outputs_that_are_inputs_are_refused_and_the_input_is_untouched() {
+    let dir = tempfile::tempdir().unwrap();
+    fixtures(dir.path());
+    let d = dir.path();
+    std::os::unix::fs::symlink(d.join("c.xyz"), d.join("link.xyz")).unwrap();
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["build", "c.xyz", "-o", "c.xyz"], "c.xyz"),
+        (
+            vec!["build", "c.xyz", "-o", "x.odl", "--bt", "c.xyz"],
+            "c.xyz",
+        ),
+        (
+            vec!["build", "c.xyz", "-o", "x.odl", "--ot", "./c.xyz"],
+            "c.xyz",
+        ),
+        (
+            vec!["build", "c.xyz", "-o", "x.odl", "--stats", "link.xyz"],
+            "c.xyz",
+        ),
+        (
+            vec!["build", "s.graph", "c.xyz", "-o", "s.graph"],
+            "s.graph",
+        ),
+        (vec!["apply", "s.odl", "-o", "s.odl"], "s.odl"),
+        (vec!["full", "s.ot", "-o", "s.ot"], "s.ot"),
+        (vec!["full", "s.bt", "-o", "s.bt"], "s.bt"),
+        (vec!["dump", "s.odl", "-o", "s.odl"], "s.odl"),
+    ];
+    for (args, input) in cases {
+        let before = std::fs::read(d.join(input)).unwrap();
+        let what = args.join(" ");
+        refused(&octo(d, &args), "refusing to overwrite an input", &what);
+        assert_eq!(std::fs::read(d.join(input)).unwrap(), before, "{what}");
+        assert!(!d.join("x.odl").exists(), "{what}: left -o behind");
+    }
+    // Two outputs on one file, two on standard output.
+    refused(
+        &octo(d, &["build", "c.xyz", "-o", "a.odl", "--bt", "a.odl"]),
+        "also the output of -o",
+        "-o = --bt",
+    );
+    refused(
+        &octo(d, &["build", "c.xyz", "--stats", "-"]),
+        "both write to standard output",
+        "-o and --stats on stdout",
+    );
+    assert!(!d.join("a.odl").exists());
+}
+
+#[test]
+fn side_outputs_go_to_standard_output_when_asked() {
+    let dir = tempfile::tempdir().unwrap();
+    fixtures(dir.path());
+    let r = octo(
+        dir.path(),
+        &["build", "s.graph", "-q", "-o", "x.odl", "--stats", "-"],
+    );
+    ok(&r, "--stats -");
+    let text = String::from_utf8(r.stdout).unwrap();
+    assert!(text.starts_with("scan,points,delta_bytes,"), "{text}");
+    assert_eq!(text.lines().count(), 3, "header and two scans: {text}");
+    assert!(!dir.path().join("-").exists(), "a file named -");
+}
+
+#[test]
+fn a_full_disk_is_a_one_line_error() {
+    let dir = tempfile::tempdir().unwrap();
+    fixtures(dir.path());
+    for args in [
+        vec!["build", "s.graph", "-q", "-o", "/dev/full"],
+        vec!["build", "s.graph", "-q", "-o", "x.odl", "--bt", "/dev/full"],
+        vec![
+            "build",
+            "s.graph",
+            "-q",
+            "-o",
+            "x.odl",
+            "--stats",
+            "/dev/full",
+        ],
+        vec!["apply", "s.odl", "-o", "/dev/full"],
+        vec!["full", "s.ot", "-o", "/dev/full"],
+        vec!["dump", "s.odl", "-o", "/dev/full"],
+        vec!["synth", "--scans", "1", "-o", "/dev/full"],
+    ] {
+        let what = args.join(" ");
+        refused(&octo(dir.path(), &args), "/dev/full", &what);
+        assert!(!dir.path().join("x.odl").exists(), "{what}: left -o behind");
+        assert!(temp_files(dir.path()).is_empty(), "{what}");
+    }
+}
+
+#[test]
+fn closed_pipes_downstream_are_success() {
+    let dir = tempfile::tempdir().unwrap();
+    fixtures(dir.path());
+    let odl = dir.path().join("s.odl");
+    let graph = dir.path().join("s.graph");
+    for args in [
+        vec!["dump", s(&odl), "--voxels"],
+        vec!["dump", s(&odl), "--format", "ndjson", "--voxels"],
+        vec!["synth", "--scans", "3"],
+        vec!["build", s(&graph), "-q"],
+    ] {
+        let r = head_one(OCTO, &args, b"", LIMIT);
+        let what = format!("{} | head -1", args.join(" "));
+        assert_contract(&r, &[0], &what);
+        assert_eq!(r.stderr, "", "{what}");
+    }
+}
+
+/// Starts a long build (the survey many times over) in `dir`, sends `signal` once the stats
+/// file has two rows, and returns the run.
+fn interrupted_build(dir: &Path, signal: Signal) -> (Option<i32>, String) {
+    ok(
+        &octo(dir, &["synth", "--scans", "6", "-o", "long.graph"]),
+        "synth",
+    );
+    let mut args = vec!["build"];
+    args.extend(std::iter::repeat_n("long.graph", 200));
+    args.extend([
+        "-o",
+        "i.odl",
+        "--stats",
+        "i.csv",
+        "--bt",
+        "i.bt",
+        "--ot",
+        "i.ot",
+        "--threads",
+        "1",
+    ]);
+    let mut child = Command::new(OCTO)
+        .args(&args)
+        .current_dir(dir)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    loop {
+        let rows = std::fs::read_to_string(dir.join("i.csv")).map_or(0, |t| t.lines().count());
+        if rows >= 3 || started.elapsed() > LIMIT {
+            break;
+        }
+        assert!(child.try_wait().unwrap().is_none(), "the build ended early");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    kill(Pid::from_raw(child.id() as i32), signal).unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(started.elapsed() < LIMIT, "the build did not stop");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn a_signal_stops_a_build_with_whole_valid_outputs() {
+    for (signal, code, name) in [
+        (Signal::SIGTERM, 143, "SIGTERM"),
+        (Signal::SIGINT, 130, "SIGINT"),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let (got, stderr) = interrupted_build(d, signal);
+        assert_eq!(got, Some(code), "{name}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        assert!(
+            stderr.contains(&format!("interrupted by {name}")),
+            "{stderr}"
+        );
+        assert!(temp_files(d).is_empty(), "{name}: temp files left");
+        // Whole rows, one per message in the stream, and the stream decodes.
+        assert_whole_csv(&d.join("i.csv"));
+        let rows = std::fs::read_to_string(d.join("i.csv"))
+            .unwrap()
+            .lines()
+            .count()
+            - 1;
+        let dump = octo(d, &["dump", "i.odl", "--format", "csv"]);
+        ok(&dump, "dump of the interrupted stream");
+        let messages = String::from_utf8(dump.stdout).unwrap().lines().count() - 1;
+        assert_eq!(messages, rows, "{name}: messages vs stats rows");
+        assert!((2..1200).contains(&rows), "{rows} rows");
+        // The maps are the map so far, and read back.
+        ok(
+            &octo(d, &["full", "i.ot", "-o", "f1.odl"]),
+            "full of the .ot",
+        );
+        ok(
+            &octo(d, &["full", "i.bt", "-o", "f2.odl"]),
+            "full of the .bt",
+        );
+        // The summary counts as many scans as the stream holds.
+        assert!(stderr.contains(&format!("after {rows} scans")), "{stderr}");
+    }
+}
+
+#[test]
+fn issue_14_defects_are_fixed() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // The squared distance of this point from the origin underflows to 0 in f32: it hung.
+    std::fs::write(d.join("t.xyz"), "-1e-30 -1e-30 -1e-30\n").unwrap();
+    let r = run_in(
+        d,
+        OCTO,
+        &["build", "t.xyz", "--origin", "0,0,0", "-o", "t.odl"],
+        b"",
+        Duration::from_secs(20),
+    );
+    ok(&r, "the underflowing point");
+    assert!(r.stderr.contains("1 scans, 1 points"), "{}", r.stderr);
+    ok(&octo(d, &["apply", "t.odl", "-o", "t.ot"]), "apply");
+    // 2^32 scans aborted allocating 72 GB.
+    let r = octo(d, &["synth", "--scans", "4294967296", "-o", "x.graph"]);
+    refused(
+        &r,
+        "--scans: expected 1 ..= 10000 scans, found 4294967296",
+        "2^32 scans",
+    );
+    assert!(!d.join("x.graph").exists());
+    // Subnormal, huge and origin points of every kind, through a whole build.
+    std::fs::write(
+        d.join("odd.xyz"),
+        "0 0 0\n1e-45 -1e-45 1e-45\n1e-38 0 0\n3e38 3e38 3e38\n-3.4e38 0 0\n1e-30 1e-30 1e-30\n",
+    )
+    .unwrap();
+    for res in ["0.0001", "0.1", "1000"] {
+        let r = run(
+            OCTO,
+            &[
+                "build",
+                s(&d.join("odd.xyz")),
+                "--res",
+                res,
+                "--origin",
+                "0,0,0",
+                "-o",
+                "-",
+            ],
+            b"",
+            Duration::from_secs(20),
+        );
+        assert_contract(&r, &[0], &format!("odd points at {res} m"));
+    }
+}
