@@ -504,6 +504,14 @@ pub enum PipelineError {
         /// The file.
         name: String,
     },
+    /// An input holding a number this module does not work with (a map's resolution).
+    #[error("{name}: {source}")]
+    OutOfRange {
+        /// The file.
+        name: String,
+        /// Which number, the range and what was found.
+        source: ConfigError,
+    },
     /// Reading an input or writing an output failed.
     #[error(transparent)]
     Io(#[from] IoError),
@@ -762,7 +770,14 @@ pub fn full(
         name: name.to_string(),
         source,
     })?;
-    let spec = view_spec(tree.resolution_m(), coarse, roi)?;
+    let res = tree.resolution_m();
+    check_range("resolution", res, RESOLUTION_MIN_M, RESOLUTION_MAX_M, "m").map_err(|source| {
+        PipelineError::OutOfRange {
+            name: name.to_string(),
+            source,
+        }
+    })?;
+    let spec = view_spec(res, coarse, roi)?;
     let view = delta::view_of(&tree, &spec);
     let mut out = delta::encode_header(&spec);
     out.extend_from_slice(&delta::encode_full(0, &view));
@@ -1049,6 +1064,16 @@ mod tests {
         .unwrap();
         assert_eq!((built.report.scans, built.report.points), (1, 1));
         assert!(!built.report.interrupted);
+    }
+
+    #[test]
+    fn a_map_of_an_unusable_resolution_is_named() {
+        let map = b"# Octomap OcTree file\nid OcTree\nsize 0\nres 1e-10\ndata\n";
+        let err = full(map, "m.ot", Coarse::default(), None).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "m.ot: resolution: expected 0.0001 m ..= 1000 m, found 1e-10"
+        );
     }
 
     #[test]
