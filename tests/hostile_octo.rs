@@ -255,6 +255,8 @@ fn outputs_that_are_inputs_are_refused_and_the_input_is_untouched() {
     fixtures(dir.path());
     let d = dir.path();
     std::os::unix::fs::symlink(d.join("c.xyz"), d.join("link.xyz")).unwrap();
+    let model = rovlink::link::Model::preset("satellite-up").unwrap();
+    std::fs::write(d.join("model.json"), model.to_json()).unwrap();
     let cases: Vec<(Vec<&str>, &str)> = vec![
         (vec!["build", "c.xyz", "-o", "c.xyz"], "c.xyz"),
         (
@@ -272,6 +274,19 @@ fn outputs_that_are_inputs_are_refused_and_the_input_is_untouched() {
         (
             vec!["build", "s.graph", "c.xyz", "-o", "s.graph"],
             "s.graph",
+        ),
+        (
+            vec![
+                "build",
+                "c.xyz",
+                "-o",
+                "x.odl",
+                "--link",
+                "model.json",
+                "--arrivals",
+                "model.json",
+            ],
+            "model.json",
         ),
         (vec!["apply", "s.odl", "-o", "s.odl"], "s.odl"),
         (vec!["full", "s.ot", "-o", "s.ot"], "s.ot"),

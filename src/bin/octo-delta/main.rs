@@ -55,6 +55,7 @@ fn build(a: &BuildArgs) -> Result<u8> {
     let link = link.map_err(|e| UsageError(format!("--link: {e}")))?;
     let mut outs = Outputs::new();
     outs.inputs(a.inputs.iter().map(PathBuf::as_path));
+    outs.input(a.link.as_deref().map(Path::new));
     let stream = outs.claim("-o", &a.output, Kind::Binary)?;
     let bt = outs.claim_opt("--bt", a.bt.as_deref(), Kind::Binary)?;
     let ot = outs.claim_opt("--ot", a.ot.as_deref(), Kind::Binary)?;
