@@ -108,4 +108,13 @@ mkdir -p "$corpus/evologics"
 printf '\x05AT*SEND,4,2,ab\r\n\r\nAT*SENDIM,3,2,ack,xyz\r\nAT?T\r\n+++AT*SEND,1,1,q\r\n' >"$corpus/evologics/seed-commands"
 printf '\x07RECV,3,1,2,1620,-50,100,670,0.00,a\r\nb\r\nRECVIM,2,2,1,ack,5000,-45,80,0.25,hi\r\nDELIVEREDIM,2\r\nOK\r\nERROR WRONG FORMAT\r\nBUSY BACKOFF\r\n' >"$corpus/evologics/seed-notifications"
 
+# octo_insert: byte 0 picks resolution/max range/colour/raw mode. Clouds as text (issue 14's
+# point whose squared length underflows; subnormal, huge and origin points), and raw f32
+# triples (origin 0, then -1e-30 x 3 and the smallest subnormal x 3).
+mkdir -p "$corpus/octo_insert"
+printf '\x01-1e-30 -1e-30 -1e-30\n' >"$corpus/octo_insert/seed-issue14"
+printf '\x0d0 0 0\n1e-45 -1e-45 1e-45\n3e38 3e38 3e38\n-3.4e38 0 0\n1 2 3 200 10 10\n' >"$corpus/octo_insert/seed-odd-points"
+printf '\x03ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 0 0\n0 1e-30 0\n' >"$corpus/octo_insert/seed-ply"
+printf '\x11\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x60\x42\xa2\x8d\x60\x42\xa2\x8d\x60\x42\xa2\x8d\x01\x00\x00\x00\x01\x00\x00\x00\x01\x00\x00\x00' >"$corpus/octo_insert/seed-raw"
+
 echo "seeded $(find "$corpus" -name 'seed-*' | wc -l) files in $corpus"
