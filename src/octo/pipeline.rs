@@ -15,7 +15,7 @@
 //! whose errors name the option, the range with its unit, and what was found.
 
 use std::fs::File;
-use std::io::Write;
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
@@ -353,6 +353,39 @@ impl BuildConfig {
     }
 }
 
+/// Largest cloud, stream or map file read whole, bytes (1 GiB; a `.graph` streams, unbounded).
+pub const MAX_INPUT_BYTES: u64 = 1 << 30;
+
+/// Reads all of `input` up to `max_bytes`: a longer one (an endless one such as `/dev/zero`)
+/// is an error naming `name`, after reading `max_bytes + 1` bytes at most.
+pub fn read_limited(input: &mut dyn Read, name: &str, max_bytes: u64) -> Result<Vec<u8>, IoError> {
+    let mut data = Vec::new();
+    let read_err = |source| IoError::Read {
+        name: name.to_string(),
+        source,
+    };
+    input
+        .take(max_bytes.saturating_add(1))
+        .read_to_end(&mut data)
+        .map_err(read_err)?;
+    if data.len() as u64 > max_bytes {
+        return Err(read_err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("more than {max_bytes} bytes: not a file octo-delta reads whole"),
+        )));
+    }
+    Ok(data)
+}
+
+/// An input file (`-`: standard input) read whole, at most [`MAX_INPUT_BYTES`], and the name
+/// its errors carry.
+pub fn read_input(path: &Path) -> Result<(Vec<u8>, String), PipelineError> {
+    let mut input = Input::open(Some(path))?;
+    let name = input.name.clone();
+    let bytes = read_limited(input.reader(), &name, MAX_INPUT_BYTES)?;
+    Ok((bytes, name))
+}
+
 /// Checks a transfer's time between scans (0 ..= [`transfer::MAX_PERIOD_S`]).
 pub fn check_scan_period(period_s: f64) -> Result<f64, ConfigError> {
     check_range("--scan-period", period_s, 0.0, transfer::MAX_PERIOD_S, "s")
@@ -545,7 +578,7 @@ fn open_scans(path: &Path, cfg: &BuildConfig) -> Result<ScanSource, PipelineErro
         let n = stream.node_count() as usize;
         return Ok((Box::new(stream), n, InputFormat::Graph));
     }
-    let bytes = Input::open(Some(path))?.read_all()?;
+    let (bytes, _) = read_input(path)?;
     let format = cfg
         .format
         .or(by_name)
@@ -1074,6 +1107,18 @@ mod tests {
             err.to_string(),
             "m.ot: resolution: expected 0.0001 m ..= 1000 m, found 1e-10"
         );
+    }
+
+    #[test]
+    fn endless_inputs_are_cut_at_the_limit() {
+        let mut zeros = std::io::repeat(0);
+        let err = read_limited(&mut zeros, "/dev/zero", 1000).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "/dev/zero: read failed: more than 1000 bytes: not a file octo-delta reads whole"
+        );
+        let mut short: &[u8] = b"1 2 3\n";
+        assert_eq!(read_limited(&mut short, "x", 6).unwrap(), b"1 2 3\n");
     }
 
     #[test]

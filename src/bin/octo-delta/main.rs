@@ -13,7 +13,7 @@ use cli::{ApplyArgs, BuildArgs, Cli, Command, DumpArgs, FullArgs, SynthArgs};
 use rovlink::cli::output::{Dest, Kind, Outputs};
 use rovlink::cli::rows::{RowFormat, RowWriter};
 use rovlink::cli::{UsageError, progress, stop};
-use rovlink::io::{EXIT_OK, Input};
+use rovlink::io::EXIT_OK;
 use rovlink::octo::pipeline::{self, Hooks, SinkError, StatsRow};
 use rovlink::octo::{files, transfer};
 use rovlink::say;
@@ -37,8 +37,8 @@ fn claim_and_read(input: &Path, output: &Path, kind: Kind) -> Result<(Dest, Vec<
     let mut outs = Outputs::new();
     outs.input(Some(input));
     let dest = outs.claim("-o", output, kind)?;
-    let mut input = Input::open(Some(input))?;
-    Ok((dest, input.read_all()?, input.name.clone()))
+    let (bytes, name) = pipeline::read_input(input)?;
+    Ok((dest, bytes, name))
 }
 
 /// Writes a claimed whole-file output.
