@@ -30,7 +30,8 @@ struct Args {
     /// DEBT stream; `-` or nothing reads stdin.
     input: Option<PathBuf>,
 
-    /// Output image: PNG, or PPM/PGM by extension; `-` or nothing writes PNG to stdout.
+    /// Output image, its format by extension: .png, .jpg/.jpeg, .ppm (RGB), .pgm (grey),
+    /// .pnm (as decoded), .bmp, .tif/.tiff; `-` or nothing writes PNG to stdout.
     #[arg(short, long, value_name = "FILE")]
     output: Option<PathBuf>,
 
@@ -55,34 +56,13 @@ struct Args {
     erase: Vec<u64>,
 }
 
-/// Encodes the decoded image as PNG or, by the output's extension, binary PPM (P6) or PGM (P5):
-/// `.ppm` always RGB, `.pgm` always grey (luma), `.pnm` as decoded.
-fn write_image(img: &debt::Image, path: Option<&std::path::Path>) -> Result<Vec<u8>> {
-    let ext = path
-        .and_then(|p| p.extension())
-        .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
-    let channels = match ext.as_str() {
-        "ppm" => 3,
-        "pgm" => 1,
-        "pnm" => img.channels,
-        _ => return debt::picture::to_png(img).context("cannot encode the output image"),
-    };
-    let magic = if channels == 1 { "P5" } else { "P6" };
-    let mut bytes = format!("{magic}\n{} {}\n255\n", img.width, img.height).into_bytes();
-    match (img.channels, channels) {
-        (a, b) if a == b => bytes.extend_from_slice(&img.data),
-        (1, _) => bytes.extend(img.data.iter().flat_map(|&v| [v, v, v])),
-        _ => bytes.extend(
-            debt::metrics::luma(img)
-                .iter()
-                .map(|&v| (v.clamp(0.0, 255.0) + 0.5) as u8),
-        ),
-    }
-    Ok(bytes)
-}
-
 fn run(args: &Args) -> Result<u8> {
+    let format = match args.output.as_deref() {
+        Some(path) if !rovlink::io::is_std(Some(path)) => {
+            debt::picture::OutputFormat::for_path(path)?
+        }
+        _ => debt::picture::OutputFormat::Png,
+    };
     let mut input = Input::open(args.input.as_deref())?;
     let mut stream = input.read_all()?;
     if let Some(n) = args.bytes {
@@ -104,7 +84,7 @@ fn run(args: &Args) -> Result<u8> {
         }
     }
     let img = debt::decode_with_loss(&stream, &lost).with_context(|| input.name.clone())?;
-    let bytes = write_image(&img, args.output.as_deref())?;
+    let bytes = debt::picture::encode(&img, format)?;
     let mut out = Output::open(args.output.as_deref(), true)?;
     out.write_bytes(&bytes)?;
     out.finish()?;

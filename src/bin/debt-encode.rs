@@ -9,7 +9,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use rovlink::debt::{self, EncodeOptions, Rect, metrics};
-use rovlink::io::{EXIT_OK, Input, Output};
+use rovlink::io::{EXIT_OK, Output};
 
 /// The tool's name, prefixed to everything it says on stderr.
 const TOOL: &str = "debt-encode";
@@ -109,10 +109,10 @@ fn parse_rect(text: &str) -> Result<Rect, String> {
 
 /// Reads any image the `image` crate knows into 8-bit grey or RGB.
 fn read_image(input: Option<&std::path::Path>) -> Result<debt::Image> {
-    let mut src = Input::open(input)?;
-    let bytes = src.read_all()?;
-    debt::picture::from_file_bytes(&bytes)
-        .with_context(|| format!("{}: not a readable image", src.name))
+    Ok(match input {
+        Some(path) if !rovlink::io::is_std(Some(path)) => debt::picture::open(path)?,
+        _ => debt::picture::read("<stdin>", std::io::stdin().lock())?,
+    })
 }
 
 impl Args {
@@ -206,7 +206,7 @@ fn sweep(args: &Args) -> Result<u8> {
                 .with_context(|| format!("{image_name}: decoding its own stream"))?;
             let decode_ms = started.elapsed().as_secs_f64() * 1e3;
             let reference = if decoded.channels == 1 && img.channels == 3 {
-                to_gray(&img)
+                debt::picture::to_gray(&img)
             } else {
                 img.clone()
             };
@@ -230,20 +230,6 @@ fn sweep(args: &Args) -> Result<u8> {
         eprintln!();
     }
     Ok(EXIT_OK)
-}
-
-/// The luma of a colour image, as the decoder of a --gray stream gives it back.
-fn to_gray(img: &debt::Image) -> debt::Image {
-    let data = metrics::luma(img)
-        .iter()
-        .map(|v| v.round().clamp(0.0, 255.0) as u8)
-        .collect();
-    debt::Image {
-        width: img.width,
-        height: img.height,
-        channels: 1,
-        data,
-    }
 }
 
 fn run(args: &Args) -> Result<u8> {
