@@ -431,7 +431,9 @@ fn bad_summary_path_fails_before_any_output() {
     );
     assert_eq!(out.code, 2);
     assert!(
-        out.stderr.contains("/nonexistent/dir/s.json: cannot open"),
+        out.stderr.contains(
+            "--summary: cannot create /nonexistent/dir/s.json: /nonexistent/dir does not exist"
+        ),
         "{}",
         out.stderr
     );
