@@ -365,7 +365,7 @@ fn output_to_a_directory_fails_cleanly() {
     );
     assert_eq!(out.code, 2);
     assert!(
-        out.stderr.contains("cannot open: is a directory"),
+        out.stderr.contains("is a directory, expected a file"),
         "{}",
         out.stderr
     );
