@@ -15,6 +15,9 @@
 //! truncates one segment (one horizontal stripe of the image loses detail) instead of the whole
 //! rest of the stream. The bitstream is described in `docs/debt-format.md`.
 //!
+//! Around the codec: [`picture`] reads and writes picture files, [`metrics`] measures quality,
+//! [`trial`] runs the compression trials of `debt-encode --sweep`.
+//!
 //! No-panic contract: [`decode`] returns an [`Error`] for a stream that is not DEBT and decodes
 //! any other bytes, truncated or corrupt, to some image without panicking.
 
@@ -22,6 +25,7 @@ pub mod coder;
 pub mod metrics;
 pub mod picture;
 pub mod rangecoder;
+pub mod trial;
 pub mod wavelet;
 
 use coder::{Band, BitCoder, Decoder, Encoder};
