@@ -127,6 +127,16 @@ fn empty_random_and_truncated_inputs() {
     let cut = jsonl.iter().position(|&b| b == b'\n').unwrap() + 20;
     s.check(PACK, &["-o", "p.bin"], &jsonl[..cut], &[2]);
     assert!(!s.path("p.bin").exists());
+    // Endless inputs are refused at a bound, not read whole.
+    for (bin, args) in [
+        (ENCODE, vec!["/dev/zero", "-b", "100", "-o", "z.debt"]),
+        (DECODE, vec!["/dev/zero", "-o", "z.png"]),
+        (PACK, vec!["/dev/zero", "-o", "z.bin"]),
+        (PACK, vec!["--image", "/dev/zero", "-o", "z.bin"]),
+    ] {
+        let run = s.check(bin, &args, b"", &[2]);
+        assert!(run.stderr.contains("/dev/zero"), "{args:?}: {}", run.stderr);
+    }
     // A stream claiming a 512 x 512 picture, garbage after its header: decodes.
     let mut big = vec![0xd1, 0x1f, 0xf1, 0xff, 0x38];
     big.extend(garbage(300, 9));

@@ -129,6 +129,9 @@ pub const MIN_TRUNK_BYTES: usize = 16;
 const MAGIC: u8 = 0xd0;
 /// The largest width or height.
 pub const MAX_SIDE: usize = 4096;
+/// Longer than any stream of a [`MAX_SIDE`]-square picture, even lossless: what a reader of
+/// streams may refuse beyond.
+pub const MAX_STREAM_BYTES: u64 = 256 << 20;
 /// Bits of fraction kept below the weighted coefficient's unit (finest quantiser step 1/4).
 const FRACTION_BITS: u32 = 2;
 /// Where in its uncertainty interval a partly known coefficient is put back (0.5 = middle;

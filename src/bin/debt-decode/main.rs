@@ -3,10 +3,11 @@
 
 mod cli;
 
+use std::io::Read;
 use std::path::Path;
 use std::process::ExitCode;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use cli::Args;
 use rovlink::cli::output::{Dest, Kind, Outputs};
 use rovlink::debt::{self, picture::OutputFormat};
@@ -29,9 +30,20 @@ fn run(args: &Args) -> Result<u8> {
     };
     let mut out = dest.open()?;
     let mut input = Input::open(args.input.as_deref())?;
-    let mut stream = input.read_all()?;
-    if let Some(n) = args.bytes {
-        stream.truncate(usize::try_from(n).unwrap_or(usize::MAX));
+    // Read up to a bound (and only the bytes asked for), so that an endless input is refused.
+    let most = args
+        .bytes
+        .unwrap_or(u64::MAX)
+        .min(debt::MAX_STREAM_BYTES + 1);
+    let mut stream = Vec::new();
+    (input.reader().take(most).read_to_end(&mut stream))
+        .with_context(|| format!("{}: read failed", input.name))?;
+    if stream.len() as u64 > debt::MAX_STREAM_BYTES {
+        bail!(
+            "{}: more than {} MiB: longer than any DEBT stream",
+            input.name,
+            debt::MAX_STREAM_BYTES >> 20
+        );
     }
     let mut lost = Vec::new();
     if let (Some(trunk), Some(erased)) = (args.trunk_size, &args.erase) {

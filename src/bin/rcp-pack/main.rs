@@ -3,7 +3,7 @@
 
 mod cli;
 
-use std::io::BufRead;
+use std::io::{BufRead, Read};
 use std::path::Path;
 use std::process::ExitCode;
 
@@ -17,6 +17,9 @@ use rovlink::wire::{Message, MessageRepr, frame, json, rov};
 
 /// The tool's name, prefixed to everything it says on stderr.
 const TOOL: &str = "rcp-pack";
+
+/// The longest input line read: far above any message's JSON.
+const MAX_LINE_BYTES: usize = 64 * 1024;
 
 /// Writes one message's frame in the chosen form.
 fn put(out: &mut Output, repr: &MessageRepr, hex: bool) -> Result<()> {
@@ -35,11 +38,22 @@ fn put(out: &mut Output, repr: &MessageRepr, hex: bool) -> Result<()> {
 fn pack_lines(args: &Args, out: &mut Output) -> Result<u8> {
     let mut input = Input::open(args.input.as_deref())?;
     let name = input.name.clone();
-    let reader = std::io::BufReader::new(input.reader());
+    let mut reader = std::io::BufReader::new(input.reader());
     let (mut bad, mut frames) = (0usize, 0usize);
-    for (index, line) in reader.split(b'\n').enumerate() {
-        let number = index + 1;
-        let line = line.with_context(|| format!("{name}: read failed"))?;
+    let mut line = Vec::new();
+    for number in 1.. {
+        line.clear();
+        // A line is read up to a bound, so that a stream without newlines is not held whole.
+        (&mut reader)
+            .take(MAX_LINE_BYTES as u64 + 1)
+            .read_until(b'\n', &mut line)
+            .with_context(|| format!("{name}: read failed"))?;
+        if line.is_empty() {
+            break;
+        }
+        if line.len() > MAX_LINE_BYTES && line.last() != Some(&b'\n') {
+            bail!("{name}:{number}: longer than {MAX_LINE_BYTES} bytes: not a message");
+        }
         let parsed = std::str::from_utf8(&line)
             .map_err(|e| anyhow::anyhow!("not UTF-8 at byte {}", e.valid_up_to()))
             .and_then(|text| match text.trim() {
@@ -68,10 +82,20 @@ fn pack_lines(args: &Args, out: &mut Output) -> Result<u8> {
 
 fn pack_image(args: &Args, path: &Path, out: &mut Output) -> Result<u8> {
     let mut input = Input::open(Some(path))?;
-    let data = input.read_all()?;
+    let most = rovlink::rcp::MAX_TRUNKS * rov::MAX_TRUNK_BYTES;
+    let mut data = Vec::new();
+    (input.reader().take(most as u64 + 1).read_to_end(&mut data))
+        .with_context(|| format!("{}: read failed", input.name))?;
     let trunk = args.trunk.unwrap_or(39) as usize;
     if data.is_empty() {
         bail!("{}: empty file, nothing to cut into trunks", input.name);
+    }
+    if data.len() > most {
+        bail!(
+            "{}: more than {most} bytes: not even 64 trunks of {} bytes hold it",
+            input.name,
+            rov::MAX_TRUNK_BYTES
+        );
     }
     let trunks = rovlink::rcp::cut_trunks(&data, trunk).map_err(|smallest| {
         anyhow::anyhow!(
