@@ -507,3 +507,80 @@ fn issue_14_defects_stay_fixed() {
         run.stderr
     );
 }
+
+#[test]
+fn rcp_dump_reads_tcp_and_udp_ports() {
+    use std::io::Read;
+    use std::process::{Command, Stdio};
+    let frames = common::vector_frames();
+    // TCP: the console closes after the frames: everything printed, exit 1 (port closed).
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let device = format!("tcp:{}", listener.local_addr().unwrap());
+    let mut child = Command::new(DUMP)
+        .args(["--port", &device, "-q", "-f", "ndjson"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (mut console, _) = listener.accept().unwrap();
+    for f in &frames {
+        console.write_all(f).unwrap();
+    }
+    drop(console);
+    let status = common::wait_for_exit(&mut child, LIMIT);
+    let mut out = String::new();
+    child
+        .stdout
+        .take()
+        .unwrap()
+        .read_to_string(&mut out)
+        .unwrap();
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    assert_eq!(status.code(), Some(1), "{err}");
+    assert!(err.contains("port closed"), "{err}");
+    assert_eq!(out.lines().count(), frames.len(), "{out}");
+    // UDP: one frame per datagram until SIGINT, exit 0.
+    let free = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let bind = free.local_addr().unwrap();
+    drop(free);
+    let sender = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let device = format!("udp:{bind}={}", sender.local_addr().unwrap());
+    let mut child = Command::new(DUMP)
+        .args(["--port", &device, "-f", "csv"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
+    let mut first = String::new();
+    std::io::BufRead::read_line(&mut stderr, &mut first).unwrap();
+    assert!(first.contains("until it closes or Ctrl-C"), "{first}");
+    for f in &frames {
+        sender.send_to(f, bind).unwrap();
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(child.id() as i32),
+        Signal::SIGINT,
+    )
+    .unwrap();
+    let status = common::wait_for_exit(&mut child, LIMIT);
+    let mut out = String::new();
+    child
+        .stdout
+        .take()
+        .unwrap()
+        .read_to_string(&mut out)
+        .unwrap();
+    let mut err = String::new();
+    stderr.read_to_string(&mut err).unwrap();
+    assert_eq!(status.code(), Some(0), "{err}");
+    assert_eq!(out.lines().count(), frames.len() + 1, "{out}");
+    assert!(err.contains("5 frames ok"), "{err}");
+}
