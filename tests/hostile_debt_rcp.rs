@@ -584,3 +584,24 @@ fn rcp_dump_reads_tcp_and_udp_ports() {
     assert_eq!(out.lines().count(), frames.len() + 1, "{out}");
     assert!(err.contains("5 frames ok"), "{err}");
 }
+
+#[test]
+fn a_sweep_takes_a_directory_of_pictures() {
+    let s = Scratch::new();
+    std::fs::create_dir(s.path("pics")).unwrap();
+    std::fs::copy(s.path("in.png"), s.path("pics/b.png")).unwrap();
+    std::fs::copy(testdata("peppers-gray-64.png"), s.path("pics/a.png")).unwrap();
+    std::fs::write(s.path("pics/notes.txt"), "not a picture").unwrap();
+    let run = s.check(ENCODE, &["--sweep", "200,300", "pics"], b"", &[0]);
+    let text = String::from_utf8_lossy(&run.stdout).into_owned();
+    let images: Vec<&str> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap())
+        .collect();
+    assert_eq!(
+        images,
+        ["pics/a.png", "pics/a.png", "pics/b.png", "pics/b.png"],
+        "{text}"
+    );
+}

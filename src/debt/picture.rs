@@ -220,18 +220,8 @@ pub fn load(path: &Path) -> Result<Vec<(PathBuf, Image)>, PictureError> {
     if !path.is_dir() {
         return Ok(vec![(path.to_path_buf(), open(path)?)]);
     }
-    let entries = std::fs::read_dir(path).map_err(|source| PictureError::Read {
-        name: name.clone(),
-        source,
-    })?;
-    let mut files: Vec<PathBuf> = entries
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.is_file())
-        .collect();
-    files.sort();
     let mut pictures = Vec::new();
-    for file in files {
+    for file in files_in(path)? {
         match open(&file) {
             Ok(img) => pictures.push((file, img)),
             Err(PictureError::Format { .. }) => {}
@@ -242,6 +232,21 @@ pub fn load(path: &Path) -> Result<Vec<(PathBuf, Image)>, PictureError> {
         return Err(PictureError::NoImage { name });
     }
     Ok(pictures)
+}
+
+/// The files of a directory (not its subdirectories), sorted by name: what [`load`] tries.
+pub fn files_in(dir: &Path) -> Result<Vec<PathBuf>, PictureError> {
+    let entries = std::fs::read_dir(dir).map_err(|source| PictureError::Read {
+        name: dir.display().to_string(),
+        source,
+    })?;
+    let mut files: Vec<PathBuf> = entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.is_file())
+        .collect();
+    files.sort();
+    Ok(files)
 }
 
 /// One 8-bit sample from a computed value: to nearest, halves up, clamped to 0..=255.

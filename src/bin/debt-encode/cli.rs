@@ -34,7 +34,8 @@ pub type Budgets = Vec<u64>;
 #[command(version, after_help = EXAMPLES)]
 pub struct Args {
     /// Image file (PNG, JPEG, PNM, BMP, TIFF, GIF, WebP, TGA, QOI; at most 4096 pixels a
-    /// side); `-` or nothing reads stdin. With --sweep, any number of images.
+    /// side); `-` or nothing reads stdin. With --sweep, any number of images, a directory
+    /// standing for the pictures in it.
     pub inputs: Vec<PathBuf>,
 
     /// Output file (written whole or not at all); `-` or nothing writes stdout.

@@ -52,15 +52,33 @@ fn sweep(args: &Args, budgets: &[u64], outs: &mut Outputs) -> Result<u8> {
         &trial::COLUMNS,
     );
     stop::install()?;
-    let inputs: Vec<Option<&Path>> = if args.inputs.is_empty() {
-        vec![None]
-    } else {
-        args.inputs.iter().map(|p| Some(p.as_path())).collect()
-    };
+    // A directory stands for the pictures in it (files that are not pictures are skipped).
+    let mut inputs: Vec<(Option<PathBuf>, bool)> = Vec::new();
+    for path in &args.inputs {
+        match path.is_dir() {
+            true => inputs.extend(
+                picture::files_in(path)?
+                    .into_iter()
+                    .map(|f| (Some(f), true)),
+            ),
+            false => inputs.push((Some(path.clone()), false)),
+        }
+    }
+    if args.inputs.is_empty() {
+        inputs.push((None, false));
+    }
     let total = (inputs.len() * budgets.len()) as u64;
     let bar = progress::bar(false, total, "{pos}/{len} trials [{bar:30}] {msg}");
-    'images: for input in &inputs {
-        let (img, name) = load(args, *input)?;
+    'images: for (input, in_dir) in &inputs {
+        let (img, name) = match load(args, input.as_deref()) {
+            Err(e)
+                if *in_dir
+                    && matches!(e.downcast_ref(), Some(picture::PictureError::Format { .. })) =>
+            {
+                continue;
+            }
+            loaded => loaded?,
+        };
         bar.set_message(name.clone());
         for &budget in budgets {
             if stop::requested() {
@@ -77,7 +95,7 @@ fn sweep(args: &Args, budgets: &[u64], outs: &mut Outputs) -> Result<u8> {
     let done = rows.rows();
     rows.finish()?;
     if let Some(note) = stop::note() {
-        say!("{done} of {total} trials written ({note})");
+        say!("{done} trials written ({note})");
     }
     Ok(stop::code_or(EXIT_OK))
 }
