@@ -166,9 +166,20 @@ pub fn from_bytes(name: &str, bytes: &[u8]) -> Result<Image, PictureError> {
     limits.max_image_height = Some(MAX_PICTURE_SIDE as u32);
     let mut decoding = reader()?;
     decoding.limits(limits);
-    let decoded = decoding.decode().map_err(|e| format_error(&e))?;
+    Ok(to_image(decoding.decode().map_err(|e| format_error(&e))?))
+}
+
+/// Decodes a picture file's bytes into 8-bit grey or RGB whatever its size (within the image
+/// crate's default memory limit), for callers that check the dimensions themselves and scale
+/// large pictures down (the ROV's camera); [`from_bytes`] refuses them instead.
+pub fn from_file_bytes(bytes: &[u8]) -> Result<Image, image::ImageError> {
+    Ok(to_image(image::load_from_memory(bytes)?))
+}
+
+/// A decoded picture as grey (one channel) if it has no colour, else RGB.
+fn to_image(decoded: image::DynamicImage) -> Image {
     let (width, height) = (decoded.width() as usize, decoded.height() as usize);
-    Ok(if decoded.color().has_color() {
+    if decoded.color().has_color() {
         Image {
             width,
             height,
@@ -182,7 +193,7 @@ pub fn from_bytes(name: &str, bytes: &[u8]) -> Result<Image, PictureError> {
             channels: 1,
             data: decoded.into_luma8().into_raw(),
         }
-    })
+    }
 }
 
 /// Reads a picture from any reader (standard input, say), at most [`MAX_INPUT_BYTES`].
@@ -206,11 +217,13 @@ pub fn read(name: &str, reader: impl Read) -> Result<Image, PictureError> {
 /// Reads a picture file.
 pub fn open(path: &Path) -> Result<Image, PictureError> {
     let name = path.display().to_string();
-    let file = std::fs::File::open(path).map_err(|source| PictureError::Read {
-        name: name.clone(),
-        source,
-    })?;
-    read(&name, file)
+    match crate::io::read_at_most(path, MAX_INPUT_BYTES) {
+        Ok(bytes) => from_bytes(&name, &bytes),
+        Err(e) if e.kind() == std::io::ErrorKind::InvalidData => {
+            Err(PictureError::TooManyBytes { name })
+        }
+        Err(source) => Err(PictureError::Read { name, source }),
+    }
 }
 
 /// The pictures a path names: the file itself, or every readable picture in a directory

@@ -3,7 +3,6 @@
 
 mod cli;
 
-use std::io::Read;
 use std::path::Path;
 use std::process::ExitCode;
 
@@ -43,12 +42,14 @@ fn pack_lines(args: &Args, out: &mut Output) -> Result<u8> {
 }
 
 fn pack_image(args: &Args, path: &Path, out: &mut Output) -> Result<u8> {
-    let mut input = Input::open(Some(path))?;
+    let name = path.display().to_string();
     // Read up to a bound: a file longer than any image's trunks is refused, not held whole.
-    let mut data = Vec::new();
-    (input.reader().take(pack::MAX_IMAGE_BYTES as u64 + 1))
-        .read_to_end(&mut data)
-        .with_context(|| format!("{}: read failed", input.name))?;
+    let data = match rovlink::io::read_at_most(path, pack::MAX_IMAGE_BYTES as u64) {
+        Err(e) if e.kind() == std::io::ErrorKind::InvalidData => {
+            Err(pack::ImageError::TooLarge).with_context(|| name.clone())?
+        }
+        read => read.with_context(|| format!("{name}: cannot read"))?,
+    };
     let trunk = args.trunk.unwrap_or(39) as usize;
     let (src, dst, isn) = (
         args.src.unwrap_or(1),
@@ -56,7 +57,7 @@ fn pack_image(args: &Args, path: &Path, out: &mut Output) -> Result<u8> {
         args.isn == Some(1),
     );
     let messages =
-        pack::image_messages(&data, trunk, src, dst, isn).with_context(|| input.name.clone())?;
+        pack::image_messages(&data, trunk, src, dst, isn).with_context(|| name.clone())?;
     for repr in &messages {
         out.write_bytes(&pack::frame(repr, args.hex)?)?;
     }
