@@ -121,9 +121,10 @@ fn bad_inputs_are_clear_errors_without_output() {
     );
     assert!(!out.exists());
 
+    let picture = dir.path().join("out.png");
     let dec = run(
         DECODE,
-        &["-o", out.to_str().unwrap()],
+        &["-o", picture.to_str().unwrap()],
         b"\x55\x10\x11 not debt",
     );
     assert_eq!(dec.code, 2);
@@ -132,7 +133,7 @@ fn bad_inputs_are_clear_errors_without_output() {
         "{}",
         dec.stderr
     );
-    assert!(!out.exists());
+    assert!(!picture.exists());
     let version = run(DECODE, &[], b"\xd9\x00\x00\x00\x00");
     assert!(
         version.stderr.contains("DEBT version 9 is not supported"),

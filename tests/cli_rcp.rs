@@ -365,7 +365,7 @@ fn output_to_a_directory_fails_cleanly() {
     );
     assert_eq!(out.code, 2);
     assert!(
-        out.stderr.contains("cannot open: is a directory"),
+        out.stderr.contains("is a directory, expected a file"),
         "{}",
         out.stderr
     );
@@ -431,7 +431,9 @@ fn bad_summary_path_fails_before_any_output() {
     );
     assert_eq!(out.code, 2);
     assert!(
-        out.stderr.contains("/nonexistent/dir/s.json: cannot open"),
+        out.stderr.contains(
+            "--summary: cannot create /nonexistent/dir/s.json: /nonexistent/dir does not exist"
+        ),
         "{}",
         out.stderr
     );

@@ -15,6 +15,9 @@
 //! truncates one segment (one horizontal stripe of the image loses detail) instead of the whole
 //! rest of the stream. The bitstream is described in `docs/debt-format.md`.
 //!
+//! Around the codec: [`picture`] reads and writes picture files, [`metrics`] measures quality,
+//! [`trial`] runs the compression trials of `debt-encode --sweep`.
+//!
 //! No-panic contract: [`decode`] returns an [`Error`] for a stream that is not DEBT and decodes
 //! any other bytes, truncated or corrupt, to some image without panicking.
 
@@ -22,6 +25,7 @@ pub mod coder;
 pub mod metrics;
 pub mod picture;
 pub mod rangecoder;
+pub mod trial;
 pub mod wavelet;
 
 use coder::{Band, BitCoder, Decoder, Encoder};
@@ -82,6 +86,26 @@ pub enum Error {
         /// Image height.
         height: usize,
     },
+    /// A byte budget smaller than the header that must start the stream.
+    #[error("bytes: expected at least the header ({header} bytes), found {found}")]
+    Budget {
+        /// The budget asked for.
+        found: usize,
+        /// Bytes the header takes.
+        header: usize,
+    },
+    /// A segmented stream whose header does not fit in its first trunk (the format puts the
+    /// whole header in trunk 0).
+    #[error(
+        "a segmented header of {header} bytes does not fit in the first {trunk}-byte trunk: \
+         trunks of at least {header} bytes, or fewer segments, are needed"
+    )]
+    HeaderTrunk {
+        /// Bytes the header takes.
+        header: usize,
+        /// The trunk size.
+        trunk: usize,
+    },
     /// A setting out of range.
     #[error("{field}: expected {expected}, found {found}")]
     Setting {
@@ -105,6 +129,9 @@ pub const MIN_TRUNK_BYTES: usize = 16;
 const MAGIC: u8 = 0xd0;
 /// The largest width or height.
 pub const MAX_SIDE: usize = 4096;
+/// Longer than any stream of a [`MAX_SIDE`]-square picture, even lossless: what a reader of
+/// streams may refuse beyond.
+pub const MAX_STREAM_BYTES: u64 = 256 << 20;
 /// Bits of fraction kept below the weighted coefficient's unit (finest quantiser step 1/4).
 const FRACTION_BITS: u32 = 2;
 /// Where in its uncertainty interval a partly known coefficient is put back (0.5 = middle;
@@ -207,27 +234,32 @@ impl SegmentLayout {
     /// byte range in the stream and the segment it carries, in stream order. Trunk `k` is
     /// chunk `k` (less the header in trunk 0); trunks go to segments by smooth weighted round
     /// robin: each trunk, every segment gains its weight in credit, the segment with the most
-    /// credit (the first on ties) takes the trunk and pays the total weight.
-    fn chunks(&self, header_bytes: usize, total_bytes: usize) -> Vec<(Range<usize>, usize)> {
-        let trunk = self.segments.trunk_bytes;
-        let weights = &self.weights[..=self.segments.count];
-        let total_weight: i64 = weights.iter().map(|&w| i64::from(w)).sum();
+    /// credit (the first on ties) takes the trunk and pays the total weight. Lazy, so that an
+    /// encoder can stop early; a range is never inverted (a trunk inside the header is empty).
+    fn chunks(
+        &self,
+        header_bytes: usize,
+        total_bytes: usize,
+    ) -> impl Iterator<Item = (Range<usize>, usize)> + use<> {
+        let trunk = self.segments.trunk_bytes.max(1);
+        let count = self.segments.count;
+        let weights = self.weights;
+        let total_weight: i64 = weights[..=count].iter().map(|&w| i64::from(w)).sum();
         let mut credit = [0i64; MAX_SEGMENTS + 1];
-        (0..total_bytes.div_ceil(trunk))
-            .map(|k| {
-                let mut best = 0;
-                for (i, &w) in weights.iter().enumerate() {
-                    credit[i] += i64::from(w);
-                    // Trunk 0, with the header, always carries the base.
-                    if k > 0 && credit[i] > credit[best] {
-                        best = i;
-                    }
+        (0..total_bytes.div_ceil(trunk)).map(move |k| {
+            let mut best = 0;
+            for (i, &w) in weights[..=count].iter().enumerate() {
+                credit[i] += i64::from(w);
+                // Trunk 0, with the header, always carries the base.
+                if k > 0 && credit[i] > credit[best] {
+                    best = i;
                 }
-                credit[best] -= total_weight;
-                let range = (k * trunk).max(header_bytes)..((k + 1) * trunk).min(total_bytes);
-                (range, best)
-            })
-            .collect()
+            }
+            credit[best] -= total_weight;
+            let start = k.saturating_mul(trunk);
+            let end = start.saturating_add(trunk).min(total_bytes);
+            (start.max(header_bytes).min(end)..end, best)
+        })
     }
 }
 
@@ -398,8 +430,20 @@ impl Header {
             let mut weights = [0; MAX_SEGMENTS + 1];
             weights[..=segments.count].copy_from_slice(read);
             header.segments = Some(SegmentLayout { segments, weights });
+            header.check_trunk()?;
         }
         Ok(header)
+    }
+
+    /// A segmented header must fit in trunk 0 (a lost trunk 1 would otherwise lose it).
+    fn check_trunk(&self) -> Result<(), Error> {
+        match self.segments {
+            Some(layout) if self.len() > layout.segments.trunk_bytes => Err(Error::HeaderTrunk {
+                header: self.len(),
+                trunk: layout.segments.trunk_bytes,
+            }),
+            _ => Ok(()),
+        }
     }
 
     /// Size of the coded (downscaled) image.
@@ -847,13 +891,15 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
     if let Some(seg) = options.segments {
         seg.check()?;
     }
-    let mut out = Vec::with_capacity(options.bytes);
+    header.check_trunk()?;
+    // Nothing is allocated from the budget: a stream grows with what the image needs, and
+    // stops when it is complete (a budget of 2^64 - 1 bytes is as good as unbounded).
+    let mut out = Vec::with_capacity(header.len());
     header.write(&mut out);
     if options.bytes < out.len() {
-        return Err(Error::Setting {
-            field: "bytes",
-            expected: "at least the header (5 bytes, 8 with a ROI)",
-            found: options.bytes as u64,
+        return Err(Error::Budget {
+            found: options.bytes,
+            header: out.len(),
         });
     }
     let (w, h) = header.coded_size();
@@ -875,19 +921,31 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
     let budget = options.bytes.saturating_sub(header_bytes);
     let mut streams = Vec::with_capacity(count);
     let mut ends = Vec::with_capacity(count);
+    let mut all_complete = true;
     for part in 0..count {
         let (bands, _) = build_bands(&header, Some(&planes), part, count);
-        let (mut payload, complete, marks) = encode_bands(bands, budget);
+        let (payload, complete, marks) = encode_bands(bands, budget);
         ends.push(pass_ends(&marks, complete));
-        // A complete stream ends in zeros anyway: padded, every segment fills any share.
-        payload.resize(budget, 0);
+        all_complete &= complete;
         streams.push(payload);
     }
-    let shares = split_budget(&ends, budget);
-    let largest = shares.iter().copied().max().unwrap_or(1).max(1);
+    // When every segment is complete the image needs no more than their sum: a larger budget
+    // would only pad, so the stream stops once every segment has had its bytes.
+    // Each then gets weight for the whole trunks it fills, so that small segments get their
+    // trunks early instead of once per round of the large ones.
+    let trunk = layout.segments.trunk_bytes;
+    let shares = if all_complete {
+        streams
+            .iter()
+            .map(|s| s.len().div_ceil(trunk).max(1) * trunk)
+            .collect()
+    } else {
+        split_budget(&ends, budget)
+    };
+    let largest = shares.iter().copied().max().unwrap_or(1).max(1) as u128;
     let mut weights = [0u8; MAX_SEGMENTS + 1];
     for (w, &share) in weights.iter_mut().zip(&shares) {
-        *w = (share * 255).div_ceil(largest).clamp(1, 255) as u8;
+        *w = (share as u128 * 255).div_ceil(largest).clamp(1, 255) as u8;
     }
     let layout = SegmentLayout {
         segments: layout.segments,
@@ -899,11 +957,24 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
     };
     out.clear();
     header.write(&mut out);
-    let chunks = layout.chunks(header_bytes, options.bytes);
+    // Past its end a segment's trunks are zeros (a complete stream ends in zeros anyway).
     let mut taken = vec![0; count];
-    for (range, part) in chunks {
-        out.extend_from_slice(&streams[part][taken[part]..][..range.len()]);
+    let mut needed_end = out.len();
+    for (range, part) in layout.chunks(header_bytes, options.bytes) {
+        if all_complete && taken.iter().zip(&streams).all(|(&t, s)| t >= s.len()) {
+            break;
+        }
+        let stream = streams[part].get(taken[part]..).unwrap_or_default();
+        let real = stream.len().min(range.len());
+        out.extend_from_slice(&stream[..real]);
+        out.resize(out.len() + range.len() - real, 0);
         taken[part] += range.len();
+        if real > 0 {
+            needed_end = range.start + real;
+        }
+    }
+    if all_complete {
+        out.truncate(needed_end);
     }
     Ok(out)
 }
@@ -1240,7 +1311,7 @@ mod tests {
         // Every trunk carries one segment; the base has trunk 0 and each segment some trunks.
         let header = Header::read(&stream).unwrap();
         let layout = header.segments.unwrap();
-        let chunks = layout.chunks(header.len(), stream.len());
+        let chunks: Vec<_> = layout.chunks(header.len(), stream.len()).collect();
         assert_eq!(chunks.len(), 1500usize.div_ceil(trunk));
         assert_eq!(chunks[0], (header.len()..trunk, 0));
         for part in 0..=4 {
@@ -1272,6 +1343,147 @@ mod tests {
         // A cut segmented stream still decodes, and better with more bytes.
         let short = psnr(&img, &decode(&stream[..400]).unwrap());
         assert!(short < whole && short > 10.0, "{short}");
+    }
+
+    #[test]
+    // Lists of one lost range are what this test means, not ranges meant as lists.
+    #[allow(clippy::single_range_in_vec_init)]
+    fn segmented_header_longer_than_a_trunk_is_refused_not_a_panic() {
+        // debt-encode -b 600 --segments 16 --trunk-size 16 wrote a 24-byte header into 16-byte
+        // trunks, and the decoder panicked on it (issue 14).
+        let img = synthetic(64, 48, 3);
+        let options = |count, trunk_bytes| EncodeOptions {
+            bytes: 600,
+            segments: Some(Segments { count, trunk_bytes }),
+            ..Default::default()
+        };
+        assert_eq!(
+            encode(&img, &options(16, 16)),
+            Err(Error::HeaderTrunk {
+                header: 24,
+                trunk: 16
+            })
+        );
+        // Such a stream, however made, is refused by the decoder.
+        let mut weights = [0; MAX_SEGMENTS + 1];
+        weights.fill(1);
+        let header = Header {
+            width: 64,
+            height: 48,
+            gray: false,
+            lossless: false,
+            levels: 3,
+            scale: 0,
+            roi: None,
+            segments: Some(SegmentLayout {
+                segments: Segments {
+                    count: 16,
+                    trunk_bytes: 16,
+                },
+                weights,
+            }),
+        };
+        let mut stream = Vec::new();
+        header.write(&mut stream);
+        stream.resize(600, 0x5a);
+        assert_eq!(
+            decode(&stream),
+            Err(Error::HeaderTrunk {
+                header: 24,
+                trunk: 16
+            })
+        );
+        assert!(decode_with_loss(&stream, &[16..32]).is_err());
+        // A header exactly one trunk long fits: trunk 0 carries only the header.
+        let stream = encode(&img, &options(16, 24)).unwrap();
+        assert_eq!(stream.len(), 600);
+        let whole = psnr(&img, &decode(&stream).unwrap());
+        let lossy = psnr(&img, &decode_with_loss(&stream, &[48..72]).unwrap());
+        assert!(whole > 15.0 && lossy > 10.0, "{whole} {lossy}");
+    }
+
+    #[test]
+    fn huge_budgets_are_capped_at_what_the_image_uses() {
+        // -b 18446744073709551615 overflowed a capacity and -b 30000000000 aborted allocating
+        // (issue 14): a budget is never allocated, the stream stops when complete.
+        let img = synthetic(64, 48, 3);
+        for bytes in [usize::MAX, 30_000_000_000] {
+            for (lossless, segments) in [
+                (false, None),
+                (true, None),
+                (
+                    false,
+                    Some(Segments {
+                        count: 4,
+                        trunk_bytes: 39,
+                    }),
+                ),
+                (
+                    true,
+                    Some(Segments {
+                        count: 16,
+                        trunk_bytes: 255,
+                    }),
+                ),
+            ] {
+                let options = EncodeOptions {
+                    bytes,
+                    lossless,
+                    segments,
+                    ..Default::default()
+                };
+                let stream = encode(&img, &options).unwrap();
+                assert!(
+                    stream.len() < 64 * 48 * 3 + 17 * 255,
+                    "{bytes} lossless {lossless} {segments:?}: {} bytes",
+                    stream.len()
+                );
+                let out = decode(&stream).unwrap();
+                if lossless {
+                    assert_eq!(out, img, "{segments:?}");
+                } else {
+                    assert!(psnr(&img, &out) > 40.0, "{segments:?}");
+                }
+            }
+        }
+        // A capped segmented stream keeps what each segment needs: not shorter than any
+        // complete budget, and no longer than the segments' sum plus a trunk per segment.
+        let seg = Some(Segments {
+            count: 2,
+            trunk_bytes: 39,
+        });
+        let capped = encode(
+            &img,
+            &EncodeOptions {
+                bytes: usize::MAX,
+                segments: seg,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let padded = encode(
+            &img,
+            &EncodeOptions {
+                bytes: capped.len() + 1000,
+                segments: seg,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(decode(&capped).unwrap(), decode(&padded).unwrap());
+        assert_eq!(
+            encode(
+                &img,
+                &EncodeOptions {
+                    bytes: 4,
+                    ..Default::default()
+                }
+            ),
+            Err(Error::Budget {
+                found: 4,
+                header: 5
+            })
+        );
     }
 
     #[test]

@@ -1,14 +1,185 @@
-//! Image files to and from the codec's [`Image`]: any format the `image` crate reads, PNG out.
+//! Picture files to and from the codec's [`Image`]: the one image loader of the toolkit.
 //!
-//! Reading keeps grey pictures grey (one channel) and turns everything else into 8-bit RGB.
+//! - Reading: any format the `image` crate is built with (PNG, JPEG, PNM, BMP, TIFF, GIF, WebP,
+//!   TGA, QOI), from bytes, a file, or every picture in a directory. Grey pictures stay grey
+//!   (one channel), everything else becomes 8-bit RGB.
+//! - Bounded memory: at most [`MAX_INPUT_BYTES`] of file are read, and the dimensions are
+//!   checked from the file's header before anything is decoded: a picture wider or taller than
+//!   [`MAX_PICTURE_SIDE`] (the most DEBT codes) is refused, never decoded.
+//! - Writing: PNG, JPEG, binary PPM/PGM/PNM, BMP and TIFF, chosen by the file's extension
+//!   ([`OutputFormat`]).
+//! - Grey conversion ([`to_gray`]): BT.601 luma with one rounding (to nearest, halves up),
+//!   shared by every caller.
 
-use super::Image;
+use std::io::{Cursor, Read};
+use std::path::{Path, PathBuf};
 
-/// Decodes an image file's bytes (PNG, JPEG, PNM, ...) into 8-bit grey or RGB.
+use super::{Image, MAX_SIDE, metrics};
+
+/// Widest and tallest picture read, pixels: the most a DEBT stream holds.
+pub const MAX_PICTURE_SIDE: usize = MAX_SIDE;
+
+/// Most bytes of a picture file read (a 4096 x 4096 16-bit RGBA TIFF is 128 MiB).
+pub const MAX_INPUT_BYTES: u64 = 256 << 20;
+
+/// JPEG quality of written pictures (the image has been through a lossy codec already).
+const JPEG_QUALITY: u8 = 92;
+
+/// What can go wrong reading or writing a picture; every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum PictureError {
+    /// The file could not be opened or read.
+    #[error("{name}: cannot read: {source}")]
+    Read {
+        /// The file.
+        name: String,
+        /// The reason.
+        source: std::io::Error,
+    },
+    /// More bytes than any picture this loader takes.
+    #[error("{name}: more than {} MiB: not a picture this tool reads", MAX_INPUT_BYTES >> 20)]
+    TooManyBytes {
+        /// The file.
+        name: String,
+    },
+    /// Not a picture in a format this build reads, or a damaged one.
+    #[error("{name}: not a readable image: {reason}")]
+    Format {
+        /// The file.
+        name: String,
+        /// What the decoder said.
+        reason: String,
+    },
+    /// Larger than [`MAX_PICTURE_SIDE`] a side.
+    #[error(
+        "{name}: {width}x{height} pixels, larger than the {MAX_PICTURE_SIDE}x{MAX_PICTURE_SIDE} \
+         this tool reads: scale it down first"
+    )]
+    TooLarge {
+        /// The file.
+        name: String,
+        /// Width in pixels, from the file's header.
+        width: u64,
+        /// Height in pixels, from the file's header.
+        height: u64,
+    },
+    /// A directory without a single readable picture.
+    #[error("{name}: no image found in the directory")]
+    NoImage {
+        /// The directory.
+        name: String,
+    },
+    /// An output file whose extension names no format this build writes.
+    #[error(
+        "{name}: cannot write {found:?} pictures: the extension must be one of {OUTPUT_EXTENSIONS}"
+    )]
+    OutputExtension {
+        /// The file.
+        name: String,
+        /// The extension found (empty: none).
+        found: String,
+    },
+    /// The encoder failed.
+    #[error("cannot encode the picture as {format:?}: {reason}")]
+    Encode {
+        /// The format.
+        format: OutputFormat,
+        /// What the encoder said.
+        reason: String,
+    },
+}
+
+/// The extensions [`OutputFormat::for_path`] knows, for messages.
+pub const OUTPUT_EXTENSIONS: &str = ".png, .jpg, .jpeg, .ppm, .pgm, .pnm, .bmp, .tif, .tiff";
+
+/// Picture formats written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OutputFormat {
+    /// PNG, grey or RGB as the image is.
+    Png,
+    /// JPEG, grey or RGB as the image is.
+    Jpeg,
+    /// Binary PPM (P6): always RGB.
+    Ppm,
+    /// Binary PGM (P5): always grey (luma).
+    Pgm,
+    /// Binary PGM or PPM as the image is.
+    Pnm,
+    /// BMP.
+    Bmp,
+    /// TIFF.
+    Tiff,
+}
+
+impl OutputFormat {
+    /// The format an output path's extension asks for (case-insensitive); PNG for a path
+    /// without one (and for standard output). Any other extension is an error naming the
+    /// ones written, rather than a PNG under a misleading name.
+    pub fn for_path(path: &Path) -> Result<OutputFormat, PictureError> {
+        let Some(ext) = path.extension() else {
+            return Ok(OutputFormat::Png);
+        };
+        let ext = ext.to_string_lossy().to_ascii_lowercase();
+        Ok(match ext.as_str() {
+            "png" => OutputFormat::Png,
+            "jpg" | "jpeg" => OutputFormat::Jpeg,
+            "ppm" => OutputFormat::Ppm,
+            "pgm" => OutputFormat::Pgm,
+            "pnm" => OutputFormat::Pnm,
+            "bmp" => OutputFormat::Bmp,
+            "tif" | "tiff" => OutputFormat::Tiff,
+            _ => {
+                return Err(PictureError::OutputExtension {
+                    name: path.display().to_string(),
+                    found: ext,
+                });
+            }
+        })
+    }
+}
+
+/// Decodes a picture file's bytes; `name` is what errors call it.
+pub fn from_bytes(name: &str, bytes: &[u8]) -> Result<Image, PictureError> {
+    let format_error = |e: &dyn std::fmt::Display| PictureError::Format {
+        name: name.to_string(),
+        reason: e.to_string(),
+    };
+    let reader = || {
+        image::ImageReader::new(Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| format_error(&e))
+    };
+    // The header first: a picture too large is refused before a pixel is decoded.
+    let (width, height) = reader()?.into_dimensions().map_err(|e| format_error(&e))?;
+    if width == 0 || height == 0 {
+        return Err(format_error(&format!("{width}x{height} pixels")));
+    }
+    if width as usize > MAX_PICTURE_SIDE || height as usize > MAX_PICTURE_SIDE {
+        return Err(PictureError::TooLarge {
+            name: name.to_string(),
+            width: width.into(),
+            height: height.into(),
+        });
+    }
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_PICTURE_SIDE as u32);
+    limits.max_image_height = Some(MAX_PICTURE_SIDE as u32);
+    let mut decoding = reader()?;
+    decoding.limits(limits);
+    Ok(to_image(decoding.decode().map_err(|e| format_error(&e))?))
+}
+
+/// Decodes a picture file's bytes into 8-bit grey or RGB whatever its size (within the image
+/// crate's default memory limit), for callers that check the dimensions themselves and scale
+/// large pictures down (the ROV's camera); [`from_bytes`] refuses them instead.
 pub fn from_file_bytes(bytes: &[u8]) -> Result<Image, image::ImageError> {
-    let decoded = image::load_from_memory(bytes)?;
+    Ok(to_image(image::load_from_memory(bytes)?))
+}
+
+/// A decoded picture as grey (one channel) if it has no colour, else RGB.
+fn to_image(decoded: image::DynamicImage) -> Image {
     let (width, height) = (decoded.width() as usize, decoded.height() as usize);
-    Ok(if decoded.color().has_color() {
+    if decoded.color().has_color() {
         Image {
             width,
             height,
@@ -22,25 +193,162 @@ pub fn from_file_bytes(bytes: &[u8]) -> Result<Image, image::ImageError> {
             channels: 1,
             data: decoded.into_luma8().into_raw(),
         }
-    })
+    }
+}
+
+/// Reads a picture from any reader (standard input, say), at most [`MAX_INPUT_BYTES`].
+pub fn read(name: &str, reader: impl Read) -> Result<Image, PictureError> {
+    let mut bytes = Vec::new();
+    reader
+        .take(MAX_INPUT_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|source| PictureError::Read {
+            name: name.to_string(),
+            source,
+        })?;
+    if bytes.len() as u64 > MAX_INPUT_BYTES {
+        return Err(PictureError::TooManyBytes {
+            name: name.to_string(),
+        });
+    }
+    from_bytes(name, &bytes)
+}
+
+/// Reads a picture file.
+pub fn open(path: &Path) -> Result<Image, PictureError> {
+    let name = path.display().to_string();
+    match crate::io::read_at_most(path, MAX_INPUT_BYTES) {
+        Ok(bytes) => from_bytes(&name, &bytes),
+        Err(e) if e.kind() == std::io::ErrorKind::InvalidData => {
+            Err(PictureError::TooManyBytes { name })
+        }
+        Err(source) => Err(PictureError::Read { name, source }),
+    }
+}
+
+/// The pictures a path names: the file itself, or every readable picture in a directory
+/// (sorted by name; files that are not pictures are skipped, a picture too large is an error).
+pub fn load(path: &Path) -> Result<Vec<(PathBuf, Image)>, PictureError> {
+    let name = path.display().to_string();
+    if !path.is_dir() {
+        return Ok(vec![(path.to_path_buf(), open(path)?)]);
+    }
+    let mut pictures = Vec::new();
+    for file in files_in(path)? {
+        match open(&file) {
+            Ok(img) => pictures.push((file, img)),
+            Err(PictureError::Format { .. }) => {}
+            Err(e) => return Err(e),
+        }
+    }
+    if pictures.is_empty() {
+        return Err(PictureError::NoImage { name });
+    }
+    Ok(pictures)
+}
+
+/// The files of a directory (not its subdirectories), sorted by name: what [`load`] tries.
+pub fn files_in(dir: &Path) -> Result<Vec<PathBuf>, PictureError> {
+    let entries = std::fs::read_dir(dir).map_err(|source| PictureError::Read {
+        name: dir.display().to_string(),
+        source,
+    })?;
+    let mut files: Vec<PathBuf> = entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.is_file())
+        .collect();
+    files.sort();
+    Ok(files)
+}
+
+/// One 8-bit sample from a computed value: to nearest, halves up, clamped to 0..=255.
+pub fn sample(value: f64) -> u8 {
+    (value.clamp(0.0, 255.0) + 0.5) as u8
+}
+
+/// The luma (BT.601) of an image as a grey image; a grey image as it is.
+pub fn to_gray(img: &Image) -> Image {
+    if img.channels == 1 {
+        return img.clone();
+    }
+    Image {
+        width: img.width,
+        height: img.height,
+        channels: 1,
+        data: metrics::luma(img).into_iter().map(sample).collect(),
+    }
+}
+
+/// An image as RGB (a grey one with its sample in every channel).
+pub fn to_rgb(img: &Image) -> Image {
+    if img.channels == 3 {
+        return img.clone();
+    }
+    Image {
+        width: img.width,
+        height: img.height,
+        channels: 3,
+        data: img.data.iter().flat_map(|&v| [v, v, v]).collect(),
+    }
 }
 
 /// Encodes an image as PNG (grey or RGB, as it is).
-pub fn to_png(img: &Image) -> Result<Vec<u8>, image::ImageError> {
+pub fn to_png(img: &Image) -> Result<Vec<u8>, PictureError> {
+    encode(img, OutputFormat::Png)
+}
+
+/// Encodes an image in a format: `Ppm` always RGB, `Pgm` always grey ([`to_gray`]), the
+/// others as the image is.
+pub fn encode(img: &Image, format: OutputFormat) -> Result<Vec<u8>, PictureError> {
+    let converted;
+    let img = match format {
+        OutputFormat::Ppm if img.channels == 1 => {
+            converted = to_rgb(img);
+            &converted
+        }
+        OutputFormat::Pgm if img.channels == 3 => {
+            converted = to_gray(img);
+            &converted
+        }
+        _ => img,
+    };
+    if matches!(
+        format,
+        OutputFormat::Ppm | OutputFormat::Pgm | OutputFormat::Pnm
+    ) {
+        let magic = if img.channels == 1 { "P5" } else { "P6" };
+        let mut bytes = format!("{magic}\n{} {}\n255\n", img.width, img.height).into_bytes();
+        bytes.extend_from_slice(&img.data);
+        return Ok(bytes);
+    }
     let color = if img.channels == 1 {
         image::ExtendedColorType::L8
     } else {
         image::ExtendedColorType::Rgb8
     };
+    let (width, height) = (img.width as u32, img.height as u32);
     let mut bytes = Vec::new();
-    image::write_buffer_with_format(
-        &mut std::io::Cursor::new(&mut bytes),
-        &img.data,
-        img.width as u32,
-        img.height as u32,
-        color,
-        image::ImageFormat::Png,
-    )?;
+    let mut cursor = Cursor::new(&mut bytes);
+    let written = match format {
+        OutputFormat::Jpeg => {
+            use image::ImageEncoder;
+            image::codecs::jpeg::JpegEncoder::new_with_quality(&mut cursor, JPEG_QUALITY)
+                .write_image(&img.data, width, height, color)
+        }
+        _ => {
+            let kind = match format {
+                OutputFormat::Bmp => image::ImageFormat::Bmp,
+                OutputFormat::Tiff => image::ImageFormat::Tiff,
+                _ => image::ImageFormat::Png,
+            };
+            image::write_buffer_with_format(&mut cursor, &img.data, width, height, color, kind)
+        }
+    };
+    written.map_err(|e| PictureError::Encode {
+        format,
+        reason: e.to_string(),
+    })?;
     Ok(bytes)
 }
 
@@ -48,17 +356,137 @@ pub fn to_png(img: &Image) -> Result<Vec<u8>, image::ImageError> {
 mod tests {
     use super::*;
 
-    #[test]
-    fn png_round_trips_grey_and_colour() {
-        for channels in [1, 3] {
-            let img = Image {
-                width: 5,
-                height: 3,
-                channels,
-                data: (0..15 * channels).map(|v| (v * 7) as u8).collect(),
-            };
-            assert_eq!(from_file_bytes(&to_png(&img).unwrap()).unwrap(), img);
+    fn picture(width: usize, height: usize, channels: usize) -> Image {
+        Image {
+            width,
+            height,
+            channels,
+            data: (0..width * height * channels)
+                .map(|v| (v * 7) as u8)
+                .collect(),
         }
-        assert!(from_file_bytes(b"not an image").is_err());
+    }
+
+    #[test]
+    fn lossless_formats_round_trip_grey_and_colour() {
+        for channels in [1, 3] {
+            let img = picture(5, 3, channels);
+            for format in [
+                OutputFormat::Png,
+                OutputFormat::Pnm,
+                OutputFormat::Bmp,
+                OutputFormat::Tiff,
+            ] {
+                let bytes = encode(&img, format).unwrap();
+                let back = from_bytes("x", &bytes).unwrap();
+                // BMP has no grey: it comes back as RGB.
+                let expected = if back.channels == 3 {
+                    to_rgb(&img)
+                } else {
+                    img.clone()
+                };
+                assert_eq!(back, expected, "{format:?} {channels}");
+            }
+            let ppm = from_bytes("x", &encode(&img, OutputFormat::Ppm).unwrap()).unwrap();
+            assert_eq!(ppm, to_rgb(&img));
+            let pgm = from_bytes("x", &encode(&img, OutputFormat::Pgm).unwrap()).unwrap();
+            assert_eq!(pgm, to_gray(&img));
+        }
+        assert!(matches!(
+            from_bytes("junk", b"not an image"),
+            Err(PictureError::Format { .. })
+        ));
+    }
+
+    #[test]
+    fn jpeg_is_written_as_jpeg() {
+        // debt-decode -o x.jpg wrote PNG bytes (issue 14).
+        let path = Path::new("out/X.JPG");
+        assert_eq!(OutputFormat::for_path(path).unwrap(), OutputFormat::Jpeg);
+        let img = picture(16, 8, 3);
+        let bytes = encode(&img, OutputFormat::Jpeg).unwrap();
+        assert_eq!(&bytes[..2], &[0xff, 0xd8]);
+        let back = from_bytes("x.jpg", &bytes).unwrap();
+        assert_eq!((back.width, back.height), (16, 8));
+        assert_eq!(
+            OutputFormat::for_path(Path::new("-")).unwrap(),
+            OutputFormat::Png
+        );
+        let err = OutputFormat::for_path(Path::new("x.gif")).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            format!(
+                "x.gif: cannot write \"gif\" pictures: the extension must be one of {OUTPUT_EXTENSIONS}"
+            )
+        );
+    }
+
+    #[test]
+    fn pictures_too_large_are_refused_from_their_header() {
+        // A 20000 x 20000 PNG header: refused without decoding (or allocating) 1.2 GB.
+        let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+        let mut chunk = |kind: &[u8], data: &[u8]| {
+            png.extend_from_slice(&(data.len() as u32).to_be_bytes());
+            let body = [kind, data].concat();
+            png.extend_from_slice(&body);
+            let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&body);
+            png.extend_from_slice(&crc.to_be_bytes());
+        };
+        let side = 20000u32.to_be_bytes();
+        chunk(b"IHDR", &[&side[..], &side, &[8, 2, 0, 0, 0]].concat());
+        chunk(b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]);
+        chunk(b"IEND", &[]);
+        let err = from_bytes("huge.png", &png).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "huge.png: 20000x20000 pixels, larger than the 4096x4096 this tool reads: scale it down first"
+        );
+        let pnm = b"P5\n5000 10\n255\n";
+        assert!(matches!(
+            from_bytes("tall.pgm", pnm),
+            Err(PictureError::TooLarge { width: 5000, .. })
+        ));
+    }
+
+    #[test]
+    fn grey_conversion_rounds_once_to_nearest() {
+        let img = Image {
+            width: 3,
+            height: 1,
+            channels: 3,
+            data: vec![255, 255, 255, 0, 0, 0, 10, 20, 30],
+        };
+        // 0.299 * 10 + 0.587 * 20 + 0.114 * 30 = 18.15
+        assert_eq!(to_gray(&img).data, vec![255, 0, 18]);
+        assert_eq!(sample(2.5), 3);
+        assert_eq!(sample(-4.0), 0);
+        assert_eq!(sample(300.0), 255);
+    }
+
+    #[test]
+    fn directories_give_their_pictures_in_order() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("b.png"), to_png(&picture(4, 4, 3)).unwrap()).unwrap();
+        std::fs::write(
+            dir.path().join("a.pgm"),
+            encode(&picture(2, 2, 1), OutputFormat::Pgm).unwrap(),
+        )
+        .unwrap();
+        std::fs::write(dir.path().join("notes.txt"), "not a picture").unwrap();
+        let found = load(dir.path()).unwrap();
+        let names: Vec<_> = found
+            .iter()
+            .map(|(p, img)| (p.file_name().unwrap().to_owned(), img.channels))
+            .collect();
+        assert_eq!(names, [("a.pgm".into(), 1), ("b.png".into(), 3)]);
+        let empty = tempfile::tempdir().unwrap();
+        assert!(matches!(
+            load(empty.path()),
+            Err(PictureError::NoImage { .. })
+        ));
+        assert!(matches!(
+            load(&dir.path().join("missing.png")),
+            Err(PictureError::Read { .. })
+        ));
     }
 }

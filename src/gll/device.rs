@@ -4,10 +4,12 @@
 //! A device is a serial port or pseudo-terminal path, `tcp:HOST:PORT` (a modem's TCP console,
 //! EvoLogics' usual interface) or `udp:BIND_ADDR=PEER_ADDR` (one datagram per packet).
 
-use std::net::SocketAddr;
+use std::io::{self, Read, Write};
+use std::net::{SocketAddr, TcpStream, UdpSocket};
+use std::time::Duration;
 
 use super::evologics::{EvoLogics, SendMode};
-use super::{Endpoint, GllError, Pacing, Transparent, Udp, open_serial};
+use super::{Endpoint, GllError, Pacing, TimedRead, Transparent, Udp, open_serial};
 
 /// How a modem is spoken to: the one dialect enum of every tool that opens a port.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -84,22 +86,13 @@ impl PortOptions {
 
     /// Opens `device` as these flags say.
     pub fn open(&self, device: &str) -> Result<Box<dyn Endpoint>, PortError> {
-        if let Some(spec) = device.strip_prefix("udp:") {
-            let Some((bind, peer)) = spec.split_once('=') else {
-                return Err(PortError::Usage(format!(
-                    "{device}: expected udp:BIND_ADDR=PEER_ADDR"
-                )));
-            };
-            let parse = |text: &str| {
-                text.parse::<SocketAddr>()
-                    .map_err(|e| PortError::Usage(format!("{device}: `{text}`: {e}")))
-            };
+        if let Some((bind, peer)) = udp_addresses(device)? {
             if self.dialect != Dialect::Transparent {
                 return Err(PortError::Usage(format!(
                     "{device}: UDP carries bare datagrams: use --dialect transparent"
                 )));
             }
-            return Ok(Box::new(Udp::open(parse(bind)?, parse(peer)?)?));
+            return Ok(Box::new(Udp::open(bind, peer)?));
         }
         if !(self.chunk_rate_bps.is_finite() && self.chunk_rate_bps > 0.0) {
             return Err(PortError::Usage(format!(
@@ -117,11 +110,7 @@ impl PortOptions {
             SendMode::Burst
         };
         if let Some(address) = device.strip_prefix("tcp:") {
-            let stream = std::net::TcpStream::connect(address).map_err(|e| GllError::Open {
-                name: device.to_string(),
-                reason: e.to_string(),
-            })?;
-            let _ = stream.set_nodelay(true);
+            let stream = connect_tcp(device, address)?;
             return Ok(match self.dialect {
                 Dialect::Transparent => Box::new(Transparent::new(device, stream, pacing)),
                 Dialect::Evologics => Box::new(EvoLogics::new(device, stream, self.address, mode)),
@@ -132,5 +121,94 @@ impl PortOptions {
             Dialect::Transparent => Box::new(Transparent::new(device, port, pacing)),
             Dialect::Evologics => Box::new(EvoLogics::new(device, port, self.address, mode)),
         })
+    }
+}
+
+impl PortOptions {
+    /// Opens `device` as a bare byte stream whose reads time out after `timeout`, for tools
+    /// that watch a line's bytes as they come (`rcp-dump --port`): a serial port or
+    /// pseudo-terminal at the baud rate, a TCP console, or UDP datagrams back to back. No
+    /// dialect is spoken.
+    pub fn open_bytes(
+        &self,
+        device: &str,
+        timeout: Duration,
+    ) -> Result<Box<dyn TimedRead>, PortError> {
+        let mut port: Box<dyn TimedRead> = if let Some((bind, peer)) = udp_addresses(device)? {
+            let socket = UdpSocket::bind(bind).map_err(|e| GllError::Open {
+                name: device.to_string(),
+                reason: e.to_string(),
+            })?;
+            Box::new(UdpBytes { socket, peer })
+        } else if let Some(address) = device.strip_prefix("tcp:") {
+            Box::new(connect_tcp(device, address)?)
+        } else {
+            Box::new(open_serial(device, self.baud)?)
+        };
+        port.set_read_timeout(timeout).map_err(|e| GllError::Open {
+            name: device.to_string(),
+            reason: e.to_string(),
+        })?;
+        Ok(port)
+    }
+}
+
+/// The addresses of a `udp:BIND_ADDR=PEER_ADDR` device; `None` for another device.
+fn udp_addresses(device: &str) -> Result<Option<(SocketAddr, SocketAddr)>, PortError> {
+    let Some(spec) = device.strip_prefix("udp:") else {
+        return Ok(None);
+    };
+    let Some((bind, peer)) = spec.split_once('=') else {
+        return Err(PortError::Usage(format!(
+            "{device}: expected udp:BIND_ADDR=PEER_ADDR"
+        )));
+    };
+    let parse = |text: &str| {
+        text.parse::<SocketAddr>()
+            .map_err(|e| PortError::Usage(format!("{device}: `{text}`: {e}")))
+    };
+    Ok(Some((parse(bind)?, parse(peer)?)))
+}
+
+/// Connects a `tcp:HOST:PORT` device.
+fn connect_tcp(device: &str, address: &str) -> Result<TcpStream, GllError> {
+    let stream = TcpStream::connect(address).map_err(|e| GllError::Open {
+        name: device.to_string(),
+        reason: e.to_string(),
+    })?;
+    let _ = stream.set_nodelay(true);
+    Ok(stream)
+}
+
+/// A UDP socket read as a byte stream: each datagram's bytes in turn (empty ones skipped);
+/// writes go to the peer.
+struct UdpBytes {
+    socket: UdpSocket,
+    peer: SocketAddr,
+}
+
+impl Read for UdpBytes {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        match self.socket.recv(buf)? {
+            0 => Err(io::ErrorKind::WouldBlock.into()),
+            n => Ok(n),
+        }
+    }
+}
+
+impl Write for UdpBytes {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        self.socket.send_to(buf, self.peer)
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        Ok(())
+    }
+}
+
+impl TimedRead for UdpBytes {
+    fn set_read_timeout(&mut self, timeout: Duration) -> io::Result<()> {
+        self.socket
+            .set_read_timeout(Some(timeout.max(Duration::from_micros(1))))
     }
 }

@@ -159,7 +159,20 @@ pub fn trunks_of(image: &debt::Image, settings: &ImageSettings) -> Vec<Vec<u8>> 
             )
         })
         .unwrap_or_default();
-    stream.chunks(trunk).map(<[u8]>::to_vec).collect()
+    cut_trunks(&stream, trunk)
+        .map(|trunks| trunks.into_iter().map(<[u8]>::to_vec).collect())
+        .unwrap_or_default()
+}
+
+/// A stream cut into trunks of `trunk_bytes` (the last one shorter), as ITSN 0, 1, ... carry
+/// them; `Err` with the smallest trunk size that would do when it takes more than
+/// [`MAX_TRUNKS`].
+pub fn cut_trunks(stream: &[u8], trunk_bytes: usize) -> Result<Vec<&[u8]>, usize> {
+    let trunk = trunk_bytes.max(1);
+    if stream.len().div_ceil(trunk) > MAX_TRUNKS {
+        return Err(stream.len().div_ceil(MAX_TRUNKS));
+    }
+    Ok(stream.chunks(trunk).collect())
 }
 
 /// A built-in camera picture: `width` x `height` RGB, a seabed-like texture with a few

@@ -14,6 +14,9 @@
 //! - [`message`]: a whole frame as a value: addresses plus the message its source implies.
 //! - [`deframe`]: a streaming deframer that finds frames in any byte stream and resynchronises.
 //! - [`json`]: the JSON Lines text form that `rcp-pack` reads and `rcp-dump` writes.
+//! - [`pack`]: `rcp-pack`'s packer: JSON Lines to frames, a file cut into image trunks.
+//! - [`print`]: `rcp-dump`'s printer: frames in a byte stream or from a live port as text,
+//!   JSON or CSV records, notices about what was not a frame, and the run's counters.
 //!
 //! # No-panic contract
 //! Every function here that reads untrusted bytes or text (`new_checked`, `parse`, the deframer,
@@ -25,6 +28,8 @@ pub mod frame;
 pub mod json;
 pub mod message;
 pub mod operator;
+pub mod pack;
+pub mod print;
 pub mod rov;
 
 pub use deframe::{DeframeEvent, DeframeStats, Deframer};

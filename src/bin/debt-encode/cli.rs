@@ -1,0 +1,140 @@
+//! debt-encode's command line.
+
+use std::path::PathBuf;
+
+use clap::Parser;
+use rovlink::cli::value;
+use rovlink::debt::{self, EncodeOptions, Rect};
+
+const EXAMPLES: &str = "\
+Examples:
+  debt-encode photo.png --bytes 1000 -o photo.debt      exactly 1000 bytes
+  debt-encode photo.png --bytes 500 --roi 100,80,420,300 --roi-shift 4 -o roi.debt
+  debt-encode --gray --scale 1 --bytes 250 < photo.png > tiny.debt
+  debt-encode photo.png --lossless --bytes 10000000 -o exact.debt   (shorter when complete)
+  debt-encode --sweep 250,500,1000,2000,8000 --csv trials.csv a.png b.png   compression trials
+  debt-encode photo.png --bytes 2000 --segments 4 --trunk-size 39 -o robust.debt   loss-resilient
+
+Exit codes: 0 ok, 2 bad usage or an unreadable image; a --sweep stopped by SIGINT or SIGTERM
+keeps its whole rows and exits 130 or 143.";
+
+/// Most budgets one --sweep takes.
+const MAX_SWEEP_BUDGETS: usize = 10_000;
+
+/// The budgets of a --sweep, parsed from one comma list (an alias, so that clap takes the list
+/// as one value).
+pub type Budgets = Vec<u64>;
+
+/// Encode an image with DEBT, the embedded wavelet codec for narrow links.
+///
+/// The stream is exactly --bytes long (shorter only if the image codes completely, as with
+/// --lossless and a large budget), and every prefix of it decodes: cut it anywhere and the
+/// decoder shows what those bytes can.
+#[derive(Parser, Debug)]
+#[command(version, after_help = EXAMPLES)]
+pub struct Args {
+    /// Image file (PNG, JPEG, PNM, BMP, TIFF, GIF, WebP, TGA, QOI; at most 4096 pixels a
+    /// side); `-` or nothing reads stdin. With --sweep, any number of images, a directory
+    /// standing for the pictures in it.
+    pub inputs: Vec<PathBuf>,
+
+    /// Output file (written whole or not at all); `-` or nothing writes stdout.
+    #[arg(short, long, value_name = "FILE")]
+    pub output: Option<PathBuf>,
+
+    /// Size of the stream in bytes (a budget larger than the image needs gives the complete
+    /// stream, shorter).
+    #[arg(long, short = 'b', value_name = "N", required_unless_present = "sweep",
+          value_parser = value::bytes(1, u64::MAX))]
+    pub bytes: Option<u64>,
+
+    /// Compression trials instead of one stream: encode and decode every input at each of
+    /// these byte budgets and write one CSV row per image and budget (flushed as it goes).
+    #[arg(long, value_name = "BYTES,...", conflicts_with_all = ["bytes", "output"],
+          value_parser = value::count_list(value::bytes(1, u64::MAX), MAX_SWEEP_BUDGETS))]
+    pub sweep: Option<Budgets>,
+
+    /// Where --sweep writes its CSV; `-` or nothing writes stdout.
+    #[arg(long, value_name = "FILE", requires = "sweep")]
+    pub csv: Option<PathBuf>,
+
+    /// Region of interest in pixels, x0,y0,x1,y1 (x1 and y1 exclusive), coded first.
+    #[arg(long, value_name = "X0,Y0,X1,Y1", value_parser = parse_rect)]
+    pub roi: Option<Rect>,
+
+    /// Bit-planes the region of interest is raised by (1 ..= 15).
+    #[arg(long, default_value_t = 3, value_parser = value::count(1, 15))]
+    pub roi_shift: u64,
+
+    /// Code luma only.
+    #[arg(long)]
+    pub gray: bool,
+
+    /// Reversible transforms: with enough bytes the decoded image is exact.
+    #[arg(long)]
+    pub lossless: bool,
+
+    /// Encode at 1/2^K of the size (0 ..= 3); the decoder scales back up.
+    #[arg(long, value_name = "K", default_value_t = 0, value_parser = value::count(0, 3))]
+    pub scale: u64,
+
+    /// Wavelet levels (0 ..= 7); by default as many as keep the low band at least 2 pixels a
+    /// side.
+    #[arg(long, value_parser = value::count(0, 7))]
+    pub levels: Option<u64>,
+
+    /// Split the stream into K independently decodable segments (2 ..= 16, stripes of rows)
+    /// interleaved trunk by trunk: a lost trunk then blurs one stripe instead of ending the
+    /// image. Costs some quality when nothing is lost (see docs/debt-format.md).
+    #[arg(long, value_name = "K", value_parser = value::count(2, debt::MAX_SEGMENTS as u64))]
+    pub segments: Option<u64>,
+
+    /// With --segments: the trunk size in bytes (16 ..= 255, at least the header: 8 + K, 3
+    /// more with --roi) the link cuts the stream into [default: 39, the paper's image trunk].
+    #[arg(long, value_name = "T", requires = "segments", value_parser = value::bytes(16, 255))]
+    pub trunk_size: Option<u64>,
+}
+
+fn parse_rect(text: &str) -> Result<Rect, String> {
+    let parts: Vec<&str> = text.split(',').collect();
+    let nums: Result<Vec<usize>, _> = parts.iter().map(|p| p.trim().parse::<usize>()).collect();
+    match nums {
+        Ok(n)
+            if n.len() == 4
+                && n[0] < n[2]
+                && n[1] < n[3]
+                && n[2] <= debt::MAX_SIDE
+                && n[3] <= debt::MAX_SIDE =>
+        {
+            Ok(Rect {
+                x0: n[0],
+                y0: n[1],
+                x1: n[2],
+                y1: n[3],
+            })
+        }
+        _ => Err(format!(
+            "expected x0,y0,x1,y1 with x0 < x1 <= {0} and y0 < y1 <= {0}, found {text:?}",
+            debt::MAX_SIDE
+        )),
+    }
+}
+
+impl Args {
+    /// The encoder's settings for a budget.
+    pub fn options(&self, bytes: u64) -> EncodeOptions {
+        EncodeOptions {
+            bytes: usize::try_from(bytes).unwrap_or(usize::MAX),
+            levels: self.levels.map(|l| l as u32),
+            gray: self.gray,
+            lossless: self.lossless,
+            scale: self.scale as u32,
+            roi: self.roi,
+            roi_shift: self.roi_shift as u32,
+            segments: self.segments.map(|count| debt::Segments {
+                count: count as usize,
+                trunk_bytes: self.trunk_size.unwrap_or(39) as usize,
+            }),
+        }
+    }
+}

@@ -1,0 +1,95 @@
+//! rcp-pack: RCP messages as JSON Lines -> link frames (bytes), or a file cut into image trunks.
+#![forbid(unsafe_code)]
+
+mod cli;
+
+use std::path::Path;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use cli::Args;
+use rovlink::cli::only_with;
+use rovlink::cli::output::{Kind, Outputs};
+use rovlink::io::{EXIT_BAD_INPUT, EXIT_OK, Input, Output};
+use rovlink::say;
+use rovlink::wire::pack::{self, Lines};
+
+/// The tool's name, prefixed to everything it says on stderr.
+const TOOL: &str = "rcp-pack";
+
+fn pack_lines(args: &Args, out: &mut Output) -> Result<u8> {
+    let mut input = Input::open(args.input.as_deref())?;
+    let name = input.name.clone();
+    let (mut bad, mut frames) = (0usize, 0usize);
+    for (number, parsed) in Lines::new(std::io::BufReader::new(input.reader())) {
+        match parsed {
+            Ok(repr) => {
+                out.write_bytes(&pack::frame(&repr, args.hex)?)?;
+                frames += 1;
+            }
+            Err(e) if args.keep_going && !e.is_fatal() => {
+                say!("{name}:{number}: {e} (line skipped)");
+                bad += 1;
+            }
+            Err(e) => bail!("{name}:{number}: {e}"),
+        }
+    }
+    if bad > 0 {
+        say!("{name}: {frames} frames packed, {bad} bad lines skipped");
+        return Ok(EXIT_BAD_INPUT);
+    }
+    Ok(EXIT_OK)
+}
+
+fn pack_image(args: &Args, path: &Path, out: &mut Output) -> Result<u8> {
+    let name = path.display().to_string();
+    // Read up to a bound: a file longer than any image's trunks is refused, not held whole.
+    let data = match rovlink::io::read_at_most(path, pack::MAX_IMAGE_BYTES as u64) {
+        Err(e) if e.kind() == std::io::ErrorKind::InvalidData => {
+            Err(pack::ImageError::TooLarge).with_context(|| name.clone())?
+        }
+        read => read.with_context(|| format!("{name}: cannot read"))?,
+    };
+    let trunk = args.trunk.unwrap_or(39) as usize;
+    let (src, dst, isn) = (
+        args.src.unwrap_or(1),
+        args.dst.unwrap_or(0),
+        args.isn == Some(1),
+    );
+    let messages =
+        pack::image_messages(&data, trunk, src, dst, isn).with_context(|| name.clone())?;
+    for repr in &messages {
+        out.write_bytes(&pack::frame(repr, args.hex)?)?;
+    }
+    Ok(EXIT_OK)
+}
+
+fn run(args: &Args) -> Result<u8> {
+    only_with(
+        args.image.is_some(),
+        "--image FILE",
+        &[
+            ("--trunk", args.trunk.is_some()),
+            ("--src", args.src.is_some()),
+            ("--dst", args.dst.is_some()),
+            ("--isn", args.isn.is_some()),
+        ],
+    )?;
+    let mut outs = Outputs::new();
+    outs.input(args.input.as_deref());
+    outs.input(args.image.as_deref());
+    let kind = if args.hex { Kind::Text } else { Kind::Binary };
+    let dest = outs.claim("-o", args.output.as_deref().unwrap_or(Path::new("-")), kind)?;
+    let mut out = dest.open()?;
+    let code = match &args.image {
+        Some(path) => pack_image(args, path, &mut out)?,
+        None => pack_lines(args, &mut out)?,
+    };
+    out.finish()?;
+    Ok(code)
+}
+
+fn main() -> ExitCode {
+    let args: Args = rovlink::cli::parse(TOOL);
+    rovlink::cli::finish(TOOL, run(&args))
+}
