@@ -437,6 +437,57 @@ pub fn tuple<const N: usize>(item: RealParser) -> TupleParser<N> {
     TupleParser(item.0)
 }
 
+/// A parser of a pixel rectangle `x0,y0,x1,y1` (whole pixels, `x0 < x1 <= max_px`,
+/// `y0 < y1 <= max_px`), as `[x0, y0, x1, y1]`.
+#[derive(Debug, Clone, Copy)]
+pub struct RectParser {
+    /// The largest coordinate allowed, pixels.
+    pub max_px: u64,
+}
+
+impl RectParser {
+    /// Parses and checks a rectangle written by a user.
+    pub fn parse(&self, text: &str) -> Result<[u64; 4], String> {
+        let expected = || {
+            format!(
+                "expected whole pixels x0,y0,x1,y1 with x0 < x1 <= {0} and y0 < y1 <= {0}, found `{text}`",
+                self.max_px
+            )
+        };
+        let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+        let numbers: Vec<u64> = parts
+            .iter()
+            .map(|p| p.parse::<u64>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| expected())?;
+        match numbers[..] {
+            [x0, y0, x1, y1] if x0 < x1 && y0 < y1 && x1 <= self.max_px && y1 <= self.max_px => {
+                Ok([x0, y0, x1, y1])
+            }
+            _ => Err(expected()),
+        }
+    }
+}
+
+impl clap::builder::TypedValueParser for RectParser {
+    type Value = [u64; 4];
+
+    fn parse_ref(
+        &self,
+        cmd: &clap::Command,
+        arg: Option<&clap::Arg>,
+        value: &std::ffi::OsStr,
+    ) -> Result<[u64; 4], clap::Error> {
+        let this = *self;
+        delegate(move |text: &str| this.parse(text), cmd, arg, value)
+    }
+}
+
+/// A pixel rectangle `x0,y0,x1,y1` with coordinates up to `max_px`.
+pub fn rect(max_px: u64) -> RectParser {
+    RectParser { max_px }
+}
+
 /// Checks a number that did not come through a parser: `Err("--ipg: expected ..., found ...")`.
 pub fn check(flag: &str, value: f64, parser: RealParser) -> Result<f64, crate::cli::UsageError> {
     parser
@@ -509,5 +560,9 @@ mod tests {
                 .contains("number 1")
         );
         assert!(point3().parse("1,2").is_err());
+        assert_eq!(rect(100).parse("1, 2,30,40").unwrap(), [1, 2, 30, 40]);
+        for bad in ["3,2,1,4", "1,2,3", "0,0,101,5", "0,0,1.5,4", "-1,0,2,2", ""] {
+            assert!(rect(100).parse(bad).is_err(), "{bad}");
+        }
     }
 }

@@ -96,28 +96,10 @@ pub struct Args {
 }
 
 fn parse_rect(text: &str) -> Result<Rect, String> {
-    let parts: Vec<&str> = text.split(',').collect();
-    let nums: Result<Vec<usize>, _> = parts.iter().map(|p| p.trim().parse::<usize>()).collect();
-    match nums {
-        Ok(n)
-            if n.len() == 4
-                && n[0] < n[2]
-                && n[1] < n[3]
-                && n[2] <= debt::MAX_SIDE
-                && n[3] <= debt::MAX_SIDE =>
-        {
-            Ok(Rect {
-                x0: n[0],
-                y0: n[1],
-                x1: n[2],
-                y1: n[3],
-            })
-        }
-        _ => Err(format!(
-            "expected x0,y0,x1,y1 with x0 < x1 <= {0} and y0 < y1 <= {0}, found {text:?}",
-            debt::MAX_SIDE
-        )),
-    }
+    let [x0, y0, x1, y1] = value::rect(debt::MAX_SIDE as u64)
+        .parse(text)?
+        .map(|v| v as usize);
+    Ok(Rect { x0, y0, x1, y1 })
 }
 
 impl Args {

@@ -96,14 +96,7 @@ fn duration() -> RealParser {
 }
 
 fn roi(text: &str) -> Result<Roi, String> {
-    let [x0, y0, x1, y1] = value::tuple::<4>(value::real(0.0, 1023.0, "px")).parse(text)?;
-    let whole = [x0, y0, x1, y1].iter().all(|v| v.fract() == 0.0);
-    if !(whole && x0 < x1 && y0 < y1) {
-        return Err(format!(
-            "expected whole pixels x0,y0,x1,y1 with x0 < x1 and y0 < y1, found `{text}`"
-        ));
-    }
-    let [x0, y0, x1, y1] = [x0, y0, x1, y1].map(|v| v as u16);
+    let [x0, y0, x1, y1] = value::rect(1023).parse(text)?.map(|v| v as u16);
     Ok(Roi { x0, y0, x1, y1 })
 }
 
