@@ -356,7 +356,7 @@ fn interrupted(signal: Signal, code: i32) {
     if let Ok(entries) = std::fs::read_dir(dir.path().join("received")) {
         for entry in entries {
             let bytes = std::fs::read(entry.unwrap().path()).unwrap();
-            rovlink::debt::picture::from_file_bytes(&bytes).unwrap();
+            rovlink::debt::picture::from_bytes("received", &bytes).unwrap();
         }
     }
 }

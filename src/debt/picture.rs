@@ -63,6 +63,22 @@ pub enum PictureError {
         /// Height in pixels, from the file's header.
         height: u64,
     },
+    /// More pixels than a scaled-down read decodes ([`Oversize::ScaleDown`]).
+    #[error(
+        "{name}: {width}x{height} pixels: pictures of at most {} megapixels are scaled down to \
+         fit; scale it down first",
+        max_pixels >> 20
+    )]
+    TooManyPixels {
+        /// The file.
+        name: String,
+        /// Width in pixels, from the file's header.
+        width: u64,
+        /// Height in pixels, from the file's header.
+        height: u64,
+        /// The most pixels decoded.
+        max_pixels: u64,
+    },
     /// A directory without a single readable picture.
     #[error("{name}: no image found in the directory")]
     NoImage {
@@ -138,8 +154,44 @@ impl OutputFormat {
     }
 }
 
-/// Decodes a picture file's bytes; `name` is what errors call it.
+/// What to do with a picture larger than DEBT codes ([`MAX_PICTURE_SIDE`] a side).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Oversize {
+    /// Refuse it ([`PictureError::TooLarge`]): what the codec's tools do.
+    Refuse,
+    /// Decode it if it has at most `max_pixels`, then scale it down, aspect kept, to fit (a
+    /// camera's pictures); more pixels than that is [`PictureError::TooManyPixels`].
+    ScaleDown {
+        /// The most pixels decoded.
+        max_pixels: u64,
+    },
+}
+
+/// A picture as read: the image, and the size it had if it was scaled down to fit.
+#[derive(Debug, Clone)]
+pub struct Loaded {
+    /// The file.
+    pub path: PathBuf,
+    /// The image, at most [`MAX_PICTURE_SIDE`] a side.
+    pub image: Image,
+    /// The picture's own width and height, when it was scaled down.
+    pub scaled_from: Option<(usize, usize)>,
+}
+
+/// Decodes a picture file's bytes; `name` is what errors call it. A picture larger than DEBT
+/// codes is refused.
 pub fn from_bytes(name: &str, bytes: &[u8]) -> Result<Image, PictureError> {
+    from_bytes_fit(name, bytes, Oversize::Refuse).map(|(image, _)| image)
+}
+
+/// Decodes a picture file's bytes, dealing with a large one as `oversize` says; the
+/// dimensions are checked from the header before a pixel is decoded. Returns the image and,
+/// if it was scaled down, the picture's own size.
+pub fn from_bytes_fit(
+    name: &str,
+    bytes: &[u8],
+    oversize: Oversize,
+) -> Result<(Image, Option<(usize, usize)>), PictureError> {
     let format_error = |e: &dyn std::fmt::Display| PictureError::Format {
         name: name.to_string(),
         reason: e.to_string(),
@@ -149,31 +201,72 @@ pub fn from_bytes(name: &str, bytes: &[u8]) -> Result<Image, PictureError> {
             .with_guessed_format()
             .map_err(|e| format_error(&e))
     };
-    // The header first: a picture too large is refused before a pixel is decoded.
     let (width, height) = reader()?.into_dimensions().map_err(|e| format_error(&e))?;
     if width == 0 || height == 0 {
         return Err(format_error(&format!("{width}x{height} pixels")));
     }
-    if width as usize > MAX_PICTURE_SIDE || height as usize > MAX_PICTURE_SIDE {
-        return Err(PictureError::TooLarge {
-            name: name.to_string(),
-            width: width.into(),
-            height: height.into(),
-        });
-    }
+    let fits = width as usize <= MAX_PICTURE_SIDE && height as usize <= MAX_PICTURE_SIDE;
     let mut limits = image::Limits::default();
-    limits.max_image_width = Some(MAX_PICTURE_SIDE as u32);
-    limits.max_image_height = Some(MAX_PICTURE_SIDE as u32);
+    match oversize {
+        _ if fits => {
+            limits.max_image_width = Some(MAX_PICTURE_SIDE as u32);
+            limits.max_image_height = Some(MAX_PICTURE_SIDE as u32);
+        }
+        Oversize::Refuse => {
+            return Err(PictureError::TooLarge {
+                name: name.to_string(),
+                width: width.into(),
+                height: height.into(),
+            });
+        }
+        Oversize::ScaleDown { max_pixels } => {
+            if u64::from(width) * u64::from(height) > max_pixels {
+                return Err(PictureError::TooManyPixels {
+                    name: name.to_string(),
+                    width: width.into(),
+                    height: height.into(),
+                    max_pixels,
+                });
+            }
+            // RGBA at 16 bits a sample is the most a decoder holds per pixel.
+            limits.max_alloc = Some(max_pixels.saturating_mul(8));
+        }
+    }
     let mut decoding = reader()?;
     decoding.limits(limits);
-    Ok(to_image(decoding.decode().map_err(|e| format_error(&e))?))
+    let image = to_image(decoding.decode().map_err(|e| format_error(&e))?);
+    if fits {
+        return Ok((image, None));
+    }
+    let from = (image.width, image.height);
+    Ok((scale_to_fit(&image, MAX_PICTURE_SIDE), Some(from)))
 }
 
-/// Decodes a picture file's bytes into 8-bit grey or RGB whatever its size (within the image
-/// crate's default memory limit), for callers that check the dimensions themselves and scale
-/// large pictures down (the ROV's camera); [`from_bytes`] refuses them instead.
-pub fn from_file_bytes(bytes: &[u8]) -> Result<Image, image::ImageError> {
-    Ok(to_image(image::load_from_memory(bytes)?))
+/// `image` scaled down (triangle filter), aspect kept, to at most `max_side` a side (at least
+/// one pixel); an image that fits is returned as it is.
+pub fn scale_to_fit(image: &Image, max_side: usize) -> Image {
+    let longest = image.width.max(image.height);
+    if longest <= max_side {
+        return image.clone();
+    }
+    let side = |n: usize| (n * max_side).div_ceil(longest).clamp(1, max_side);
+    let (width, height) = (side(image.width), side(image.height));
+    let filter = image::imageops::FilterType::Triangle;
+    let (w, h) = (width as u32, height as u32);
+    let (iw, ih) = (image.width as u32, image.height as u32);
+    let data = if image.channels == 1 {
+        image::GrayImage::from_raw(iw, ih, image.data.clone())
+            .map(|buffer| image::imageops::resize(&buffer, w, h, filter).into_raw())
+    } else {
+        image::RgbImage::from_raw(iw, ih, image.data.clone())
+            .map(|buffer| image::imageops::resize(&buffer, w, h, filter).into_raw())
+    };
+    Image {
+        width,
+        height,
+        channels: image.channels,
+        data: data.unwrap_or_else(|| vec![0; width * height * image.channels]),
+    }
 }
 
 /// A decoded picture as grey (one channel) if it has no colour, else RGB.
@@ -216,27 +309,46 @@ pub fn read(name: &str, reader: impl Read) -> Result<Image, PictureError> {
 
 /// Reads a picture file.
 pub fn open(path: &Path) -> Result<Image, PictureError> {
+    open_fit(path, Oversize::Refuse).map(|loaded| loaded.image)
+}
+
+/// Reads a picture file, dealing with a large one as `oversize` says.
+pub fn open_fit(path: &Path, oversize: Oversize) -> Result<Loaded, PictureError> {
     let name = path.display().to_string();
-    match crate::io::read_at_most(path, MAX_INPUT_BYTES) {
-        Ok(bytes) => from_bytes(&name, &bytes),
+    let bytes = match crate::io::read_at_most(path, MAX_INPUT_BYTES) {
+        Ok(bytes) => bytes,
         Err(e) if e.kind() == std::io::ErrorKind::InvalidData => {
-            Err(PictureError::TooManyBytes { name })
+            return Err(PictureError::TooManyBytes { name });
         }
-        Err(source) => Err(PictureError::Read { name, source }),
-    }
+        Err(source) => return Err(PictureError::Read { name, source }),
+    };
+    let (image, scaled_from) = from_bytes_fit(&name, &bytes, oversize)?;
+    Ok(Loaded {
+        path: path.to_path_buf(),
+        image,
+        scaled_from,
+    })
 }
 
 /// The pictures a path names: the file itself, or every readable picture in a directory
 /// (sorted by name; files that are not pictures are skipped, a picture too large is an error).
 pub fn load(path: &Path) -> Result<Vec<(PathBuf, Image)>, PictureError> {
+    Ok(load_fit(path, Oversize::Refuse)?
+        .into_iter()
+        .map(|loaded| (loaded.path, loaded.image))
+        .collect())
+}
+
+/// [`load`], dealing with large pictures as `oversize` says.
+pub fn load_fit(path: &Path, oversize: Oversize) -> Result<Vec<Loaded>, PictureError> {
     let name = path.display().to_string();
     if !path.is_dir() {
-        return Ok(vec![(path.to_path_buf(), open(path)?)]);
+        return Ok(vec![open_fit(path, oversize)?]);
     }
     let mut pictures = Vec::new();
     for file in files_in(path)? {
-        match open(&file) {
-            Ok(img) => pictures.push((file, img)),
+        match open_fit(&file, oversize) {
+            Ok(loaded) => pictures.push(loaded),
             Err(PictureError::Format { .. }) => {}
             Err(e) => return Err(e),
         }
