@@ -145,6 +145,18 @@ impl RowWriter {
         Ok(())
     }
 
+    /// Ends a run that failed on bad input (exit 2): the file this writer created is removed,
+    /// so no output is left behind. Standard output, and a path that is not a regular file
+    /// (a device, a FIFO), are left as they are. A run that measured something and then lost
+    /// its port keeps its rows: it calls [`finish`](Self::finish) instead.
+    pub fn discard(self) {
+        if let (Sink::File(_), Dest::File(path)) = (&self.sink, &self.dest)
+            && std::fs::symlink_metadata(path).is_ok_and(|m| m.is_file())
+        {
+            let _ = std::fs::remove_file(path);
+        }
+    }
+
     /// Ends a completed run: a CSV with no rows gets its header, so the file exists and reads.
     pub fn finish(mut self) -> Result<(), IoError> {
         if self.rows == 0 && self.format == RowFormat::Csv {
@@ -164,6 +176,7 @@ impl RowWriter {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::path::Path;
 
     #[derive(Serialize)]
     struct Row {
@@ -224,6 +237,21 @@ mod tests {
             .finish()
             .unwrap();
         assert_eq!(std::fs::read_to_string(&path).unwrap(), "a,b\n");
+    }
+
+    #[test]
+    fn a_discarded_writer_removes_its_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("p.csv");
+        let mut rows = RowWriter::new(Dest::File(path.clone()), RowFormat::Csv, &["a"]);
+        rows.row(&(1u8,)).unwrap();
+        assert!(path.exists());
+        rows.discard();
+        assert!(!path.exists());
+        let mut rows = RowWriter::new(Dest::File("/dev/null".into()), RowFormat::Csv, &["a"]);
+        rows.row(&(1u8,)).unwrap();
+        rows.discard();
+        assert!(Path::new("/dev/null").exists());
     }
 
     #[test]

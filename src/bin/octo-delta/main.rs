@@ -89,12 +89,10 @@ fn build(a: &BuildArgs) -> Result<u8> {
         Ok(built)
     })();
     // A failed run (bad input found late, a full disk) leaves no stats file either.
-    let written = rows.as_ref().filter(|w| w.rows() > 0);
     if outcome.is_err()
-        && let Some(path) = written.and_then(|w| w.dest().path())
-        && std::fs::symlink_metadata(path).is_ok_and(|m| m.is_file())
+        && let Some(rows) = rows.take()
     {
-        let _ = std::fs::remove_file(path);
+        rows.discard();
     }
     let built = outcome?;
     rows.map(RowWriter::finish).transpose()?;
