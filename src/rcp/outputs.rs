@@ -18,7 +18,7 @@ use super::mcap_log::McapLog;
 use super::session::{FrameEvent, Metrics, Observer};
 use crate::cli::output::Dest;
 use crate::cli::rows::{RowFormat, RowWriter};
-use crate::io::AtomicFile;
+use crate::io::{AtomicFile, Output};
 
 /// The columns of `--events`.
 pub const EVENTS_HEADER: [&str; 6] = [
@@ -228,18 +228,19 @@ impl Observer for Recorder {
     }
 }
 
-/// Writes `metrics` as pretty JSON to `dest`: one whole file (written aside and renamed), or
-/// standard output.
-pub fn write_metrics(dest: &Dest, metrics: &Metrics) -> Result<(), crate::io::IoError> {
+/// Writes `metrics` as pretty JSON to `out` and flushes it; the caller commits it
+/// ([`Output::finish`]) once every other output is complete. `out` is opened before the run
+/// (a file aside, renamed on commit), so an output that cannot be created fails before any
+/// work and a failed run leaves no metrics file.
+pub fn write_metrics(out: &mut Output, metrics: &Metrics) -> Result<(), crate::io::IoError> {
     let mut text =
         serde_json::to_string_pretty(metrics).map_err(|e| crate::io::IoError::Write {
-            name: dest.name(),
+            name: out.name(),
             source: std::io::Error::other(e),
         })?;
     text.push('\n');
-    let mut out = dest.open()?;
     out.write_bytes(text.as_bytes())?;
-    out.finish()
+    out.flush_named()
 }
 
 /// The base of real-time log times: the wall clock now, ns since the Unix epoch.

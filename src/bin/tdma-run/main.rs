@@ -80,6 +80,8 @@ fn run(args: &Args) -> Result<u8> {
         images: pictures(args.images.as_deref())?,
     };
     config.validate()?;
+    // Opened (aside) before the run: a metrics file that cannot be created fails now.
+    let mut metrics_out = metrics_dest.map(|dest| dest.open()).transpose()?;
     let base_ns = if role.is_some() { wall_clock_ns() } else { 0 };
     let template = "{spinner} {pos}/{len} s [{bar:30}] {msg}";
     let bar = progress::bar(role.is_none(), args.duration.ceil() as u64, template);
@@ -135,19 +137,21 @@ fn run(args: &Args) -> Result<u8> {
             (metrics, stop::code_or(EXIT_OK))
         }
     };
+    if let Some(name) = stop::signal_name() {
+        metrics.interrupted = Some(name.to_string());
+    }
+    // Every output complete (metrics written aside) before any is committed or said done.
+    if let Some(out) = metrics_out.as_mut() {
+        write_metrics(out, &metrics)?;
+    }
     recorder.finish()?;
+    metrics_out.map(|out| out.finish()).transpose()?;
     if let Some(line) = done {
         say!("{line}");
     }
     if let Some(note) = stop::note() {
-        metrics.interrupted = stop::signal_name().map(str::to_string);
-        say!(
-            "{note} at {:.1} s: the outputs hold what was done",
-            metrics.duration_s
-        );
-    }
-    if let Some(dest) = metrics_dest {
-        write_metrics(&dest, &metrics)?;
+        let at_s = metrics.duration_s;
+        say!("{note} at {at_s:.1} s: the outputs hold what was done");
     }
     for line in summary(&metrics) {
         say!("{line}");
