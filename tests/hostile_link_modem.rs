@@ -738,3 +738,30 @@ fn link_sim_print_model_honours_o_and_refuses_what_it_would_ignore() {
     }
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
 }
+
+/// A summary or fit file that cannot be created (in /proc) is an error before the campaign:
+/// no packets.csv and no other document left behind, however long --count asked it to run.
+#[test]
+fn modem_bench_an_uncreatable_summary_or_fit_fails_before_the_run_and_leaves_nothing() {
+    for (flag, other) in [("--summary", "--fit"), ("--fit", "--summary")] {
+        let dir = tempfile::tempdir().unwrap();
+        let args = [
+            "--sim",
+            "s100",
+            "--count",
+            "1000000000",
+            "-o",
+            "p.csv",
+            other,
+            "other.json",
+            flag,
+            "/proc/version",
+        ];
+        let started = Instant::now();
+        let out = run_in(dir.path(), MODEM_BENCH, &args, b"", LIMIT);
+        assert_contract(&out, &[2], &format!("{flag} /proc/version"));
+        assert!(error_line(&out, "modem-bench").contains("/proc/version"));
+        assert!(started.elapsed() < Duration::from_secs(10), "ran first");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "{flag}");
+    }
+}
