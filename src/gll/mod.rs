@@ -343,11 +343,17 @@ mod tests {
                 "a device that is not a terminal, not a serial port",
             ),
         ] {
-            let err = open_serial(path, 9600).err().expect(path).to_string();
+            let Err(err) = open_serial(path, 9600) else {
+                panic!("{path} opened");
+            };
+            let err = err.to_string();
             assert!(err.contains(what), "{err}");
             assert!(!err.contains("typewriter"), "{err}");
         }
-        let err = open_serial("/no/such/tty", 9600).err().unwrap().to_string();
+        let Err(err) = open_serial("/no/such/tty", 9600) else {
+            panic!("/no/such/tty opened");
+        };
+        let err = err.to_string();
         assert!(err.contains("No such file"), "{err}");
     }
 }
