@@ -541,3 +541,47 @@ fn a_script_from_standard_input() {
         out.stderr
     );
 }
+
+/// `--images-out` into the directory the camera's pictures come from: a picture named like
+/// the received ones (`image-0001.png`, or a link to it) is an input, so the run is refused
+/// before it starts and the picture kept (it was overwritten by the first received image).
+#[test]
+fn images_out_never_overwrites_a_camera_picture() {
+    let dir = tempfile::tempdir().unwrap();
+    let pictures = dir.path().join("pictures");
+    std::fs::create_dir(&pictures).unwrap();
+    let picture = write(&pictures, "image-0001.png", &png(64, 48));
+    let link = dir.path().join("link.png");
+    std::os::unix::fs::symlink(&picture, &link).unwrap();
+    let before = std::fs::read(&picture).unwrap();
+    for images in [&pictures, &picture, &link] {
+        let args = [
+            "--duration",
+            "60",
+            "--images",
+            s(images),
+            "--images-out",
+            s(&pictures),
+        ];
+        let out = tdma(&args);
+        assert_contract(&out, &[2], &format!("--images {}", images.display()));
+        assert!(
+            out.stderr.contains("--images-out: ") && out.stderr.contains("refusing to overwrite"),
+            "{}",
+            out.stderr
+        );
+        assert_eq!(std::fs::read(&picture).unwrap(), before);
+        assert_eq!(std::fs::read_dir(&pictures).unwrap().count(), 1);
+    }
+    let received = dir.path().join("received");
+    let args = [
+        "--duration",
+        "60",
+        "--images",
+        s(&pictures),
+        "--images-out",
+        s(&received),
+    ];
+    assert_contract(&tdma(&args), &[0], "another directory");
+    assert!(received.join("image-0001.png").exists());
+}

@@ -7,17 +7,18 @@
 
 mod cli;
 
-use std::path::Path;
 use std::process::ExitCode;
 
 use anyhow::Result;
 use rovlink::cli::output::{Kind, Outputs};
 use rovlink::cli::{progress, stop};
 use rovlink::io::{EXIT_CHECK_FAILED, EXIT_OK};
-use rovlink::rcp::outputs::{Destinations, Recorder, summary, wall_clock_ns, write_metrics};
+use rovlink::rcp::outputs::{
+    Destinations, Recorder, check_images_out, summary, wall_clock_ns, write_metrics,
+};
 use rovlink::rcp::realtime::{self, Ended, Role};
 use rovlink::rcp::session::{self, SessionConfig};
-use rovlink::rcp::{camera, script, test_image};
+use rovlink::rcp::{camera, script};
 use rovlink::say;
 
 use cli::{Args, RoleArg};
@@ -28,18 +29,6 @@ const TOOL: &str = "tdma-run";
 fn main() -> ExitCode {
     let args: Args = rovlink::cli::parse(TOOL);
     rovlink::cli::finish(TOOL, run(&args))
-}
-
-/// The camera's pictures: the built-in ones, or the files at `path`.
-fn pictures(path: Option<&Path>) -> Result<Vec<rovlink::debt::Image>> {
-    let Some(path) = path else {
-        return Ok((0..4).map(|k| test_image(320, 240, k)).collect());
-    };
-    let pictures = camera::load(path)?;
-    if let Some(note) = pictures.note() {
-        say!("{note}");
-    }
-    Ok(pictures.images)
 }
 
 fn run(args: &Args) -> Result<u8> {
@@ -56,6 +45,9 @@ fn run(args: &Args) -> Result<u8> {
             .map(|dir| outs.claim_dir("--images-out", dir))
             .transpose()?,
     };
+    if let Some(dir) = &dests.images_out {
+        check_images_out(dir, args.inputs())?;
+    }
     let role = args.role.map(RoleArg::role);
     let port_flags = "each of --dialect, --instant and --chunk-bytes";
     rovlink::cli::only_with(
@@ -66,6 +58,10 @@ fn run(args: &Args) -> Result<u8> {
     let model = args.model.resolve()?;
     let (script, waypoints) = script::load(args.script.as_deref(), args.waypoints.as_deref())?;
     let settings = args.settings();
+    let pictures = camera::load_or_builtin(args.images.as_deref())?;
+    if let Some(note) = pictures.note() {
+        say!("{note}");
+    }
     let ipg_s = args.ipg_s(&model, &settings);
     let config = SessionConfig {
         model: model.clone(),
@@ -77,7 +73,7 @@ fn run(args: &Args) -> Result<u8> {
         script,
         waypoints,
         settings,
-        images: pictures(args.images.as_deref())?,
+        images: pictures.images,
     };
     config.validate()?;
     // Opened (aside) before the run: a metrics file that cannot be created fails now.
