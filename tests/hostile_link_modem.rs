@@ -765,3 +765,21 @@ fn modem_bench_an_uncreatable_summary_or_fit_fails_before_the_run_and_leaves_not
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "{flag}");
     }
 }
+
+/// A side that is not a serial port is named as such (it said `cannot open: Not a
+/// typewriter`).
+#[test]
+fn link_sim_a_side_that_is_not_a_terminal_is_named_as_such() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("frames.bin");
+    std::fs::write(&file, frames(2)).unwrap();
+    let out = run(
+        LINK_SIM,
+        &["--a", file.to_str().unwrap(), "--b", "/dev/null"],
+        b"",
+        LIMIT,
+    );
+    assert_contract(&out, &[2], "--a FILE");
+    let line = error_line(&out, "link-sim");
+    assert!(line.contains("a regular file, not a serial port"), "{line}");
+}

@@ -109,7 +109,7 @@ pub fn open_serial(path: &str, baud: u32) -> Result<Box<dyn serialport::SerialPo
 }
 
 /// Why `path`, which exists, cannot be a serial port: `None` when it may be one (or is gone).
-fn not_a_terminal(path: &str) -> Option<String> {
+pub(crate) fn not_a_terminal(path: &str) -> Option<String> {
     use std::os::unix::fs::FileTypeExt;
     let kind = std::fs::metadata(path).ok()?.file_type();
     let what = if kind.is_file() {
@@ -135,10 +135,7 @@ fn not_a_terminal(path: &str) -> Option<String> {
         }
         "a device that is not a terminal"
     };
-    Some(format!(
-        "{what}, not a serial port or pseudo-terminal (tcp:HOST:PORT and udp:BIND=PEER are \
-         the network forms)"
-    ))
+    Some(format!("{what}, not a serial port or pseudo-terminal"))
 }
 
 /// Reads once from `port`, waiting until `deadline` at most: `Ok(None)` on timeout.
