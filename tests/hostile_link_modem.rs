@@ -678,3 +678,108 @@ fn modem_bench_sim_memory_does_not_grow_with_the_count() {
         "resident memory grew from {early} kB to {late} kB"
     );
 }
+
+/// A stats file that cannot be created (in /proc no temporary file can go, even for root) is
+/// an error before the pipe runs: the frames were not written to -o and the trace not begun,
+/// so exit 2 leaves no file.
+#[test]
+fn link_sim_an_uncreatable_stats_file_fails_before_the_run_and_leaves_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("in.bin"), frames(50)).unwrap();
+    let args = [
+        "in.bin",
+        "-o",
+        "out.bin",
+        "--trace",
+        "t.csv",
+        "--stats",
+        "/proc/version",
+    ];
+    let out = run_in(dir.path(), LINK_SIM, &args, b"", LIMIT);
+    assert_contract(&out, &[2], "--stats /proc/version");
+    assert!(error_line(&out, "link-sim").contains("/proc/version"));
+    let names: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(names, ["in.bin"]);
+}
+
+/// `--print-model` writes to -o when given (it was ignored: the JSON went to standard output)
+/// and refuses what it would ignore (an input, a trace, ports).
+#[test]
+fn link_sim_print_model_honours_o_and_refuses_what_it_would_ignore() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = ["--print-model", "s100", "--ber", "0.001", "-o", "m.json"];
+    let out = run_in(dir.path(), LINK_SIM, &args, b"", LIMIT);
+    assert_contract(&out, &[0], "--print-model -o");
+    assert!(out.stdout.is_empty());
+    let model = json(&dir.path().join("m.json"));
+    assert_eq!(
+        (model["name"].as_str(), model["ber"].as_f64()),
+        (Some("s100"), Some(0.001))
+    );
+    let args = ["--print-model", "--model-file", "m.json", "-o", "m.json"];
+    let out = run_in(dir.path(), LINK_SIM, &args, b"", LIMIT);
+    assert_contract(&out, &[2], "--print-model -o = --model-file");
+    assert!(error_line(&out, "link-sim").contains("refusing to overwrite an input"));
+    for extra in [
+        &["in.bin"][..],
+        &["--trace", "t.csv"],
+        &["--stats", "-"],
+        &["--pty"],
+    ] {
+        let mut args = vec!["--print-model", "s100"];
+        args.extend(extra);
+        let out = run_in(dir.path(), LINK_SIM, &args, b"", LIMIT);
+        assert_contract(&out, &[2], &format!("--print-model {extra:?}"));
+        assert!(error_line(&out, "link-sim").contains("cannot be used with"));
+        assert!(out.stdout.is_empty());
+    }
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+}
+
+/// A summary or fit file that cannot be created (in /proc) is an error before the campaign:
+/// no packets.csv and no other document left behind, however long --count asked it to run.
+#[test]
+fn modem_bench_an_uncreatable_summary_or_fit_fails_before_the_run_and_leaves_nothing() {
+    for (flag, other) in [("--summary", "--fit"), ("--fit", "--summary")] {
+        let dir = tempfile::tempdir().unwrap();
+        let args = [
+            "--sim",
+            "s100",
+            "--count",
+            "1000000000",
+            "-o",
+            "p.csv",
+            other,
+            "other.json",
+            flag,
+            "/proc/version",
+        ];
+        let started = Instant::now();
+        let out = run_in(dir.path(), MODEM_BENCH, &args, b"", LIMIT);
+        assert_contract(&out, &[2], &format!("{flag} /proc/version"));
+        assert!(error_line(&out, "modem-bench").contains("/proc/version"));
+        assert!(started.elapsed() < Duration::from_secs(10), "ran first");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "{flag}");
+    }
+}
+
+/// A side that is not a serial port is named as such (it said `cannot open: Not a
+/// typewriter`).
+#[test]
+fn link_sim_a_side_that_is_not_a_terminal_is_named_as_such() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("frames.bin");
+    std::fs::write(&file, frames(2)).unwrap();
+    let out = run(
+        LINK_SIM,
+        &["--a", file.to_str().unwrap(), "--b", "/dev/null"],
+        b"",
+        LIMIT,
+    );
+    assert_contract(&out, &[2], "--a FILE");
+    let line = error_line(&out, "link-sim");
+    assert!(line.contains("a regular file, not a serial port"), "{line}");
+}

@@ -459,3 +459,129 @@ fn ctrl_c_ends_a_real_time_run_with_exit_0_and_its_summary() {
     assert_whole_csv(&dir.path().join("e.csv"));
     assert!(temp_files(dir.path()).is_empty());
 }
+
+/// A metrics file that cannot be created (here in /proc, where no temporary file can go, even
+/// for root) is an error before the session: a week of virtual time is not run first, and the
+/// other outputs are not left behind.
+#[test]
+fn an_uncreatable_metrics_file_fails_before_the_run_and_leaves_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = [
+        "--duration",
+        "604800",
+        "--metrics",
+        "/proc/version",
+        "--mcap",
+        "s.mcap",
+        "--events",
+        "e.csv",
+        "--track",
+        "t.csv",
+    ];
+    let started = std::time::Instant::now();
+    let out = run_in(dir.path(), TDMA_RUN, &args, b"", LIMIT);
+    assert_contract(&out, &[2], "--metrics /proc/version");
+    assert!(out.stderr.contains("/proc/version"), "{}", out.stderr);
+    assert!(
+        started.elapsed() < Duration::from_secs(20),
+        "ran the session first"
+    );
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
+
+/// NED positions west, north or above the origin are negative: `--buoy -5,0,0` is a value,
+/// not an unknown flag `-5`; `--seed` says its range like every other number.
+#[test]
+fn negative_positions_are_values_and_the_seed_has_a_range() {
+    let out = tdma(&[
+        "--duration",
+        "2",
+        "--buoy",
+        "-5,0,0",
+        "--start",
+        "-4,-0.5,1",
+    ]);
+    assert_contract(&out, &[0], "--buoy -5,0,0");
+    let out = tdma(&["--duration", "2", "--buoy", "-1e300,0,0"]);
+    assert_contract(&out, &[2], "--buoy -1e300,0,0");
+    assert!(out.stderr.contains("--buoy: "), "{}", out.stderr);
+    for seed in ["-1", "18446744073709551616", "1.5"] {
+        let out = tdma(&["--duration", "2", "--seed", seed]);
+        assert_contract(&out, &[2], &format!("--seed {seed}"));
+        assert!(
+            out.stderr
+                .contains("--seed: expected a whole number 0 ..= 18446744073709551615"),
+            "{}",
+            out.stderr
+        );
+    }
+}
+
+/// `--script -` (or `--waypoints -`) reads standard input; not both at once.
+#[test]
+fn a_script_from_standard_input() {
+    let script = b"t_s,vx,vy,vz,vyaw\n0,10,0,0,0\n";
+    let out = run(
+        TDMA_RUN,
+        &["--duration", "2", "--script", "-"],
+        script,
+        LIMIT,
+    );
+    assert_contract(&out, &[0], "--script -");
+    let bad = b"t_s,vx,vy,vz,vyaw\n0,1e300,0,0,0\n";
+    let out = run(TDMA_RUN, &["--duration", "2", "--script", "-"], bad, LIMIT);
+    assert_contract(&out, &[2], "--script - with a bad row");
+    assert!(out.stderr.contains("line 2"), "{}", out.stderr);
+    let args = ["--duration", "2", "--script", "-", "--waypoints", "-"];
+    let out = run(TDMA_RUN, &args, script, LIMIT);
+    assert_contract(&out, &[2], "both from stdin");
+    assert!(
+        out.stderr.contains("both read standard input"),
+        "{}",
+        out.stderr
+    );
+}
+
+/// `--images-out` into the directory the camera's pictures come from: a picture named like
+/// the received ones (`image-0001.png`, or a link to it) is an input, so the run is refused
+/// before it starts and the picture kept (it was overwritten by the first received image).
+#[test]
+fn images_out_never_overwrites_a_camera_picture() {
+    let dir = tempfile::tempdir().unwrap();
+    let pictures = dir.path().join("pictures");
+    std::fs::create_dir(&pictures).unwrap();
+    let picture = write(&pictures, "image-0001.png", &png(64, 48));
+    let link = dir.path().join("link.png");
+    std::os::unix::fs::symlink(&picture, &link).unwrap();
+    let before = std::fs::read(&picture).unwrap();
+    for images in [&pictures, &picture, &link] {
+        let args = [
+            "--duration",
+            "60",
+            "--images",
+            s(images),
+            "--images-out",
+            s(&pictures),
+        ];
+        let out = tdma(&args);
+        assert_contract(&out, &[2], &format!("--images {}", images.display()));
+        assert!(
+            out.stderr.contains("--images-out: ") && out.stderr.contains("refusing to overwrite"),
+            "{}",
+            out.stderr
+        );
+        assert_eq!(std::fs::read(&picture).unwrap(), before);
+        assert_eq!(std::fs::read_dir(&pictures).unwrap().count(), 1);
+    }
+    let received = dir.path().join("received");
+    let args = [
+        "--duration",
+        "60",
+        "--images",
+        s(&pictures),
+        "--images-out",
+        s(&received),
+    ];
+    assert_contract(&tdma(&args), &[0], "another directory");
+    assert!(received.join("image-0001.png").exists());
+}

@@ -96,15 +96,46 @@ impl TimedRead for std::net::TcpStream {
     }
 }
 
-/// Opens a serial port (or pseudo-terminal) for an adapter.
+/// Opens a serial port (or pseudo-terminal) for an adapter. A path that is not a terminal (a
+/// regular file, a directory, `/dev/null`) is named as such, not as "Not a typewriter".
 pub fn open_serial(path: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort>, GllError> {
     serialport::new(path, baud)
         .timeout(Duration::from_millis(50))
         .open()
         .map_err(|e| GllError::Open {
             name: path.to_string(),
-            reason: e.to_string(),
+            reason: not_a_terminal(path).unwrap_or_else(|| e.to_string()),
         })
+}
+
+/// Why `path`, which exists, cannot be a serial port: `None` when it may be one (or is gone).
+pub(crate) fn not_a_terminal(path: &str) -> Option<String> {
+    use std::os::unix::fs::FileTypeExt;
+    let kind = std::fs::metadata(path).ok()?.file_type();
+    let what = if kind.is_file() {
+        "a regular file"
+    } else if kind.is_dir() {
+        "a directory"
+    } else if kind.is_fifo() {
+        "a FIFO"
+    } else if kind.is_socket() {
+        "a socket"
+    } else {
+        use std::os::unix::fs::OpenOptionsExt;
+        // Non-blocking: a serial line waiting for carrier must not hold the error up.
+        let nonblocking = nix::fcntl::OFlag::O_NONBLOCK.bits();
+        let mut options = std::fs::OpenOptions::new();
+        let file = options
+            .read(true)
+            .custom_flags(nonblocking)
+            .open(path)
+            .ok()?;
+        if nix::unistd::isatty(&file).unwrap_or(true) {
+            return None;
+        }
+        "a device that is not a terminal"
+    };
+    Some(format!("{what}, not a serial port or pseudo-terminal"))
 }
 
 /// Reads once from `port`, waiting until `deadline` at most: `Ok(None)` on timeout.
@@ -286,5 +317,40 @@ impl Endpoint for Udp {
             }
             Err(e) => Err(closed(&self.name, "receive failed", e)),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_path_that_is_not_a_terminal_is_named_as_such() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("frames.bin");
+        std::fs::write(&file, b"x").unwrap();
+        for (path, what) in [
+            (file.to_str().unwrap(), "a regular file, not a serial port"),
+            (
+                dir.path().to_str().unwrap(),
+                "a directory, not a serial port",
+            ),
+            (
+                "/dev/null",
+                "a device that is not a terminal, not a serial port",
+            ),
+        ] {
+            let Err(err) = open_serial(path, 9600) else {
+                panic!("{path} opened");
+            };
+            let err = err.to_string();
+            assert!(err.contains(what), "{err}");
+            assert!(!err.contains("typewriter"), "{err}");
+        }
+        let Err(err) = open_serial("/no/such/tty", 9600) else {
+            panic!("/no/such/tty opened");
+        };
+        let err = err.to_string();
+        assert!(err.contains("No such file"), "{err}");
     }
 }

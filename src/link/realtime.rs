@@ -433,7 +433,10 @@ fn open_side(
             let port = serialport::new(&path, baud)
                 .timeout(Duration::from_millis(100))
                 .open()
-                .map_err(|e| fail(&path, e.to_string()))?;
+                .map_err(|e| {
+                    let not_a_tty = crate::gll::not_a_terminal(&path);
+                    fail(&path, not_a_tty.unwrap_or_else(|| e.to_string()))
+                })?;
             let mut writer = port.try_clone().map_err(|e| fail(&path, e.to_string()))?;
             let mut reader = port;
             spawn_reader(side, rt, false, inbox.clone(), move |buf| reader.read(buf));

@@ -79,6 +79,18 @@ impl Pictures {
     }
 }
 
+/// The camera's pictures: the files at `path` ([`load`]), or with no path the four built-in
+/// 320x240 ones ([`super::test_image`]).
+pub fn load_or_builtin(path: Option<&Path>) -> Result<Pictures, CameraError> {
+    match path {
+        Some(path) => load(path),
+        None => Ok(Pictures {
+            images: (0..4).map(|k| super::test_image(320, 240, k)).collect(),
+            scaled: Vec::new(),
+        }),
+    }
+}
+
 /// Reads one image file, or every image file of a directory (other files are skipped).
 pub fn load(path: &Path) -> Result<Pictures, CameraError> {
     let meta = std::fs::metadata(path).map_err(|source| PictureError::Read {

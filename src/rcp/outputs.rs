@@ -11,14 +11,15 @@
 //! [`Observer::failed`] is true (the session ends at its next event) and [`Recorder::finish`]
 //! returns it.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use super::PoseSample;
 use super::mcap_log::McapLog;
 use super::session::{FrameEvent, Metrics, Observer};
+use crate::cli::UsageError;
 use crate::cli::output::Dest;
 use crate::cli::rows::{RowFormat, RowWriter};
-use crate::io::AtomicFile;
+use crate::io::{AtomicFile, Output};
 
 /// The columns of `--events`.
 pub const EVENTS_HEADER: [&str; 6] = [
@@ -228,18 +229,62 @@ impl Observer for Recorder {
     }
 }
 
-/// Writes `metrics` as pretty JSON to `dest`: one whole file (written aside and renamed), or
-/// standard output.
-pub fn write_metrics(dest: &Dest, metrics: &Metrics) -> Result<(), crate::io::IoError> {
+/// Writes `metrics` as pretty JSON to `out` and flushes it; the caller commits it
+/// ([`Output::finish`]) once every other output is complete. `out` is opened before the run
+/// (a file aside, renamed on commit), so an output that cannot be created fails before any
+/// work and a failed run leaves no metrics file.
+pub fn write_metrics(out: &mut Output, metrics: &Metrics) -> Result<(), crate::io::IoError> {
     let mut text =
         serde_json::to_string_pretty(metrics).map_err(|e| crate::io::IoError::Write {
-            name: dest.name(),
+            name: out.name(),
             source: std::io::Error::other(e),
         })?;
     text.push('\n');
-    let mut out = dest.open()?;
     out.write_bytes(text.as_bytes())?;
-    out.finish()
+    out.flush_named()
+}
+
+/// Checks that the pictures `--images-out` would write into `dir` (`image-NNNN.png`) are none
+/// of `inputs` (files, or directories standing for the files in them), through links too: an
+/// input is never overwritten. A directory that does not exist yet holds no input.
+pub fn check_images_out<'a>(
+    dir: &Path,
+    inputs: impl IntoIterator<Item = &'a Path>,
+) -> Result<(), UsageError> {
+    use std::os::unix::fs::MetadataExt;
+    let identity = |path: &Path| std::fs::metadata(path).ok().map(|m| (m.dev(), m.ino()));
+    let files_of = |path: &Path| -> Vec<PathBuf> {
+        match std::fs::read_dir(path) {
+            Ok(entries) => entries.flatten().map(|e| e.path()).collect(),
+            Err(_) => vec![path.to_path_buf()],
+        }
+    };
+    let mut taken = Vec::new();
+    for input in inputs {
+        for file in files_of(input) {
+            if let Some(id) = identity(&file) {
+                taken.push((id, file));
+            }
+        }
+    }
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Ok(());
+    };
+    for path in entries.flatten().map(|e| e.path()) {
+        let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
+        let ours = name.is_some_and(|n| n.starts_with("image-") && n.ends_with(".png"));
+        let Some(id) = identity(&path).filter(|_| ours) else {
+            continue;
+        };
+        if let Some((_, input)) = taken.iter().find(|(i, _)| *i == id) {
+            return Err(UsageError(format!(
+                "--images-out: {} is the input {}: refusing to overwrite an input",
+                path.display(),
+                input.display()
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// The base of real-time log times: the wall clock now, ns since the Unix epoch.

@@ -4,7 +4,8 @@
 //! `--script` files have the columns `t_s,vx,vy,vz,vyaw` (joystick, percent of full thrust,
 //! from `t_s` on), `--waypoints` files `t_s,x_m,y_m,z_m,heading_deg` (a GoTo order queued at
 //! `t_s`; NED metres). Every row is checked ([`JoystickChange::check`], [`Waypoint::check`]) and
-//! an error names the file and line; rows are returned sorted by time.
+//! an error names the file and line; rows are returned sorted by time. `-` reads standard
+//! input (for one of the two).
 
 use std::path::{Path, PathBuf};
 
@@ -26,7 +27,7 @@ pub enum ScriptError {
         source: std::io::Error,
     },
     /// The file is larger than [`MAX_FILE_BYTES`].
-    #[error("{path}: more than {MAX_FILE_BYTES} bytes: not a script")]
+    #[error("{path}: more than {MAX_FILE_BYTES} bytes: not a script or waypoint file")]
     TooBig {
         /// The file.
         path: PathBuf,
@@ -47,7 +48,11 @@ fn table(path: &Path, columns: &[&str]) -> Result<Vec<(u64, Vec<f64>)>, ScriptEr
         path: path.to_path_buf(),
         source,
     };
-    let Some(text) = super::read_at_most(path, MAX_FILE_BYTES).map_err(read_error)? else {
+    let read = match path.as_os_str() == "-" {
+        true => read_stdin_at_most(MAX_FILE_BYTES),
+        false => super::read_at_most(path, MAX_FILE_BYTES),
+    };
+    let Some(text) = read.map_err(read_error)? else {
         return Err(ScriptError::TooBig {
             path: path.to_path_buf(),
         });
@@ -56,6 +61,17 @@ fn table(path: &Path, columns: &[&str]) -> Result<Vec<(u64, Vec<f64>)>, ScriptEr
         path: path.to_path_buf(),
         problem: e.to_string(),
     })
+}
+
+/// Standard input's bytes (`-` as a file name): `None` when it holds more than `max_bytes`.
+fn read_stdin_at_most(max_bytes: u64) -> std::io::Result<Option<Vec<u8>>> {
+    use std::io::Read;
+    let mut data = Vec::new();
+    std::io::stdin()
+        .lock()
+        .take(max_bytes + 1)
+        .read_to_end(&mut data)?;
+    Ok((data.len() as u64 <= max_bytes).then_some(data))
 }
 
 fn row_error(path: &Path, error: impl std::fmt::Display) -> ScriptError {
@@ -141,6 +157,15 @@ pub fn load(
 ) -> Result<(Vec<JoystickChange>, Vec<Waypoint>), ScriptError> {
     if script.is_none() && waypoints.is_none() {
         return Ok(builtin());
+    }
+    if let (Some(a), Some(b)) = (script, waypoints)
+        && a.as_os_str() == "-"
+        && b.as_os_str() == "-"
+    {
+        return Err(ScriptError::Row {
+            path: a.to_path_buf(),
+            problem: "--script and --waypoints cannot both read standard input".into(),
+        });
     }
     Ok((
         script.map(read_script).transpose()?.unwrap_or_default(),

@@ -12,6 +12,7 @@ use rovlink::cli::output::{Dest, Kind, Outputs};
 use rovlink::cli::rows::{RowFormat, RowWriter};
 use rovlink::cli::value::{self, CountParser};
 use rovlink::gll::Dialect;
+use rovlink::io::Output;
 use rovlink::link::model::MAX_RANGE_M;
 use rovlink::link::pipe::Pace;
 use rovlink::link::realtime::{Framing, PortSpec};
@@ -61,8 +62,11 @@ pub struct Args {
     #[arg(short, long, value_name = "FILE")]
     pub output: Option<PathBuf>,
 
-    /// Print the model (the preset NAME, or --model/--model-file with the flags applied) as JSON and exit.
-    #[arg(long, value_name = "NAME", num_args = 0..=1, default_missing_value = "")]
+    /// Print the model (the preset NAME, or --model/--model-file with the flags applied) as
+    /// JSON to standard output (or -o) and exit.
+    #[arg(long, value_name = "NAME", num_args = 0..=1, default_missing_value = "",
+          conflicts_with_all = ["input", "trace", "stats", "interval", "pty", "a", "b", "udp_a",
+                                "udp_b", "reverse_model", "reverse_model_file", "distance_file"])]
     pub print_model: Option<String>,
 
     #[command(flatten)]
@@ -191,8 +195,9 @@ pub struct Claimed {
     pub output: Option<Dest>,
     /// The trace, as rows.
     pub trace: Option<RowWriter>,
-    /// The stats document.
-    pub stats: Option<Dest>,
+    /// The stats document, open (aside) from the start, so that a file that cannot be
+    /// created fails before the run.
+    pub stats: Option<Output>,
 }
 
 impl Args {
@@ -206,21 +211,31 @@ impl Args {
         Some(model)
     }
 
+    /// Where `--print-model` writes: `-o` (not the model file it reads), or standard output.
+    pub fn printed_model_dest(&self) -> Result<Dest, UsageError> {
+        let mut outs = Outputs::new();
+        outs.input(self.model.model_file.as_deref());
+        let path = self.output.as_deref().unwrap_or(Path::new("-"));
+        outs.claim("-o", path, Kind::Text)
+    }
+
     /// Checks that the flags fit the mode and claims every output (inputs registered first,
-    /// so that none is overwritten): nothing is created yet.
-    pub fn claim(&self, mode: Mode) -> Result<Claimed, UsageError> {
+    /// so that none is overwritten); only the stats file is opened (aside: it is removed
+    /// unless the run commits it).
+    pub fn claim(&self, mode: Mode) -> anyhow::Result<Claimed> {
         let pipe_only = self.interval.is_some() || self.output.is_some() || self.input.is_some();
         match mode {
             Mode::Pipe if self.raw => {
-                return Err(UsageError(
-                    "--raw applies to real-time ports, not the pipe".into(),
-                ));
+                return Err(
+                    UsageError("--raw applies to real-time ports, not the pipe".into()).into(),
+                );
             }
             Mode::RealTime if pipe_only => {
                 return Err(UsageError(
                     "INPUT, --output and --interval apply to the pipe, not to real-time ports"
                         .into(),
-                ));
+                )
+                .into());
             }
             _ => {}
         }
@@ -247,7 +262,7 @@ impl Args {
         Ok(Claimed {
             output,
             trace: trace.map(|dest| RowWriter::new(dest, RowFormat::Csv, mode.trace_columns())),
-            stats,
+            stats: stats.map(|dest| dest.open()).transpose()?,
         })
     }
 

@@ -10,6 +10,7 @@ use anyhow::Result;
 use rovlink::cli::output::Dest;
 use rovlink::cli::stop;
 use rovlink::gll::Dialect;
+use rovlink::io::Output;
 use rovlink::io::{EXIT_CHECK_FAILED, EXIT_OK};
 use rovlink::link::Link;
 use rovlink::link::dialect::EvoLogicsEmulator;
@@ -30,8 +31,9 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> Result<u8> {
     if let Some(model) = args.printed_model() {
-        let mut out = Dest::Stdout.open()?;
-        out.write_bytes(model.resolve()?.to_json().as_bytes())?;
+        let json = model.resolve()?.to_json();
+        let mut out = args.printed_model_dest()?.open()?;
+        out.write_bytes(json.as_bytes())?;
         return Ok(out.finish().map(|()| EXIT_OK)?);
     }
     let specs = args.port_specs();
@@ -72,9 +74,8 @@ fn run_pipe(args: &Args, mut link: Link, mut out: Claimed) -> Result<u8> {
         Err(error) if !stop::requested() => return Err(error.into()),
         _ => {}
     }
-    output.finish()?;
     let extra = format!("{:.3} s of wall time", wall.elapsed().as_secs_f64());
-    finish(args, &link, &counters, out, None, vec![extra])?;
+    finish(args, &link, &counters, out, Some(output), None, vec![extra])?;
     Ok(stop::code_or(EXIT_OK))
 }
 
@@ -109,6 +110,7 @@ fn run_realtime(args: &Args, mut link: Link, specs: [PortSpec; 2], mut out: Clai
         &link,
         &counters,
         out,
+        None,
         Some(&info),
         real_time_lines(&info),
     )?;
@@ -124,12 +126,14 @@ fn run_realtime(args: &Args, mut link: Link, specs: [PortSpec; 2], mut out: Clai
     }
 }
 
-/// Ends a run: the trace's last word, the summary on stderr, the stats file.
+/// Ends a run: the trace's last word, the stats written, the pipe's output and the stats
+/// committed (neither before both are complete), the summary on stderr.
 fn finish(
     args: &Args,
     link: &Link,
     counters: &Counters,
-    out: Claimed,
+    mut out: Claimed,
+    output: Option<Output>,
     info: Option<&RunInfo>,
     extra: Vec<String>,
 ) -> Result<()> {
@@ -143,11 +147,13 @@ fn finish(
         duration_s: link.now().as_secs_f64(),
         interrupted: note.as_deref(),
     };
-    // The file first, so that a file that cannot be written is the one line said.
-    if let Some(dest) = out.stats {
-        let mut file = dest.open()?;
+    // The files first, so that a file that cannot be written is the one line said.
+    if let Some(file) = out.stats.as_mut() {
         let json = counters.stats_json(&facts, link, info);
         file.write_bytes(format!("{json:#}\n").as_bytes())?;
+        file.flush_named()?;
+    }
+    for file in [output, out.stats].into_iter().flatten() {
         file.finish()?;
     }
     let lines = counters.summary_lines(&facts, link);

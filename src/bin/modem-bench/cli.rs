@@ -11,6 +11,7 @@ use rovlink::cli::output::{Dest, Kind, Outputs};
 use rovlink::cli::port::PortArgs;
 use rovlink::cli::value::{self, MAX_COUNT, WEEK_S};
 use rovlink::gll::{Endpoint, PortError};
+use rovlink::io::Output;
 use rovlink::link::model::MAX_RANGE_M;
 use rovlink::link::pipe::Pace;
 use rovlink::measure::{MAX_PROBE_BYTES, MIN_PROBE_BYTES, live, sim};
@@ -155,10 +156,13 @@ pub type Modem = Box<dyn Endpoint>;
 pub struct Claimed {
     /// packets.csv.
     pub rows: Dest,
-    /// The summary document.
-    pub summary: Option<Dest>,
-    /// The fitted model.
-    pub fit: Option<Dest>,
+    /// The summary document, open (aside) from the start: a file that cannot be created fails
+    /// before the run.
+    pub summary: Option<Output>,
+    /// The fitted model's file, open the same way.
+    pub fit: Option<Output>,
+    /// The fitted model's name: the file's stem, or `fitted`.
+    pub fit_name: String,
 }
 
 impl Args {
@@ -226,13 +230,16 @@ impl Args {
         model
     }
 
-    /// Checks the flags against the mode and claims every output: nothing is created yet.
-    pub fn claim(&self) -> Result<Claimed, UsageError> {
+    /// Checks the flags against the mode and claims every output; the summary and fit files
+    /// are opened (aside: removed unless the run commits them), the rows' file is created at
+    /// the first row.
+    pub fn claim(&self) -> anyhow::Result<Claimed> {
         if !self.real() && self.port_args.any_set() {
             return Err(UsageError(
                 "--dialect, --instant, --address, --baud and --chunk-bytes apply to real modems (--tx/--rx or --port)"
                     .into(),
-            ));
+            )
+            .into());
         }
         let mut outs = Outputs::new();
         outs.input(self.model.model_file.as_deref());
@@ -240,6 +247,13 @@ impl Args {
         let fit = outs.claim_opt("--fit", self.fit.as_deref(), Kind::Text)?;
         let rows_path = self.output.as_deref().unwrap_or(Path::new("-"));
         let rows = outs.claim("-o", rows_path, Kind::Text)?;
-        Ok(Claimed { rows, summary, fit })
+        let stem = fit.as_ref().and_then(|dest| dest.path()?.file_stem());
+        let fit_name = stem.map_or("fitted".into(), |s| s.to_string_lossy().into_owned());
+        Ok(Claimed {
+            rows,
+            summary: summary.map(|dest| dest.open()).transpose()?,
+            fit: fit.map(|dest| dest.open()).transpose()?,
+            fit_name,
+        })
     }
 }

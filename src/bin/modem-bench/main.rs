@@ -7,10 +7,9 @@ use std::process::ExitCode;
 
 use anyhow::{Result, bail};
 use indicatif::ProgressBar;
-use rovlink::cli::output::Dest;
 use rovlink::cli::rows::{RowFormat, RowWriter};
 use rovlink::cli::{progress, stop};
-use rovlink::io::{CheckFailed, EXIT_CHECK_FAILED, EXIT_OK, IoError};
+use rovlink::io::{CheckFailed, EXIT_CHECK_FAILED, EXIT_OK, IoError, Output};
 use rovlink::link::{Distance, Link};
 use rovlink::measure::live::{self, Ports};
 use rovlink::measure::{ROW_COLUMNS, Row, Tally, probe_total, sim};
@@ -50,24 +49,32 @@ fn run(args: &Args) -> Result<u8> {
     rows.finish()?;
     let mut summary = tally.summary();
     summary.interrupted = stop::note();
-    // Files first, so that a file that cannot be written is the one line said.
-    if let Some(dest) = &out.summary {
-        write_file(dest, format!("{:#}\n", serde_json::to_value(&summary)?))?;
+    // Files first, so that a file that cannot be written is the one line said; none is
+    // committed before all are written.
+    let mut summary_file = out.summary;
+    if let Some(file) = summary_file.as_mut() {
+        write_text(file, format!("{:#}\n", serde_json::to_value(&summary)?))?;
     }
-    let fitted = out.fit.map(|dest| {
-        let name = dest.path().and_then(|p| p.file_stem());
-        let name = name.map_or("fitted".into(), |s| s.to_string_lossy().into_owned());
-        (summary.to_model(&name, assumed_rate), dest)
-    });
-    if let Some((Some(model), dest)) = &fitted {
-        write_file(dest, model.to_json())?;
+    let mut fitted = (out.fit).map(|file| (summary.to_model(&out.fit_name, assumed_rate), file));
+    if let Some((Some(model), file)) = fitted.as_mut() {
+        write_text(file, model.to_json())?;
     }
+    summary_file.map(Output::finish).transpose()?;
+    // A fit without a model is not committed (its file is removed when dropped).
+    let fitted = match fitted {
+        Some((Some(model), file)) => {
+            let name = file.name();
+            file.finish()?;
+            Some((Some(model), name))
+        }
+        other => other.map(|(model, file)| (model, file.name())),
+    };
     if !args.quiet {
         summary.lines().iter().for_each(|line| say!("{line}"));
     }
     match fitted {
-        Some((Some(model), dest)) if !args.quiet => {
-            say!("model written to {}: {}", dest.name(), model.figures());
+        Some((Some(model), name)) if !args.quiet => {
+            say!("model written to {name}: {}", model.figures());
         }
         Some((None, _)) => {
             let (delivered, count) = (summary.delivered, summary.count);
@@ -80,11 +87,10 @@ fn run(args: &Args) -> Result<u8> {
     Ok(code)
 }
 
-/// Writes a whole file (or standard output).
-fn write_file(dest: &Dest, text: String) -> Result<()> {
-    let mut file = dest.open()?;
+/// Writes `text` to a whole-file output and flushes it (the caller commits it).
+fn write_text(file: &mut Output, text: String) -> Result<()> {
     file.write_bytes(text.as_bytes())?;
-    Ok(file.finish()?)
+    Ok(file.flush_named()?)
 }
 
 type OnRow<'a> = dyn FnMut(Row) -> Result<(), IoError> + 'a;

@@ -141,16 +141,18 @@ pub struct Args {
     pub duration: f64,
 
     /// Seed of the link's random streams.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = value::count(0, u64::MAX))]
     pub seed: u64,
 
     /// The operator modem's position, NED m (each within 100 km): its distance to the ROV
     /// drives the range model.
-    #[arg(long, value_name = "X,Y,Z", default_value = "0,0,0", value_parser = value::point3())]
+    #[arg(long, value_name = "X,Y,Z", default_value = "0,0,0", allow_hyphen_values = true,
+          value_parser = value::point3())]
     pub buoy: [f64; 3],
 
     /// The ROV's initial position, NED m (each within 100 km).
-    #[arg(long, value_name = "X,Y,Z", default_value = "1,0,0", value_parser = value::point3())]
+    #[arg(long, value_name = "X,Y,Z", default_value = "1,0,0", allow_hyphen_values = true,
+          value_parser = value::point3())]
     pub start: [f64; 3],
 
     /// Joystick script, CSV t_s,vx,vy,vz,vyaw [default: a built-in 10-minute script].

@@ -7,17 +7,18 @@
 
 mod cli;
 
-use std::path::Path;
 use std::process::ExitCode;
 
 use anyhow::Result;
 use rovlink::cli::output::{Kind, Outputs};
 use rovlink::cli::{progress, stop};
 use rovlink::io::{EXIT_CHECK_FAILED, EXIT_OK};
-use rovlink::rcp::outputs::{Destinations, Recorder, summary, wall_clock_ns, write_metrics};
+use rovlink::rcp::outputs::{
+    Destinations, Recorder, check_images_out, summary, wall_clock_ns, write_metrics,
+};
 use rovlink::rcp::realtime::{self, Ended, Role};
 use rovlink::rcp::session::{self, SessionConfig};
-use rovlink::rcp::{camera, script, test_image};
+use rovlink::rcp::{camera, script};
 use rovlink::say;
 
 use cli::{Args, RoleArg};
@@ -28,18 +29,6 @@ const TOOL: &str = "tdma-run";
 fn main() -> ExitCode {
     let args: Args = rovlink::cli::parse(TOOL);
     rovlink::cli::finish(TOOL, run(&args))
-}
-
-/// The camera's pictures: the built-in ones, or the files at `path`.
-fn pictures(path: Option<&Path>) -> Result<Vec<rovlink::debt::Image>> {
-    let Some(path) = path else {
-        return Ok((0..4).map(|k| test_image(320, 240, k)).collect());
-    };
-    let pictures = camera::load(path)?;
-    if let Some(note) = pictures.note() {
-        say!("{note}");
-    }
-    Ok(pictures.images)
 }
 
 fn run(args: &Args) -> Result<u8> {
@@ -56,6 +45,9 @@ fn run(args: &Args) -> Result<u8> {
             .map(|dir| outs.claim_dir("--images-out", dir))
             .transpose()?,
     };
+    if let Some(dir) = &dests.images_out {
+        check_images_out(dir, args.inputs())?;
+    }
     let role = args.role.map(RoleArg::role);
     let port_flags = "each of --dialect, --instant and --chunk-bytes";
     rovlink::cli::only_with(
@@ -66,6 +58,10 @@ fn run(args: &Args) -> Result<u8> {
     let model = args.model.resolve()?;
     let (script, waypoints) = script::load(args.script.as_deref(), args.waypoints.as_deref())?;
     let settings = args.settings();
+    let pictures = camera::load_or_builtin(args.images.as_deref())?;
+    if let Some(note) = pictures.note() {
+        say!("{note}");
+    }
     let ipg_s = args.ipg_s(&model, &settings);
     let config = SessionConfig {
         model: model.clone(),
@@ -77,9 +73,11 @@ fn run(args: &Args) -> Result<u8> {
         script,
         waypoints,
         settings,
-        images: pictures(args.images.as_deref())?,
+        images: pictures.images,
     };
     config.validate()?;
+    // Opened (aside) before the run: a metrics file that cannot be created fails now.
+    let mut metrics_out = metrics_dest.map(|dest| dest.open()).transpose()?;
     let base_ns = if role.is_some() { wall_clock_ns() } else { 0 };
     let template = "{spinner} {pos}/{len} s [{bar:30}] {msg}";
     let bar = progress::bar(role.is_none(), args.duration.ceil() as u64, template);
@@ -135,19 +133,21 @@ fn run(args: &Args) -> Result<u8> {
             (metrics, stop::code_or(EXIT_OK))
         }
     };
+    if let Some(name) = stop::signal_name() {
+        metrics.interrupted = Some(name.to_string());
+    }
+    // Every output complete (metrics written aside) before any is committed or said done.
+    if let Some(out) = metrics_out.as_mut() {
+        write_metrics(out, &metrics)?;
+    }
     recorder.finish()?;
+    metrics_out.map(|out| out.finish()).transpose()?;
     if let Some(line) = done {
         say!("{line}");
     }
     if let Some(note) = stop::note() {
-        metrics.interrupted = stop::signal_name().map(str::to_string);
-        say!(
-            "{note} at {:.1} s: the outputs hold what was done",
-            metrics.duration_s
-        );
-    }
-    if let Some(dest) = metrics_dest {
-        write_metrics(&dest, &metrics)?;
+        let at_s = metrics.duration_s;
+        say!("{note} at {at_s:.1} s: the outputs hold what was done");
     }
     for line in summary(&metrics) {
         say!("{line}");
