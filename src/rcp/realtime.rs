@@ -179,6 +179,10 @@ impl End<'_> {
         let mut round_trip_ms = Running::new();
         // The last slot's send time, until its answer arrives.
         let mut awaiting: Option<SimTime> = None;
+        // Set when a slot went out while the previous one was still unanswered: the next
+        // answer may be that late one, so it is not timed against the new slot's frame (it
+        // would give a round trip shorter than the link allows).
+        let mut ambiguous = false;
         let mut last_status: Option<crate::wire::rov::BasicStatus> = None;
         let mut drained = false;
         loop {
@@ -202,6 +206,7 @@ impl End<'_> {
                 endpoint.send(&frame)?;
                 directions[0].sent();
                 observer.frame(&sent_event("operator_to_rov", &frame, now));
+                ambiguous = awaiting.is_some();
                 awaiting = Some(now);
                 drained = false;
             }
@@ -235,7 +240,11 @@ impl End<'_> {
             directions[1].delivered(t, received.bytes.len(), None);
             observer.frame(&received_event("rov_to_operator", &received.bytes, t));
             if let Some(sent) = awaiting.take() {
-                round_trip_ms.push(t.0.saturating_sub(sent.0) as f64 * 1e-6);
+                if ambiguous {
+                    ambiguous = false;
+                } else {
+                    round_trip_ms.push(t.0.saturating_sub(sent.0) as f64 * 1e-6);
+                }
             }
             operator.receive(t, &received.bytes);
             for event in operator.take_events() {
