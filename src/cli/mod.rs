@@ -116,6 +116,17 @@ pub fn one_line(err: &clap::Error) -> String {
         .unwrap_or("bad usage");
     let first = first.strip_prefix("error: ").unwrap_or(first).trim();
     let mut line = first.to_string();
+    // What clap lists under its first line (the required arguments missing, say) belongs to it.
+    let listed: Vec<&str> = text
+        .lines()
+        .skip_while(|l| l.trim().is_empty())
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        .map(str::trim)
+        .collect();
+    if !listed.is_empty() {
+        line = format!("{} {}", line.trim_end_matches(':'), listed.join(", "));
+    }
     // clap puts a suggestion or the usage on the following lines; keep a short usage hint.
     if let Some(usage) = text.lines().find(|l| l.starts_with("Usage: ")) {
         line.push_str(&format!(" ({})", usage.trim()));
@@ -174,6 +185,24 @@ mod tests {
         let err = Tool::try_parse_from(["t", "--bogus"]).unwrap_err();
         let line = one_line(&err);
         assert!(line.contains("--bogus") && !line.contains('\n'), "{line}");
+    }
+
+    #[derive(Parser, Debug)]
+    struct Needs {
+        /// A.
+        #[arg(long, requires = "b")]
+        a: Option<u8>,
+        /// B.
+        #[arg(long)]
+        b: Option<u8>,
+    }
+
+    #[test]
+    fn missing_arguments_are_named() {
+        let err = Needs::try_parse_from(["t", "--a", "1"]).unwrap_err();
+        let line = one_line(&err);
+        assert!(line.contains("not provided --b <B>"), "{line}");
+        assert!(!line.contains('\n'), "{line}");
     }
 
     #[test]

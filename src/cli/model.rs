@@ -7,8 +7,8 @@ use std::path::PathBuf;
 
 use crate::cli::value;
 use crate::link::model::{
-    ErrorMode, GilbertElliott, JitterDistribution, MAX_BITRATE_BPS, MAX_DELAY_MS, MAX_FIFO_BYTES,
-    MAX_PROPAGATION_MS_PER_M, MAX_RANGE_M, MIN_BITRATE_BPS, parse_gilbert_elliott,
+    ErrorMode, GilbertElliott, JitterDistribution, MAX_BER, MAX_BITRATE_BPS, MAX_DELAY_MS,
+    MAX_FIFO_BYTES, MAX_PROPAGATION_MS_PER_M, MAX_RANGE_M, MIN_BITRATE_BPS, parse_gilbert_elliott,
 };
 use crate::link::{Model, ModelError};
 
@@ -85,7 +85,7 @@ pub struct ModelArgs {
     #[arg(long, value_parser = value::real(0.0, MAX_RANGE_M, "m"), value_name = "M", help_heading = "Link model")]
     pub range_max_m: Option<f64>,
     /// Bit error rate, e.g. 7e-4.
-    #[arg(long, value_parser = value::probability(), value_name = "P", help_heading = "Link model")]
+    #[arg(long, value_parser = value::real(0.0, MAX_BER, ""), value_name = "P", help_heading = "Link model")]
     pub ber: Option<f64>,
     /// What a frame with bit errors becomes: dropped, or delivered with the bits flipped.
     #[arg(long, value_enum, value_name = "MODE", help_heading = "Link model")]

@@ -149,6 +149,9 @@ impl Outputs {
         }
         let id = meta.as_ref().map(|m| (m.dev(), m.ino()));
         let regular = meta.as_ref().is_none_or(|m| m.is_file());
+        if regular {
+            probe_directory(flag, path)?;
+        }
         if let Some(id) = id
             && regular
             && let Some((input, _)) = self.inputs.iter().find(|(_, i)| *i == id)
@@ -246,6 +249,33 @@ impl Outputs {
     }
 }
 
+/// Checks that a file can be created beside `path` (where its temporary file goes), by
+/// creating and removing an empty one: a read-only file system or a directory such as `/proc`
+/// is found before the run, not after it.
+fn probe_directory(flag: &str, path: &Path) -> Result<(), UsageError> {
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let probe = dir.join(format!(".rovlink-probe-{}", std::process::id()));
+    match std::fs::File::options()
+        .write(true)
+        .create_new(true)
+        .open(&probe)
+    {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Ok(()),
+        Err(e) => Err(UsageError(format!(
+            "{flag}: cannot write {}: no file can be created in {}: {e}",
+            path.display(),
+            dir.display()
+        ))),
+    }
+}
+
 /// An absolute, `.`-free form of a path that may not exist yet, to compare two outputs.
 fn lexical_path(path: &Path) -> PathBuf {
     let absolute = if path.is_absolute() {
@@ -319,6 +349,10 @@ mod tests {
             .claim_dir("--images-out", Path::new("/dev/null/x"))
             .unwrap_err();
         assert!(err.0.contains("/dev/null is not a directory"), "{err}");
+        let err = outs
+            .claim("-o", Path::new("/proc/version"), Kind::Text)
+            .unwrap_err();
+        assert!(err.0.contains("no file can be created in /proc"), "{err}");
         // A device is not an input's twin: /dev/null as both is fine.
         outs.input(Some(Path::new("/dev/null")));
         outs.claim("-o", Path::new("/dev/null"), Kind::Text)

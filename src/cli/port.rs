@@ -38,7 +38,7 @@ pub struct PortArgs {
 
     /// Baud rate of the serial ports (50 ..= 4000000).
     #[arg(long, default_value_t = 9600,
-          value_parser = clap::value_parser!(u32).range(50..=4_000_000), help_heading = "Real modems")]
+          value_parser = value::baud(), help_heading = "Real modems")]
     pub baud: u32,
 
     /// Transparent modems: write each packet in chunks of this many bytes, paced at

@@ -317,6 +317,21 @@ impl Item for CountParser {
     }
 }
 
+/// A serial port's baud rate, 50 ..= 4000000.
+pub fn baud() -> clap::builder::MapValueParser<CountParser, fn(u64) -> u32> {
+    fn narrow(value: u64) -> u32 {
+        u32::try_from(value).unwrap_or(u32::MAX)
+    }
+    clap::builder::TypedValueParser::map(
+        CountParser {
+            min: 50,
+            max: 4_000_000,
+            unit: "baud",
+        },
+        narrow as fn(u64) -> u32,
+    )
+}
+
 /// A comma-separated list, each element checked by `item`, 1 ..= `max_len` of them.
 #[derive(Debug, Clone, Copy)]
 pub struct ListParser<I> {

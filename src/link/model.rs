@@ -45,6 +45,8 @@ pub const PRESETS: [&str; 5] = [
     "satellite-down",
 ];
 
+/// The highest bit error rate a model may have: at 0.5 a bit carries nothing.
+pub const MAX_BER: f64 = 0.5;
 /// Largest model file read, bytes (a model is a few hundred).
 pub const MAX_MODEL_FILE_BYTES: u64 = 1 << 20;
 /// The lowest bit rate a model may have, bit/s (`bitrate_bps`, `rate_limit_bps`): the slowest
@@ -163,7 +165,7 @@ pub struct Model {
     /// Farthest distance at which a frame is heard, m (absent: no limit).
     #[serde(default)]
     pub range_max_m: Option<f64>,
-    /// Bit error rate (probability that a bit is flipped), 0 <= ber < 1.
+    /// Bit error rate (probability that a bit is flipped), 0 ..= 0.5.
     #[serde(default)]
     pub ber: f64,
     /// What a frame with bit errors becomes.
@@ -411,10 +413,10 @@ impl Model {
                 );
             }
         }
-        if !(0.0..1.0).contains(&self.ber) {
+        if !(0.0..=MAX_BER).contains(&self.ber) {
             return bad(
                 "ber",
-                format!("expected a probability 0 <= ber < 1, found {}", self.ber),
+                format!("expected a probability 0 ..= {MAX_BER}, found {}", self.ber),
             );
         }
         if !(1..=MAX_FIFO_BYTES).contains(&self.fifo_bytes) {

@@ -124,7 +124,7 @@ pub struct Args {
 
     /// Baud rate of --a and --b (50 ..= 4000000).
     #[arg(long, default_value_t = 9600, help_heading = "Real time",
-          value_parser = clap::value_parser!(u32).range(50..=4_000_000))]
+          value_parser = value::baud())]
     pub baud: u32,
 
     /// Real time: side A's UDP address (bound here; each datagram is a frame).

@@ -51,7 +51,7 @@ pub struct Args {
     pub port: Option<String>,
 
     /// Baud rate of a serial --port (50 ..= 4000000) [default: 9600].
-    #[arg(long, value_parser = clap::value_parser!(u32).range(50..=4_000_000))]
+    #[arg(long, value_parser = value::baud())]
     pub baud: Option<u32>,
 
     /// On --port, give up on an incomplete frame after the line has been quiet this long
