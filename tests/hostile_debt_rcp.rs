@@ -605,3 +605,70 @@ fn a_sweep_takes_a_directory_of_pictures() {
         "{text}"
     );
 }
+
+#[test]
+fn a_sweep_checks_every_picture_first_and_leaves_no_csv_on_exit_2() {
+    let s = Scratch::new();
+    std::fs::create_dir(s.path("pics")).unwrap();
+    std::fs::copy(s.path("in.png"), s.path("pics/a.png")).unwrap();
+    std::fs::create_dir(s.path("none")).unwrap();
+    std::fs::write(s.path("none/notes.txt"), "not a picture").unwrap();
+    let png = s.bytes("in.png");
+    std::fs::write(s.path("cut.png"), &png[..png.len() / 2]).unwrap();
+    std::fs::write(s.path("noise.png"), garbage(3000, 7)).unwrap();
+    // A picture inside an input directory is an input: --csv may not overwrite it.
+    let before = s.bytes("pics/a.png");
+    let run = s.check(
+        ENCODE,
+        &["--sweep", "200", "pics", "--csv", "pics/a.png"],
+        b"",
+        &[2],
+    );
+    assert!(
+        run.stderr.contains("refusing to overwrite an input"),
+        "{}",
+        run.stderr
+    );
+    assert_eq!(s.bytes("pics/a.png"), before);
+    // A bad picture after good ones: exit 2 and no CSV, whether it fails from its header
+    // (checked before the first trial) or only when decoded (its rows are taken back).
+    for (bad, says) in [
+        ("noise.png", "not a readable image"),
+        ("cut.png", "not a readable image"),
+        ("none", "no image found"),
+        ("missing.png", "cannot read"),
+    ] {
+        let args = [
+            "--sweep", "200,300", "in.png", "pics", bad, "--csv", "t.csv",
+        ];
+        let run = s.check(ENCODE, &args, b"", &[2]);
+        assert!(run.stderr.contains(says), "{bad}: {}", run.stderr);
+        assert!(!s.path("t.csv").exists(), "{bad}: a CSV was left on exit 2");
+    }
+    // The ROI is checked against every picture before any trial.
+    let args = [
+        "--sweep",
+        "200",
+        "pics",
+        "--roi",
+        "0,0,65,10",
+        "--csv",
+        "t.csv",
+    ];
+    let run = s.check(ENCODE, &args, b"", &[2]);
+    assert!(run.stderr.contains("reaches outside"), "{}", run.stderr);
+    assert!(!s.path("t.csv").exists());
+    // --csv belongs to --sweep: alone it was silently ignored.
+    let run = s.check(
+        ENCODE,
+        &["in.png", "-b", "200", "--csv", "t.csv"],
+        b"",
+        &[2],
+    );
+    assert!(
+        run.stderr.contains("--csv only applies with --sweep"),
+        "{}",
+        run.stderr
+    );
+    assert!(run.stdout.is_empty() && !s.path("t.csv").exists());
+}
