@@ -672,3 +672,69 @@ fn a_sweep_checks_every_picture_first_and_leaves_no_csv_on_exit_2() {
     );
     assert!(run.stdout.is_empty() && !s.path("t.csv").exists());
 }
+
+#[test]
+fn a_signal_stops_rcp_dump_on_a_silent_pipe_with_its_outputs_whole() {
+    let s = Scratch::new();
+    let frames = std::fs::read(testdata("noisy.bin")).unwrap();
+    for (signal, code, format) in [
+        (Signal::SIGTERM, 143, "text"),
+        (Signal::SIGINT, 130, "csv"),
+        (Signal::SIGHUP, 129, "ndjson"),
+    ] {
+        let fifo = s.path("pipe");
+        let _ = std::fs::remove_file(&fifo);
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        assert!(made.unwrap().success());
+        let mut child = std::process::Command::new(DUMP)
+            .args([
+                "pipe",
+                "-q",
+                "-f",
+                format,
+                "-o",
+                "out",
+                "--summary",
+                "s.json",
+            ])
+            .current_dir(s.dir.path())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // The writer stays open and silent after some frames: the reader is blocked in read.
+        let mut writer = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(&fifo)
+            .unwrap();
+        writer.write_all(&frames).unwrap();
+        std::thread::sleep(Duration::from_millis(700));
+        let pid = nix::unistd::Pid::from_raw(child.id() as i32);
+        nix::sys::signal::kill(pid, signal).unwrap();
+        let started = std::time::Instant::now();
+        let out = loop {
+            if let Some(status) = child.try_wait().unwrap() {
+                break status;
+            }
+            assert!(started.elapsed() < LIMIT, "{signal}: rcp-dump did not stop");
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        let mut err = String::new();
+        std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+        assert_eq!(out.code(), Some(code), "{signal}: {err}");
+        assert!(err.contains(&format!("interrupted by {signal}")), "{err}");
+        let summary: serde_json::Value = serde_json::from_slice(&s.bytes("s.json")).unwrap();
+        assert_eq!(summary["interrupted"], signal.as_str(), "{summary}");
+        assert!(summary["frames"].as_u64().unwrap() > 0, "{summary}");
+        let text = String::from_utf8(s.bytes("out")).unwrap();
+        assert!(
+            text.ends_with('\n') && text.lines().count() > 1,
+            "{format}: {text}"
+        );
+        assert!(
+            temp_files(s.dir.path()).is_empty(),
+            "{signal}: temporary file left"
+        );
+        drop(writer);
+    }
+}

@@ -4,9 +4,11 @@
 //! invalid messages), with the counters a summary reports.
 //!
 //! Where records and notices go is the caller's [`Sink`]; [`capture`] reads a live port until
-//! it closes or a stop flag is set, giving up an incomplete frame when the line goes quiet.
+//! it closes or a stop flag is set, giving up an incomplete frame when the line goes quiet;
+//! [`read_stream`] reads a file or pipe to its end or until the flag is set.
 
 use std::io::{self, Read};
+use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
@@ -14,6 +16,7 @@ use serde_json::{Map, Value};
 
 use super::frame::Frame;
 use super::{DeframeEvent, DeframeStats, Deframer, MessageRepr, json};
+use crate::io::IoError;
 
 /// The columns of a CSV of frames, in order ([`Record::csv_fields`]).
 pub const CSV_COLUMNS: [&str; 48] = json::CSV_COLUMNS;
@@ -300,6 +303,83 @@ pub fn capture<S: Sink>(
     printer.finish(sink)?;
     sink.flush()?;
     Ok(end)
+}
+
+/// What reading a file or pipe through the printer ([`read_stream`]) can fail with.
+#[derive(Debug, thiserror::Error)]
+pub enum StreamError<E: std::error::Error + 'static> {
+    /// Opening or reading the stream failed.
+    #[error(transparent)]
+    Read(IoError),
+    /// The sink failed (a closed pipe, a full disk).
+    #[error(transparent)]
+    Sink(E),
+}
+
+/// Most chunks read ahead of the printer by [`read_stream`]'s reading thread.
+const CHUNKS_AHEAD: usize = 4;
+
+/// Reads a file (`None` or `-`: standard input) to its end, printing as it goes, or until
+/// `stop` is set; true if the flag ended it. The stream is read on a thread of its own, so a
+/// pipe from a live process that stays silent cannot keep a signal from being seen (the flag
+/// is polled every 100 ms). The end of the stream is printed either way.
+pub fn read_stream<S: Sink>(
+    path: Option<&Path>,
+    printer: &mut Printer,
+    sink: &mut S,
+    stop: &AtomicBool,
+) -> Result<bool, StreamError<S::Error>>
+where
+    S::Error: std::error::Error + 'static,
+{
+    let name = crate::io::display_name(path, "<stdin>");
+    let path = path
+        .filter(|p| !crate::io::is_std(Some(p)))
+        .map(Path::to_path_buf);
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Vec<u8>, IoError>>(CHUNKS_AHEAD);
+    // Opening happens there too: a named pipe without a writer blocks in open.
+    std::thread::spawn(move || {
+        let mut reader: Box<dyn Read> = match path {
+            Some(path) => match std::fs::File::open(&path) {
+                Ok(file) => Box::new(file),
+                Err(source) => return drop(tx.send(Err(IoError::Open { path, source }))),
+            },
+            None => Box::new(io::stdin()),
+        };
+        loop {
+            let mut buf = vec![0u8; 64 * 1024];
+            let read = match reader.read(&mut buf) {
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                read => read,
+            };
+            let last = !matches!(read, Ok(n) if n > 0);
+            let chunk = read.map(|n| {
+                buf.truncate(n);
+                buf
+            });
+            let sent = tx.send(chunk.map_err(|source| IoError::Read {
+                name: name.clone(),
+                source,
+            }));
+            if last || sent.is_err() {
+                break;
+            }
+        }
+    });
+    let stopped = loop {
+        if stop.load(Ordering::SeqCst) {
+            break true;
+        }
+        match rx.recv_timeout(Duration::from_millis(100)) {
+            Ok(Ok(chunk)) if chunk.is_empty() => break false,
+            Ok(Ok(chunk)) => printer.push(&chunk, sink).map_err(StreamError::Sink)?,
+            Ok(Err(e)) => return Err(StreamError::Read(e)),
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break false,
+        }
+    };
+    printer.finish(sink).map_err(StreamError::Sink)?;
+    Ok(stopped)
 }
 
 #[cfg(test)]
