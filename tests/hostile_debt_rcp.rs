@@ -673,6 +673,54 @@ fn a_sweep_checks_every_picture_first_and_leaves_no_csv_on_exit_2() {
     assert!(run.stdout.is_empty() && !s.path("t.csv").exists());
 }
 
+/// Runs `bin` in the scratch directory reading the named pipe `pipe`, whose writer sends
+/// `bytes` and then stays open and silent; sends `signal` once the reader is blocked. Returns
+/// the exit status and stderr.
+fn signalled_on_a_silent_pipe(
+    s: &Scratch,
+    bin: &str,
+    args: &[&str],
+    bytes: &[u8],
+    signal: Signal,
+) -> (std::process::ExitStatus, String) {
+    let fifo = s.path("pipe");
+    let _ = std::fs::remove_file(&fifo);
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    assert!(made.unwrap().success());
+    let mut child = std::process::Command::new(bin)
+        .args(args)
+        .current_dir(s.dir.path())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Read and write: opening does not wait for the reader, and the pipe never ends.
+    let mut writer = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(&fifo)
+        .unwrap();
+    writer.write_all(bytes).unwrap();
+    std::thread::sleep(Duration::from_millis(700));
+    let pid = nix::unistd::Pid::from_raw(child.id() as i32);
+    nix::sys::signal::kill(pid, signal).unwrap();
+    let started = std::time::Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        assert!(
+            started.elapsed() < LIMIT,
+            "{args:?}: did not stop on {signal}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+    drop(writer);
+    (status, err)
+}
+
 #[test]
 fn a_signal_stops_rcp_dump_on_a_silent_pipe_with_its_outputs_whole() {
     let s = Scratch::new();
@@ -682,46 +730,18 @@ fn a_signal_stops_rcp_dump_on_a_silent_pipe_with_its_outputs_whole() {
         (Signal::SIGINT, 130, "csv"),
         (Signal::SIGHUP, 129, "ndjson"),
     ] {
-        let fifo = s.path("pipe");
-        let _ = std::fs::remove_file(&fifo);
-        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
-        assert!(made.unwrap().success());
-        let mut child = std::process::Command::new(DUMP)
-            .args([
-                "pipe",
-                "-q",
-                "-f",
-                format,
-                "-o",
-                "out",
-                "--summary",
-                "s.json",
-            ])
-            .current_dir(s.dir.path())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
-        // The writer stays open and silent after some frames: the reader is blocked in read.
-        let mut writer = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .open(&fifo)
-            .unwrap();
-        writer.write_all(&frames).unwrap();
-        std::thread::sleep(Duration::from_millis(700));
-        let pid = nix::unistd::Pid::from_raw(child.id() as i32);
-        nix::sys::signal::kill(pid, signal).unwrap();
-        let started = std::time::Instant::now();
-        let out = loop {
-            if let Some(status) = child.try_wait().unwrap() {
-                break status;
-            }
-            assert!(started.elapsed() < LIMIT, "{signal}: rcp-dump did not stop");
-            std::thread::sleep(Duration::from_millis(20));
-        };
-        let mut err = String::new();
-        std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
-        assert_eq!(out.code(), Some(code), "{signal}: {err}");
+        let args = [
+            "pipe",
+            "-q",
+            "-f",
+            format,
+            "-o",
+            "out",
+            "--summary",
+            "s.json",
+        ];
+        let (status, err) = signalled_on_a_silent_pipe(&s, DUMP, &args, &frames, signal);
+        assert_eq!(status.code(), Some(code), "{signal}: {err}");
         assert!(err.contains(&format!("interrupted by {signal}")), "{err}");
         let summary: serde_json::Value = serde_json::from_slice(&s.bytes("s.json")).unwrap();
         assert_eq!(summary["interrupted"], signal.as_str(), "{summary}");
@@ -735,6 +755,32 @@ fn a_signal_stops_rcp_dump_on_a_silent_pipe_with_its_outputs_whole() {
             temp_files(s.dir.path()).is_empty(),
             "{signal}: temporary file left"
         );
-        drop(writer);
+    }
+}
+
+#[test]
+fn a_signal_while_a_pipe_is_read_leaves_no_temporary_file() {
+    let s = Scratch::new();
+    let png = s.bytes("in.png");
+    let stream = s.bytes("in.debt");
+    let cases: [(&str, &[&str], &[u8]); 3] = [
+        (DECODE, &["pipe", "-o", "out.png"], &stream[..20]),
+        (
+            ENCODE,
+            &["pipe", "-b", "300", "-o", "out.debt"],
+            &png[..100],
+        ),
+        (PACK, &["--image", "pipe", "-o", "out.bin"], &stream[..20]),
+    ];
+    for (bin, args, bytes) in cases {
+        let (_, err) = signalled_on_a_silent_pipe(&s, bin, args, bytes, Signal::SIGTERM);
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert!(
+            temp_files(s.dir.path()).is_empty(),
+            "{args:?}: temporary file left"
+        );
+        for out in ["out.png", "out.debt", "out.bin"] {
+            assert!(!s.path(out).exists(), "{args:?}: {out} left");
+        }
     }
 }

@@ -121,11 +121,13 @@ fn run(args: &Args) -> Result<u8> {
         );
     }
     let output = args.output.as_deref().unwrap_or(Path::new("-"));
-    let mut out = outs.claim("-o", output, Kind::Binary)?.open()?;
+    let dest = outs.claim("-o", output, Kind::Binary)?;
     let (img, name) = load(args, args.inputs.first().map(PathBuf::as_path))?;
     let bytes = args.bytes.unwrap_or_default();
     let stream =
         debt::encode(&img, &args.options(bytes)).map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+    // Opened only now: a signal while a pipe is read leaves no temporary file behind.
+    let mut out = dest.open()?;
     out.write_bytes(&stream)?;
     out.finish()?;
     Ok(EXIT_OK)

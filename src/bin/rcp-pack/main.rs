@@ -9,7 +9,7 @@ use std::process::ExitCode;
 use anyhow::{Context, Result, bail};
 use cli::Args;
 use rovlink::cli::only_with;
-use rovlink::cli::output::{Kind, Outputs};
+use rovlink::cli::output::{Dest, Kind, Outputs};
 use rovlink::io::{EXIT_BAD_INPUT, EXIT_OK, Input, Output};
 use rovlink::say;
 use rovlink::wire::pack::{self, Lines};
@@ -41,7 +41,7 @@ fn pack_lines(args: &Args, out: &mut Output) -> Result<u8> {
     Ok(EXIT_OK)
 }
 
-fn pack_image(args: &Args, path: &Path, out: &mut Output) -> Result<u8> {
+fn pack_image(args: &Args, path: &Path, dest: &Dest) -> Result<u8> {
     let name = path.display().to_string();
     // Read up to a bound: a file longer than any image's trunks is refused, not held whole.
     let data = match rovlink::io::read_at_most(path, pack::MAX_IMAGE_BYTES as u64) {
@@ -58,9 +58,12 @@ fn pack_image(args: &Args, path: &Path, out: &mut Output) -> Result<u8> {
     );
     let messages =
         pack::image_messages(&data, trunk, src, dst, isn).with_context(|| name.clone())?;
+    // Opened only now: a signal while a pipe is read leaves no temporary file behind.
+    let mut out = dest.open()?;
     for repr in &messages {
         out.write_bytes(&pack::frame(repr, args.hex)?)?;
     }
+    out.finish()?;
     Ok(EXIT_OK)
 }
 
@@ -80,13 +83,15 @@ fn run(args: &Args) -> Result<u8> {
     outs.input(args.image.as_deref());
     let kind = if args.hex { Kind::Text } else { Kind::Binary };
     let dest = outs.claim("-o", args.output.as_deref().unwrap_or(Path::new("-")), kind)?;
-    let mut out = dest.open()?;
-    let code = match &args.image {
-        Some(path) => pack_image(args, path, &mut out)?,
-        None => pack_lines(args, &mut out)?,
-    };
-    out.finish()?;
-    Ok(code)
+    match &args.image {
+        Some(path) => pack_image(args, path, &dest),
+        None => {
+            let mut out = dest.open()?;
+            let code = pack_lines(args, &mut out)?;
+            out.finish()?;
+            Ok(code)
+        }
+    }
 }
 
 fn main() -> ExitCode {
