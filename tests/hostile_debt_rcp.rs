@@ -784,3 +784,16 @@ fn a_signal_while_a_pipe_is_read_leaves_no_temporary_file() {
         }
     }
 }
+
+#[test]
+fn rcp_pack_addresses_say_their_range_like_every_flag() {
+    let s = Scratch::new();
+    for (flag, value, says) in [
+        ("--isn", "2", "--isn: expected 0 ..= 1, found 2"),
+        ("--src", "0", "--src: expected 1 ..= 15, found 0"),
+        ("--dst", "16", "--dst: expected 0 ..= 15, found 16"),
+    ] {
+        let run = s.check(PACK, &["--image", "in.debt", flag, value], b"", &[2]);
+        assert!(run.stderr.contains(says), "{flag}: {}", run.stderr);
+    }
+}

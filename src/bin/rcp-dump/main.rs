@@ -79,10 +79,11 @@ fn pump(args: &Args, printer: &mut Printer, sink: &mut Sink) -> Result<Option<Ca
     };
     let mut port = options.open_bytes(dev, Duration::from_millis(100))?;
     if !args.quiet {
-        say!(
-            "reading {dev} at {} baud until it closes or Ctrl-C",
-            options.baud
-        );
+        // A baud rate is a serial line's only: not said for tcp: and udp:.
+        let baud = format!(" at {} baud", options.baud);
+        let serial = !(dev.starts_with("tcp:") || dev.starts_with("udp:"));
+        let at = if serial { baud.as_str() } else { "" };
+        say!("reading {dev}{at} until it closes or Ctrl-C");
     }
     let idle_ms = args.idle_ms.unwrap_or(1000.0);
     let idle = (idle_ms > 0.0).then(|| Duration::from_secs_f64(idle_ms / 1000.0));

@@ -52,8 +52,8 @@ fn pack_image(args: &Args, path: &Path, dest: &Dest) -> Result<u8> {
     };
     let trunk = args.trunk.unwrap_or(39) as usize;
     let (src, dst, isn) = (
-        args.src.unwrap_or(1),
-        args.dst.unwrap_or(0),
+        args.src.unwrap_or(1) as u8,
+        args.dst.unwrap_or(0) as u8,
         args.isn == Some(1),
     );
     let messages =
