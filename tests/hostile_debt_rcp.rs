@@ -763,7 +763,8 @@ fn a_signal_while_a_pipe_is_read_leaves_no_temporary_file() {
     let s = Scratch::new();
     let png = s.bytes("in.png");
     let stream = s.bytes("in.debt");
-    let cases: [(&str, &[&str], &[u8]); 3] = [
+    let messages = s.bytes("messages.jsonl");
+    let cases: [(&str, &[&str], &[u8]); 4] = [
         (DECODE, &["pipe", "-o", "out.png"], &stream[..20]),
         (
             ENCODE,
@@ -771,10 +772,19 @@ fn a_signal_while_a_pipe_is_read_leaves_no_temporary_file() {
             &png[..100],
         ),
         (PACK, &["--image", "pipe", "-o", "out.bin"], &stream[..20]),
+        (PACK, &["pipe", "-o", "out.bin"], &messages),
     ];
     for (bin, args, bytes) in cases {
-        let (_, err) = signalled_on_a_silent_pipe(&s, bin, args, bytes, Signal::SIGTERM);
+        let (status, err) = signalled_on_a_silent_pipe(&s, bin, args, bytes, Signal::SIGTERM);
         assert!(!err.contains("panicked"), "{args:?}: {err}");
+        if args == ["pipe", "-o", "out.bin"] {
+            // JSON Lines are read as they come: the signal is seen, the output not committed.
+            assert_eq!(status.code(), Some(143), "{err}");
+            assert!(
+                err.contains("interrupted by SIGTERM: nothing written"),
+                "{err}"
+            );
+        }
         assert!(
             temp_files(s.dir.path()).is_empty(),
             "{args:?}: temporary file left"

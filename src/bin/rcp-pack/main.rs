@@ -8,21 +8,35 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use cli::Args;
-use rovlink::cli::only_with;
 use rovlink::cli::output::{Dest, Kind, Outputs};
-use rovlink::io::{EXIT_BAD_INPUT, EXIT_OK, Input, Output};
+use rovlink::cli::{only_with, stop};
+use rovlink::io::{EXIT_BAD_INPUT, EXIT_OK, Output};
 use rovlink::say;
 use rovlink::wire::pack::{self, Lines};
+use rovlink::wire::print::StopReader;
 
 /// The tool's name, prefixed to everything it says on stderr.
 const TOOL: &str = "rcp-pack";
 
 fn pack_lines(args: &Args, out: &mut Output) -> Result<u8> {
-    let mut input = Input::open(args.input.as_deref())?;
-    let name = input.name.clone();
+    // Read on a thread of its own, so that a signal ends a run on a quiet pipe.
+    stop::install()?;
+    let name = rovlink::io::display_name(args.input.as_deref(), "<stdin>");
+    if let Some(path) = args
+        .input
+        .as_deref()
+        .filter(|p| !rovlink::io::is_std(Some(p)))
+    {
+        std::fs::metadata(path).map_err(|source| rovlink::io::IoError::Open {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    }
+    let input = StopReader::open(args.input.as_deref(), stop::flag());
     let (mut bad, mut frames) = (0usize, 0usize);
-    for (number, parsed) in Lines::new(std::io::BufReader::new(input.reader())) {
+    for (number, parsed) in Lines::new(std::io::BufReader::new(input)) {
         match parsed {
+            Err(_) if stop::requested() => break,
             Ok(repr) => {
                 out.write_bytes(&pack::frame(&repr, args.hex)?)?;
                 frames += 1;
@@ -88,6 +102,11 @@ fn run(args: &Args) -> Result<u8> {
         None => {
             let mut out = dest.open()?;
             let code = pack_lines(args, &mut out)?;
+            // Written whole or not at all: a stopped run leaves no file.
+            if let Some(note) = stop::note() {
+                say!("{note}: nothing written");
+                return Ok(stop::code_or(code));
+            }
             out.finish()?;
             Ok(code)
         }
