@@ -234,7 +234,8 @@ fn sweep_writes_one_row_per_image_and_budget_and_keeps_rows_on_failure() {
             assert!(ssim > 0.0 && ssim <= 1.0);
         }
     }
-    // A bad image after a good one: exit 2, the good image's rows are kept.
+    // A bad image after a good one: exit 2, found from its header before any trial, so the
+    // CSV is not touched (the earlier run's rows stay) and a new one is not made.
     let junk = dir.path().join("junk.png");
     std::fs::write(&junk, b"junk").unwrap();
     let out = run(
@@ -257,8 +258,23 @@ fn sweep_writes_one_row_per_image_and_budget_and_keeps_rows_on_failure() {
     );
     assert_eq!(
         std::fs::read_to_string(&csv).unwrap().lines().count(),
-        1 + 2
+        1 + 6
     );
+    let fresh = dir.path().join("fresh.csv");
+    let out = run(
+        ENCODE,
+        &[
+            "--sweep",
+            "60",
+            "--csv",
+            fresh.to_str().unwrap(),
+            rgb.to_str().unwrap(),
+            junk.to_str().unwrap(),
+        ],
+        b"",
+    );
+    assert_eq!(out.code, 2);
+    assert!(!fresh.exists(), "no output file on exit 2");
     // --bytes or --sweep, not neither.
     assert_eq!(run(ENCODE, &[rgb.to_str().unwrap()], b"").code, 2);
 }

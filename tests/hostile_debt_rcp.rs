@@ -605,3 +605,205 @@ fn a_sweep_takes_a_directory_of_pictures() {
         "{text}"
     );
 }
+
+#[test]
+fn a_sweep_checks_every_picture_first_and_leaves_no_csv_on_exit_2() {
+    let s = Scratch::new();
+    std::fs::create_dir(s.path("pics")).unwrap();
+    std::fs::copy(s.path("in.png"), s.path("pics/a.png")).unwrap();
+    std::fs::create_dir(s.path("none")).unwrap();
+    std::fs::write(s.path("none/notes.txt"), "not a picture").unwrap();
+    let png = s.bytes("in.png");
+    std::fs::write(s.path("cut.png"), &png[..png.len() / 2]).unwrap();
+    std::fs::write(s.path("noise.png"), garbage(3000, 7)).unwrap();
+    // A picture inside an input directory is an input: --csv may not overwrite it.
+    let before = s.bytes("pics/a.png");
+    let run = s.check(
+        ENCODE,
+        &["--sweep", "200", "pics", "--csv", "pics/a.png"],
+        b"",
+        &[2],
+    );
+    assert!(
+        run.stderr.contains("refusing to overwrite an input"),
+        "{}",
+        run.stderr
+    );
+    assert_eq!(s.bytes("pics/a.png"), before);
+    // A bad picture after good ones: exit 2 and no CSV, whether it fails from its header
+    // (checked before the first trial) or only when decoded (its rows are taken back).
+    for (bad, says) in [
+        ("noise.png", "not a readable image"),
+        ("cut.png", "not a readable image"),
+        ("none", "no image found"),
+        ("missing.png", "cannot read"),
+    ] {
+        let args = [
+            "--sweep", "200,300", "in.png", "pics", bad, "--csv", "t.csv",
+        ];
+        let run = s.check(ENCODE, &args, b"", &[2]);
+        assert!(run.stderr.contains(says), "{bad}: {}", run.stderr);
+        assert!(!s.path("t.csv").exists(), "{bad}: a CSV was left on exit 2");
+    }
+    // The ROI is checked against every picture before any trial.
+    let args = [
+        "--sweep",
+        "200",
+        "pics",
+        "--roi",
+        "0,0,65,10",
+        "--csv",
+        "t.csv",
+    ];
+    let run = s.check(ENCODE, &args, b"", &[2]);
+    assert!(run.stderr.contains("reaches outside"), "{}", run.stderr);
+    assert!(!s.path("t.csv").exists());
+    // --csv belongs to --sweep: alone it was silently ignored.
+    let run = s.check(
+        ENCODE,
+        &["in.png", "-b", "200", "--csv", "t.csv"],
+        b"",
+        &[2],
+    );
+    assert!(
+        run.stderr.contains("--csv only applies with --sweep"),
+        "{}",
+        run.stderr
+    );
+    assert!(run.stdout.is_empty() && !s.path("t.csv").exists());
+}
+
+/// Runs `bin` in the scratch directory reading the named pipe `pipe`, whose writer sends
+/// `bytes` and then stays open and silent; sends `signal` once the reader is blocked. Returns
+/// the exit status and stderr.
+fn signalled_on_a_silent_pipe(
+    s: &Scratch,
+    bin: &str,
+    args: &[&str],
+    bytes: &[u8],
+    signal: Signal,
+) -> (std::process::ExitStatus, String) {
+    let fifo = s.path("pipe");
+    let _ = std::fs::remove_file(&fifo);
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    assert!(made.unwrap().success());
+    let mut child = std::process::Command::new(bin)
+        .args(args)
+        .current_dir(s.dir.path())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Read and write: opening does not wait for the reader, and the pipe never ends.
+    let mut writer = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(&fifo)
+        .unwrap();
+    writer.write_all(bytes).unwrap();
+    std::thread::sleep(Duration::from_millis(700));
+    let pid = nix::unistd::Pid::from_raw(child.id() as i32);
+    nix::sys::signal::kill(pid, signal).unwrap();
+    let started = std::time::Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        assert!(
+            started.elapsed() < LIMIT,
+            "{args:?}: did not stop on {signal}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+    drop(writer);
+    (status, err)
+}
+
+#[test]
+fn a_signal_stops_rcp_dump_on_a_silent_pipe_with_its_outputs_whole() {
+    let s = Scratch::new();
+    let frames = std::fs::read(testdata("noisy.bin")).unwrap();
+    for (signal, code, format) in [
+        (Signal::SIGTERM, 143, "text"),
+        (Signal::SIGINT, 130, "csv"),
+        (Signal::SIGHUP, 129, "ndjson"),
+    ] {
+        let args = [
+            "pipe",
+            "-q",
+            "-f",
+            format,
+            "-o",
+            "out",
+            "--summary",
+            "s.json",
+        ];
+        let (status, err) = signalled_on_a_silent_pipe(&s, DUMP, &args, &frames, signal);
+        assert_eq!(status.code(), Some(code), "{signal}: {err}");
+        assert!(err.contains(&format!("interrupted by {signal}")), "{err}");
+        let summary: serde_json::Value = serde_json::from_slice(&s.bytes("s.json")).unwrap();
+        assert_eq!(summary["interrupted"], signal.as_str(), "{summary}");
+        assert!(summary["frames"].as_u64().unwrap() > 0, "{summary}");
+        let text = String::from_utf8(s.bytes("out")).unwrap();
+        assert!(
+            text.ends_with('\n') && text.lines().count() > 1,
+            "{format}: {text}"
+        );
+        assert!(
+            temp_files(s.dir.path()).is_empty(),
+            "{signal}: temporary file left"
+        );
+    }
+}
+
+#[test]
+fn a_signal_while_a_pipe_is_read_leaves_no_temporary_file() {
+    let s = Scratch::new();
+    let png = s.bytes("in.png");
+    let stream = s.bytes("in.debt");
+    let messages = s.bytes("messages.jsonl");
+    let cases: [(&str, &[&str], &[u8]); 4] = [
+        (DECODE, &["pipe", "-o", "out.png"], &stream[..20]),
+        (
+            ENCODE,
+            &["pipe", "-b", "300", "-o", "out.debt"],
+            &png[..100],
+        ),
+        (PACK, &["--image", "pipe", "-o", "out.bin"], &stream[..20]),
+        (PACK, &["pipe", "-o", "out.bin"], &messages),
+    ];
+    for (bin, args, bytes) in cases {
+        let (status, err) = signalled_on_a_silent_pipe(&s, bin, args, bytes, Signal::SIGTERM);
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        if args == ["pipe", "-o", "out.bin"] {
+            // JSON Lines are read as they come: the signal is seen, the output not committed.
+            assert_eq!(status.code(), Some(143), "{err}");
+            assert!(
+                err.contains("interrupted by SIGTERM: nothing written"),
+                "{err}"
+            );
+        }
+        assert!(
+            temp_files(s.dir.path()).is_empty(),
+            "{args:?}: temporary file left"
+        );
+        for out in ["out.png", "out.debt", "out.bin"] {
+            assert!(!s.path(out).exists(), "{args:?}: {out} left");
+        }
+    }
+}
+
+#[test]
+fn rcp_pack_addresses_say_their_range_like_every_flag() {
+    let s = Scratch::new();
+    for (flag, value, says) in [
+        ("--isn", "2", "--isn: expected 0 ..= 1, found 2"),
+        ("--src", "0", "--src: expected 1 ..= 15, found 0"),
+        ("--dst", "16", "--dst: expected 0 ..= 15, found 16"),
+    ] {
+        let run = s.check(PACK, &["--image", "in.debt", flag, value], b"", &[2]);
+        assert!(run.stderr.contains(says), "{flag}: {}", run.stderr);
+    }
+}

@@ -514,3 +514,82 @@ fn issue_14_defects_are_fixed() {
         assert_contract(&r, &[0], &format!("odd points at {res} m"));
     }
 }
+
+#[test]
+fn a_signal_stops_a_build_reading_a_silent_pipe() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("scans.graph");
+    let graph = dir.path().join("survey.graph");
+    ok(
+        &octo(dir.path(), &["synth", "--scans", "3", "-o", s(&graph)]),
+        "synth",
+    );
+    let survey = std::fs::read(&graph).unwrap();
+    for (format, bytes) in [
+        ("xyz", &b"1 1 1\n2 2 2\n"[..]),
+        ("graph", &survey[..600_000]),
+    ] {
+        let _ = std::fs::remove_file(&fifo);
+        assert!(
+            Command::new("mkfifo")
+                .arg(&fifo)
+                .status()
+                .unwrap()
+                .success()
+        );
+        let mut child = Command::new(OCTO)
+            .args([
+                "build",
+                "scans.graph",
+                "--format",
+                format,
+                "--origin",
+                "0,0,0",
+            ])
+            .args([
+                "-q", "-o", "out.odl", "--stats", "out.csv", "--ot", "out.ot",
+            ])
+            .current_dir(dir.path())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Read and write: the writer stays open and silent, the pipe never ends.
+        let mut writer = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(&fifo)
+            .unwrap();
+        std::io::Write::write_all(&mut writer, bytes).unwrap();
+        std::thread::sleep(Duration::from_millis(1500));
+        kill(Pid::from_raw(child.id() as i32), Signal::SIGTERM).unwrap();
+        let started = Instant::now();
+        let status = loop {
+            if let Some(status) = child.try_wait().unwrap() {
+                break status;
+            }
+            assert!(
+                started.elapsed() < LIMIT,
+                "{format}: the build did not stop"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        let mut err = String::new();
+        std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+        assert_eq!(status.code(), Some(143), "{format}: {err}");
+        assert!(err.contains("interrupted by SIGTERM"), "{format}: {err}");
+        assert!(
+            temp_files(dir.path()).is_empty(),
+            "{format}: temporary file left"
+        );
+        assert_whole_csv(&dir.path().join("out.csv"));
+        ok(
+            &octo(dir.path(), &["dump", "out.odl"]),
+            "dump of the stopped stream",
+        );
+        ok(
+            &octo(dir.path(), &["full", "out.ot", "-o", "full.odl"]),
+            "the stopped map reads",
+        );
+        drop(writer);
+    }
+}

@@ -359,6 +359,70 @@ pub fn load_fit(path: &Path, oversize: Oversize) -> Result<Vec<Loaded>, PictureE
     Ok(pictures)
 }
 
+/// A picture [`list`] found: its path, and its width and height in pixels when its header was
+/// read.
+pub type Listed = (PathBuf, Option<(usize, usize)>);
+
+/// Checks a picture file from its header alone, without decoding it: a format this build
+/// reads, at least one pixel and at most [`MAX_PICTURE_SIDE`] a side. Returns its width and
+/// height in pixels. Only what [`open`] would read whole can be checked this way: call it on
+/// regular files (a pipe's bytes would be spent).
+pub fn probe(path: &Path) -> Result<(usize, usize), PictureError> {
+    let name = path.display().to_string();
+    let format_error = |e: &dyn std::fmt::Display| PictureError::Format {
+        name: name.clone(),
+        reason: e.to_string(),
+    };
+    let reader = image::ImageReader::open(path).map_err(|source| PictureError::Read {
+        name: name.clone(),
+        source,
+    })?;
+    let reader = reader.with_guessed_format().map_err(|e| format_error(&e))?;
+    let (width, height) = reader.into_dimensions().map_err(|e| format_error(&e))?;
+    if width == 0 || height == 0 {
+        return Err(format_error(&format!("{width}x{height} pixels")));
+    }
+    if width as usize > MAX_PICTURE_SIDE || height as usize > MAX_PICTURE_SIDE {
+        return Err(PictureError::TooLarge {
+            name,
+            width: width.into(),
+            height: height.into(),
+        });
+    }
+    Ok((width as usize, height as usize))
+}
+
+/// The pictures a list of paths names, each checked from its header ([`probe`]) before any is
+/// decoded: a directory stands for the pictures in it (sorted by name; files that are not
+/// pictures skipped, none at all an error), a regular file must be a picture, and anything
+/// else (`-` for standard input, a pipe) is kept as it is, read when its turn comes. Each
+/// picture comes with its width and height when they are known.
+pub fn list(paths: &[PathBuf]) -> Result<Vec<Listed>, PictureError> {
+    let mut pictures = Vec::new();
+    for path in paths {
+        if path.is_dir() {
+            let before = pictures.len();
+            for file in files_in(path)? {
+                match probe(&file) {
+                    Ok(size) => pictures.push((file, Some(size))),
+                    Err(PictureError::Format { .. }) => {}
+                    Err(e) => return Err(e),
+                }
+            }
+            if pictures.len() == before {
+                return Err(PictureError::NoImage {
+                    name: path.display().to_string(),
+                });
+            }
+        } else if path.is_file() {
+            pictures.push((path.clone(), Some(probe(path)?)));
+        } else {
+            pictures.push((path.clone(), None));
+        }
+    }
+    Ok(pictures)
+}
+
 /// The files of a directory (not its subdirectories), sorted by name: what [`load`] tries.
 pub fn files_in(dir: &Path) -> Result<Vec<PathBuf>, PictureError> {
     let entries = std::fs::read_dir(dir).map_err(|source| PictureError::Read {

@@ -14,7 +14,6 @@
 //! Every number comes with a range ([`BuildConfig::validate`], [`synth::SurveyParams::validate`])
 //! whose errors name the option, the range with its unit, and what was found.
 
-use std::fs::File;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -27,6 +26,7 @@ use super::delta::{self, Message, Receiver, Roi, Sender, ViewSpec};
 use super::tree::{OcTree, TREE_DEPTH, unmorton};
 use super::{ParseError, Pose, Scan, files, graph, synth, transfer};
 use crate::io::{Input, IoError};
+use crate::wire::print::StopReader;
 
 /// Finest voxel edge accepted, m (0.1 mm).
 pub const RESOLUTION_MIN_M: f64 = 1e-4;
@@ -555,30 +555,47 @@ pub enum PipelineError {
 
 /// The scans of one input, one at a time (a `.graph` file is streamed from disk, so a large
 /// survey never sits in memory whole), how many there will be, and the format.
-type ScanSource = (
-    Box<dyn Iterator<Item = Result<Scan, ParseError>>>,
+type ScanSource<'a> = (
+    Box<dyn Iterator<Item = Result<Scan, ParseError>> + 'a>,
     usize,
     InputFormat,
 );
 
-fn open_scans(path: &Path, cfg: &BuildConfig) -> Result<ScanSource, PipelineError> {
+/// The scans of one input, read through a [`StopReader`]: a read waiting on a silent pipe
+/// gives up once `stop` is set.
+fn open_scans<'a>(
+    path: &Path,
+    cfg: &BuildConfig,
+    stop: &'a AtomicBool,
+) -> Result<ScanSource<'a>, PipelineError> {
     let name = path.display().to_string();
     let bad = |source| PipelineError::Input {
         name: name.clone(),
         source,
     };
     let by_name = InputFormat::from_path(path);
-    if cfg.format.or(by_name) == Some(InputFormat::Graph) && !crate::io::is_std(Some(path)) {
-        let file = File::open(path).map_err(|source| IoError::Open {
+    // Looked up, not opened (a named pipe would wait for a writer): a missing file is named.
+    let meta = match crate::io::is_std(Some(path)) {
+        true => None,
+        false => Some(std::fs::metadata(path).map_err(|source| IoError::Open {
             path: path.to_path_buf(),
             source,
-        })?;
-        let len = file.metadata().map(|m| m.len()).unwrap_or(u64::MAX);
-        let stream = graph::ScanStream::new(file, len).map_err(bad)?;
+        })?),
+    };
+    if cfg.format.or(by_name) == Some(InputFormat::Graph)
+        && let Some(meta) = meta
+    {
+        let len = if meta.is_file() { meta.len() } else { u64::MAX };
+        let stream = graph::ScanStream::new(StopReader::open(Some(path), stop), len);
+        let stream = stream.map_err(bad)?;
         let n = stream.node_count() as usize;
         return Ok((Box::new(stream), n, InputFormat::Graph));
     }
-    let (bytes, _) = read_input(path)?;
+    let bytes = read_limited(
+        &mut StopReader::open(Some(path), stop),
+        &name,
+        MAX_INPUT_BYTES,
+    )?;
     let format = cfg
         .format
         .or(by_name)
@@ -648,7 +665,14 @@ pub fn build(
             report.interrupted = true;
             break;
         }
-        let (scans, count, format) = open_scans(path, cfg)?;
+        // A read that gave up because the flag was set is a stop, not a bad input.
+        let (scans, count, format) = match open_scans(path, cfg, hooks.stop) {
+            Err(_) if hooks.stop.load(Ordering::Relaxed) => {
+                report.interrupted = true;
+                break;
+            }
+            opened => opened?,
+        };
         known += count as u64;
         if let Some(p) = hooks.progress.as_mut() {
             p(report.scans as u64, known);
@@ -659,13 +683,17 @@ pub fn build(
                 report.interrupted = true;
                 break 'inputs;
             }
-            let scan = with_origin(
-                scan.map_err(|source| PipelineError::Input {
+            let scan = match scan {
+                Err(_) if hooks.stop.load(Ordering::Relaxed) => {
+                    report.interrupted = true;
+                    break 'inputs;
+                }
+                scan => scan.map_err(|source| PipelineError::Input {
                     name: path.display().to_string(),
                     source,
                 })?,
-                origin,
-            );
+            };
+            let scan = with_origin(scan, origin);
             let tree = tree.get_or_insert_with(|| {
                 let mut t = OcTree::new(cfg.resolution_m);
                 t.set_threads(threads);

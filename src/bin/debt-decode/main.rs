@@ -28,7 +28,6 @@ fn run(args: &Args) -> Result<u8> {
         Dest::File(path) => OutputFormat::for_path(path)?,
         Dest::Stdout => OutputFormat::Png,
     };
-    let mut out = dest.open()?;
     let mut input = Input::open(args.input.as_deref())?;
     // Read up to a bound (and only the bytes asked for), so that an endless input is refused.
     let most = args
@@ -64,6 +63,8 @@ fn run(args: &Args) -> Result<u8> {
     }
     let img = debt::decode_with_loss(&stream, &lost)
         .map_err(|e| anyhow::anyhow!("{}: {e}", input.name))?;
+    // Opened only now: a signal while a pipe is read leaves no temporary file behind.
+    let mut out = dest.open()?;
     out.write_bytes(&debt::picture::encode(&img, format)?)?;
     out.finish()?;
     Ok(EXIT_OK)

@@ -18,6 +18,23 @@ use rovlink::say;
 /// The tool's name, prefixed to everything it says on stderr.
 const TOOL: &str = "debt-encode";
 
+/// The --sweep progress bar (shown on a terminal only).
+const PROGRESS: &str = "{pos}/{len} trials [{bar:30}] {msg}";
+
+/// Checks the ROI against a picture's size.
+fn check_roi(args: &Args, (width, height): (usize, usize), name: &str) -> Result<()> {
+    match args.roi {
+        Some(r) if r.x1 > width || r.y1 > height => bail!(
+            "--roi {},{},{},{} reaches outside the {width}x{height} image {name}",
+            r.x0,
+            r.y0,
+            r.x1,
+            r.y1
+        ),
+        _ => Ok(()),
+    }
+}
+
 /// Reads a picture (`None` or `-`: standard input) and checks the ROI against it.
 fn load(args: &Args, input: Option<&Path>) -> Result<(debt::Image, String)> {
     let (img, name) = match input.filter(|p| p.as_os_str() != "-") {
@@ -27,24 +44,25 @@ fn load(args: &Args, input: Option<&Path>) -> Result<(debt::Image, String)> {
             "<stdin>".into(),
         ),
     };
-    if let Some(r) = args.roi
-        && (r.x1 > img.width || r.y1 > img.height)
-    {
-        bail!(
-            "--roi {},{},{},{} reaches outside the {}x{} image {name}",
-            r.x0,
-            r.y0,
-            r.x1,
-            r.y1,
-            img.width,
-            img.height
-        );
-    }
+    check_roi(args, (img.width, img.height), &name)?;
     Ok((img, name))
 }
 
-/// Compression trials: one CSV row per image and budget, until done or a signal.
+/// Compression trials: one CSV row per image and budget, until done or a signal. Every picture
+/// is listed and checked from its header first (a directory's pictures are inputs too), and a
+/// picture that fails later takes the rows written with it: exit 2 leaves no file.
 fn sweep(args: &Args, budgets: &[u64], outs: &mut Outputs) -> Result<u8> {
+    let stdin = [PathBuf::from("-")];
+    let pictures = picture::list(match args.inputs.is_empty() {
+        true => &stdin,
+        false => &args.inputs,
+    })?;
+    for (path, size) in &pictures {
+        outs.input(Some(path));
+        size.map_or(Ok(()), |size| {
+            check_roi(args, size, &path.display().to_string())
+        })?;
+    }
     let csv = args.csv.as_deref().unwrap_or(Path::new("-"));
     let mut rows = RowWriter::new(
         outs.claim("--csv", csv, Kind::Text)?,
@@ -52,46 +70,31 @@ fn sweep(args: &Args, budgets: &[u64], outs: &mut Outputs) -> Result<u8> {
         &trial::COLUMNS,
     );
     stop::install()?;
-    // A directory stands for the pictures in it (files that are not pictures are skipped).
-    let mut inputs: Vec<(Option<PathBuf>, bool)> = Vec::new();
-    for path in &args.inputs {
-        match path.is_dir() {
-            true => inputs.extend(
-                picture::files_in(path)?
-                    .into_iter()
-                    .map(|f| (Some(f), true)),
-            ),
-            false => inputs.push((Some(path.clone()), false)),
-        }
-    }
-    if args.inputs.is_empty() {
-        inputs.push((None, false));
-    }
-    let total = (inputs.len() * budgets.len()) as u64;
-    let bar = progress::bar(false, total, "{pos}/{len} trials [{bar:30}] {msg}");
-    'images: for (input, in_dir) in &inputs {
-        let (img, name) = match load(args, input.as_deref()) {
-            Err(e)
-                if *in_dir
-                    && matches!(e.downcast_ref(), Some(picture::PictureError::Format { .. })) =>
-            {
-                continue;
+    let bar = progress::bar(false, (pictures.len() * budgets.len()) as u64, PROGRESS);
+    let outcome = (|| -> Result<()> {
+        for (path, _) in &pictures {
+            let (img, name) = load(args, Some(path))?;
+            bar.set_message(name.clone());
+            for &budget in budgets {
+                if stop::requested() {
+                    return Ok(());
+                }
+                let trial = trial::run(&name, &img, &args.options(budget));
+                rows.row(&trial.map_err(|e| anyhow::anyhow!("{name}: {e}"))?)?;
+                bar.inc(1);
             }
-            loaded => loaded?,
-        };
-        bar.set_message(name.clone());
-        for &budget in budgets {
-            if stop::requested() {
-                break 'images;
-            }
-            rows.row(
-                &debt::trial::run(&name, &img, &args.options(budget))
-                    .map_err(|e| anyhow::anyhow!("{name}: {e}"))?,
-            )?;
-            bar.inc(1);
         }
-    }
+        Ok(())
+    })();
     bar.finish_and_clear();
+    // Only a regular file the rows created is removed (never a device, a pipe or a symlink).
+    if outcome.is_err()
+        && let Some(path) = rows.dest().path().filter(|_| rows.rows() > 0)
+        && std::fs::symlink_metadata(path).is_ok_and(|m| m.is_file())
+    {
+        let _ = std::fs::remove_file(path);
+    }
+    outcome?;
     let done = rows.rows();
     rows.finish()?;
     if let Some(note) = stop::note() {
@@ -103,6 +106,11 @@ fn sweep(args: &Args, budgets: &[u64], outs: &mut Outputs) -> Result<u8> {
 fn run(args: &Args) -> Result<u8> {
     let mut outs = Outputs::new();
     outs.inputs(args.inputs.iter().map(PathBuf::as_path));
+    rovlink::cli::only_with(
+        args.sweep.is_some(),
+        "--sweep",
+        &[("--csv", args.csv.is_some())],
+    )?;
     if let Some(budgets) = &args.sweep {
         return sweep(args, budgets, &mut outs);
     }
@@ -113,11 +121,13 @@ fn run(args: &Args) -> Result<u8> {
         );
     }
     let output = args.output.as_deref().unwrap_or(Path::new("-"));
-    let mut out = outs.claim("-o", output, Kind::Binary)?.open()?;
+    let dest = outs.claim("-o", output, Kind::Binary)?;
     let (img, name) = load(args, args.inputs.first().map(PathBuf::as_path))?;
     let bytes = args.bytes.unwrap_or_default();
     let stream =
         debt::encode(&img, &args.options(bytes)).map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+    // Opened only now: a signal while a pipe is read leaves no temporary file behind.
+    let mut out = dest.open()?;
     out.write_bytes(&stream)?;
     out.finish()?;
     Ok(EXIT_OK)

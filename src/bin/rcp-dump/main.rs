@@ -13,7 +13,7 @@ use rovlink::cli::output::{Dest, Kind, Outputs};
 use rovlink::cli::rows::{RowFormat, RowWriter};
 use rovlink::cli::{only_with, stop};
 use rovlink::gll::PortOptions;
-use rovlink::io::{CheckFailed, EXIT_OK, Input, IoError, Output};
+use rovlink::io::{CheckFailed, EXIT_OK, IoError, Output};
 use rovlink::say;
 use rovlink::wire::print::{self, CSV_COLUMNS, CaptureEnd, Printer, Record};
 
@@ -68,30 +68,22 @@ impl Sink {
 
 /// Reads the input (a file, standard input or a port) through the printer: how a port ended.
 fn pump(args: &Args, printer: &mut Printer, sink: &mut Sink) -> Result<Option<CaptureEnd>> {
+    stop::install()?;
     let Some(dev) = &args.port else {
-        let mut input = Input::open(args.input.as_deref())?;
-        let mut buf = vec![0u8; 64 * 1024];
-        loop {
-            let n = input.read_chunk(&mut buf)?;
-            if n == 0 {
-                break;
-            }
-            printer.push(&buf[..n], sink)?;
-        }
-        printer.finish(sink)?;
+        print::read_stream(args.input.as_deref(), printer, sink, stop::flag())?;
         return Ok(None);
     };
-    stop::install()?;
     let options = PortOptions {
         baud: args.baud.unwrap_or(9600),
         ..PortOptions::default()
     };
     let mut port = options.open_bytes(dev, Duration::from_millis(100))?;
     if !args.quiet {
-        say!(
-            "reading {dev} at {} baud until it closes or Ctrl-C",
-            options.baud
-        );
+        // A baud rate is a serial line's only: not said for tcp: and udp:.
+        let baud = format!(" at {} baud", options.baud);
+        let serial = !(dev.starts_with("tcp:") || dev.starts_with("udp:"));
+        let at = if serial { baud.as_str() } else { "" };
+        say!("reading {dev}{at} until it closes or Ctrl-C");
     }
     let idle_ms = args.idle_ms.unwrap_or(1000.0);
     let idle = (idle_ms > 0.0).then(|| Duration::from_secs_f64(idle_ms / 1000.0));
@@ -130,19 +122,29 @@ fn run(args: &Args) -> Result<u8> {
     };
     let mut printer = Printer::new(&name, args.quiet, args.port.is_some());
     let pumped = pump(args, &mut printer, &mut sink);
-    // The summary is said even when the run ends early (a closed pipe, a read error), once
+    // A file or pipe stopped by a signal is an interrupted run (a port's normal end). The
+    // summary is said even when the run ends early (a closed pipe, a read error), once
     // anything was read.
+    let note = stop::note().filter(|_| args.port.is_none());
     if pumped.is_ok() || printer.summary().stats.bytes_in > 0 {
-        say!("{}", printer.summary_line());
+        let marked = note.as_ref().map(|n| format!(" ({n})")).unwrap_or_default();
+        say!("{}{marked}", printer.summary_line());
     }
     let end = pumped?;
     sink.finish()?;
     if let Some(mut file) = summary {
-        file.write_bytes(format!("{:#}\n", serde_json::json!(printer.summary())).as_bytes())?;
+        let mut json = serde_json::json!(printer.summary());
+        if note.is_some() {
+            json["interrupted"] = stop::signal_name().unwrap_or("a signal").into();
+        }
+        file.write_bytes(format!("{json:#}\n").as_bytes())?;
         file.finish()?;
     }
     if let Some(CaptureEnd::Closed(reason)) = end {
         return Err(CheckFailed(format!("{name}: port closed ({reason})")).into());
+    }
+    if note.is_some() {
+        return Ok(stop::code_or(EXIT_OK));
     }
     if args.strict && !printer.clean() {
         let text = format!("--strict: {name} is not a clean frame stream");

@@ -49,14 +49,14 @@ pub struct Args {
     pub trunk: Option<u64>,
 
     /// Source address of the ROV for --image (1 ..= 15) [default: 1].
-    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=15))]
-    pub src: Option<u8>,
+    #[arg(long, value_parser = value::count(1, 15))]
+    pub src: Option<u64>,
 
     /// Destination address for --image (0 ..= 15) [default: 0].
-    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=15))]
-    pub dst: Option<u8>,
+    #[arg(long, value_parser = value::count(0, 15))]
+    pub dst: Option<u64>,
 
     /// Image sequence number (ISN) for --image, 0 or 1 [default: 0].
-    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=1))]
-    pub isn: Option<u8>,
+    #[arg(long, value_parser = value::count(0, 1))]
+    pub isn: Option<u64>,
 }

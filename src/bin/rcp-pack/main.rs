@@ -8,21 +8,35 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use cli::Args;
-use rovlink::cli::only_with;
-use rovlink::cli::output::{Kind, Outputs};
-use rovlink::io::{EXIT_BAD_INPUT, EXIT_OK, Input, Output};
+use rovlink::cli::output::{Dest, Kind, Outputs};
+use rovlink::cli::{only_with, stop};
+use rovlink::io::{EXIT_BAD_INPUT, EXIT_OK, Output};
 use rovlink::say;
 use rovlink::wire::pack::{self, Lines};
+use rovlink::wire::print::StopReader;
 
 /// The tool's name, prefixed to everything it says on stderr.
 const TOOL: &str = "rcp-pack";
 
 fn pack_lines(args: &Args, out: &mut Output) -> Result<u8> {
-    let mut input = Input::open(args.input.as_deref())?;
-    let name = input.name.clone();
+    // Read on a thread of its own, so that a signal ends a run on a quiet pipe.
+    stop::install()?;
+    let name = rovlink::io::display_name(args.input.as_deref(), "<stdin>");
+    if let Some(path) = args
+        .input
+        .as_deref()
+        .filter(|p| !rovlink::io::is_std(Some(p)))
+    {
+        std::fs::metadata(path).map_err(|source| rovlink::io::IoError::Open {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    }
+    let input = StopReader::open(args.input.as_deref(), stop::flag());
     let (mut bad, mut frames) = (0usize, 0usize);
-    for (number, parsed) in Lines::new(std::io::BufReader::new(input.reader())) {
+    for (number, parsed) in Lines::new(std::io::BufReader::new(input)) {
         match parsed {
+            Err(_) if stop::requested() => break,
             Ok(repr) => {
                 out.write_bytes(&pack::frame(&repr, args.hex)?)?;
                 frames += 1;
@@ -41,7 +55,7 @@ fn pack_lines(args: &Args, out: &mut Output) -> Result<u8> {
     Ok(EXIT_OK)
 }
 
-fn pack_image(args: &Args, path: &Path, out: &mut Output) -> Result<u8> {
+fn pack_image(args: &Args, path: &Path, dest: &Dest) -> Result<u8> {
     let name = path.display().to_string();
     // Read up to a bound: a file longer than any image's trunks is refused, not held whole.
     let data = match rovlink::io::read_at_most(path, pack::MAX_IMAGE_BYTES as u64) {
@@ -52,15 +66,18 @@ fn pack_image(args: &Args, path: &Path, out: &mut Output) -> Result<u8> {
     };
     let trunk = args.trunk.unwrap_or(39) as usize;
     let (src, dst, isn) = (
-        args.src.unwrap_or(1),
-        args.dst.unwrap_or(0),
+        args.src.unwrap_or(1) as u8,
+        args.dst.unwrap_or(0) as u8,
         args.isn == Some(1),
     );
     let messages =
         pack::image_messages(&data, trunk, src, dst, isn).with_context(|| name.clone())?;
+    // Opened only now: a signal while a pipe is read leaves no temporary file behind.
+    let mut out = dest.open()?;
     for repr in &messages {
         out.write_bytes(&pack::frame(repr, args.hex)?)?;
     }
+    out.finish()?;
     Ok(EXIT_OK)
 }
 
@@ -80,13 +97,20 @@ fn run(args: &Args) -> Result<u8> {
     outs.input(args.image.as_deref());
     let kind = if args.hex { Kind::Text } else { Kind::Binary };
     let dest = outs.claim("-o", args.output.as_deref().unwrap_or(Path::new("-")), kind)?;
-    let mut out = dest.open()?;
-    let code = match &args.image {
-        Some(path) => pack_image(args, path, &mut out)?,
-        None => pack_lines(args, &mut out)?,
-    };
-    out.finish()?;
-    Ok(code)
+    match &args.image {
+        Some(path) => pack_image(args, path, &dest),
+        None => {
+            let mut out = dest.open()?;
+            let code = pack_lines(args, &mut out)?;
+            // Written whole or not at all: a stopped run leaves no file.
+            if let Some(note) = stop::note() {
+                say!("{note}: nothing written");
+                return Ok(stop::code_or(code));
+            }
+            out.finish()?;
+            Ok(code)
+        }
+    }
 }
 
 fn main() -> ExitCode {
