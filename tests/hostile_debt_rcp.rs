@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use common::hostile::{
     BAD_NUMBERS, Run, assert_contract, assert_whole_csv, garbage, head_one, run_in, run_signalled,
-    temp_files,
+    signalled_on_a_silent_pipe, temp_files,
 };
 use common::testdata;
 use nix::sys::signal::Signal;
@@ -21,6 +21,8 @@ const DECODE: &str = env!("CARGO_BIN_EXE_debt-decode");
 const PACK: &str = env!("CARGO_BIN_EXE_rcp-pack");
 const DUMP: &str = env!("CARGO_BIN_EXE_rcp-dump");
 const LIMIT: Duration = Duration::from_secs(30);
+/// How long a reader of a silent pipe is left blocked before it is signalled.
+const WAIT: Duration = Duration::from_millis(700);
 
 /// A scratch directory with the fixtures: a picture, a stream of it, frames and messages.
 struct Scratch {
@@ -673,54 +675,6 @@ fn a_sweep_checks_every_picture_first_and_leaves_no_csv_on_exit_2() {
     assert!(run.stdout.is_empty() && !s.path("t.csv").exists());
 }
 
-/// Runs `bin` in the scratch directory reading the named pipe `pipe`, whose writer sends
-/// `bytes` and then stays open and silent; sends `signal` once the reader is blocked. Returns
-/// the exit status and stderr.
-fn signalled_on_a_silent_pipe(
-    s: &Scratch,
-    bin: &str,
-    args: &[&str],
-    bytes: &[u8],
-    signal: Signal,
-) -> (std::process::ExitStatus, String) {
-    let fifo = s.path("pipe");
-    let _ = std::fs::remove_file(&fifo);
-    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
-    assert!(made.unwrap().success());
-    let mut child = std::process::Command::new(bin)
-        .args(args)
-        .current_dir(s.dir.path())
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    // Read and write: opening does not wait for the reader, and the pipe never ends.
-    let mut writer = std::fs::OpenOptions::new()
-        .read(true)
-        .write(true)
-        .open(&fifo)
-        .unwrap();
-    writer.write_all(bytes).unwrap();
-    std::thread::sleep(Duration::from_millis(700));
-    let pid = nix::unistd::Pid::from_raw(child.id() as i32);
-    nix::sys::signal::kill(pid, signal).unwrap();
-    let started = std::time::Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            break status;
-        }
-        assert!(
-            started.elapsed() < LIMIT,
-            "{args:?}: did not stop on {signal}"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    };
-    let mut err = String::new();
-    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
-    drop(writer);
-    (status, err)
-}
-
 #[test]
 fn a_signal_stops_rcp_dump_on_a_silent_pipe_with_its_outputs_whole() {
     let s = Scratch::new();
@@ -740,7 +694,16 @@ fn a_signal_stops_rcp_dump_on_a_silent_pipe_with_its_outputs_whole() {
             "--summary",
             "s.json",
         ];
-        let (status, err) = signalled_on_a_silent_pipe(&s, DUMP, &args, &frames, signal);
+        let (status, err) = signalled_on_a_silent_pipe(
+            s.dir.path(),
+            "pipe",
+            DUMP,
+            &args,
+            &frames,
+            signal,
+            WAIT,
+            LIMIT,
+        );
         assert_eq!(status.code(), Some(code), "{signal}: {err}");
         assert!(err.contains(&format!("interrupted by {signal}")), "{err}");
         let summary: serde_json::Value = serde_json::from_slice(&s.bytes("s.json")).unwrap();
@@ -775,7 +738,16 @@ fn a_signal_while_a_pipe_is_read_leaves_no_temporary_file() {
         (PACK, &["pipe", "-o", "out.bin"], &messages),
     ];
     for (bin, args, bytes) in cases {
-        let (status, err) = signalled_on_a_silent_pipe(&s, bin, args, bytes, Signal::SIGTERM);
+        let (status, err) = signalled_on_a_silent_pipe(
+            s.dir.path(),
+            "pipe",
+            bin,
+            args,
+            bytes,
+            Signal::SIGTERM,
+            WAIT,
+            LIMIT,
+        );
         assert!(!err.contains("panicked"), "{args:?}: {err}");
         if args == ["pipe", "-o", "out.bin"] {
             // JSON Lines are read as they come: the signal is seen, the output not committed.

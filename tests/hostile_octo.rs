@@ -13,7 +13,8 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use common::hostile::{
-    Run, assert_contract, assert_whole_csv, garbage, head_one, run, run_in, temp_files,
+    Run, assert_contract, assert_whole_csv, garbage, head_one, run, run_in,
+    signalled_on_a_silent_pipe, temp_files,
 };
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
@@ -518,7 +519,6 @@ fn issue_14_defects_are_fixed() {
 #[test]
 fn a_signal_stops_a_build_reading_a_silent_pipe() {
     let dir = tempfile::tempdir().unwrap();
-    let fifo = dir.path().join("scans.graph");
     let graph = dir.path().join("survey.graph");
     ok(
         &octo(dir.path(), &["synth", "--scans", "3", "-o", s(&graph)]),
@@ -529,52 +529,32 @@ fn a_signal_stops_a_build_reading_a_silent_pipe() {
         ("xyz", &b"1 1 1\n2 2 2\n"[..]),
         ("graph", &survey[..600_000]),
     ] {
-        let _ = std::fs::remove_file(&fifo);
-        assert!(
-            Command::new("mkfifo")
-                .arg(&fifo)
-                .status()
-                .unwrap()
-                .success()
+        let args = [
+            "build",
+            "scans.graph",
+            "--format",
+            format,
+            "--origin",
+            "0,0,0",
+            "-q",
+            "-o",
+            "out.odl",
+            "--stats",
+            "out.csv",
+            "--ot",
+            "out.ot",
+        ];
+        let wait = Duration::from_millis(1500);
+        let (status, err) = signalled_on_a_silent_pipe(
+            dir.path(),
+            "scans.graph",
+            OCTO,
+            &args,
+            bytes,
+            Signal::SIGTERM,
+            wait,
+            LIMIT,
         );
-        let mut child = Command::new(OCTO)
-            .args([
-                "build",
-                "scans.graph",
-                "--format",
-                format,
-                "--origin",
-                "0,0,0",
-            ])
-            .args([
-                "-q", "-o", "out.odl", "--stats", "out.csv", "--ot", "out.ot",
-            ])
-            .current_dir(dir.path())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        // Read and write: the writer stays open and silent, the pipe never ends.
-        let mut writer = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .open(&fifo)
-            .unwrap();
-        std::io::Write::write_all(&mut writer, bytes).unwrap();
-        std::thread::sleep(Duration::from_millis(1500));
-        kill(Pid::from_raw(child.id() as i32), Signal::SIGTERM).unwrap();
-        let started = Instant::now();
-        let status = loop {
-            if let Some(status) = child.try_wait().unwrap() {
-                break status;
-            }
-            assert!(
-                started.elapsed() < LIMIT,
-                "{format}: the build did not stop"
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        };
-        let mut err = String::new();
-        std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
         assert_eq!(status.code(), Some(143), "{format}: {err}");
         assert!(err.contains("interrupted by SIGTERM"), "{format}: {err}");
         assert!(
@@ -590,6 +570,5 @@ fn a_signal_stops_a_build_reading_a_silent_pipe() {
             &octo(dir.path(), &["full", "out.ot", "-o", "full.odl"]),
             "the stopped map reads",
         );
-        drop(writer);
     }
 }

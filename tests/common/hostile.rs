@@ -252,3 +252,58 @@ pub fn head_one(bin: &str, args: &[&str], stdin: &[u8], limit: Duration) -> Run 
     run.stdout = first;
     run
 }
+
+/// Runs `bin` with `args` in `dir`, reading the named pipe `dir/fifo` (created here) whose
+/// writer sends `bytes` and then stays open and silent, as a live producer does; sends `signal`
+/// after `wait` and fails the test if the tool has not ended within `limit` of it. Returns the
+/// exit status and standard error.
+#[allow(clippy::too_many_arguments)]
+pub fn signalled_on_a_silent_pipe(
+    dir: &Path,
+    fifo: &str,
+    bin: &str,
+    args: &[&str],
+    bytes: &[u8],
+    signal: Signal,
+    wait: Duration,
+    limit: Duration,
+) -> (std::process::ExitStatus, String) {
+    let fifo = dir.join(fifo);
+    let _ = std::fs::remove_file(&fifo);
+    nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).expect("mkfifo");
+    let mut child = Command::new(bin)
+        .args(args)
+        .current_dir(dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("binary starts");
+    // Read and write: opening does not wait for the reader, and the pipe never ends.
+    let mut writer = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(&fifo)
+        .expect("the pipe opens");
+    writer.write_all(bytes).expect("the pipe takes the bytes");
+    std::thread::sleep(wait);
+    let _ = kill(Pid::from_raw(child.id() as i32), signal);
+    let started = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("try_wait") {
+            break status;
+        }
+        assert!(
+            started.elapsed() < limit,
+            "{args:?}: did not stop on {signal}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut err = String::new();
+    let _ = child
+        .stderr
+        .take()
+        .expect("stderr")
+        .read_to_string(&mut err);
+    drop(writer);
+    (status, err)
+}
