@@ -4,6 +4,8 @@
 //! - Output files are written atomically: to a temporary file beside the target, renamed into
 //!   place only when the tool succeeds, so a failed run never leaves a half-written file.
 //! - Binary output is refused when standard output is a terminal.
+//! - A pipe from a live process is read through a [`StopReader`], so a signal ends a run that
+//!   waits on it.
 //! - Errors name the file and what went wrong; [`exit_code`] maps any error to the exit-code
 //!   table (0 ok, 1 a requested check failed, 2 bad usage or input), treating a closed pipe
 //!   downstream (`tool | head`) as success.
@@ -11,6 +13,8 @@
 use std::fs::File;
 use std::io::{self, BufReader, BufWriter, IsTerminal, Read, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
 
 /// Exit code: success.
 pub const EXIT_OK: u8 = 0;
@@ -517,6 +521,111 @@ impl Write for Output {
             Output::Stdout(w) => w.flush(),
             Output::File(f) => f.flush(),
         }
+    }
+}
+
+/// Most chunks a [`StopReader`]'s thread reads ahead.
+const CHUNKS_AHEAD: usize = 4;
+
+/// A file (`None`: standard input) read on a thread of its own, so that a read waiting on a
+/// silent pipe gives up once `stop` is set (an error saying so, never `Interrupted`, which
+/// readers retry): a signal then ends a run that reads a pipe from a live process. The file is
+/// opened on that thread too, since a named pipe without a writer blocks in `open`.
+pub struct StopReader<'a> {
+    chunks: std::sync::mpsc::Receiver<Result<Vec<u8>, IoError>>,
+    chunk: Vec<u8>,
+    at: usize,
+    ended: bool,
+    stop: &'a AtomicBool,
+}
+
+impl<'a> StopReader<'a> {
+    /// Opens `path` (`None` or `-`: standard input) and starts reading it.
+    pub fn open(path: Option<&Path>, stop: &'a AtomicBool) -> StopReader<'a> {
+        let name = display_name(path, "<stdin>");
+        let path = path.filter(|p| !is_std(Some(p))).map(Path::to_path_buf);
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Vec<u8>, IoError>>(CHUNKS_AHEAD);
+        std::thread::spawn(move || {
+            let mut reader: Box<dyn Read> = match path {
+                Some(path) => match std::fs::File::open(&path) {
+                    Ok(file) => Box::new(file),
+                    Err(source) => return drop(tx.send(Err(IoError::Open { path, source }))),
+                },
+                None => Box::new(io::stdin()),
+            };
+            loop {
+                let mut buf = vec![0u8; 64 * 1024];
+                let read = match reader.read(&mut buf) {
+                    Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                    read => read,
+                };
+                let last = !matches!(read, Ok(n) if n > 0);
+                let chunk = read.map(|n| {
+                    buf.truncate(n);
+                    buf
+                });
+                let sent = tx.send(chunk.map_err(|source| IoError::Read {
+                    name: name.clone(),
+                    source,
+                }));
+                if last || sent.is_err() {
+                    break;
+                }
+            }
+        });
+        StopReader {
+            chunks: rx,
+            chunk: Vec::new(),
+            at: 0,
+            ended: false,
+            stop,
+        }
+    }
+
+    /// The next chunk read, `Ok(None)` at the end, or `Err` with what failed (opening,
+    /// reading, or [`STOPPED`] once the flag is set while waiting).
+    pub fn next_chunk(&mut self) -> Result<Option<Vec<u8>>, IoError> {
+        use std::sync::mpsc::RecvTimeoutError;
+        while !self.ended {
+            if self.stop.load(Ordering::SeqCst) {
+                return Err(IoError::Read {
+                    name: STOPPED.into(),
+                    source: io::Error::other(STOPPED),
+                });
+            }
+            match self.chunks.recv_timeout(Duration::from_millis(100)) {
+                Ok(Ok(chunk)) if chunk.is_empty() => self.ended = true,
+                Ok(Ok(chunk)) => return Ok(Some(chunk)),
+                Ok(Err(e)) => {
+                    self.ended = true;
+                    return Err(e);
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => self.ended = true,
+            }
+        }
+        Ok(None)
+    }
+}
+
+/// What a [`StopReader`] says when the stop flag ended a read.
+pub const STOPPED: &str = "reading stopped by a signal";
+
+impl Read for StopReader<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        if self.at == self.chunk.len() {
+            match self.next_chunk() {
+                Ok(Some(chunk)) => (self.chunk, self.at) = (chunk, 0),
+                Ok(None) => return Ok(0),
+                // The reader's caller names the file: hand on the system's own error.
+                Err(IoError::Read { source, .. }) => return Err(source),
+                Err(e) => return Err(io::Error::other(e.to_string())),
+            }
+        }
+        let n = buf.len().min(self.chunk.len() - self.at);
+        buf[..n].copy_from_slice(&self.chunk[self.at..self.at + n]);
+        self.at += n;
+        Ok(n)
     }
 }
 

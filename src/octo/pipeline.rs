@@ -25,8 +25,8 @@ use super::cloud::{self, CloudFormat, McapOptions};
 use super::delta::{self, Message, Receiver, Roi, Sender, ViewSpec};
 use super::tree::{OcTree, TREE_DEPTH, unmorton};
 use super::{ParseError, Pose, Scan, files, graph, synth, transfer};
+use crate::io::StopReader;
 use crate::io::{Input, IoError};
-use crate::wire::print::StopReader;
 
 /// Finest voxel edge accepted, m (0.1 mm).
 pub const RESOLUTION_MIN_M: f64 = 1e-4;

@@ -16,7 +16,7 @@ use serde_json::{Map, Value};
 
 use super::frame::Frame;
 use super::{DeframeEvent, DeframeStats, Deframer, MessageRepr, json};
-use crate::io::IoError;
+use crate::io::{IoError, StopReader};
 
 /// The columns of a CSV of frames, in order ([`Record::csv_fields`]).
 pub const CSV_COLUMNS: [&str; 48] = json::CSV_COLUMNS;
@@ -314,113 +314,6 @@ pub enum StreamError<E: std::error::Error + 'static> {
     /// The sink failed (a closed pipe, a full disk).
     #[error(transparent)]
     Sink(E),
-}
-
-/// Most chunks a [`StopReader`]'s thread reads ahead.
-const CHUNKS_AHEAD: usize = 4;
-
-/// A file (`None`: standard input) read on a thread of its own, so that a read waiting on a
-/// silent pipe gives up once `stop` is set (an error saying so, never `Interrupted`, which
-/// readers retry): a signal then ends a run that reads a pipe from a live process. The file is
-/// opened on that thread too, since a named pipe without a writer blocks in `open`.
-pub struct StopReader<'a> {
-    chunks: std::sync::mpsc::Receiver<Result<Vec<u8>, IoError>>,
-    chunk: Vec<u8>,
-    at: usize,
-    ended: bool,
-    stop: &'a AtomicBool,
-}
-
-impl<'a> StopReader<'a> {
-    /// Opens `path` (`None` or `-`: standard input) and starts reading it.
-    pub fn open(path: Option<&Path>, stop: &'a AtomicBool) -> StopReader<'a> {
-        let name = crate::io::display_name(path, "<stdin>");
-        let path = path
-            .filter(|p| !crate::io::is_std(Some(p)))
-            .map(Path::to_path_buf);
-        let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Vec<u8>, IoError>>(CHUNKS_AHEAD);
-        std::thread::spawn(move || {
-            let mut reader: Box<dyn Read> = match path {
-                Some(path) => match std::fs::File::open(&path) {
-                    Ok(file) => Box::new(file),
-                    Err(source) => return drop(tx.send(Err(IoError::Open { path, source }))),
-                },
-                None => Box::new(io::stdin()),
-            };
-            loop {
-                let mut buf = vec![0u8; 64 * 1024];
-                let read = match reader.read(&mut buf) {
-                    Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
-                    read => read,
-                };
-                let last = !matches!(read, Ok(n) if n > 0);
-                let chunk = read.map(|n| {
-                    buf.truncate(n);
-                    buf
-                });
-                let sent = tx.send(chunk.map_err(|source| IoError::Read {
-                    name: name.clone(),
-                    source,
-                }));
-                if last || sent.is_err() {
-                    break;
-                }
-            }
-        });
-        StopReader {
-            chunks: rx,
-            chunk: Vec::new(),
-            at: 0,
-            ended: false,
-            stop,
-        }
-    }
-
-    /// The next chunk read, `Ok(None)` at the end, or `Err` with what failed (opening,
-    /// reading, or [`STOPPED`] once the flag is set while waiting).
-    fn next_chunk(&mut self) -> Result<Option<Vec<u8>>, IoError> {
-        use std::sync::mpsc::RecvTimeoutError;
-        while !self.ended {
-            if self.stop.load(Ordering::SeqCst) {
-                return Err(IoError::Read {
-                    name: STOPPED.into(),
-                    source: io::Error::other(STOPPED),
-                });
-            }
-            match self.chunks.recv_timeout(Duration::from_millis(100)) {
-                Ok(Ok(chunk)) if chunk.is_empty() => self.ended = true,
-                Ok(Ok(chunk)) => return Ok(Some(chunk)),
-                Ok(Err(e)) => {
-                    self.ended = true;
-                    return Err(e);
-                }
-                Err(RecvTimeoutError::Timeout) => {}
-                Err(RecvTimeoutError::Disconnected) => self.ended = true,
-            }
-        }
-        Ok(None)
-    }
-}
-
-/// What a [`StopReader`] says when the stop flag ended a read.
-pub const STOPPED: &str = "reading stopped by a signal";
-
-impl Read for StopReader<'_> {
-    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
-        if self.at == self.chunk.len() {
-            match self.next_chunk() {
-                Ok(Some(chunk)) => (self.chunk, self.at) = (chunk, 0),
-                Ok(None) => return Ok(0),
-                // The reader's caller names the file: hand on the system's own error.
-                Err(IoError::Read { source, .. }) => return Err(source),
-                Err(e) => return Err(io::Error::other(e.to_string())),
-            }
-        }
-        let n = buf.len().min(self.chunk.len() - self.at);
-        buf[..n].copy_from_slice(&self.chunk[self.at..self.at + n]);
-        self.at += n;
-        Ok(n)
-    }
 }
 
 /// Reads a file (`None` or `-`: standard input) to its end, printing as it goes, or until

@@ -10,10 +10,10 @@ use anyhow::{Context, Result, bail};
 use cli::Args;
 use rovlink::cli::output::{Dest, Kind, Outputs};
 use rovlink::cli::{only_with, stop};
+use rovlink::io::StopReader;
 use rovlink::io::{EXIT_BAD_INPUT, EXIT_OK, Output};
 use rovlink::say;
 use rovlink::wire::pack::{self, Lines};
-use rovlink::wire::print::StopReader;
 
 /// The tool's name, prefixed to everything it says on stderr.
 const TOOL: &str = "rcp-pack";
