@@ -10,6 +10,8 @@ use std::path::{Path, PathBuf};
 
 use super::model::MAX_RANGE_M;
 
+/// Latest time a distance track may name, seconds (about 31 years: far beyond any run).
+pub const MAX_TRACK_TIME_S: f64 = 1e9;
 /// Largest distance-track file read, bytes (a week of 0.1 s rows is about 100 MB).
 pub const MAX_TRACK_FILE_BYTES: u64 = 256 << 20;
 
@@ -67,6 +69,13 @@ impl Distance {
                     line,
                     "t_s",
                     format!("{t} is before the previous row's {last}: times must not decrease"),
+                ));
+            }
+            if t > MAX_TRACK_TIME_S {
+                return Err(DistanceError::at(
+                    line,
+                    "t_s",
+                    format!("expected 0 ..= 1e9 s (about 31 years), found {t:e}"),
                 ));
             }
             if d > MAX_RANGE_M {
@@ -168,12 +177,16 @@ mod tests {
 
     #[test]
     fn bad_tracks_name_the_line_and_field() {
-        let cases: [(&[u8], &str); 6] = [
+        let cases: [(&[u8], &str); 7] = [
             (
                 b"t_s,distance_m\n0,1\n1,1e300\n",
                 "line 3: field `distance_m`: expected 0 ..= 1e9 m (a million km), found 1e300",
             ),
             (b"t,d\n0,1\n", "line 1: field `t_s`: missing column"),
+            (
+                b"t_s,distance_m\n0,1\n1e300,1\n",
+                "line 3: field `t_s`: expected 0 ..= 1e9 s (about 31 years), found 1e300",
+            ),
             (
                 b"t_s,distance_m\n0,1\n1,x\n",
                 "line 3: field `distance_m`: expected a number >= 0, found `x`",

@@ -63,7 +63,7 @@ pub struct Args {
     pub roi: Option<Rect>,
 
     /// Bit-planes the region of interest is raised by (1 ..= 15).
-    #[arg(long, default_value_t = 3, value_parser = value::count(1, 15))]
+    #[arg(long, default_value_t = 3, requires = "roi", value_parser = value::count(1, 15))]
     pub roi_shift: u64,
 
     /// Code luma only.
