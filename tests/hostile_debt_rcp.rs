@@ -155,7 +155,7 @@ fn numbers_out_of_range_are_one_line_errors() {
         (ENCODE, vec!["in.png", "--csv", "o.csv"], "--sweep"),
         (
             ENCODE,
-            vec!["in.png", "-b", "300", "-o", "o.debt"],
+            vec!["in.png", "-b", "300", "-o", "o.debt", "--roi", "0,0,8,8"],
             "--roi-shift",
         ),
         (

@@ -132,7 +132,7 @@ fn cases(fixtures: &Path) -> Vec<Case> {
         Case {
             bin: env!("CARGO_BIN_EXE_debt-encode"),
             sub: None,
-            base: s(&[&png, "-b", "300", "-o", "out.debt"]),
+            base: s(&[&png, "-b", "300", "--roi", "0,0,32,24", "-o", "out.debt"]),
             stdin: Vec::new(),
             outputs: vec!["out.debt"],
         },
