@@ -130,17 +130,22 @@ pub fn warn(tool: &str, message: &str) {
 /// `/dev/zero`) is an error of kind `InvalidData` saying so, after reading `max_bytes + 1`
 /// bytes at most, so no file can make a tool run out of memory.
 pub fn read_at_most(path: &Path, max_bytes: u64) -> io::Result<Vec<u8>> {
-    let mut data = Vec::new();
-    File::open(path)?
-        .take(max_bytes.saturating_add(1))
-        .read_to_end(&mut data)?;
-    if data.len() as u64 > max_bytes {
-        return Err(io::Error::new(
+    read_bounded(File::open(path)?, max_bytes)?.ok_or_else(|| {
+        io::Error::new(
             io::ErrorKind::InvalidData,
             format!("more than {max_bytes} bytes: not a file this tool reads"),
-        ));
-    }
-    Ok(data)
+        )
+    })
+}
+
+/// Reads what is left of `reader` if it holds at most `max_bytes` (`None` if it holds more),
+/// reading `max_bytes + 1` bytes at most: the one bounded read every whole-input reader uses.
+pub fn read_bounded(reader: impl Read, max_bytes: u64) -> io::Result<Option<Vec<u8>>> {
+    let mut data = Vec::new();
+    reader
+        .take(max_bytes.saturating_add(1))
+        .read_to_end(&mut data)?;
+    Ok((data.len() as u64 <= max_bytes).then_some(data))
 }
 
 /// What is wrong with a table of numbers ([`read_number_table`]).

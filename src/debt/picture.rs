@@ -291,19 +291,14 @@ fn to_image(decoded: image::DynamicImage) -> Image {
 
 /// Reads a picture from any reader (standard input, say), at most [`MAX_INPUT_BYTES`].
 pub fn read(name: &str, reader: impl Read) -> Result<Image, PictureError> {
-    let mut bytes = Vec::new();
-    reader
-        .take(MAX_INPUT_BYTES + 1)
-        .read_to_end(&mut bytes)
+    let bytes = crate::io::read_bounded(reader, MAX_INPUT_BYTES)
         .map_err(|source| PictureError::Read {
             name: name.to_string(),
             source,
-        })?;
-    if bytes.len() as u64 > MAX_INPUT_BYTES {
-        return Err(PictureError::TooManyBytes {
+        })?
+        .ok_or_else(|| PictureError::TooManyBytes {
             name: name.to_string(),
-        });
-    }
+        })?;
     from_bytes(name, &bytes)
 }
 
@@ -315,11 +310,10 @@ pub fn open(path: &Path) -> Result<Image, PictureError> {
 /// Reads a picture file, dealing with a large one as `oversize` says.
 pub fn open_fit(path: &Path, oversize: Oversize) -> Result<Loaded, PictureError> {
     let name = path.display().to_string();
-    let bytes = match crate::io::read_at_most(path, MAX_INPUT_BYTES) {
-        Ok(bytes) => bytes,
-        Err(e) if e.kind() == std::io::ErrorKind::InvalidData => {
-            return Err(PictureError::TooManyBytes { name });
-        }
+    let read = std::fs::File::open(path).and_then(|f| crate::io::read_bounded(f, MAX_INPUT_BYTES));
+    let bytes = match read {
+        Ok(Some(bytes)) => bytes,
+        Ok(None) => return Err(PictureError::TooManyBytes { name }),
         Err(source) => return Err(PictureError::Read { name, source }),
     };
     let (image, scaled_from) = from_bytes_fit(&name, &bytes, oversize)?;

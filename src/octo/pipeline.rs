@@ -359,22 +359,18 @@ pub const MAX_INPUT_BYTES: u64 = 1 << 30;
 /// Reads all of `input` up to `max_bytes`: a longer one (an endless one such as `/dev/zero`)
 /// is an error naming `name`, after reading `max_bytes + 1` bytes at most.
 pub fn read_limited(input: &mut dyn Read, name: &str, max_bytes: u64) -> Result<Vec<u8>, IoError> {
-    let mut data = Vec::new();
     let read_err = |source| IoError::Read {
         name: name.to_string(),
         source,
     };
-    input
-        .take(max_bytes.saturating_add(1))
-        .read_to_end(&mut data)
-        .map_err(read_err)?;
-    if data.len() as u64 > max_bytes {
-        return Err(read_err(std::io::Error::new(
-            std::io::ErrorKind::InvalidData,
-            format!("more than {max_bytes} bytes: not a file octo-delta reads whole"),
-        )));
-    }
-    Ok(data)
+    crate::io::read_bounded(input, max_bytes)
+        .map_err(read_err)?
+        .ok_or_else(|| {
+            read_err(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!("more than {max_bytes} bytes: not a file octo-delta reads whole"),
+            ))
+        })
 }
 
 /// An input file (`-`: standard input) read whole, at most [`MAX_INPUT_BYTES`], and the name

@@ -21,17 +21,13 @@ use crate::debt;
 use crate::wire::operator::{Order, Roi};
 use crate::wire::{Message, MessageRepr};
 
-/// A file's bytes through [`crate::io::read_at_most`]: `None` when it holds more than
+/// A file's bytes through [`crate::io::read_bounded`]: `None` when it holds more than
 /// `max_bytes`.
 pub(crate) fn read_at_most(
     path: &std::path::Path,
     max_bytes: u64,
 ) -> std::io::Result<Option<Vec<u8>>> {
-    match crate::io::read_at_most(path, max_bytes) {
-        Ok(data) => Ok(Some(data)),
-        Err(e) if e.kind() == std::io::ErrorKind::InvalidData => Ok(None),
-        Err(e) => Err(e),
-    }
+    crate::io::read_bounded(std::fs::File::open(path)?, max_bytes)
 }
 
 /// Something an engine did that a report or a test wants to know.

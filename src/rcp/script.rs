@@ -65,13 +65,7 @@ fn table(path: &Path, columns: &[&str]) -> Result<Vec<(u64, Vec<f64>)>, ScriptEr
 
 /// Standard input's bytes (`-` as a file name): `None` when it holds more than `max_bytes`.
 fn read_stdin_at_most(max_bytes: u64) -> std::io::Result<Option<Vec<u8>>> {
-    use std::io::Read;
-    let mut data = Vec::new();
-    std::io::stdin()
-        .lock()
-        .take(max_bytes + 1)
-        .read_to_end(&mut data)?;
-    Ok((data.len() as u64 <= max_bytes).then_some(data))
+    crate::io::read_bounded(std::io::stdin().lock(), max_bytes)
 }
 
 fn row_error(path: &Path, error: impl std::fmt::Display) -> ScriptError {
