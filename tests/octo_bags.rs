@@ -1,0 +1,259 @@
+//! octo-delta on robot logs written by the real ROS 2 writers (Python `rosbags` for rosbag2
+//! sqlite3 and mcap storage, the official `mcap` and `mcap_ros2` writers for MCAP with zstd, lz4
+//! and no compression; `tests/bags/survey_bag.py`), posed by /tf + /tf_static, PoseStamped or
+//! Odometry: every map must be graph2tree's map of the same scans (the .bt byte for byte, and
+//! compare_octrees' KLD 0). Also the ways a log can be unusable: no pose, malformed TF, a
+//! database that is not a bag, a cut compressed chunk: exit 2, one line, no output left.
+//!
+//! `.ci/run` installs the Python packages (pip) and OctoMap's tools (apt); without them these
+//! tests fail saying what to install.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+use common::run;
+
+const OCTO: &str = env!("CARGO_BIN_EXE_octo-delta");
+const WRITER: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/bags/survey_bag.py");
+const RES: &str = "0.2";
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A 6-scan survey and graph2tree's map of it, made once for all tests.
+struct Survey {
+    _dir: tempfile::TempDir,
+    graph: PathBuf,
+    reference_bt: Vec<u8>,
+    reference_bt_path: PathBuf,
+}
+
+fn survey() -> &'static Survey {
+    static SURVEY: OnceLock<Survey> = OnceLock::new();
+    SURVEY.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let graph = dir.path().join("survey.graph");
+        let out = run(OCTO, &["synth", "--scans", "6", "-o", s(&graph)], b"");
+        assert_eq!(out.code, 0, "{}", out.stderr);
+        let reference = dir.path().join("ref.bt");
+        let g2t = Command::new("graph2tree")
+            .args(["-i", s(&graph), "-o", s(&reference), "-res", RES])
+            .output()
+            .unwrap_or_else(|e| {
+                panic!("graph2tree not runnable ({e}): apt-get install octomap-tools")
+            });
+        assert!(g2t.status.success(), "graph2tree failed");
+        Survey {
+            reference_bt: std::fs::read(&reference).unwrap(),
+            reference_bt_path: reference,
+            graph,
+            _dir: dir,
+        }
+    })
+}
+
+/// Writes a bag of the survey with the real writers; `extra` are survey_bag.py flags.
+fn write_bag(dir: &Path, kind: &str, extra: &[&str]) -> PathBuf {
+    let mut out = dir.join(format!("bag-{kind}"));
+    if kind.starts_with("mcap") {
+        out.set_extension("mcap");
+    }
+    let result = Command::new("python3")
+        .arg(WRITER)
+        .args(["--graph", s(&survey().graph), "--kind", kind, "--out", s(&out)])
+        .args(extra)
+        .output()
+        .unwrap_or_else(|e| panic!("python3 not runnable ({e})"));
+    assert!(
+        result.status.success(),
+        "{WRITER} --kind {kind} {extra:?} failed (it needs `pip install mcap mcap-ros2-support \
+         rosbags`): {}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    out
+}
+
+/// Builds `input`'s map (no colour, .bt) with `flags`; returns the outcome and the .bt path.
+fn build(dir: &Path, input: &Path, flags: &[&str]) -> (common::Outcome, PathBuf) {
+    let bt = dir.join("ours.bt");
+    let _ = std::fs::remove_file(&bt);
+    let mut args = vec!["build", s(input), "--res", RES, "-q", "-o"];
+    let odl = dir.join("d.odl");
+    args.push(s(&odl));
+    args.extend(["--bt", s(&bt)]);
+    args.extend(flags);
+    let out = run(OCTO, &args, b"");
+    (out, bt)
+}
+
+/// The map of `input` is graph2tree's: same .bt bytes, KLD 0.
+fn assert_same_map(dir: &Path, input: &Path, flags: &[&str], what: &str) -> common::Outcome {
+    let (out, bt) = build(dir, input, flags);
+    assert_eq!(out.code, 0, "{what}: {}", out.stderr);
+    let ours = std::fs::read(&bt).unwrap();
+    assert!(
+        ours == survey().reference_bt,
+        "{what}: the .bt differs from graph2tree's ({} vs {} bytes)",
+        ours.len(),
+        survey().reference_bt.len()
+    );
+    let cmp = Command::new("compare_octrees")
+        .args([s(&bt), s(&survey().reference_bt_path)])
+        .output()
+        .expect("compare_octrees (apt-get install octomap-tools)");
+    let text = String::from_utf8_lossy(&cmp.stdout).into_owned()
+        + &String::from_utf8_lossy(&cmp.stderr);
+    assert!(text.contains("KLD: 0\n"), "{what}: {text}");
+    out
+}
+
+#[test]
+fn every_bag_kind_gives_graph2trees_map() {
+    let dir = tempfile::tempdir().unwrap();
+    for kind in [
+        "db3",
+        "rosbag2-mcap",
+        "mcap-zstd",
+        "mcap-lz4",
+        "mcap-none",
+        "mcap-ros2",
+    ] {
+        // Coloured, organised clouds with NaN holes, posed by a TF chain.
+        let bag = write_bag(dir.path(), kind, &["--color", "--organised"]);
+        assert_same_map(dir.path(), &bag, &[], kind);
+    }
+}
+
+#[test]
+fn a_rosbag2_directory_opens_by_its_directory_metadata_or_database() {
+    let dir = tempfile::tempdir().unwrap();
+    let bag = write_bag(dir.path(), "db3", &[]);
+    let db3 = std::fs::read_dir(&bag)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "db3"))
+        .expect("a .db3 in the bag");
+    for input in [bag.clone(), bag.join("metadata.yaml"), db3] {
+        assert_same_map(dir.path(), &input, &[], &input.display().to_string());
+    }
+}
+
+#[test]
+fn pose_topics_pose_the_clouds() {
+    let dir = tempfile::tempdir().unwrap();
+    let bag = write_bag(dir.path(), "mcap-zstd", &["--pose", "pose"]);
+    assert_same_map(dir.path(), &bag, &[], "PoseStamped found by its schema");
+    assert_same_map(
+        dir.path(),
+        &bag,
+        &["--pose-topic", "/pose"],
+        "PoseStamped named",
+    );
+    let bag = write_bag(dir.path(), "db3", &["--pose", "odom"]);
+    assert_same_map(
+        dir.path(),
+        &bag,
+        &["--pose-topic", "/odom"],
+        "Odometry named",
+    );
+}
+
+#[test]
+fn a_cloud_without_a_pose_is_skipped_with_one_warning_naming_the_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    // One more cloud, stamped after the last transform.
+    let bag = write_bag(dir.path(), "mcap-lz4", &["--late"]);
+    let out = assert_same_map(dir.path(), &bag, &[], "late cloud");
+    let warnings: Vec<&str> = out
+        .stderr
+        .lines()
+        .filter(|l| l.contains("skipped"))
+        .collect();
+    assert_eq!(warnings.len(), 1, "{}", out.stderr);
+    assert!(
+        warnings[0].contains("sensor") && warnings[0].contains("map"),
+        "{}",
+        out.stderr
+    );
+}
+
+#[test]
+fn a_bag_without_poses_is_an_error_unless_origin_is_given() {
+    let dir = tempfile::tempdir().unwrap();
+    let bag = write_bag(dir.path(), "mcap-none", &["--pose", "none"]);
+    let (out, bt) = build(dir.path(), &bag, &[]);
+    assert_eq!(out.code, 2, "{}", out.stderr);
+    assert_eq!(out.stderr.trim().lines().count(), 1, "{}", out.stderr);
+    assert!(
+        out.stderr.contains("bag-mcap-none.mcap") && out.stderr.contains("--origin"),
+        "{}",
+        out.stderr
+    );
+    assert!(!bt.exists(), "no output after an error");
+    let (out, bt) = build(dir.path(), &bag, &["--origin", "0,0,0"]);
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    assert!(bt.exists());
+}
+
+#[test]
+fn the_fixed_frame_can_be_named_and_must_exist() {
+    let dir = tempfile::tempdir().unwrap();
+    let bag = write_bag(dir.path(), "mcap-zstd", &[]);
+    assert_same_map(dir.path(), &bag, &["--fixed-frame", "map"], "map named");
+    let (out, _) = build(dir.path(), &bag, &["--fixed-frame", "nowhere"]);
+    assert_eq!(out.code, 2, "{}", out.stderr);
+    assert!(out.stderr.contains("nowhere"), "{}", out.stderr);
+}
+
+/// An unusable log: exit 2, one line naming the file, no output files.
+fn assert_refused(dir: &Path, input: &Path, needle: &str) {
+    let (out, bt) = build(dir, input, &[]);
+    assert_eq!(out.code, 2, "{}: {}", input.display(), out.stderr);
+    assert_eq!(out.stderr.trim().lines().count(), 1, "{}", out.stderr);
+    assert!(
+        out.stderr.contains(needle),
+        "expected {needle:?} in: {}",
+        out.stderr
+    );
+    assert!(!bt.exists(), "no .bt after an error");
+    assert!(!dir.join("d.odl").exists(), "no stream after an error");
+}
+
+#[test]
+fn malformed_tf_is_refused_naming_the_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    for (fault, needle) in [
+        ("cycle", "cycle"),
+        ("two-parents", "sensor"),
+        ("nan", "NaN"),
+    ] {
+        let bag = write_bag(dir.path(), "mcap-none", &["--tf-fault", fault]);
+        assert_refused(dir.path(), &bag, needle);
+    }
+}
+
+#[test]
+fn a_database_that_is_not_a_bag_and_a_cut_chunk_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let not_bag = dir.path().join("other.db3");
+    let made = Command::new("python3")
+        .arg("-c")
+        .arg(format!(
+            "import sqlite3; c = sqlite3.connect({:?}); c.execute('create table t(x)'); c.commit()",
+            s(&not_bag)
+        ))
+        .status()
+        .unwrap();
+    assert!(made.success());
+    assert_refused(dir.path(), &not_bag, "other.db3");
+
+    let bag = write_bag(dir.path(), "mcap-zstd", &[]);
+    let bytes = std::fs::read(&bag).unwrap();
+    let cut = dir.path().join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    assert_refused(dir.path(), &cut, "cut.mcap");
+}
