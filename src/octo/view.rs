@@ -587,7 +587,7 @@ fn fine_region(spec: &ViewSpec) -> Option<KeyBox> {
                 hi: [0; 3],
             });
         };
-        let last = hits.last().unwrap_or(first);
+        let last = hits.next_back().unwrap_or(first);
         region.lo[a] = first << shift;
         region.hi[a] = (last + 1) << shift;
     }
