@@ -1438,4 +1438,32 @@ mod tests {
         assert!(err.to_string().starts_with("s.odl: offset"), "{err}");
         assert!(none.is_empty());
     }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
+
+        #[test]
+        fn arbitrary_arrivals_and_messages_never_panic(
+            text in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..200),
+            depth in 1u32..=16,
+            kind in 0u8..3,
+        ) {
+            let _ = read_arrivals(&text);
+            let spec = ViewSpec {
+                resolution_m: 0.1,
+                coarse_depth: depth,
+                roi: Some(Roi { min_m: [-0.3, -1.0, -0.5], max_m: [0.3, 2.0, 2.0] }),
+            };
+            let mut stream = delta::encode_header(&spec);
+            stream.extend(delta::frame_message(kind, 7, &text));
+            if let Ok((_, msgs)) = delta::decode_stream(&stream) {
+                let mut b = SceneBuilder::new(spec);
+                let mut scene = HashMap::new();
+                for (k, m) in msgs.iter().chain(&msgs).enumerate() {
+                    replay(&mut scene, &b.apply(&m.message, k as u64));
+                }
+                proptest::prop_assert_eq!(b.entities(), scene.len());
+            }
+        }
+    }
 }
