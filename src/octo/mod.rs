@@ -14,6 +14,7 @@
 //! - [`synth`]: a synthetic seabed survey, scans to test and benchmark with.
 //! - [`pipeline`]: octo-delta's build loop and its other commands as library calls, with the
 //!   configuration checks (ranges with units) and a stop flag.
+//! - [`view`]: the operator's view as it grew, as an MCAP file of `foxglove.SceneUpdate`s.
 //!
 //! Parsers of untrusted bytes in this module never panic, on any input: they return a
 //! [`ParseError`] that carries the byte offset (or line) where the input stopped making sense.
@@ -27,6 +28,7 @@ pub mod pipeline;
 pub mod synth;
 pub mod transfer;
 pub mod tree;
+pub mod view;
 
 /// A sensor pose as OctoMap holds it: translation and rotation quaternion, in `f32`.
 ///

@@ -20,6 +20,7 @@ Examples:
   octo-delta build scan*.pcd --roi -2,-2,-5,2,2,0 --coarse-depth 13 -o deltas.odl
   octo-delta build survey.graph -o deltas.odl --link satellite-up   when each scan reaches shore
   octo-delta apply deltas.odl -o view.ot               the operator's view
+  octo-delta apply deltas.odl --mcap view.mcap --arrivals arrivals.csv   the view as it grew, for Foxglove
   octo-delta dump deltas.odl --format csv              one line per message
   octo-delta full map.ot --roi -1,-1,-1,1,1,1 -o full.odl
 
@@ -236,12 +237,25 @@ pub struct ApplyArgs {
     /// The delta stream [default: standard input].
     #[arg(default_value = "-")]
     pub input: PathBuf,
-    /// The view, as a .ot file ("-" for standard output).
-    #[arg(short, long, value_name = "FILE", required = true)]
-    pub output: PathBuf,
+    /// The view, as a .ot file ("-" for standard output); required unless --mcap is given.
+    #[arg(short, long, value_name = "FILE", required_unless_present = "mcap")]
+    pub output: Option<PathBuf>,
     /// Apply only the first N messages.
     #[arg(long, value_name = "N", value_parser = value::count(0, MAX_COUNT), allow_hyphen_values = true)]
     pub messages: Option<u64>,
+    /// Also write the view as it grew, for Foxglove: an MCAP file with one foxglove.SceneUpdate
+    /// (JSON) per message on /octo_delta/view, coloured cubes for fine voxels, translucent grey
+    /// ones for coarse voxels, logged when the operator got the message.
+    #[arg(long, value_name = "FILE")]
+    pub mcap: Option<PathBuf>,
+    /// With --mcap: the CSV of build --link --arrivals; message k is logged at its row's
+    /// t_shown_s (when it and every earlier message had arrived).
+    #[arg(long, value_name = "FILE", requires = "mcap")]
+    pub arrivals: Option<PathBuf>,
+    /// With --mcap and no --arrivals: seconds between messages (message k logged at k x S).
+    #[arg(long, value_name = "S", default_value_t = 1.0, requires = "mcap", conflicts_with = "arrivals",
+          value_parser = value::seconds(0.0, transfer::MAX_PERIOD_S), allow_hyphen_values = true)]
+    pub scan_period: f64,
 }
 
 #[derive(Args, Debug)]

@@ -15,7 +15,7 @@ use rovlink::cli::rows::{RowFormat, RowWriter};
 use rovlink::cli::{UsageError, progress, stop};
 use rovlink::io::EXIT_OK;
 use rovlink::octo::pipeline::{self, Hooks, SinkError, StatsRow};
-use rovlink::octo::{files, transfer};
+use rovlink::octo::{files, transfer, view};
 use rovlink::say;
 
 const TOOL: &str = "octo-delta";
@@ -117,9 +117,34 @@ fn build(a: &BuildArgs) -> Result<u8> {
 }
 
 fn apply(a: &ApplyArgs) -> Result<u8> {
-    let (dest, bytes, name) = claim_and_read(&a.input, &a.output, Kind::Binary)?;
-    let view = pipeline::apply(&bytes, &name, a.messages.map_or(usize::MAX, |n| n as usize))?;
-    write_whole(&dest, &files::write_ot(&view))?;
+    let mut outs = Outputs::new();
+    outs.input(Some(&a.input));
+    outs.input(a.arrivals.as_deref());
+    let ot = outs.claim_opt("-o", a.output.as_deref(), Kind::Binary)?;
+    let mcap = outs.claim_opt("--mcap", a.mcap.as_deref(), Kind::Binary)?;
+    let (bytes, name) = pipeline::read_input(&a.input)?;
+    let messages = a.messages.map_or(usize::MAX, |n| n as usize);
+    let Some(mcap) = mcap else {
+        let view = pipeline::apply(&bytes, &name, messages)?;
+        ot.map(|d| write_whole(&d, &files::write_ot(&view)))
+            .transpose()?;
+        return Ok(EXIT_OK);
+    };
+    let arrivals = a
+        .arrivals
+        .as_deref()
+        .map(pipeline::read_input)
+        .transpose()?;
+    let timing = match &arrivals {
+        Some((text, name)) => view::Timing::Arrivals { text, name },
+        None => view::Timing::Period(a.scan_period),
+    };
+    let mut out = mcap.open()?;
+    let (view, _) = view::apply_with_view(&bytes, &name, messages, timing, &mut out, &mcap.name())?;
+    // The .ot first: a failure there leaves no MCAP either (it is committed last).
+    ot.map(|d| write_whole(&d, &files::write_ot(&view)))
+        .transpose()?;
+    out.finish()?;
     Ok(EXIT_OK)
 }
 
