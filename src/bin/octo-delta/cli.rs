@@ -52,7 +52,7 @@ pub struct Cli {
 pub enum Command {
     /// Build the map from point clouds and write the delta stream.
     Build(Box<BuildArgs>),
-    /// Apply a delta stream: write the operator's view as a .ot file.
+    /// Apply a delta stream: write the operator's view as a .ot file and/or a Foxglove MCAP.
     Apply(ApplyArgs),
     /// List a delta stream's messages.
     Dump(DumpArgs),
