@@ -969,9 +969,23 @@ pub(crate) fn zstd_into(input: &[u8], max: u64, out: &mut Vec<u8>) -> Result<(),
 }
 
 /// Decompresses `input` (LZ4 frames) into `out`, as [`zstd_into`].
+///
+/// The decoder stops quietly when the input ends where a block size (or the end mark) should
+/// be, so the frame's end is checked here: its last 4 bytes (before the content checksum, when
+/// the frame descriptor's flag says there is one) must be the end mark, zero.
 fn lz4_into(input: &[u8], max: u64, out: &mut Vec<u8>) -> Result<(), String> {
     read_limited(lz4_flex::frame::FrameDecoder::new(input), max, out)
-        .map_err(|e| format!("lz4 frame: {e}"))
+        .map_err(|e| format!("lz4 frame: {e}"))?;
+    let checksum = input.get(4).is_some_and(|flg| flg & 0x04 != 0);
+    let end = input.len().saturating_sub(if checksum { 4 } else { 0 });
+    let mark = input.get(end.saturating_sub(4)..end);
+    if mark != Some(&[0u8; 4][..]) {
+        return Err(format!(
+            "lz4 frame: expected the end mark (4 zero bytes) at the end, found {}",
+            mark.map_or_else(|| "too few bytes".to_string(), hex)
+        ));
+    }
+    Ok(())
 }
 
 fn read_limited(reader: impl Read, max: u64, out: &mut Vec<u8>) -> io::Result<()> {
@@ -998,5 +1012,265 @@ impl Iterator for McapMessages<'_> {
         self.walk
             .next(self.file, &self.wanted, Some(self.stop))
             .transpose()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::octo::bag::Bag;
+
+    fn rec(out: &mut Vec<u8>, opcode: u8, body: &[u8]) {
+        out.push(opcode);
+        out.extend((body.len() as u64).to_le_bytes());
+        out.extend_from_slice(body);
+    }
+
+    fn string(s: &str) -> Vec<u8> {
+        let mut v = (s.len() as u32).to_le_bytes().to_vec();
+        v.extend_from_slice(s.as_bytes());
+        v
+    }
+
+    /// Schema 1, channel 1 on `/t` (cdr), and messages with payloads `[i; 3]` at log time i.
+    fn records(messages: u8) -> Vec<u8> {
+        let mut out = Vec::new();
+        let mut b = 1u16.to_le_bytes().to_vec();
+        b.extend(string("std_msgs/msg/String"));
+        b.extend(string("ros2msg"));
+        b.extend(string(""));
+        rec(&mut out, op::SCHEMA, &b);
+        let mut b = 1u16.to_le_bytes().to_vec();
+        b.extend(1u16.to_le_bytes());
+        b.extend(string("/t"));
+        b.extend(string("cdr"));
+        b.extend(0u32.to_le_bytes());
+        rec(&mut out, op::CHANNEL, &b);
+        for i in 0..messages {
+            let mut b = 1u16.to_le_bytes().to_vec();
+            b.extend(0u32.to_le_bytes());
+            b.extend(u64::from(i).to_le_bytes());
+            b.extend(u64::from(i).to_le_bytes());
+            b.extend([i; 3]);
+            rec(&mut out, op::MESSAGE, &b);
+        }
+        out
+    }
+
+    /// Offset of the chunk record in [`file`]: after the magic and the 8-byte Header.
+    const CHUNK_AT: u64 = 8 + 9 + 8;
+
+    /// A file of one chunk: `compressed` (the records as stored), with the given size and CRC
+    /// fields.
+    fn file(compression: &str, compressed: &[u8], size: u64, crc: u32) -> Vec<u8> {
+        let mut out = MAGIC.to_vec();
+        rec(&mut out, op::HEADER, &[0; 8]);
+        let mut b = Vec::new();
+        b.extend(0u64.to_le_bytes());
+        b.extend(0u64.to_le_bytes());
+        b.extend(size.to_le_bytes());
+        b.extend(crc.to_le_bytes());
+        b.extend(string(compression));
+        b.extend((compressed.len() as u64).to_le_bytes());
+        b.extend_from_slice(compressed);
+        rec(&mut out, op::CHUNK, &b);
+        rec(&mut out, op::FOOTER, &[0; 20]);
+        out.extend_from_slice(MAGIC);
+        out
+    }
+
+    /// Offsets of a chunk's fields in [`file`].
+    const SIZE_AT: u64 = CHUNK_AT + 9 + 16;
+    const CRC_AT: u64 = SIZE_AT + 8;
+    const COMPRESSION_AT: u64 = CRC_AT + 4;
+
+    fn records_at(compression: &str) -> u64 {
+        COMPRESSION_AT + 4 + compression.len() as u64 + 8
+    }
+
+    fn zstd(data: &[u8]) -> Vec<u8> {
+        zstd::bulk::compress(data, 3).unwrap()
+    }
+
+    fn lz4(data: &[u8]) -> Vec<u8> {
+        let mut w = lz4_flex::frame::FrameEncoder::new(Vec::new());
+        std::io::Write::write_all(&mut w, data).unwrap();
+        w.finish().unwrap()
+    }
+
+    fn read_all(bytes: Vec<u8>) -> Result<Vec<(u64, Vec<u8>, Location)>, BagError> {
+        let mut bag = Bag::from_mcap_bytes("f.mcap", bytes)?;
+        let all: Vec<usize> = (0..bag.topics().len()).collect();
+        let stop = AtomicBool::new(false);
+        bag.messages(&all, &stop)?
+            .map(|m| m.map(|m| (m.log_time_ns, m.data, m.at)))
+            .collect()
+    }
+
+    fn error(bytes: Vec<u8>) -> (Location, String) {
+        let e = read_all(bytes).unwrap_err();
+        (e.at, e.message)
+    }
+
+    #[test]
+    fn compressed_chunks_read_with_places() {
+        let plain = records(3);
+        let crc = CRC32.checksum(&plain);
+        for (compression, stored) in [
+            ("", plain.clone()),
+            ("zstd", zstd(&plain)),
+            ("lz4", lz4(&plain)),
+        ] {
+            for crc in [0, crc] {
+                let got = read_all(file(compression, &stored, plain.len() as u64, crc)).unwrap();
+                assert_eq!(got.len(), 3, "{compression}");
+                for (i, (t, data, at)) in got.iter().enumerate() {
+                    assert_eq!(*t, i as u64);
+                    assert_eq!(*data, vec![i as u8; 3]);
+                    // The payload is where the location says.
+                    let inner = (plain.len() - (3 - i) * (9 + 25) + 9 + 22) as u64;
+                    if compression.is_empty() {
+                        assert_eq!(at.offset, Some(records_at("") + inner));
+                        assert_eq!(at.inner, None);
+                    } else {
+                        assert_eq!(at.offset, Some(CHUNK_AT));
+                        assert_eq!(at.inner, Some(inner));
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn chunk_checks_carry_offsets() {
+        let plain = records(2);
+        let n = plain.len() as u64;
+        let good_crc = CRC32.checksum(&plain);
+        let cases: Vec<(Vec<u8>, u64, String)> = vec![
+            (
+                file("zstd", &zstd(&plain), n, good_crc ^ 1),
+                CRC_AT,
+                "uncompressed_crc: expected".to_string(),
+            ),
+            (
+                file("lz4", &lz4(&plain), n, good_crc ^ 1),
+                CRC_AT,
+                "uncompressed_crc: expected".to_string(),
+            ),
+            (
+                file("zstd", &zstd(&plain), n + 1, 0),
+                SIZE_AT,
+                format!(
+                    "uncompressed_size: expected {n} (the size the records decompress to), found {}",
+                    n + 1
+                ),
+            ),
+            (
+                file("lz4", &lz4(&plain), n - 1, 0),
+                SIZE_AT,
+                format!(
+                    "uncompressed_size: expected more than {} (the size the records decompress to), found {}",
+                    n - 1,
+                    n - 1
+                ),
+            ),
+            (
+                file("zstd", &zstd(&plain), MAX_CHUNK_BYTES + 1, 0),
+                SIZE_AT,
+                "expected at most 1073741824 (1 GiB".to_string(),
+            ),
+            (
+                file("", &plain, n + 1, 0),
+                SIZE_AT,
+                "(the records' length, uncompressed)".to_string(),
+            ),
+            (
+                file("bz2", &plain, n, 0),
+                COMPRESSION_AT,
+                "compression: expected \"\", \"zstd\" or \"lz4\", found \"bz2\"".to_string(),
+            ),
+        ];
+        for (bytes, at, want) in cases {
+            let (loc, msg) = error(bytes);
+            assert_eq!(loc.offset, Some(at), "{msg}");
+            assert!(msg.contains(&want), "{msg}\n(wanted {want})");
+        }
+        // Truncated compressed data (the chunk's own length says where it ends).
+        for (compression, stored) in [("zstd", zstd(&plain)), ("lz4", lz4(&plain))] {
+            for cut in [1, stored.len() / 2, stored.len() - 1] {
+                let (loc, msg) = error(file(compression, &stored[..cut], n, 0));
+                assert_eq!(loc.offset, Some(records_at(compression)), "{msg}");
+                assert!(
+                    msg.contains(&format!("{compression}-compressed records")),
+                    "{msg}"
+                );
+                assert_eq!(
+                    loc.to_string(),
+                    format!("f.mcap: offset {}", records_at(compression))
+                );
+            }
+        }
+        // A record inside a compressed chunk that runs past its end: chunk and inner offset.
+        let mut bad = plain.clone();
+        bad.truncate(plain.len() - 1);
+        let (loc, msg) = error(file("zstd", &zstd(&bad), bad.len() as u64, 0));
+        assert_eq!(loc.offset, Some(CHUNK_AT));
+        assert_eq!(loc.inner, Some((plain.len() - (9 + 25) + 1) as u64));
+        assert!(
+            msg.contains("length: expected at most the 21 bytes left, found 22"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn summary_topics_and_counts_and_stop() {
+        let scans = vec![crate::octo::Scan::default(); 4];
+        let bytes = crate::octo::cloud::write_clouds_mcap(&scans);
+        let mut bag = Bag::from_mcap_bytes("w.mcap", bytes).unwrap();
+        let topics: Vec<_> = bag
+            .topics()
+            .iter()
+            .map(|t| (t.name.as_str(), t.encoding.as_str(), t.messages))
+            .collect();
+        assert_eq!(
+            topics,
+            [("/points", "cdr", Some(4)), ("/pose", "cdr", Some(4))]
+        );
+        let stop = AtomicBool::new(false);
+        let times: Vec<u64> = bag
+            .messages(&[0, 1], &stop)
+            .unwrap()
+            .map(|m| m.unwrap().log_time_ns)
+            .collect();
+        assert_eq!(times.len(), 8);
+        assert!(times.is_sorted());
+        stop.store(true, Ordering::Relaxed);
+        assert_eq!(bag.messages(&[0, 1], &stop).unwrap().count(), 0);
+        let e = bag.messages(&[2], &stop).err().unwrap();
+        assert_eq!(e.to_string(), "w.mcap: topic index: expected 0..2, found 2");
+    }
+
+    #[test]
+    fn every_prefix_and_byte_flip_is_an_error_or_messages_never_a_panic() {
+        let plain = records(2);
+        for bytes in [
+            file(
+                "zstd",
+                &zstd(&plain),
+                plain.len() as u64,
+                CRC32.checksum(&plain),
+            ),
+            file("lz4", &lz4(&plain), plain.len() as u64, 0),
+            crate::octo::cloud::write_clouds_mcap(&[crate::octo::Scan::default()]),
+        ] {
+            for cut in 0..bytes.len() {
+                assert!(read_all(bytes[..cut].to_vec()).is_err());
+            }
+            for i in 0..bytes.len() {
+                let mut b = bytes.clone();
+                b[i] ^= 0x55;
+                let _ = read_all(b);
+            }
+        }
     }
 }
