@@ -1217,7 +1217,7 @@ mod tests {
         assert_eq!(loc.offset, Some(CHUNK_AT));
         assert_eq!(loc.inner, Some((plain.len() - (9 + 25) + 1) as u64));
         assert!(
-            msg.contains("length: expected at most the 21 bytes left, found 22"),
+            msg.contains("length: expected at most the 24 bytes left, found 25"),
             "{msg}"
         );
     }
