@@ -101,12 +101,24 @@ fn messages() -> Vec<Written> {
 /// Every message of `bag`: (topic name, log time, payload), and the topics (name, type,
 /// encoding, count).
 #[allow(clippy::type_complexity)]
-fn read(path: &Path) -> (Vec<(String, u64, Vec<u8>)>, Vec<(String, String, String, Option<u64>)>) {
+fn read(
+    path: &Path,
+) -> (
+    Vec<(String, u64, Vec<u8>)>,
+    Vec<(String, String, String, Option<u64>)>,
+) {
     let mut bag = Bag::open(path).unwrap_or_else(|e| panic!("{e}"));
     let topics: Vec<_> = bag
         .topics()
         .iter()
-        .map(|t| (t.name.clone(), t.schema.clone(), t.encoding.clone(), t.messages))
+        .map(|t| {
+            (
+                t.name.clone(),
+                t.schema.clone(),
+                t.encoding.clone(),
+                t.messages,
+            )
+        })
         .collect();
     let names: Vec<String> = topics.iter().map(|t| t.0.clone()).collect();
     let all: Vec<usize> = (0..names.len()).collect();
@@ -143,7 +155,11 @@ fn mcap_files_of_every_compression() {
     for kind in ["mcap-zstd", "mcap-lz4", "mcap-none", "mcap-unchunked"] {
         let path = dir.path().join(format!("{kind}.mcap"));
         let written = write(kind, &path, &messages);
-        assert_eq!(written, plain(&messages), "{kind}: the writer wrote what it was given");
+        assert_eq!(
+            written,
+            plain(&messages),
+            "{kind}: the writer wrote what it was given"
+        );
         let (got, topics) = read(&path);
         assert_eq!(topics, expected_topics(), "{kind}");
         assert_eq!(got, written, "{kind}");
@@ -168,7 +184,11 @@ fn mcap_files_of_every_compression() {
 fn rosbag2_directories_by_directory_metadata_and_file() {
     let dir = tempfile::tempdir().unwrap();
     let messages = messages();
-    for (kind, ext) in [("db3", "db3"), ("db3-message-zstd", "db3"), ("rosbag2-mcap", "mcap")] {
+    for (kind, ext) in [
+        ("db3", "db3"),
+        ("db3-message-zstd", "db3"),
+        ("rosbag2-mcap", "mcap"),
+    ] {
         let bag = dir.path().join(kind);
         write(kind, &bag, &messages);
         let file = bag.join(format!("{kind}.{ext}"));
@@ -200,7 +220,14 @@ fn mcap_ros2_writer_clouds_read_as_scans() {
     let dir = tempfile::tempdir().unwrap();
     let path: PathBuf = dir.path().join("ros2.mcap");
     let messages: Vec<Written> = (1..=3)
-        .map(|i| ("/cloud".to_string(), CLOUD.to_string(), i * 1_000, Vec::new()))
+        .map(|i| {
+            (
+                "/cloud".to_string(),
+                CLOUD.to_string(),
+                i * 1_000,
+                Vec::new(),
+            )
+        })
         .collect();
     let written = write("mcap-ros2", &path, &messages);
     assert_eq!(written.len(), 3);
@@ -218,4 +245,27 @@ fn mcap_ros2_writer_clouds_read_as_scans() {
     assert_eq!(scans.scans.len(), 3);
     assert_eq!(scans.scans[0].points, vec![[1.0, 2.0, 3.0]]);
     assert_eq!(scans.log_times_ns, [1_000, 2_000, 3_000]);
+}
+
+/// Reading speed and memory: `BAG_BENCH_FILE=big.mcap cargo test --release --test bag_writers
+/// -- --ignored read_speed --nocapture` under `/usr/bin/time -v` (peak RSS).
+#[test]
+#[ignore = "a measurement on a file given by BAG_BENCH_FILE"]
+fn read_speed() {
+    let path = std::env::var("BAG_BENCH_FILE").expect("BAG_BENCH_FILE: a bag to read");
+    let start = std::time::Instant::now();
+    let mut bag = Bag::open(Path::new(&path)).unwrap();
+    let all: Vec<usize> = (0..bag.topics().len()).collect();
+    let stop = AtomicBool::new(false);
+    let (mut n, mut bytes) = (0u64, 0u64);
+    for m in bag.messages(&all, &stop).unwrap() {
+        n += 1;
+        bytes += m.unwrap().data.len() as u64;
+    }
+    let s = start.elapsed().as_secs_f64();
+    println!(
+        "{n} messages, {:.1} MB of payload in {s:.3} s: {:.0} MB/s",
+        bytes as f64 / 1e6,
+        bytes as f64 / 1e6 / s
+    );
 }
