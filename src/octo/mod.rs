@@ -19,6 +19,7 @@
 //! Parsers of untrusted bytes in this module never panic, on any input: they return a
 //! [`ParseError`] that carries the byte offset (or line) where the input stopped making sense.
 
+pub mod bag;
 pub mod cellset;
 pub mod cloud;
 pub mod delta;

@@ -1,18 +1,17 @@
 //! MCAP recordings of ROS 2 messages: `sensor_msgs/msg/PointCloud2` clouds, posed by
 //! `geometry_msgs/msg/PoseStamped` messages, both CDR-encoded.
 //!
-//! The records are walked here rather than with the `mcap` crate's readers: those panic on
-//! some malformed records (0.26 slices an Attachment body out of range when its CRC is cut
-//! off), cannot report byte offsets, and only read what they can decompress anyway. Only the
-//! records that matter are parsed (Header, Schema, Channel, Message, Chunk, Footer); everything
-//! else is skipped by its length. The `mcap` crate writes ([`write_clouds_mcap`]).
+//! The records are walked by [`crate::octo::bag`] (chunks uncompressed, zstd or lz4) rather than
+//! with the `mcap` crate's readers: those panic on some malformed records (0.26 slices an
+//! Attachment body out of range when its CRC is cut off) and cannot report byte offsets. The
+//! `mcap` crate writes ([`write_clouds_mcap`]).
 
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::BTreeMap;
 use std::io::Cursor;
-
-use ::mcap::records::op;
+use std::sync::atomic::AtomicBool;
 
 use super::{CloudBuilder, Scalar, err, shown, unpack_rgb};
+use crate::octo::bag::{Bag, BagError, Message, Topic};
 use crate::octo::{ParseError, Pose, Scan};
 
 /// Schema name of the clouds read: ROS 2's `sensor_msgs/msg/PointCloud2`.
@@ -60,13 +59,15 @@ pub struct McapScans {
 /// log time at or before the cloud's, or the first pose if none is earlier, or the identity when
 /// there are no poses (said in [`McapScans::notes`]).
 ///
-/// Messages must be CDR (plain XCDR1, either byte order). Chunks must be uncompressed: this
-/// build has no zstd or lz4 decompressor, and a compressed chunk is an error naming its
-/// compression. Never panics.
+/// Messages must be CDR (plain XCDR1, either byte order). Chunks may be uncompressed, zstd or
+/// lz4; an error inside a compressed chunk is at the chunk's offset, its message giving the
+/// offset in the decompressed records. Never panics.
 pub fn read_mcap(bytes: &[u8], options: &McapOptions) -> Result<McapScans, ParseError> {
-    let walk = Walk::read(bytes)?;
     let end = bytes.len();
-    let Some((cloud_topic, cloud_ids)) = walk.pick(
+    let mut bag = Bag::from_mcap_bytes("", bytes.to_vec()).map_err(parse_error)?;
+    let topics = bag.topics().to_vec();
+    let Some((cloud_topic, cloud_ids)) = pick(
+        &topics,
         options.cloud_topic.as_deref(),
         POINT_CLOUD2_SCHEMA,
         "cloud",
@@ -77,16 +78,18 @@ pub fn read_mcap(bytes: &[u8], options: &McapOptions) -> Result<McapScans, Parse
             end,
             format!(
                 "MCAP: expected a channel with schema {POINT_CLOUD2_SCHEMA}, found {}",
-                walk.topics()
+                listing(&topics)
             ),
         ));
     };
-    let pose = walk.pick(
+    let pose = pick(
+        &topics,
         options.pose_topic.as_deref(),
         POSE_STAMPED_SCHEMA,
         "pose",
         end,
     )?;
+    let stop = AtomicBool::new(false);
     let mut notes = Vec::new();
     let mut poses: Vec<(u64, Pose)> = Vec::new();
     match &pose {
@@ -94,8 +97,9 @@ pub fn read_mcap(bytes: &[u8], options: &McapOptions) -> Result<McapScans, Parse
             "no {POSE_STAMPED_SCHEMA} topic: every scan has the identity pose"
         )),
         Some((topic, ids)) => {
-            for m in walk.messages.iter().filter(|m| ids.contains(&m.channel)) {
-                poses.push((m.log_time, decode_pose(m.data, m.offset)?));
+            for m in bag.messages(ids, &stop).map_err(parse_error)? {
+                let m = m.map_err(parse_error)?;
+                poses.push((m.log_time_ns, decoded(&m, decode_pose)?));
             }
             // Stable: of poses logged at the same time, the last in the file counts.
             poses.sort_by_key(|p| p.0);
@@ -111,18 +115,15 @@ pub fn read_mcap(bytes: &[u8], options: &McapOptions) -> Result<McapScans, Parse
     let mut before_first_pose = 0usize;
     let mut dropped = 0usize;
     let mut colour_notes: Vec<String> = Vec::new();
-    for m in walk
-        .messages
-        .iter()
-        .filter(|m| cloud_ids.contains(&m.channel))
-    {
-        let (builder, note) = decode_cloud(m.data, m.offset)?;
+    for m in bag.messages(&cloud_ids, &stop).map_err(parse_error)? {
+        let m = m.map_err(parse_error)?;
+        let (builder, note) = decoded(&m, decode_cloud)?;
         if let Some(note) = note
             && !colour_notes.contains(&note)
         {
             colour_notes.push(note);
         }
-        let pose = match poses.partition_point(|p| p.0 <= m.log_time) {
+        let pose = match poses.partition_point(|p| p.0 <= m.log_time_ns) {
             _ if poses.is_empty() => Pose::IDENTITY,
             0 => {
                 before_first_pose += 1;
@@ -132,7 +133,7 @@ pub fn read_mcap(bytes: &[u8], options: &McapOptions) -> Result<McapScans, Parse
         };
         dropped += builder.dropped;
         scans.push(builder.finish(pose));
-        log_times_ns.push(m.log_time);
+        log_times_ns.push(m.log_time_ns);
     }
     if before_first_pose > 0 {
         notes.push(format!(
@@ -154,505 +155,110 @@ pub fn read_mcap(bytes: &[u8], options: &McapOptions) -> Result<McapScans, Parse
     })
 }
 
-// ---- MCAP records -------------------------------------------------------------------------
+// ---- Topics -------------------------------------------------------------------------------
 
-/// Little-endian fields of one record's body, with errors at their file offsets.
-struct Fields<'a> {
-    body: &'a [u8],
-    pos: usize,
-    /// File offset of `body[0]`.
-    base: usize,
-    record: &'static str,
-}
-
-impl<'a> Fields<'a> {
-    fn new(body: &'a [u8], base: usize, record: &'static str) -> Self {
-        Fields {
-            body,
-            pos: 0,
-            base,
-            record,
-        }
-    }
-
-    fn offset(&self) -> usize {
-        self.base + self.pos
-    }
-
-    fn take(&mut self, n: usize, field: &str) -> Result<&'a [u8], ParseError> {
-        self.take_counted(n, field, self.offset())
-    }
-
-    /// `n` bytes; an error is reported at `at` (where the count was read).
-    fn take_counted(&mut self, n: usize, field: &str, at: usize) -> Result<&'a [u8], ParseError> {
-        let left = self.body.len() - self.pos;
-        if n > left {
-            return Err(err(
-                at,
-                format!(
-                    "MCAP {} record field {field}: expected {n} bytes, found {left}",
-                    self.record
-                ),
-            ));
-        }
-        let s = &self.body[self.pos..self.pos + n];
-        self.pos += n;
-        Ok(s)
-    }
-
-    fn array<const N: usize>(&mut self, field: &str) -> Result<[u8; N], ParseError> {
-        let s = self.take(N, field)?;
-        let mut a = [0u8; N];
-        a.copy_from_slice(s);
-        Ok(a)
-    }
-
-    fn u16(&mut self, field: &str) -> Result<u16, ParseError> {
-        self.array(field).map(u16::from_le_bytes)
-    }
-
-    fn u32(&mut self, field: &str) -> Result<u32, ParseError> {
-        self.array(field).map(u32::from_le_bytes)
-    }
-
-    fn u64(&mut self, field: &str) -> Result<u64, ParseError> {
-        self.array(field).map(u64::from_le_bytes)
-    }
-
-    /// Bytes after a `u32` length.
-    fn bytes32(&mut self, field: &str) -> Result<&'a [u8], ParseError> {
-        let at = self.offset();
-        let n = self.u32(field)?;
-        self.take_counted(n as usize, field, at)
-    }
-
-    /// Bytes after a `u64` length.
-    fn bytes64(&mut self, field: &str) -> Result<&'a [u8], ParseError> {
-        let at = self.offset();
-        let n = self.u64(field)?;
-        self.take_counted(usize::try_from(n).unwrap_or(usize::MAX), field, at)
-    }
-
-    fn string(&mut self, field: &str) -> Result<&'a str, ParseError> {
-        let at = self.offset();
-        let b = self.bytes32(field)?;
-        std::str::from_utf8(b).map_err(|_| {
-            err(
-                at,
-                format!(
-                    "MCAP {} record field {field}: expected UTF-8 text, found {}",
-                    self.record,
-                    shown(b)
-                ),
-            )
-        })
-    }
-
-    fn rest(&mut self) -> &'a [u8] {
-        let s = &self.body[self.pos..];
-        self.pos = self.body.len();
-        s
+/// A [`BagError`] of an in-memory file as a [`ParseError`]: inside a compressed chunk, the
+/// chunk's offset, with the offset in its decompressed records said in the message.
+fn parse_error(e: BagError) -> ParseError {
+    let offset = e.at.offset.unwrap_or(0);
+    match e.at.inner {
+        Some(inner) => err(
+            offset as usize,
+            format!("MCAP chunk's decompressed offset {inner}: {}", e.message),
+        ),
+        None => ParseError::new(offset, e.message),
     }
 }
 
-struct SchemaRecord<'a> {
-    name: &'a str,
-    encoding: &'a str,
-    data: &'a [u8],
+/// `decode` run on a message's payload, with errors at the payload's place in the file.
+fn decoded<T>(
+    m: &Message,
+    decode: impl FnOnce(&[u8], usize) -> Result<T, ParseError>,
+) -> Result<T, ParseError> {
+    if m.at.inner.is_some() {
+        decode(&m.data, 0).map_err(|e| parse_error(m.error(e)))
+    } else {
+        decode(&m.data, m.at.offset.unwrap_or(0) as usize)
+    }
 }
 
-struct ChannelRecord<'a> {
-    id: u16,
-    schema_id: u16,
-    topic: &'a str,
-    encoding: &'a str,
-    metadata: &'a [u8],
-    offset: usize,
-}
-
-struct MessageRecord<'a> {
-    channel: u16,
-    log_time: u64,
-    data: &'a [u8],
-    /// File offset of `data[0]`.
-    offset: usize,
-}
-
-/// The schemas, channels and messages of a file, borrowed from it.
-struct Walk<'a> {
-    bytes: &'a [u8],
-    schemas: HashMap<u16, SchemaRecord<'a>>,
-    channels: Vec<ChannelRecord<'a>>,
-    /// Index in `channels` by id.
-    channel_index: HashMap<u16, usize>,
-    messages: Vec<MessageRecord<'a>>,
-}
-
-fn hex(bytes: &[u8]) -> String {
-    let mut s = bytes
+/// The topics, for error messages.
+fn listing(topics: &[Topic]) -> String {
+    if topics.is_empty() {
+        return "no channels".into();
+    }
+    let mut list: Vec<String> = topics
         .iter()
-        .take(8)
-        .map(|b| format!("{b:02x}"))
-        .collect::<Vec<_>>()
-        .join(" ");
-    if s.is_empty() {
-        s.push_str("nothing");
-    }
-    s
-}
-
-/// One record: its opcode and body, and the body's file offset.
-struct Record<'a> {
-    opcode: u8,
-    at: usize,
-    body: &'a [u8],
-}
-
-/// The record at `pos`, `None` at `end`.
-fn record_at(bytes: &[u8], pos: usize, end: usize) -> Result<Option<Record<'_>>, ParseError> {
-    if pos >= end {
-        return Ok(None);
-    }
-    let left = end - pos;
-    let Some(head) = bytes.get(pos..pos + 9).filter(|_| left >= 9) else {
-        return Err(err(
-            pos,
-            format!("MCAP record: expected 9 bytes (opcode, u64 length), found {left}"),
-        ));
-    };
-    let opcode = head[0];
-    let mut len = [0u8; 8];
-    len.copy_from_slice(&head[1..]);
-    let len = u64::from_le_bytes(len);
-    let available = left - 9;
-    if len > available as u64 {
-        return Err(err(
-            pos + 1,
-            format!(
-                "MCAP record 0x{opcode:02x} length: expected at most the {available} bytes left, \
-                 found {len}"
-            ),
-        ));
-    }
-    let at = pos + 9;
-    Ok(Some(Record {
-        opcode,
-        at,
-        body: &bytes[at..at + len as usize],
-    }))
-}
-
-impl<'a> Walk<'a> {
-    fn read(bytes: &'a [u8]) -> Result<Self, ParseError> {
-        let magic = ::mcap::MAGIC;
-        if !bytes.starts_with(magic) {
-            return Err(err(
-                0,
-                format!(
-                    "MCAP magic: expected {}, found {}",
-                    hex(magic),
-                    hex(&bytes[..bytes.len().min(8)])
-                ),
-            ));
-        }
-        let mut walk = Walk {
-            bytes,
-            schemas: HashMap::new(),
-            channels: Vec::new(),
-            channel_index: HashMap::new(),
-            messages: Vec::new(),
-        };
-        let mut pos = magic.len();
-        let mut first = true;
-        loop {
-            let Some(Record { opcode, at, body }) = record_at(bytes, pos, bytes.len())? else {
-                return Err(err(
-                    pos,
-                    "MCAP: expected a Footer record and the closing magic, found end of input",
-                ));
+        .take(10)
+        .map(|t| {
+            let schema = if t.schema.is_empty() {
+                "no schema"
+            } else {
+                &t.schema
             };
-            if first && opcode != op::HEADER {
+            format!("{:?} ({schema})", t.name)
+        })
+        .collect();
+    if topics.len() > 10 {
+        list.push(format!("and {} more", topics.len() - 10));
+    }
+    format!("channels {}", list.join(", "))
+}
+
+/// The topic to read `schema` messages from and its indices in `topics`: `wanted`, or the
+/// first topic with that schema (`None` if there is none).
+fn pick(
+    topics: &[Topic],
+    wanted: Option<&str>,
+    schema: &str,
+    role: &str,
+    end: usize,
+) -> Result<Option<(String, Vec<usize>)>, ParseError> {
+    let topic = match wanted {
+        Some(t) => {
+            if !topics.iter().any(|c| c.name == t) {
                 return Err(err(
-                    pos,
+                    end,
                     format!(
-                        "MCAP: expected a Header record (opcode 0x01) first, found opcode \
-                         0x{opcode:02x}"
+                        "MCAP {role} topic {t:?}: expected a channel with that topic, found {}",
+                        listing(topics)
                     ),
                 ));
             }
-            first = false;
-            let next = at + body.len();
-            match opcode {
-                op::FOOTER => {
-                    let tail = &bytes[next..];
-                    if tail != magic {
-                        return Err(err(
-                            next,
-                            format!(
-                                "MCAP closing magic: expected {} and the end of input, found {}{}",
-                                hex(magic),
-                                hex(tail),
-                                if tail.len() > 8 {
-                                    format!(" ({} bytes)", tail.len())
-                                } else {
-                                    String::new()
-                                }
-                            ),
-                        ));
-                    }
-                    return Ok(walk);
-                }
-                op::CHUNK => walk.chunk(at, body)?,
-                other => walk.record(other, at, body)?,
-            }
-            pos = next;
+            t
         }
-    }
-
-    fn chunk(&mut self, at: usize, body: &'a [u8]) -> Result<(), ParseError> {
-        let mut f = Fields::new(body, at, "Chunk");
-        f.u64("message_start_time")?;
-        f.u64("message_end_time")?;
-        let size_at = f.offset();
-        let uncompressed_size = f.u64("uncompressed_size")?;
-        let crc_at = f.offset();
-        let crc = f.u32("uncompressed_crc")?;
-        let compression_at = f.offset();
-        let compression = f.string("compression")?;
-        if !compression.is_empty() {
+        None => match topics.iter().find(|c| c.schema == schema) {
+            Some(c) => &c.name,
+            None => return Ok(None),
+        },
+    };
+    let mut ids = Vec::new();
+    for (i, c) in topics.iter().enumerate().filter(|(_, c)| c.name == topic) {
+        if c.schema != schema {
             return Err(err(
-                compression_at,
+                end,
                 format!(
-                    "MCAP Chunk record field compression: expected \"\" (uncompressed; this \
-                     build has no zstd or lz4 decompressor), found {compression:?}; decompress \
-                     the file first (e.g. `mcap decompress`)"
+                    "MCAP {role} channel {topic:?}: expected schema {schema}, found {}",
+                    if c.schema.is_empty() {
+                        "no schema"
+                    } else {
+                        &c.schema
+                    }
                 ),
             ));
         }
-        let records = f.bytes64("records")?;
-        let start = f.offset() - records.len();
-        if uncompressed_size != records.len() as u64 {
+        if c.encoding != "cdr" {
             return Err(err(
-                size_at,
+                end,
                 format!(
-                    "MCAP Chunk record field uncompressed_size: expected {} (the records' length, \
-                     uncompressed), found {uncompressed_size}",
-                    records.len()
+                    "MCAP {role} channel {topic:?}: expected message encoding cdr, found {:?}",
+                    c.encoding
                 ),
             ));
         }
-        if crc != 0 {
-            let computed = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(records);
-            if computed != crc {
-                return Err(err(
-                    crc_at,
-                    format!(
-                        "MCAP Chunk record field uncompressed_crc: expected {computed:08x} (the \
-                         records' CRC-32), found {crc:08x}"
-                    ),
-                ));
-            }
-        }
-        let end = start + records.len();
-        let mut pos = start;
-        while let Some(Record { opcode, at, body }) = record_at(self.bytes, pos, end)? {
-            // Only schemas, channels and messages belong in a chunk; anything else is skipped.
-            if opcode != op::CHUNK {
-                self.record(opcode, at, body)?;
-            }
-            pos = at + body.len();
-        }
-        Ok(())
+        ids.push(i);
     }
-
-    fn record(&mut self, opcode: u8, at: usize, body: &'a [u8]) -> Result<(), ParseError> {
-        match opcode {
-            op::SCHEMA => {
-                let mut f = Fields::new(body, at, "Schema");
-                let id = f.u16("id")?;
-                let schema = SchemaRecord {
-                    name: f.string("name")?,
-                    encoding: f.string("encoding")?,
-                    data: f.bytes32("data")?,
-                };
-                if id == 0 {
-                    return Err(err(
-                        at,
-                        "MCAP Schema record field id: expected 1..65535, found 0",
-                    ));
-                }
-                match self.schemas.get(&id) {
-                    Some(s)
-                        if (s.name, s.encoding, s.data)
-                            != (schema.name, schema.encoding, schema.data) =>
-                    {
-                        return Err(err(
-                            at,
-                            format!(
-                                "MCAP Schema record {id}: expected the content of its earlier \
-                                 record, found different content"
-                            ),
-                        ));
-                    }
-                    Some(_) => {}
-                    None => {
-                        self.schemas.insert(id, schema);
-                    }
-                }
-            }
-            op::CHANNEL => {
-                let mut f = Fields::new(body, at, "Channel");
-                let id = f.u16("id")?;
-                let schema_at = f.offset();
-                let schema_id = f.u16("schema_id")?;
-                let channel = ChannelRecord {
-                    id,
-                    schema_id,
-                    topic: f.string("topic")?,
-                    encoding: f.string("message_encoding")?,
-                    metadata: f.bytes32("metadata")?,
-                    offset: at,
-                };
-                if schema_id != 0 && !self.schemas.contains_key(&schema_id) {
-                    return Err(err(
-                        schema_at,
-                        format!(
-                            "MCAP Channel record field schema_id: expected a schema defined \
-                             earlier (or 0), found {schema_id}"
-                        ),
-                    ));
-                }
-                match self.channel_index.get(&id).map(|&i| &self.channels[i]) {
-                    Some(c)
-                        if (c.schema_id, c.topic, c.encoding, c.metadata)
-                            != (schema_id, channel.topic, channel.encoding, channel.metadata) =>
-                    {
-                        return Err(err(
-                            at,
-                            format!(
-                                "MCAP Channel record {id}: expected the content of its earlier \
-                                 record, found different content"
-                            ),
-                        ));
-                    }
-                    Some(_) => {}
-                    None => {
-                        self.channel_index.insert(id, self.channels.len());
-                        self.channels.push(channel);
-                    }
-                }
-            }
-            op::MESSAGE => {
-                let mut f = Fields::new(body, at, "Message");
-                let channel = f.u16("channel_id")?;
-                f.u32("sequence")?;
-                let log_time = f.u64("log_time")?;
-                f.u64("publish_time")?;
-                let offset = f.offset();
-                let data = f.rest();
-                if !self.channel_index.contains_key(&channel) {
-                    return Err(err(
-                        at,
-                        format!(
-                            "MCAP Message record field channel_id: expected a channel defined \
-                             earlier, found {channel}"
-                        ),
-                    ));
-                }
-                self.messages.push(MessageRecord {
-                    channel,
-                    log_time,
-                    data,
-                    offset,
-                });
-            }
-            _ => {}
-        }
-        Ok(())
-    }
-
-    fn schema_of(&self, c: &ChannelRecord) -> Option<&'a str> {
-        self.schemas.get(&c.schema_id).map(|s| s.name)
-    }
-
-    /// The topics, for error messages.
-    fn topics(&self) -> String {
-        if self.channels.is_empty() {
-            return "no channels".into();
-        }
-        let mut list: Vec<String> = self
-            .channels
-            .iter()
-            .take(10)
-            .map(|c| {
-                format!(
-                    "{:?} ({})",
-                    c.topic,
-                    self.schema_of(c).unwrap_or("no schema")
-                )
-            })
-            .collect();
-        if self.channels.len() > 10 {
-            list.push(format!("and {} more", self.channels.len() - 10));
-        }
-        format!("channels {}", list.join(", "))
-    }
-
-    /// The topic to read `schema` messages from and its channel ids: `wanted`, or the first
-    /// channel with that schema (`None` if there is none).
-    fn pick(
-        &self,
-        wanted: Option<&str>,
-        schema: &str,
-        role: &str,
-        end: usize,
-    ) -> Result<Option<(String, HashSet<u16>)>, ParseError> {
-        let topic = match wanted {
-            Some(t) => {
-                if !self.channels.iter().any(|c| c.topic == t) {
-                    return Err(err(
-                        end,
-                        format!(
-                            "MCAP {role} topic {t:?}: expected a channel with that topic, found {}",
-                            self.topics()
-                        ),
-                    ));
-                }
-                t
-            }
-            None => match self
-                .channels
-                .iter()
-                .find(|c| self.schema_of(c) == Some(schema))
-            {
-                Some(c) => c.topic,
-                None => return Ok(None),
-            },
-        };
-        let mut ids = HashSet::new();
-        for c in self.channels.iter().filter(|c| c.topic == topic) {
-            if self.schema_of(c) != Some(schema) {
-                return Err(err(
-                    c.offset,
-                    format!(
-                        "MCAP {role} channel {topic:?}: expected schema {schema}, found {}",
-                        self.schema_of(c).unwrap_or("no schema")
-                    ),
-                ));
-            }
-            if c.encoding != "cdr" {
-                return Err(err(
-                    c.offset,
-                    format!(
-                        "MCAP {role} channel {topic:?}: expected message encoding cdr, found {:?}",
-                        c.encoding
-                    ),
-                ));
-            }
-            ids.insert(c.id);
-        }
-        Ok(Some((topic.to_string(), ids)))
-    }
+    Ok(Some((topic.to_string(), ids)))
 }
 
 // ---- CDR ----------------------------------------------------------------------------------
@@ -1203,6 +809,7 @@ pub fn write_clouds_mcap(scans: &[Scan]) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ::mcap::records::op;
 
     fn scan(points: &[[f32; 3]], colors: Option<&[[u8; 3]]>, pose: Pose) -> Scan {
         Scan {
@@ -1727,9 +1334,18 @@ mod tests {
         let bytes = file(&[chunk(&records, "zstd", false)]);
         let (at, msg) = error(read_mcap(&bytes, &McapOptions::default()));
         let chunk_body = 8 + 9 + 8 + 9;
+        assert_eq!(at, chunk_body as u64 + 28 + 8 + 8);
+        assert!(
+            msg.contains("zstd-compressed records at offset") && msg.contains("zstd: "),
+            "{msg}"
+        );
+        let bytes = file(&[chunk(&records, "brotli", false)]);
+        let (at, msg) = error(read_mcap(&bytes, &McapOptions::default()));
         assert_eq!(at, chunk_body as u64 + 28);
-        assert!(msg.contains("compression: expected \"\""), "{msg}");
-        assert!(msg.contains("found \"zstd\""), "{msg}");
+        assert!(
+            msg.contains("compression: expected \"\", \"zstd\" or \"lz4\", found \"brotli\""),
+            "{msg}"
+        );
         let mut bytes = file(&[chunk(&records, "", true)]);
         bytes[chunk_body + 40] ^= 1; // inside the records
         let (at, msg) = error(read_mcap(&bytes, &McapOptions::default()));

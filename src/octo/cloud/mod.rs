@@ -25,9 +25,9 @@
 //!   fractions all within 0..1, scaled by 255. The pose is the identity.
 //! - **MCAP** ([`read_mcap`]): ROS 2 recordings. Every `sensor_msgs/msg/PointCloud2` message
 //!   (CDR) on the chosen topic becomes a scan whose pose is the latest
-//!   `geometry_msgs/msg/PoseStamped` logged at or before it. Chunks must be uncompressed (this
-//!   build has no zstd or lz4 decompressor; a compressed chunk is an error naming its
-//!   compression). [`write_clouds_mcap`] writes such files.
+//!   `geometry_msgs/msg/PoseStamped` logged at or before it. Chunks may be uncompressed, zstd or
+//!   lz4 (the records are walked by [`crate::octo::bag`]). [`write_clouds_mcap`] writes such
+//!   files.
 //!
 //! In every format, points with a coordinate that is not finite once converted to `f32` (the
 //! NaN holes of organised clouds, infinities, doubles beyond `f32`'s range) are dropped with
