@@ -637,3 +637,361 @@ impl fmt::Display for PoseSource {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const H: f64 = std::f64::consts::FRAC_1_SQRT_2;
+
+    fn tr(t: [f64; 3], q: [f64; 4]) -> Transform {
+        Transform {
+            translation_m: t,
+            rotation: q,
+        }
+    }
+
+    fn ts(ns: i64, parent: &str, child: &str, t: Transform) -> TransformStamped {
+        TransformStamped {
+            header: Header {
+                stamp_ns: ns,
+                frame_id: parent.into(),
+            },
+            child_frame_id: child.into(),
+            transform: t,
+        }
+    }
+
+    fn close(a: &Transform, b: &Transform) -> bool {
+        let p = [0.3, -1.7, 2.5];
+        let (x, y) = (a.apply(p), b.apply(p));
+        x.iter().zip(y).all(|(u, v)| (u - v).abs() < 1e-9)
+    }
+
+    /// map -> odom (static), odom -> base (dynamic, at 1 s and 3 s), base -> sensor (static
+    /// identity); map -> camera (static).
+    fn tree() -> TfTree {
+        let mut t = TfTree::new();
+        t.add(
+            &ts(0, "map", "odom", tr([10.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0])),
+            true,
+        )
+        .unwrap();
+        t.add(
+            &ts(
+                1_000_000_000,
+                "odom",
+                "base",
+                tr([0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]),
+            ),
+            false,
+        )
+        .unwrap();
+        t.add(
+            &ts(
+                3_000_000_000,
+                "odom",
+                "base",
+                tr([2.0, -4.0, 6.0], [H, 0.0, 0.0, H]),
+            ),
+            false,
+        )
+        .unwrap();
+        t.add(&ts(0, "base", "sensor", Transform::IDENTITY), true)
+            .unwrap();
+        t.add(
+            &ts(
+                0,
+                "map",
+                "camera",
+                tr([0.0, 1.0, 0.0], [0.0, 1.0, 0.0, 0.0]),
+            ),
+            true,
+        )
+        .unwrap();
+        t.finish().unwrap();
+        t
+    }
+
+    #[test]
+    fn interpolates_each_dynamic_link() {
+        let t = tree();
+        let mid = t.lookup("odom", "sensor", 2_000_000_000).unwrap();
+        assert_eq!(mid.translation_m, [1.0, -2.0, 3.0]);
+        let (c, s) = (
+            std::f64::consts::FRAC_PI_8.cos(),
+            std::f64::consts::FRAC_PI_8.sin(),
+        );
+        for (g, w) in mid.rotation.iter().zip([c, 0.0, 0.0, s]) {
+            assert!((g - w).abs() < 1e-12, "{:?}", mid.rotation);
+        }
+        // A quarter of the way.
+        let q = t.lookup("odom", "base", 1_500_000_000).unwrap();
+        assert_eq!(q.translation_m, [0.5, -1.0, 1.5]);
+    }
+
+    #[test]
+    fn sample_stamps_are_bit_exact_through_identity_links() {
+        let mut t = tree();
+        let odd = tr(
+            [0.1, -0.2, 0.30000000000000004],
+            [0.9238795325112867, 0.0, 0.3826834323650898, 0.0],
+        );
+        t.add(&ts(2_000_000_000, "odom", "base", odd), false)
+            .unwrap();
+        // An identity root link too: world -> map.
+        t.add(&ts(0, "world", "map", Transform::IDENTITY), true)
+            .unwrap();
+        t.finish().unwrap();
+        assert_eq!(t.lookup("odom", "sensor", 2_000_000_000).unwrap(), odd);
+        assert_eq!(
+            t.lookup("odom", "base", 3_000_000_000).unwrap().rotation,
+            [H, 0.0, 0.0, H]
+        );
+        // Through map -> odom and world -> map the translation moves, the rotation is exact.
+        let w = t.lookup("world", "sensor", 2_000_000_000).unwrap();
+        assert_eq!(w.rotation, odd.rotation);
+        assert_eq!(w.translation_m, [10.1, -0.2, 0.30000000000000004]);
+        assert_eq!(t.lookup("map", "map", 5).unwrap(), Transform::IDENTITY);
+    }
+
+    #[test]
+    fn chain_with_an_inverted_link() {
+        let t = tree();
+        // sensor -> base -> odom -> map, then map -> camera inverted.
+        let got = t.lookup("camera", "sensor", 3_000_000_000).unwrap();
+        let map_odom = tr([10.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]);
+        let odom_base = tr([2.0, -4.0, 6.0], [H, 0.0, 0.0, H]);
+        let map_camera = tr([0.0, 1.0, 0.0], [0.0, 1.0, 0.0, 0.0]);
+        let want = map_camera.inverse().compose(&map_odom.compose(&odom_base));
+        assert!(close(&got, &want), "{got:?} {want:?}");
+        // Point check by hand: p in sensor -> base (same) -> odom -> map -> camera.
+        let p = [1.0, 0.0, 0.0];
+        let in_map = [10.0 + 2.0, -4.0 + 1.0, 6.0]; // rotated 90 degrees about z: (0, 1, 0)
+        let in_camera = map_camera.inverse().apply(in_map);
+        let g = got.apply(p);
+        for (a, b) in g.iter().zip(in_camera) {
+            assert!((a - b).abs() < 1e-12, "{g:?} {in_camera:?}");
+        }
+        // And the other way round is the inverse.
+        let back = t.lookup("sensor", "camera", 3_000_000_000).unwrap();
+        assert!(close(&back.compose(&got), &Transform::IDENTITY));
+    }
+
+    #[test]
+    fn unavailable_says_why() {
+        let mut t = tree();
+        let e = t.lookup("map", "lidar", 0).unwrap_err();
+        assert_eq!(e.to_string(), "frame \"lidar\" is not in the TF tree");
+        let e = t.lookup("mars", "sensor", 0).unwrap_err();
+        assert_eq!(
+            e,
+            Unavailable::UnknownFrame {
+                frame: "mars".into()
+            }
+        );
+        let e = t.lookup("map", "sensor", 999_999_999).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "stamp 0.999999999 s is before the first sample of TF link \"odom\" -> \"base\" \
+             (samples 1.000000000 .. 3.000000000 s)"
+        );
+        let e = t.lookup("map", "sensor", 3_000_000_001).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                Unavailable::After {
+                    stamp_ns: 3_000_000_001,
+                    first_ns: 1_000_000_000,
+                    last_ns: 3_000_000_000,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        // Static links hold at any stamp.
+        assert!(t.lookup("map", "camera", -5).is_ok());
+        // Another tree.
+        t.add(&ts(7, "boat", "gps", Transform::IDENTITY), false)
+            .unwrap();
+        assert_eq!(
+            t.lookup("map", "gps", 7).unwrap_err(),
+            Unavailable::NotFinished
+        );
+        t.finish().unwrap();
+        let e = t.lookup("map", "gps", 7).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "frame \"gps\" (tree root \"boat\") is not connected to the fixed frame \"map\" (tree \
+             root \"map\")"
+        );
+        // A single sample: only at its stamp.
+        assert_eq!(t.lookup("boat", "gps", 7).unwrap(), Transform::IDENTITY);
+        assert!(matches!(
+            t.lookup("boat", "gps", 6),
+            Err(Unavailable::Before { .. })
+        ));
+        assert!(matches!(
+            t.lookup("boat", "gps", 8),
+            Err(Unavailable::After { .. })
+        ));
+        assert_eq!(t.root_of("sensor"), Some("map"));
+        assert_eq!(t.root_of("gps"), Some("boat"));
+        assert_eq!(t.root_of("boat"), Some("boat"));
+        assert_eq!(t.root_of("x"), None);
+        assert_eq!(t.default_fixed_frame("sensor"), Ok("map"));
+        assert!(t.default_fixed_frame("x").is_err());
+        assert_eq!(
+            t.frames().collect::<Vec<_>>(),
+            ["base", "boat", "camera", "gps", "map", "odom", "sensor"]
+        );
+        assert_eq!(t.parent_of("base"), Some(("odom", false)));
+        assert_eq!(t.parent_of("odom"), Some(("map", true)));
+        assert_eq!(t.parent_of("map"), None);
+    }
+
+    #[test]
+    fn duplicate_stamps_last_wins_and_order_does_not_matter() {
+        let mut t = TfTree::new();
+        let a = tr([1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]);
+        let b = tr([2.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]);
+        let c = tr([4.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]);
+        t.add(&ts(20, "p", "c", c), false).unwrap();
+        t.add(&ts(10, "p", "c", a), false).unwrap();
+        t.add(&ts(10, "p", "c", b), false).unwrap();
+        t.finish().unwrap();
+        assert_eq!(t.lookup("p", "c", 10).unwrap(), b);
+        assert_eq!(
+            t.lookup("p", "c", 15).unwrap().translation_m,
+            [3.0, 0.0, 0.0]
+        );
+        // A static link republished: the last value.
+        t.add(&ts(0, "p", "s", a), true).unwrap();
+        t.add(&ts(0, "p", "s", c), true).unwrap();
+        t.finish().unwrap();
+        assert_eq!(t.lookup("p", "s", 99).unwrap(), c);
+    }
+
+    #[test]
+    fn malformed_tf_is_refused_naming_frames() {
+        let mut t = tree();
+        let before = t.clone();
+        let id = Transform::IDENTITY;
+        let e = t.add(&ts(0, "", "x", id), false).unwrap_err();
+        assert!(matches!(e, TfError::EmptyFrameId { .. }), "{e}");
+        let e = t.add(&ts(0, "x", "", id), true).unwrap_err();
+        assert!(
+            e.to_string().contains("expected non-empty frame ids"),
+            "{e}"
+        );
+        let e = t.add(&ts(0, "x", "x", id), false).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "TF transform \"x\" -> \"x\": expected two different frames, found a self-link"
+        );
+        let e = t.add(&ts(0, "camera", "base", id), false).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "TF frame \"base\": expected one parent, found two: \"odom\" and \"camera\""
+        );
+        let e = t.add(&ts(0, "odom", "base", id), true).unwrap_err();
+        assert!(matches!(e, TfError::StaticAndDynamic { .. }), "{e}");
+        let nan = tr([0.0; 3], [f64::NAN, 0.0, 0.0, 0.0]);
+        let e = t
+            .add(&ts(1_500_000_000, "odom", "base", nan), false)
+            .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "TF link \"odom\" -> \"base\" at stamp 1.500000000 s: rotation.w: expected a finite \
+             number, found NaN"
+        );
+        let inf = tr([f64::INFINITY, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]);
+        assert!(t.add(&ts(0, "a", "b", inf), true).is_err());
+        let long = tr([0.0; 3], [1.0, 0.1, 0.0, 0.0]);
+        let e = t.add(&ts(0, "a", "b", long), true).unwrap_err();
+        assert!(e.to_string().contains("expected a unit quaternion"), "{e}");
+        // Nothing of the refused transforms was kept.
+        assert_eq!(t, before);
+        // A cycle: refused by finish, naming it.
+        t.add(&ts(0, "sensor", "map", id), true).unwrap();
+        let e = t.finish().unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "TF frames form a cycle: expected a tree, found \"base\" -> \"odom\" -> \"map\" -> \
+             \"sensor\" -> \"base\""
+        );
+        assert_eq!(
+            t.lookup("map", "odom", 0).unwrap_err(),
+            Unavailable::NotFinished
+        );
+        let mut two = TfTree::new();
+        two.add(&ts(0, "a", "b", id), false).unwrap();
+        two.add(&ts(0, "b", "a", id), false).unwrap();
+        assert_eq!(
+            two.finish().unwrap_err(),
+            TfError::Cycle {
+                frames: vec!["a".into(), "b".into()]
+            }
+        );
+    }
+
+    #[test]
+    fn pose_tracks_and_sources() {
+        let mut track = PoseTrack::new();
+        let h = |ns, f: &str| Header {
+            stamp_ns: ns,
+            frame_id: f.into(),
+        };
+        assert_eq!(
+            track.lookup(0).unwrap_err().to_string(),
+            "the pose track has no poses"
+        );
+        let a = tr([0.0; 3], [1.0, 0.0, 0.0, 0.0]);
+        let b = tr([2.0, 4.0, 6.0], [0.0, 0.0, 0.0, 1.0]);
+        track.add(&h(100, "map"), &b).unwrap();
+        track.add(&h(0, "map"), &a).unwrap();
+        assert_eq!(track.lookup(50), Err(Unavailable::NotFinished));
+        track.finish();
+        assert_eq!(track.len(), 2);
+        assert_eq!(track.span_ns(), Some((0, 100)));
+        assert_eq!(track.lookup(0).unwrap(), a);
+        assert_eq!(track.lookup(100).unwrap(), b);
+        let m = track.lookup(50).unwrap();
+        assert_eq!(m.translation_m, [1.0, 2.0, 3.0]);
+        assert!(matches!(track.lookup(101), Err(Unavailable::After { .. })));
+        let e = track
+            .add(&h(5, "odom"), &tr([0.0; 3], [0.0; 4]))
+            .unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("pose in frame \"odom\" at stamp 0.000000005 s: rotation"),
+            "{e}"
+        );
+        track.add(&h(5, "odom"), &a).unwrap();
+        track.finish();
+        assert_eq!(track.frame_ids(), ["map", "odom"]);
+
+        let source = PoseSource::Track {
+            track,
+            topic: "/nav/pose".into(),
+        };
+        assert_eq!(source.pose_at("anything", 0).unwrap(), a);
+        assert_eq!(
+            source.pose_at("x", -1).unwrap_err().to_string(),
+            "stamp -0.000000001 s is before the first sample of pose topic /nav/pose (samples \
+             0.000000000 .. 0.000000100 s)"
+        );
+        assert_eq!(source.to_string(), "pose topic /nav/pose");
+        let t = tree();
+        let fixed = t.default_fixed_frame("sensor").unwrap().to_string();
+        let source = PoseSource::Tf {
+            tree: t.clone(),
+            fixed_frame: fixed,
+        };
+        assert_eq!(
+            source.pose_at("sensor", 2_000_000_000),
+            t.lookup("map", "sensor", 2_000_000_000)
+        );
+        assert!(source.to_string().contains("\"map\""));
+    }
+}
