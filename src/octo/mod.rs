@@ -11,6 +11,8 @@
 //! Submodules:
 //! - [`cloud`]: point-cloud readers (PCD, PLY, XYZ, MCAP with ROS 2 `PointCloud2`).
 //! - [`graph`]: OctoMap's `.graph` scan-graph files, read and written.
+//! - [`ros`]: ROS 2 messages (CDR) read and written, and rigid transforms.
+//! - [`tf`]: the TF buffer and pose tracks that give each scan its pose.
 //! - [`synth`]: a synthetic seabed survey, scans to test and benchmark with.
 //! - [`pipeline`]: octo-delta's build loop and its other commands as library calls, with the
 //!   configuration checks (ranges with units) and a stop flag.
@@ -26,7 +28,9 @@ pub mod delta;
 pub mod files;
 pub mod graph;
 pub mod pipeline;
+pub mod ros;
 pub mod synth;
+pub mod tf;
 pub mod transfer;
 pub mod tree;
 pub mod view;

@@ -10,14 +10,14 @@ use std::collections::BTreeMap;
 use std::io::Cursor;
 use std::sync::atomic::AtomicBool;
 
-use super::{CloudBuilder, Scalar, err, shown, unpack_rgb};
+use super::err;
 use crate::octo::bag::{Bag, BagError, Message, Topic};
+use crate::octo::ros::{
+    self, ByteOrder, Header, POINT_CLOUD2_DEFINITION, POSE_STAMPED_DEFINITION, Transform,
+    decode_point_cloud2, decode_pose_stamped_as_pose,
+};
+pub use crate::octo::ros::{POINT_CLOUD2_SCHEMA, POSE_STAMPED_SCHEMA};
 use crate::octo::{ParseError, Pose, Scan};
-
-/// Schema name of the clouds read: ROS 2's `sensor_msgs/msg/PointCloud2`.
-pub const POINT_CLOUD2_SCHEMA: &str = "sensor_msgs/msg/PointCloud2";
-/// Schema name of the poses read: ROS 2's `geometry_msgs/msg/PoseStamped`.
-pub const POSE_STAMPED_SCHEMA: &str = "geometry_msgs/msg/PoseStamped";
 /// Topic of the clouds [`write_clouds_mcap`] writes.
 pub const DEFAULT_CLOUD_TOPIC: &str = "/points";
 /// Topic of the poses [`write_clouds_mcap`] writes.
@@ -99,7 +99,7 @@ pub fn read_mcap(bytes: &[u8], options: &McapOptions) -> Result<McapScans, Parse
         Some((topic, ids)) => {
             for m in bag.messages(ids, &stop).map_err(parse_error)? {
                 let m = m.map_err(parse_error)?;
-                poses.push((m.log_time_ns, decoded(&m, decode_pose)?));
+                poses.push((m.log_time_ns, decoded(&m, decode_pose_stamped_as_pose)?.1));
             }
             // Stable: of poses logged at the same time, the last in the file counts.
             poses.sort_by_key(|p| p.0);
@@ -117,7 +117,7 @@ pub fn read_mcap(bytes: &[u8], options: &McapOptions) -> Result<McapScans, Parse
     let mut colour_notes: Vec<String> = Vec::new();
     for m in bag.messages(&cloud_ids, &stop).map_err(parse_error)? {
         let m = m.map_err(parse_error)?;
-        let (builder, note) = decoded(&m, decode_cloud)?;
+        let (_, builder, note) = decoded(&m, decode_point_cloud2)?;
         if let Some(note) = note
             && !colour_notes.contains(&note)
         {
@@ -261,491 +261,23 @@ fn pick(
     Ok(Some((topic.to_string(), ids)))
 }
 
-// ---- CDR ----------------------------------------------------------------------------------
-
-/// Plain CDR (XCDR1) fields: primitives aligned to their size, counted from after the 4-byte
-/// encapsulation header; strings and sequences as a `u32` length then the items.
-struct Cdr<'a> {
-    data: &'a [u8],
-    pos: usize,
-    big: bool,
-    /// File offset of `data[0]`.
-    base: usize,
-    what: &'static str,
-}
-
-impl<'a> Cdr<'a> {
-    fn new(message: &'a [u8], offset: usize, what: &'static str) -> Result<Self, ParseError> {
-        let Some(head) = message.get(..4) else {
-            return Err(err(
-                offset,
-                format!(
-                    "{what} CDR encapsulation header: expected 4 bytes, found {}",
-                    message.len()
-                ),
-            ));
-        };
-        let big = match [head[0], head[1]] {
-            [0, 0] => true,
-            [0, 1] => false,
-            [a, b] => {
-                return Err(err(
-                    offset,
-                    format!(
-                        "{what} CDR encapsulation: expected 00 00 or 00 01 (plain CDR, big or \
-                         little endian), found {a:02x} {b:02x}"
-                    ),
-                ));
-            }
-        };
-        Ok(Cdr {
-            data: &message[4..],
-            pos: 0,
-            big,
-            base: offset + 4,
-            what,
-        })
-    }
-
-    fn offset(&self) -> usize {
-        self.base + self.pos.min(self.data.len())
-    }
-
-    fn take(&mut self, n: usize, field: &str) -> Result<&'a [u8], ParseError> {
-        let left = self.data.len().saturating_sub(self.pos);
-        if n > left {
-            return Err(err(
-                self.offset(),
-                format!(
-                    "{} field {field}: expected {n} bytes, found {left}",
-                    self.what
-                ),
-            ));
-        }
-        let s = &self.data[self.pos..self.pos + n];
-        self.pos += n;
-        Ok(s)
-    }
-
-    fn array<const N: usize>(&mut self, field: &str) -> Result<[u8; N], ParseError> {
-        // Aligned to the size; the padding may run past the end, which `take` reports.
-        self.pos = self.pos.next_multiple_of(N);
-        let mut a = [0u8; N];
-        a.copy_from_slice(self.take(N, field)?);
-        if self.big {
-            a.reverse();
-        }
-        Ok(a)
-    }
-
-    fn u8(&mut self, field: &str) -> Result<u8, ParseError> {
-        self.array::<1>(field).map(|[b]| b)
-    }
-
-    fn u32(&mut self, field: &str) -> Result<u32, ParseError> {
-        self.array(field).map(u32::from_le_bytes)
-    }
-
-    fn f64(&mut self, field: &str) -> Result<f64, ParseError> {
-        self.array(field).map(f64::from_le_bytes)
-    }
-
-    /// A string: `u32` length including the terminating NUL, the bytes, the NUL.
-    fn string(&mut self, field: &str) -> Result<String, ParseError> {
-        let n = self.u32(field)?;
-        let b = self.take(n as usize, field)?;
-        let b = b.strip_suffix(&[0]).unwrap_or(b);
-        Ok(String::from_utf8_lossy(b).into_owned())
-    }
-
-    /// `std_msgs/Header`: stamp (`i32` sec, `u32` nanosec) and frame id.
-    fn header(&mut self) -> Result<(), ParseError> {
-        self.u32("header.stamp.sec")?;
-        self.u32("header.stamp.nanosec")?;
-        self.string("header.frame_id")?;
-        Ok(())
-    }
-}
-
-fn decode_pose(message: &[u8], offset: usize) -> Result<Pose, ParseError> {
-    let mut c = Cdr::new(message, offset, "PoseStamped")?;
-    c.header()?;
-    let names = [
-        "pose.position.x",
-        "pose.position.y",
-        "pose.position.z",
-        "pose.orientation.x",
-        "pose.orientation.y",
-        "pose.orientation.z",
-        "pose.orientation.w",
-    ];
-    let mut v = [0f32; 7];
-    for (slot, name) in v.iter_mut().zip(names) {
-        let x = c.f64(name)?;
-        *slot = x as f32;
-        if !slot.is_finite() {
-            return Err(err(
-                c.offset() - 8,
-                format!("PoseStamped field {name}: expected a finite number (as f32), found {x}"),
-            ));
-        }
-    }
-    Ok(Pose {
-        translation_m: [v[0], v[1], v[2]],
-        rotation: [v[6], v[3], v[4], v[5]],
-    })
-}
-
-struct PointField {
-    name: String,
-    offset: u32,
-    datatype: u8,
-}
-
-fn datatype(d: u8) -> Option<Scalar> {
-    Some(match d {
-        1 => Scalar::I8,
-        2 => Scalar::U8,
-        3 => Scalar::I16,
-        4 => Scalar::U16,
-        5 => Scalar::I32,
-        6 => Scalar::U32,
-        7 => Scalar::F32,
-        8 => Scalar::F64,
-        _ => return None,
-    })
-}
-
-enum Colour {
-    /// A 4-byte `0x??RRGGBB` value at this offset in a point.
-    Packed(usize, Scalar),
-    /// `UINT8` r, g, b at these offsets.
-    Channels([usize; 3]),
-}
-
-/// The points of a `PointCloud2` message, and a note when a colour field was not understood.
-fn decode_cloud(
-    message: &[u8],
-    offset: usize,
-) -> Result<(CloudBuilder, Option<String>), ParseError> {
-    let mut c = Cdr::new(message, offset, "PointCloud2")?;
-    c.header()?;
-    let height = c.u32("height")? as usize;
-    let width = c.u32("width")? as usize;
-    let fields_at = c.offset();
-    let n = c.u32("fields")?;
-    let mut fields = Vec::new();
-    for _ in 0..n {
-        fields.push(PointField {
-            name: c.string("fields[].name")?,
-            offset: c.u32("fields[].offset")?,
-            datatype: c.u8("fields[].datatype")?,
-        });
-        c.u32("fields[].count")?;
-    }
-    let big = c.u8("is_bigendian")? != 0;
-    let step_at = c.offset();
-    let point_step = c.u32("point_step")? as usize;
-    let row_step_at = c.offset();
-    let row_step = c.u32("row_step")? as usize;
-    let data_at = c.offset();
-    let len = c.u32("data")?;
-    let data = c.take(len as usize, "data")?;
-    c.u8("is_dense")?;
-
-    let find = |name: &str| fields.iter().find(|f| f.name == name);
-    // A field's (offset, type) if it has a known datatype and fits in a point.
-    let usable = |f: &PointField| {
-        let s = datatype(f.datatype)?;
-        (f.offset as usize + s.size() <= point_step).then_some((f.offset as usize, s))
-    };
-    let mut xyz = [(0usize, Scalar::F32); 3];
-    for (slot, name) in xyz.iter_mut().zip(["x", "y", "z"]) {
-        let Some(f) = find(name) else {
-            return Err(err(
-                fields_at,
-                format!(
-                    "PointCloud2 fields: expected x, y and z, found {}",
-                    shown(
-                        fields
-                            .iter()
-                            .map(|f| f.name.as_str())
-                            .collect::<Vec<_>>()
-                            .join(" ")
-                            .as_bytes()
-                    )
-                ),
-            ));
-        };
-        *slot = usable(f).ok_or_else(|| {
-            err(
-                fields_at,
-                format!(
-                    "PointCloud2 field {name}: expected a datatype 1..8 within point_step \
-                     {point_step} (at step offset {step_at}), found datatype {} at offset {}",
-                    f.datatype, f.offset
-                ),
-            )
-        })?;
-    }
-    let mut note = None;
-    let colour = if let Some(f) = find("rgb").or_else(|| find("rgba")) {
-        match usable(f).filter(|(_, s)| s.size() == 4) {
-            Some((o, s)) => Some(Colour::Packed(o, s)),
-            None => {
-                note = Some(format!(
-                    "PointCloud2 field {} (datatype {}) is not a 4-byte packed colour within the \
-                     point: colours ignored",
-                    f.name, f.datatype
-                ));
-                None
-            }
-        }
-    } else {
-        let channel = |name| {
-            find(name)
-                .and_then(usable)
-                .filter(|(_, s)| *s == Scalar::U8)
-                .map(|(o, _)| o)
-        };
-        match (channel("r"), channel("g"), channel("b")) {
-            (Some(r), Some(g), Some(b)) => Some(Colour::Channels([r, g, b])),
-            _ => None,
-        }
-    };
-
-    let points = if width == 0 || height == 0 {
-        0
-    } else {
-        let row = width.checked_mul(point_step);
-        let Some(row) = row.filter(|&r| r <= row_step) else {
-            return Err(err(
-                row_step_at,
-                format!(
-                    "PointCloud2 row_step: expected at least width x point_step = {width} x \
-                     {point_step}, found {row_step}"
-                ),
-            ));
-        };
-        let need = (height - 1)
-            .checked_mul(row_step)
-            .and_then(|v| v.checked_add(row));
-        if need.is_none_or(|need| need > data.len()) {
-            return Err(err(
-                data_at,
-                format!(
-                    "PointCloud2 data: expected {} bytes (height {height} rows of row_step \
-                     {row_step}, the last one width {width} x point_step {point_step}), found {}",
-                    need.map_or("too many".into(), |v| v.to_string()),
-                    data.len()
-                ),
-            ));
-        }
-        // Within `data`, so bounded by the input.
-        width * height
-    };
-    let mut builder = CloudBuilder::new(points, colour.is_some());
-    let short = || {
-        err(
-            data_at,
-            "PointCloud2 data: a point lies outside the data (internal size check failed)",
-        )
-    };
-    if points > 0 {
-        for r in 0..height {
-            for k in 0..width {
-                let base = r * row_step + k * point_step;
-                let point = data.get(base..).ok_or_else(short)?;
-                let mut p = [0f32; 3];
-                for (slot, (o, s)) in p.iter_mut().zip(xyz) {
-                    *slot = point
-                        .get(o..)
-                        .and_then(|b| s.read_f32(b, big))
-                        .ok_or_else(short)?;
-                }
-                let rgb = match &colour {
-                    None => [0; 3],
-                    Some(Colour::Packed(o, s)) => point
-                        .get(*o..)
-                        .and_then(|b| s.read_bits32(b, big))
-                        .map(unpack_rgb)
-                        .ok_or_else(short)?,
-                    Some(Colour::Channels(o)) => {
-                        let mut rgb = [0u8; 3];
-                        for (slot, &o) in rgb.iter_mut().zip(o) {
-                            *slot = *point.get(o).ok_or_else(short)?;
-                        }
-                        rgb
-                    }
-                };
-                builder.push(p, rgb);
-            }
-        }
-    }
-    Ok((builder, note))
-}
-
-/// Writes plain little-endian CDR.
-struct CdrWriter {
-    buf: Vec<u8>,
-}
-
-impl CdrWriter {
-    fn new() -> Self {
-        CdrWriter {
-            buf: vec![0, 1, 0, 0],
-        }
-    }
-
-    fn align(&mut self, n: usize) {
-        while !(self.buf.len() - 4).is_multiple_of(n) {
-            self.buf.push(0);
-        }
-    }
-
-    fn u8(&mut self, v: u8) {
-        self.buf.push(v);
-    }
-
-    fn u32(&mut self, v: u32) {
-        self.align(4);
-        self.buf.extend_from_slice(&v.to_le_bytes());
-    }
-
-    fn f64(&mut self, v: f64) {
-        self.align(8);
-        self.buf.extend_from_slice(&v.to_le_bytes());
-    }
-
-    fn string(&mut self, s: &str) {
-        self.u32(s.len() as u32 + 1);
-        self.buf.extend_from_slice(s.as_bytes());
-        self.buf.push(0);
-    }
-
-    fn header(&mut self, stamp_ns: u64, frame_id: &str) {
-        self.u32((stamp_ns / 1_000_000_000) as u32);
-        self.u32((stamp_ns % 1_000_000_000) as u32);
-        self.string(frame_id);
-    }
-}
-
+/// `scan` as a little-endian `PointCloud2` in frame `sensor`, stamped `stamp_ns`.
 fn encode_cloud(scan: &Scan, stamp_ns: u64) -> Vec<u8> {
-    let colors = scan.colors.as_deref();
-    if let Some(c) = colors {
-        assert_eq!(c.len(), scan.points.len(), "one colour per point");
-    }
-    let width = u32::try_from(scan.points.len()).expect("PointCloud2 width: over 2^32 points");
-    let step: u32 = if colors.is_some() { 16 } else { 12 };
-    let mut w = CdrWriter::new();
-    w.header(stamp_ns, "sensor");
-    w.u32(1);
-    w.u32(width);
-    let names: &[&str] = if colors.is_some() {
-        &["x", "y", "z", "rgb"]
-    } else {
-        &["x", "y", "z"]
+    let header = Header {
+        stamp_ns: i64::try_from(stamp_ns).unwrap_or(i64::MAX),
+        frame_id: "sensor".into(),
     };
-    w.u32(names.len() as u32);
-    for (i, name) in names.iter().enumerate() {
-        w.string(name);
-        w.u32(4 * i as u32);
-        w.u8(7); // FLOAT32
-        w.u32(1);
-    }
-    w.u8(0); // little endian
-    w.u32(step);
-    w.u32(step * width);
-    w.u32(step * width);
-    for (i, p) in scan.points.iter().enumerate() {
-        for v in p {
-            w.buf.extend_from_slice(&v.to_le_bytes());
-        }
-        if let Some(c) = colors {
-            let [r, g, b] = c[i];
-            w.buf
-                .extend_from_slice(&u32::from_be_bytes([0, r, g, b]).to_le_bytes());
-        }
-    }
-    let dense = scan.points.iter().flatten().all(|v| v.is_finite());
-    w.u8(u8::from(dense));
-    w.buf
+    ros::encode_point_cloud2(&header, scan, ByteOrder::Little)
 }
 
+/// `pose` as a little-endian `PoseStamped` in frame `map`, stamped `stamp_ns`.
 fn encode_pose(pose: &Pose, stamp_ns: u64) -> Vec<u8> {
-    let mut w = CdrWriter::new();
-    w.header(stamp_ns, "map");
-    let [x, y, z] = pose.translation_m;
-    let [qw, qx, qy, qz] = pose.rotation;
-    for v in [x, y, z, qx, qy, qz, qw] {
-        w.f64(f64::from(v));
-    }
-    w.buf
+    let header = Header {
+        stamp_ns: i64::try_from(stamp_ns).unwrap_or(i64::MAX),
+        frame_id: "map".into(),
+    };
+    ros::encode_pose_stamped(&header, &Transform::from_pose(pose), ByteOrder::Little)
 }
-
-/// `sensor_msgs/msg/PointCloud2`'s definition, as rosbag2 stores it (`ros2msg`).
-const POINT_CLOUD2_DEFINITION: &str = "\
-std_msgs/Header header
-uint32 height
-uint32 width
-PointField[] fields
-bool is_bigendian
-uint32 point_step
-uint32 row_step
-uint8[] data
-bool is_dense
-================================================================================
-MSG: std_msgs/Header
-builtin_interfaces/Time stamp
-string frame_id
-================================================================================
-MSG: builtin_interfaces/Time
-int32 sec
-uint32 nanosec
-================================================================================
-MSG: sensor_msgs/PointField
-uint8 INT8    = 1
-uint8 UINT8   = 2
-uint8 INT16   = 3
-uint8 UINT16  = 4
-uint8 INT32   = 5
-uint8 UINT32  = 6
-uint8 FLOAT32 = 7
-uint8 FLOAT64 = 8
-string name
-uint32 offset
-uint8  datatype
-uint32 count
-";
-
-/// `geometry_msgs/msg/PoseStamped`'s definition, as rosbag2 stores it (`ros2msg`).
-const POSE_STAMPED_DEFINITION: &str = "\
-std_msgs/Header header
-Pose pose
-================================================================================
-MSG: std_msgs/Header
-builtin_interfaces/Time stamp
-string frame_id
-================================================================================
-MSG: builtin_interfaces/Time
-int32 sec
-uint32 nanosec
-================================================================================
-MSG: geometry_msgs/Pose
-Point position
-Quaternion orientation
-================================================================================
-MSG: geometry_msgs/Point
-float64 x
-float64 y
-float64 z
-================================================================================
-MSG: geometry_msgs/Quaternion
-float64 x 0
-float64 y 0
-float64 z 0
-float64 w 1
-";
 
 /// Writes `scans` as an MCAP file of ROS 2 messages that [`read_mcap`] reads back to the same
 /// scans (non-finite points are written but dropped on reading).
@@ -970,42 +502,16 @@ mod tests {
             metadata: metadata.clone(),
         })
         .unwrap();
-        // The little-endian cloud of encode_cloud, turned big endian by hand: every u32 and
-        // float swapped, the encapsulation 00 00 and is_bigendian 1.
+        // The same cloud little and big endian.
         let s = scan(&[[1.0, -2.0, 3.5]], Some(&[[10, 20, 30]]), Pose::IDENTITY);
         let le = encode_cloud(&s, 5);
-        let mut be = CdrWriter::new();
-        be.buf[1] = 0;
-        let put = |b: &mut CdrWriter, v: u32| {
-            b.align(4);
-            b.buf.extend_from_slice(&v.to_be_bytes());
+        let header = Header {
+            stamp_ns: 5,
+            frame_id: "sensor".into(),
         };
-        put(&mut be, 0);
-        put(&mut be, 5);
-        put(&mut be, 7);
-        be.buf.extend_from_slice(b"sensor\0");
-        put(&mut be, 1);
-        put(&mut be, 1);
-        put(&mut be, 4);
-        for (i, name) in ["x", "y", "z", "rgb"].iter().enumerate() {
-            put(&mut be, name.len() as u32 + 1);
-            be.buf.extend_from_slice(name.as_bytes());
-            be.buf.push(0);
-            put(&mut be, 4 * i as u32);
-            be.u8(7);
-            put(&mut be, 1);
-        }
-        be.u8(1);
-        put(&mut be, 16);
-        put(&mut be, 16);
-        put(&mut be, 16);
-        for v in [1.0f32, -2.0, 3.5] {
-            be.buf.extend_from_slice(&v.to_be_bytes());
-        }
-        be.buf.extend_from_slice(&0x000a141eu32.to_be_bytes());
-        be.u8(1);
-        assert_eq!(be.buf.len(), le.len());
-        for (data, t) in [(&le, 10), (&be.buf, 20)] {
+        let be = ros::encode_point_cloud2(&header, &s, ByteOrder::Big);
+        assert_eq!(be.len(), le.len());
+        for (data, t) in [(&le, 10), (&be, 20)] {
             let header = ::mcap::records::MessageHeader {
                 channel_id: c,
                 sequence: 0,
@@ -1020,112 +526,6 @@ mod tests {
         assert_eq!(read.scans, vec![s.clone(), s]);
         assert_eq!(read.cloud_topic, "/lidar");
         assert_eq!(read.log_times_ns, vec![10, 20]);
-    }
-
-    #[test]
-    fn hand_built_cdr_both_byte_orders() {
-        // PointCloud2, little endian, laid out by hand: header {sec 1, nanosec 2, "map"},
-        // height 1, width 2, fields x (F32 @0), y (F64 @4), z (I16 @12), r g b (U8 @14..16),
-        // point_step 17, row_step 34.
-        let le = [
-            &[0u8, 1, 0, 0][..],
-            &1u32.to_le_bytes(),
-            &2u32.to_le_bytes(),
-            &4u32.to_le_bytes(),
-            b"map\0",
-            &1u32.to_le_bytes(),
-            &2u32.to_le_bytes(),
-            &6u32.to_le_bytes(), // 6 fields; pos 24
-            // "x": len at 28, "x\0" 32..34, pad to 36, offset, datatype at 40, pad, count at 44
-            &2u32.to_le_bytes(),
-            b"x\0\0\0",
-            &0u32.to_le_bytes(),
-            &[7, 0, 0, 0],
-            &1u32.to_le_bytes(),
-            &2u32.to_le_bytes(),
-            b"y\0\0\0",
-            &4u32.to_le_bytes(),
-            &[8, 0, 0, 0],
-            &1u32.to_le_bytes(),
-            &2u32.to_le_bytes(),
-            b"z\0\0\0",
-            &12u32.to_le_bytes(),
-            &[3, 0, 0, 0],
-            &1u32.to_le_bytes(),
-            &2u32.to_le_bytes(),
-            b"r\0\0\0",
-            &14u32.to_le_bytes(),
-            &[2, 0, 0, 0],
-            &1u32.to_le_bytes(),
-            &2u32.to_le_bytes(),
-            b"g\0\0\0",
-            &15u32.to_le_bytes(),
-            &[2, 0, 0, 0],
-            &1u32.to_le_bytes(),
-            &2u32.to_le_bytes(),
-            b"b\0\0\0",
-            &16u32.to_le_bytes(),
-            &[2, 0, 0, 0],
-            &1u32.to_le_bytes(),
-            &[0, 0, 0, 0], // is_bigendian false, padded
-            &17u32.to_le_bytes(),
-            &34u32.to_le_bytes(),
-            &34u32.to_le_bytes(),
-        ]
-        .concat();
-        let mut le = le;
-        for (x, y, z, rgb) in [
-            (1.5f32, -2.25f64, -7i16, [1u8, 2, 3]),
-            (0.0, 1e10, 300, [9, 8, 7]),
-        ] {
-            le.extend_from_slice(&x.to_le_bytes());
-            le.extend_from_slice(&y.to_le_bytes());
-            le.extend_from_slice(&z.to_le_bytes());
-            le.extend_from_slice(&rgb);
-        }
-        le.push(1); // is_dense
-        let (b, note) = decode_cloud(&le, 0).unwrap();
-        assert_eq!(note, None);
-        let s = b.finish(Pose::IDENTITY);
-        assert_eq!(s.points, vec![[1.5, -2.25, -7.0], [0.0, 1e10, 300.0]]);
-        assert_eq!(s.colors, Some(vec![[1, 2, 3], [9, 8, 7]]));
-        // Cut before is_dense: the error names the field and its offset.
-        let e = decode_cloud(&le[..le.len() - 1], 100).unwrap_err();
-        assert_eq!(e.offset, 100 + le.len() as u64 - 1);
-        assert!(
-            e.message
-                .contains("PointCloud2 field is_dense: expected 1 bytes, found 0"),
-            "{}",
-            e.message
-        );
-
-        // PoseStamped, big endian: header {0, 0, ""}, pad to 8 (pos 16), then 7 doubles.
-        let mut be = vec![0u8, 0, 0, 0];
-        be.extend_from_slice(&0u32.to_be_bytes());
-        be.extend_from_slice(&0u32.to_be_bytes());
-        be.extend_from_slice(&1u32.to_be_bytes());
-        be.push(0);
-        be.extend_from_slice(&[0; 3]);
-        for v in [1.0f64, 2.0, 3.0, 0.0, 0.0, 0.5, 0.25] {
-            be.extend_from_slice(&v.to_be_bytes());
-        }
-        assert_eq!(be.len(), 4 + 16 + 56);
-        let p = decode_pose(&be, 0).unwrap();
-        assert_eq!(p.translation_m, [1.0, 2.0, 3.0]);
-        assert_eq!(p.rotation, [0.25, 0.0, 0.0, 0.5]);
-        let e = decode_pose(&be[..be.len() - 3], 10).unwrap_err();
-        assert_eq!(e.offset, 10 + 4 + 16 + 48);
-        assert!(
-            e.message
-                .contains("pose.orientation.w: expected 8 bytes, found 5"),
-            "{}",
-            e.message
-        );
-        let mut xcdr2 = be.clone();
-        xcdr2[1] = 7;
-        let e = decode_pose(&xcdr2, 10).unwrap_err();
-        assert_eq!(e.offset, 10);
-        assert!(e.message.contains("found 00 07"), "{}", e.message);
     }
 
     #[test]
@@ -1369,56 +769,6 @@ mod tests {
                 .unwrap()
                 .scans
                 .is_empty()
-        );
-    }
-
-    #[test]
-    fn cloud_errors_carry_offsets() {
-        let cloud = encode_cloud(
-            &scan(&[[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]], None, Pose::IDENTITY),
-            0,
-        );
-        // Find the data length field: it is followed by 24 bytes of data and is_dense.
-        let len_at = cloud.len() - 1 - 24 - 4;
-        assert_eq!(&cloud[len_at..len_at + 4], &24u32.to_le_bytes());
-        let mut bad = cloud.clone();
-        bad[len_at - 4..len_at].copy_from_slice(&10u32.to_le_bytes()); // row_step 10 < 24
-        let e = decode_cloud(&bad, 1000).unwrap_err();
-        assert_eq!(e.offset, 1000 + len_at as u64 - 4);
-        assert!(
-            e.message
-                .contains("row_step: expected at least width x point_step = 2 x 12, found 10"),
-            "{}",
-            e.message
-        );
-        // After the header {sec, nsec, length, "sensor\0"} and padding: height, width.
-        let height_at: usize = (4 + 4 + 4 + 4 + 7usize).next_multiple_of(4);
-        assert_eq!(&cloud[height_at..height_at + 4], &1u32.to_le_bytes());
-        assert_eq!(&cloud[height_at + 4..height_at + 8], &2u32.to_le_bytes());
-        let mut bad = cloud.clone();
-        bad[height_at + 4..height_at + 8].copy_from_slice(&3u32.to_le_bytes());
-        let e = decode_cloud(&bad, 0).unwrap_err();
-        assert_eq!(e.offset, len_at as u64 - 4);
-        assert!(e.message.contains("= 3 x 12, found 24"), "{}", e.message);
-        // Claiming 4 billion rows of a 24-byte data array errors without allocating.
-        let mut bad = cloud.clone();
-        bad[height_at..height_at + 4].copy_from_slice(&u32::MAX.to_le_bytes());
-        let e = decode_cloud(&bad, 0).unwrap_err();
-        assert_eq!(e.offset, len_at as u64);
-        assert!(
-            e.message.contains("PointCloud2 data: expected"),
-            "{}",
-            e.message
-        );
-        // No z field.
-        let mut bad = cloud.clone();
-        let z = bad.windows(2).rposition(|w| w == b"z\0").unwrap();
-        bad[z] = b'w';
-        let e = decode_cloud(&bad, 0).unwrap_err();
-        assert!(
-            e.message.contains("expected x, y and z, found \"x y w\""),
-            "{}",
-            e.message
         );
     }
 

@@ -185,12 +185,12 @@ pub fn read(
 // ---- shared by the readers ----------------------------------------------------------------
 
 /// An error at byte `offset`.
-fn err(offset: usize, message: impl Into<String>) -> ParseError {
+pub(crate) fn err(offset: usize, message: impl Into<String>) -> ParseError {
     ParseError::new(offset as u64, message)
 }
 
 /// `text` quoted for an error message, cut to a readable length.
-fn shown(text: &[u8]) -> String {
+pub(crate) fn shown(text: &[u8]) -> String {
     const MAX: usize = 40;
     let cut = &text[..text.len().min(MAX)];
     let mut s = format!("{:?}", String::from_utf8_lossy(cut));
@@ -209,7 +209,7 @@ fn capacity(claimed: u64, remaining: usize, min_bytes: usize) -> usize {
 
 /// A numeric type as the binary formats store it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Scalar {
+pub(crate) enum Scalar {
     I8,
     U8,
     I16,
@@ -224,7 +224,7 @@ enum Scalar {
 
 impl Scalar {
     /// Bytes per value.
-    fn size(self) -> usize {
+    pub(crate) fn size(self) -> usize {
         match self {
             Scalar::I8 | Scalar::U8 => 1,
             Scalar::I16 | Scalar::U16 => 2,
@@ -279,7 +279,7 @@ impl Scalar {
 
     /// A coordinate at the start of `bytes` as `f32`: floats exactly (`f64` rounded), integers
     /// converted.
-    fn read_f32(self, bytes: &[u8], big_endian: bool) -> Option<f32> {
+    pub(crate) fn read_f32(self, bytes: &[u8], big_endian: bool) -> Option<f32> {
         match self {
             // Read f32 directly: going through f64 and back is exact too, but this is clearer.
             Scalar::F32 => {
@@ -295,7 +295,7 @@ impl Scalar {
 
     /// The 32-bit pattern at the start of `bytes` (a packed colour); `None` unless the type is
     /// 4 bytes wide.
-    fn read_bits32(self, bytes: &[u8], big_endian: bool) -> Option<u32> {
+    pub(crate) fn read_bits32(self, bytes: &[u8], big_endian: bool) -> Option<u32> {
         if self.size() != 4 {
             return None;
         }
@@ -309,22 +309,22 @@ impl Scalar {
 }
 
 /// `0x??RRGGBB` to (r, g, b).
-fn unpack_rgb(packed: u32) -> [u8; 3] {
+pub(crate) fn unpack_rgb(packed: u32) -> [u8; 3] {
     let [_, r, g, b] = packed.to_be_bytes();
     [r, g, b]
 }
 
 /// Collects points and colours, dropping points that are not finite.
 #[derive(Debug)]
-struct CloudBuilder {
+pub struct CloudBuilder {
     points: Vec<[f32; 3]>,
     colors: Option<Vec<[u8; 3]>>,
     /// Points dropped because a coordinate was not finite.
-    dropped: usize,
+    pub dropped: usize,
 }
 
 impl CloudBuilder {
-    fn new(capacity: usize, with_colors: bool) -> Self {
+    pub(crate) fn new(capacity: usize, with_colors: bool) -> Self {
         CloudBuilder {
             points: Vec::with_capacity(capacity),
             colors: with_colors.then(|| Vec::with_capacity(capacity)),
@@ -333,7 +333,7 @@ impl CloudBuilder {
     }
 
     /// Adds a point (and its colour, when the cloud has colours) unless it is not finite.
-    fn push(&mut self, point: [f32; 3], color: [u8; 3]) {
+    pub(crate) fn push(&mut self, point: [f32; 3], color: [u8; 3]) {
         if !point.iter().all(|c| c.is_finite()) {
             self.dropped += 1;
             return;
@@ -344,7 +344,8 @@ impl CloudBuilder {
         }
     }
 
-    fn finish(self, pose: Pose) -> Scan {
+    /// The scan of the points kept, with `pose`.
+    pub fn finish(self, pose: Pose) -> Scan {
         Scan {
             points: self.points,
             colors: self.colors,
