@@ -64,7 +64,14 @@ fn write_bag(dir: &Path, kind: &str, extra: &[&str]) -> PathBuf {
     }
     let result = Command::new("python3")
         .arg(WRITER)
-        .args(["--graph", s(&survey().graph), "--kind", kind, "--out", s(&out)])
+        .args([
+            "--graph",
+            s(&survey().graph),
+            "--kind",
+            kind,
+            "--out",
+            s(&out),
+        ])
         .args(extra)
         .output()
         .unwrap_or_else(|e| panic!("python3 not runnable ({e})"));
@@ -101,12 +108,29 @@ fn assert_same_map(dir: &Path, input: &Path, flags: &[&str], what: &str) -> comm
         ours.len(),
         survey().reference_bt.len()
     );
+    // compare_octrees reads OcTree .ot files: the map again without colour.
+    let ot = dir.join("ours.ot");
+    let mut args = vec![
+        "build",
+        s(input),
+        "--res",
+        RES,
+        "-q",
+        "--no-color",
+        "-o",
+        "-",
+    ];
+    args.extend(["--ot", s(&ot)]);
+    args.extend(flags);
+    let plain = run(OCTO, &args, b"");
+    assert_eq!(plain.code, 0, "{what}: {}", plain.stderr);
+    let reference_ot = survey().reference_bt_path.with_extension("bt.ot");
     let cmp = Command::new("compare_octrees")
-        .args([s(&bt), s(&survey().reference_bt_path)])
+        .args([s(&ot), s(&reference_ot)])
         .output()
         .expect("compare_octrees (apt-get install octomap-tools)");
-    let text = String::from_utf8_lossy(&cmp.stdout).into_owned()
-        + &String::from_utf8_lossy(&cmp.stderr);
+    let text =
+        String::from_utf8_lossy(&cmp.stdout).into_owned() + &String::from_utf8_lossy(&cmp.stderr);
     assert!(text.contains("KLD: 0\n"), "{what}: {text}");
     out
 }

@@ -28,6 +28,7 @@ pub mod delta;
 pub mod files;
 pub mod graph;
 pub mod pipeline;
+pub mod recording;
 pub mod ros;
 pub mod synth;
 pub mod tf;

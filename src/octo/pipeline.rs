@@ -23,6 +23,7 @@ use serde::Serialize;
 
 use super::cloud::{self, CloudFormat, McapOptions};
 use super::delta::{self, Message, Receiver, Roi, Sender, ViewSpec};
+use super::recording::{Item, Recording, RecordingError, RecordingOptions};
 use super::tree::{OcTree, TREE_DEPTH, unmorton};
 use super::{ParseError, Pose, Scan, files, graph, synth, transfer};
 use crate::io::StopReader;
@@ -110,21 +111,25 @@ pub enum InputFormat {
     Ply,
     /// Text, one `x y z [r g b]` point per line.
     Xyz,
-    /// MCAP with ROS 2 `PointCloud2` and `PoseStamped` messages.
+    /// MCAP with ROS 2 `PointCloud2` messages, posed by TF or a pose topic
+    /// ([`recording`](super::recording)).
     Mcap,
+    /// A rosbag2 bag: its directory, its `metadata.yaml` or one `.db3` (sqlite3 or mcap storage).
+    Rosbag2,
 }
 
 impl InputFormat {
     /// Every format.
-    pub const ALL: [InputFormat; 5] = [
+    pub const ALL: [InputFormat; 6] = [
         InputFormat::Graph,
         InputFormat::Pcd,
         InputFormat::Ply,
         InputFormat::Xyz,
         InputFormat::Mcap,
+        InputFormat::Rosbag2,
     ];
 
-    /// The short name: `graph`, `pcd`, `ply`, `xyz`, `mcap`.
+    /// The short name: `graph`, `pcd`, `ply`, `xyz`, `mcap`, `rosbag2`.
     pub fn name(self) -> &'static str {
         match self {
             InputFormat::Graph => "graph",
@@ -132,16 +137,19 @@ impl InputFormat {
             InputFormat::Ply => "ply",
             InputFormat::Xyz => "xyz",
             InputFormat::Mcap => "mcap",
+            InputFormat::Rosbag2 => "rosbag2",
         }
     }
 
-    /// The format a file name's extension names (`.graph` or one of [`CloudFormat::from_path`]).
+    /// The format a file name names (`.graph`, `.db3` or `metadata.yaml`, or one of
+    /// [`CloudFormat::from_path`]); a directory is not looked at here (see [`build`]).
     pub fn from_path(path: &Path) -> Option<InputFormat> {
-        if path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("graph"))
-        {
+        let ext = |e: &str| path.extension().is_some_and(|x| x.eq_ignore_ascii_case(e));
+        if ext("graph") {
             return Some(InputFormat::Graph);
+        }
+        if ext("db3") || path.file_name().is_some_and(|n| n == "metadata.yaml") {
+            return Some(InputFormat::Rosbag2);
         }
         CloudFormat::from_path(path).map(InputFormat::from)
     }
@@ -154,18 +162,31 @@ impl InputFormat {
             InputFormat::Ply => Some(CloudFormat::Ply),
             InputFormat::Xyz => Some(CloudFormat::Xyz),
             InputFormat::Mcap => Some(CloudFormat::Mcap),
+            InputFormat::Rosbag2 => None,
         }
     }
 
-    /// Whether the format carries the sensor's pose (`.graph`, MCAP); the others get
-    /// [`BuildConfig::origin_m`].
+    /// Whether the format carries the sensor's pose (`.graph`, bags); the others get
+    /// [`BuildConfig::origin_m`] (a bag without any pose source does too).
     pub fn has_poses(self) -> bool {
-        matches!(self, InputFormat::Graph | InputFormat::Mcap)
+        matches!(
+            self,
+            InputFormat::Graph | InputFormat::Mcap | InputFormat::Rosbag2
+        )
+    }
+
+    /// Whether inputs of this format are robot logs read by [`Recording`].
+    pub fn is_bag(self) -> bool {
+        matches!(self, InputFormat::Mcap | InputFormat::Rosbag2)
     }
 
     /// Reads every scan of `bytes` in this format.
     pub fn read(self, bytes: &[u8], mcap: &McapOptions) -> Result<Vec<Scan>, ParseError> {
         match self.cloud() {
+            None if self == InputFormat::Rosbag2 => Err(ParseError::new(
+                0,
+                "rosbag2: expected a bag directory, its metadata.yaml or a .db3 file, found bytes",
+            )),
             None => graph::read_scans(bytes),
             Some(f) => cloud::read(f, bytes, mcap),
         }
@@ -189,7 +210,7 @@ impl std::str::FromStr for InputFormat {
         InputFormat::ALL
             .into_iter()
             .find(|f| f.name().eq_ignore_ascii_case(s))
-            .ok_or_else(|| format!("unknown format {s:?} (graph, pcd, ply, xyz or mcap)"))
+            .ok_or_else(|| format!("unknown format {s:?} (graph, pcd, ply, xyz, mcap or rosbag2)"))
     }
 }
 
@@ -290,8 +311,10 @@ pub struct BuildConfig {
     pub format: Option<InputFormat>,
     /// Sensor origin for inputs without poses (PCD without VIEWPOINT, PLY, XYZ), m.
     pub origin_m: Option<[f64; 3]>,
-    /// MCAP topics.
+    /// Bag topics (MCAP and rosbag2): the clouds' and the poses'.
     pub mcap: McapOptions,
+    /// Bags posed by TF: the frame the map is built in (`None`: the root of the TF tree).
+    pub fixed_frame: Option<String>,
     /// Build an `OcTree` even when the scans have colour.
     pub no_color: bool,
     /// Also resend an occupied voxel when a brighter colour is found for it.
@@ -310,6 +333,7 @@ impl Default for BuildConfig {
             format: None,
             origin_m: None,
             mcap: McapOptions::default(),
+            fixed_frame: None,
             no_color: false,
             color_updates: false,
             threads: None,
@@ -476,6 +500,10 @@ pub struct BuildReport {
     pub messages: Vec<(u32, usize)>,
     /// Whether the stop flag ended the build early.
     pub interrupted: bool,
+    /// Clouds of robot logs skipped for want of a pose: (reason naming the frames, count).
+    pub skipped: Vec<(String, u64)>,
+    /// What a user should know about how robot logs were read (`FILE: poses from TF ...`).
+    pub notes: Vec<String>,
 }
 
 /// A build's outcome: the map and the report.
@@ -527,7 +555,7 @@ pub enum PipelineError {
     },
     /// An input whose format neither its name nor its bytes tell.
     #[error(
-        "{name}: unknown input format (expected .graph, .pcd, .ply, .xyz or .mcap; or --format)"
+        "{name}: unknown input format (expected .graph, .pcd, .ply, .xyz, .mcap, a rosbag2 directory or .db3; or --format)"
     )]
     UnknownFormat {
         /// The file.
@@ -541,6 +569,19 @@ pub enum PipelineError {
         /// Which number, the range and what was found.
         source: ConfigError,
     },
+    /// A robot log that cannot be read (its file and where), or that lacks what a map needs.
+    #[error(transparent)]
+    Recording(#[from] RecordingError),
+    /// A robot log none of whose clouds could be posed.
+    #[error("{name}: no cloud could be posed ({skipped} skipped): {reason}")]
+    NoPosedCloud {
+        /// The bag.
+        name: String,
+        /// Clouds skipped.
+        skipped: u64,
+        /// Why the first one was.
+        reason: String,
+    },
     /// Reading an input or writing an output failed.
     #[error(transparent)]
     Io(#[from] IoError),
@@ -549,13 +590,19 @@ pub enum PipelineError {
     Sink(SinkError),
 }
 
-/// The scans of one input, one at a time (a `.graph` file is streamed from disk, so a large
-/// survey never sits in memory whole), how many there will be, and the format.
-type ScanSource<'a> = (
-    Box<dyn Iterator<Item = Result<Scan, ParseError>> + 'a>,
-    usize,
-    InputFormat,
-);
+/// The scans of one input: a stream of scans (a `.graph` file is streamed from disk, so a large
+/// survey never sits in memory whole; cloud files are read whole), or a robot log read cloud by
+/// cloud ([`Recording`]).
+enum ScanSource<'a> {
+    /// Scans, how many there will be, and the format.
+    Scans(
+        Box<dyn Iterator<Item = Result<Scan, ParseError>> + 'a>,
+        usize,
+        InputFormat,
+    ),
+    /// A bag, its poses read.
+    Bag(Box<Recording>),
+}
 
 /// The scans of one input, read through a [`StopReader`]: a read waiting on a silent pipe
 /// gives up once `stop` is set.
@@ -578,28 +625,49 @@ fn open_scans<'a>(
             source,
         })?),
     };
-    if cfg.format.or(by_name) == Some(InputFormat::Graph)
-        && let Some(meta) = meta
-    {
-        let len = if meta.is_file() { meta.len() } else { u64::MAX };
-        let stream = graph::ScanStream::new(StopReader::open(Some(path), stop), len);
-        let stream = stream.map_err(bad)?;
-        let n = stream.node_count() as usize;
-        return Ok((Box::new(stream), n, InputFormat::Graph));
+    let options = RecordingOptions {
+        cloud_topic: cfg.mcap.cloud_topic.clone(),
+        pose_topic: cfg.mcap.pose_topic.clone(),
+        fixed_frame: cfg.fixed_frame.clone(),
+        origin_given: cfg.origin_m.is_some(),
+    };
+    let is_dir = meta.as_ref().is_some_and(|m| m.is_dir());
+    let format = cfg
+        .format
+        .or(by_name)
+        .or(is_dir.then_some(InputFormat::Rosbag2));
+    if let Some(meta) = &meta {
+        if format == Some(InputFormat::Graph) {
+            let len = if meta.is_file() { meta.len() } else { u64::MAX };
+            let stream = graph::ScanStream::new(StopReader::open(Some(path), stop), len);
+            let stream = stream.map_err(bad)?;
+            let n = stream.node_count() as usize;
+            return Ok(ScanSource::Scans(Box::new(stream), n, InputFormat::Graph));
+        }
+        if format.is_some_and(InputFormat::is_bag) && (meta.is_file() || is_dir) {
+            let rec = Recording::open(path, &options, stop)?;
+            return Ok(ScanSource::Bag(Box::new(rec)));
+        }
     }
     let bytes = read_limited(
         &mut StopReader::open(Some(path), stop),
         &name,
         MAX_INPUT_BYTES,
     )?;
-    let format = cfg
-        .format
-        .or(by_name)
+    let format = format
         .or_else(|| cloud::sniff(&bytes).map(InputFormat::from))
         .ok_or_else(|| PipelineError::UnknownFormat { name: name.clone() })?;
+    if format == InputFormat::Mcap {
+        let rec = Recording::from_mcap_bytes(&name, bytes, &options, stop)?;
+        return Ok(ScanSource::Bag(Box::new(rec)));
+    }
     let scans = format.read(&bytes, &cfg.mcap).map_err(bad)?;
     let n = scans.len();
-    Ok((Box::new(scans.into_iter().map(Ok)), n, format))
+    Ok(ScanSource::Scans(
+        Box::new(scans.into_iter().map(Ok)),
+        n,
+        format,
+    ))
 }
 
 /// Inputs without a pose get the sensor origin of `--origin`: the points stay where they are in
@@ -662,33 +730,67 @@ pub fn build(
             break;
         }
         // A read that gave up because the flag was set is a stop, not a bad input.
-        let (scans, count, format) = match open_scans(path, cfg, hooks.stop) {
-            Err(_) if hooks.stop.load(Ordering::Relaxed) => {
+        let stop = hooks.stop;
+        let name = path.display().to_string();
+        let source = match open_scans(path, cfg, stop) {
+            Err(_) if stop.load(Ordering::Relaxed) => {
                 report.interrupted = true;
                 break;
             }
             opened => opened?,
         };
-        known += count as u64;
+        // A bag's clouds borrow it: it lives here, beside the loop over them.
+        let mut recording: Option<Box<Recording>> = None;
+        type Items<'s> = Box<dyn Iterator<Item = Result<Item, PipelineError>> + 's>;
+        let (items, count, needs_origin): (Items<'_>, u64, bool) = match source {
+            ScanSource::Scans(scans, n, format) => {
+                let name = name.clone();
+                let items = scans.map(move |r| {
+                    r.map(Item::Scan).map_err(|source| PipelineError::Input {
+                        name: name.clone(),
+                        source,
+                    })
+                });
+                (Box::new(items), n as u64, !format.has_poses())
+            }
+            ScanSource::Bag(rec) => {
+                let rec = recording.insert(rec);
+                let n = rec.cloud_count().unwrap_or(0);
+                let needs_origin = !rec.has_poses();
+                let items = rec.scans(stop)?.map(|r| r.map_err(PipelineError::from));
+                (Box::new(items), n, needs_origin)
+            }
+        };
+        known += count;
         if let Some(p) = hooks.progress.as_mut() {
             p(report.scans as u64, known);
         }
-        let origin = origin.filter(|_| !format.has_poses());
-        for scan in scans {
-            if hooks.stop.load(Ordering::Relaxed) {
+        let origin = origin.filter(|_| needs_origin);
+        let (mut posed, mut skipped, mut first_reason) = (0u64, 0u64, None);
+        for item in items {
+            if stop.load(Ordering::Relaxed) {
                 report.interrupted = true;
                 break 'inputs;
             }
-            let scan = match scan {
-                Err(_) if hooks.stop.load(Ordering::Relaxed) => {
+            let scan = match item {
+                Err(_) if stop.load(Ordering::Relaxed) => {
                     report.interrupted = true;
                     break 'inputs;
                 }
-                scan => scan.map_err(|source| PipelineError::Input {
-                    name: path.display().to_string(),
-                    source,
-                })?,
+                Ok(Item::Skipped(reason)) => {
+                    let reason = format!("{name}: {reason}");
+                    skipped += 1;
+                    match report.skipped.iter_mut().find(|(r, _)| *r == reason) {
+                        Some((_, n)) => *n += 1,
+                        None => report.skipped.push((reason.clone(), 1)),
+                    }
+                    first_reason.get_or_insert(reason);
+                    continue;
+                }
+                Ok(Item::Scan(scan)) => scan,
+                Err(e) => return Err(e),
             };
+            posed += 1;
             let scan = with_origin(scan, origin);
             let tree = tree.get_or_insert_with(|| {
                 let mut t = OcTree::new(cfg.resolution_m);
@@ -740,6 +842,20 @@ pub fn build(
             if let Some(p) = hooks.progress.as_mut() {
                 p(report.scans as u64, known);
             }
+        }
+        if let Some(rec) = &recording {
+            if posed == 0
+                && let Some(reason) = first_reason
+            {
+                return Err(PipelineError::NoPosedCloud {
+                    name,
+                    skipped,
+                    reason,
+                });
+            }
+            report
+                .notes
+                .extend(rec.notes.iter().map(|n| format!("{name}: {n}")));
         }
     }
     report.elapsed_s = started.elapsed().as_secs_f64();

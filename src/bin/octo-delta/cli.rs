@@ -18,6 +18,8 @@ Examples:
   octo-delta synth -o survey.mcap                      the same, coloured, as ROS 2 MCAP
   octo-delta build survey.graph --res 0.1 -o deltas.odl --stats bandwidth.csv --ot map.ot
   octo-delta build scan*.pcd --roi -2,-2,-5,2,2,0 --coarse-depth 13 -o deltas.odl
+  octo-delta build run.mcap --fixed-frame odom -o deltas.odl   a ROS 2 bag posed by /tf
+  octo-delta build rosbag2_2026_12_01/ --pose-topic /odom --bt map.bt   a rosbag2 directory
   octo-delta build survey.graph -o deltas.odl --link satellite-up   when each scan reaches shore
   octo-delta apply deltas.odl -o view.ot               the operator's view
   octo-delta apply deltas.odl --mcap view.mcap --arrivals arrivals.csv   the view as it grew, for Foxglove
@@ -116,8 +118,9 @@ impl ViewArgs {
 
 #[derive(Args, Debug)]
 pub struct BuildArgs {
-    /// Point clouds: OctoMap .graph, PCD, PLY, XYZ, or MCAP (ROS 2 PointCloud2 + PoseStamped);
-    /// - for standard input.
+    /// Point clouds: OctoMap .graph, PCD, PLY, XYZ, or a ROS 2 bag: MCAP (chunks zstd, lz4 or
+    /// none) or rosbag2 (the directory, its metadata.yaml or a .db3) with PointCloud2 clouds
+    /// posed by /tf + /tf_static or a pose topic; - for standard input.
     #[arg(required = true, value_name = "INPUT")]
     pub inputs: Vec<PathBuf>,
 
@@ -152,22 +155,30 @@ pub struct BuildArgs {
     #[arg(long, value_name = "FILE")]
     pub ot: Option<PathBuf>,
 
-    /// Input format, when the file name does not tell: graph, pcd, ply, xyz or mcap.
+    /// Input format, when the file name does not tell: graph, pcd, ply, xyz, mcap or rosbag2.
     #[arg(long, value_name = "FORMAT", value_parser = input_format)]
     pub format: Option<InputFormat>,
 
-    /// Sensor origin x,y,z (metres) for inputs without a pose (PLY, XYZ, PCD without VIEWPOINT).
+    /// Sensor origin x,y,z (metres) for inputs without a pose (PLY, XYZ, PCD without VIEWPOINT,
+    /// a bag without TF or pose topic: without --origin such a bag is refused).
     #[arg(long, value_name = "XYZ", value_parser = value::tuple::<3>(coordinate()),
           allow_hyphen_values = true)]
     pub origin: Option<[f64; 3]>,
 
-    /// MCAP: the sensor_msgs/msg/PointCloud2 topic [default: the first one].
+    /// Bags: the sensor_msgs/msg/PointCloud2 topic [default: the first one].
     #[arg(long, value_name = "TOPIC")]
     pub cloud_topic: Option<String>,
 
-    /// MCAP: the geometry_msgs/msg/PoseStamped topic with the sensor's pose [default: the first].
+    /// Bags: the sensor's pose from this topic instead of TF: geometry_msgs/msg/PoseStamped,
+    /// geometry_msgs/msg/TransformStamped or nav_msgs/msg/Odometry, interpolated at each cloud's
+    /// stamp [default: /tf + /tf_static when the bag has them, else the first PoseStamped topic].
     #[arg(long, value_name = "TOPIC")]
     pub pose_topic: Option<String>,
+
+    /// Bags posed by TF: the frame the map is built in; each cloud's header.frame_id is looked
+    /// up in it at the cloud's stamp [default: the root of the TF tree].
+    #[arg(long, value_name = "FRAME")]
+    pub fixed_frame: Option<String>,
 
     /// Ignore colours (build an OcTree, not a ColorOcTree).
     #[arg(long)]
@@ -225,6 +236,7 @@ impl BuildArgs {
                 cloud_topic: self.cloud_topic.clone(),
                 pose_topic: self.pose_topic.clone(),
             },
+            fixed_frame: self.fixed_frame.clone(),
             no_color: self.no_color,
             color_updates: self.color_updates,
             threads: self.threads.map(|t| t as usize),

@@ -96,6 +96,13 @@ fn build(a: &BuildArgs) -> Result<u8> {
     }
     let built = outcome?;
     rows.map(RowWriter::finish).transpose()?;
+    // Clouds left out of the map are said even with --quiet: the map lacks them.
+    for (reason, n) in &built.report.skipped {
+        say!("warning: {n} cloud(s) skipped: {reason}");
+    }
+    if !a.quiet {
+        built.report.notes.iter().for_each(|n| say!("{n}"));
+    }
     if !a.quiet || built.report.interrupted {
         let note = stop::note().unwrap_or_else(|| "interrupted".into());
         say!("{}", built.summary(&note));
