@@ -50,7 +50,12 @@ pub struct McapScans {
     pub notes: Vec<String>,
 }
 
-/// Reads the point clouds of an MCAP file of ROS 2 messages.
+/// Reads the point clouds of an MCAP file of ROS 2 messages, whole, posed by log time.
+///
+/// This is the simple in-memory reader behind [`super::read`] (fuzzing, tests, and the
+/// round trip of [`write_clouds_mcap`]). `octo-delta build` does not use it: it reads every bag
+/// through [`crate::octo::recording`], which poses clouds by their stamps from TF or a pose
+/// topic, streams them, and refuses a bag without poses.
 ///
 /// Each `PointCloud2` message on the cloud topic (see [`McapOptions`]) becomes one scan: its
 /// points from the `x`, `y`, `z` fields (any numeric datatype), colours from an `rgb` field
