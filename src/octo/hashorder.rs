@@ -22,6 +22,7 @@
 //! panics; memory is 12 bytes a key plus 4 a bucket, and a table never has more than about
 //! twice as many buckets as keys (plus the longest ray).
 
+use super::cellset::CellSet;
 use super::tree::Key;
 
 /// libstdc++'s bucket counts (`std::tr1::__detail::__prime_list`, 64-bit).
@@ -351,10 +352,14 @@ pub struct KeySet {
     nodes: Vec<Node>,
     /// First key of each bucket's chain.
     heads: Vec<u32>,
+    /// `1 / heads.len()`, for the bucket index without a division.
+    inv_buckets: f64,
     /// The rehash policy's `_M_next_resize`.
     next_resize: u64,
     /// A range being inserted (see [`KeySet::begin_range`]).
     pending: Vec<Key>,
+    /// The same keys, for a fast membership test (the chains answer it too, slower).
+    members: CellSet,
 }
 
 impl Default for KeySet {
@@ -379,8 +384,10 @@ impl KeySet {
         let mut s = KeySet {
             nodes: Vec::new(),
             heads: Vec::new(),
+            inv_buckets: 1.0,
             next_resize: 0,
             pending: Vec::new(),
+            members: CellSet::new(),
         };
         s.clear();
         s
@@ -392,8 +399,10 @@ impl KeySet {
         self.nodes.clear();
         self.heads.clear();
         self.heads.resize(count as usize, NONE);
+        self.inv_buckets = 1.0 / count as f64;
         self.next_resize = next_resize;
         self.pending.clear();
+        self.members.clear();
     }
 
     /// Number of keys.
@@ -406,8 +415,19 @@ impl KeySet {
         self.nodes.is_empty()
     }
 
+    /// The key's bucket: its hash modulo the bucket count, by a multiplication (the hash is
+    /// below 2^35, so the `f64` quotient is off by at most one, and corrected).
     fn bucket_of(&self, k: Key) -> usize {
-        (key_hash(k) % self.heads.len() as u64) as usize
+        let h = key_hash(k) as i64;
+        let n = self.heads.len() as i64;
+        let q = (h as f64 * self.inv_buckets) as i64;
+        let mut r = h - q * n;
+        if r < 0 {
+            r += n;
+        } else if r >= n {
+            r -= n;
+        }
+        r as usize
     }
 
     /// `_M_need_rehash`: the new bucket count if `inserting` more keys need more buckets.
@@ -432,6 +452,7 @@ impl KeySet {
     fn rehash(&mut self, count: u64) {
         let old = std::mem::take(&mut self.heads);
         self.heads = vec![NONE; count as usize];
+        self.inv_buckets = 1.0 / count as f64;
         for mut p in old {
             while let Some(&node) = self.nodes.get(p as usize) {
                 let b = self.bucket_of(node.key);
@@ -442,9 +463,9 @@ impl KeySet {
         }
     }
 
-    /// Whether `k` is in the set.
-    pub fn contains(&self, k: Key) -> bool {
-        let mut p = self.heads[self.bucket_of(k)];
+    /// Whether `k` is in bucket `b`'s chain.
+    fn in_chain(&self, b: usize, k: Key) -> bool {
+        let mut p = self.heads[b];
         while let Some(node) = self.nodes.get(p as usize) {
             if node.key == k {
                 return true;
@@ -454,9 +475,15 @@ impl KeySet {
         false
     }
 
-    /// Inserts `k` (`insert(value)`); false if it was there already.
+    /// Whether `k` is in the set.
+    pub fn contains(&self, k: Key) -> bool {
+        self.in_chain(self.bucket_of(k), k)
+    }
+
+    /// Inserts `k` (`insert(value)`); false if it was there already (then, as in libstdc++,
+    /// nothing changes).
     pub fn insert(&mut self, k: Key) -> bool {
-        if self.contains(k) {
+        if !self.members.insert_new(k) {
             return false;
         }
         if let Some(count) = self.need_rehash(1) {
@@ -550,6 +577,24 @@ mod tests {
         assert!(!s.contains([65535, 65535, 65535]));
         s.clear();
         assert!(s.is_empty() && s.iter().next().is_none());
+    }
+
+    #[test]
+    fn bucket_index_is_the_remainder() {
+        let mut s = KeySet::new();
+        let mut rng = crate::link::Rng::new(5, 0);
+        for &count in PRIMES.iter().filter(|&&p| p <= 1_447_153) {
+            s.rehash(count);
+            let mut keys = vec![[0u16, 0, 0], [65535, 65535, 65535], [65535, 0, 65535]];
+            keys.extend((0..50).map(|_| [0, 1, 2].map(|_| (rng.uniform() * 65535.0) as u16)));
+            for k in keys {
+                assert_eq!(
+                    s.bucket_of(k) as u64,
+                    key_hash(k) % count,
+                    "{k:?} mod {count}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -797,7 +797,7 @@ impl OcTree {
                 code: morton(k),
                 hit,
             };
-            self.apply(0, 0, 0, &[u], created, &mut log);
+            self.update_voxel(&u, created, &mut log);
             created = false;
         }
         self.free_keys = free;
@@ -974,30 +974,7 @@ impl OcTree {
         log: &mut PassLog,
     ) {
         if depth == TREE_DEPTH {
-            let u = &ups[0];
-            let v = self.blocks[blk as usize].value[slot];
-            let p = self.params;
-            let was_occ = v >= 0.0;
-            let mut nv = v;
-            if !self.at_clamp(v, u.hit) {
-                nv = v + if u.hit { p.hit_log } else { p.miss_log };
-                if nv < p.clamp_min_log {
-                    nv = p.clamp_min_log;
-                } else if nv > p.clamp_max_log {
-                    nv = p.clamp_max_log;
-                }
-            }
-            self.blocks[blk as usize].value[slot] = nv;
-            let now_occ = nv >= 0.0;
-            if just_created || was_occ != now_occ {
-                // The colour is the colour pass's to give (`color_pass`).
-                log.flips.push(Change {
-                    code: u.code,
-                    occupied: now_occ,
-                    color: None,
-                    recolor: false,
-                });
-            }
+            self.update_leaf(blk, slot, &ups[0], just_created, log);
             return;
         }
         if self.blocks[blk as usize].child[slot] == NONE && !just_created {
@@ -1023,19 +1000,108 @@ impl OcTree {
         }
         // Prune if the eight children are leaves of equal value (`ColorOcTree::pruneNode`),
         // else hold the maximum of the children.
-        if let Some(color) = self.collapse_by_value(blk, slot, child_blk) {
-            if self.colors.is_some() && self.blocks[blk as usize].value[slot] >= 0.0 {
-                let code = ups[0].code;
-                for (i, old) in color.into_iter().enumerate() {
-                    if old != self.color(blk, slot) {
-                        let shift = 3 * (TREE_DEPTH - 1 - depth);
-                        let child = (code & !(0o7u64 << shift)) | ((i as u64) << shift);
-                        push_voxels(&mut log.recolored, child, depth + 1);
-                    }
+        if !self.prune_logged(blk, slot, child_blk, depth, ups[0].code, log) {
+            self.set_max(blk, slot, child_blk);
+        }
+    }
+
+    /// OctoMap's update of a depth-16 voxel (`updateNodeLogOdds` with its clamping) and its
+    /// change detection: a flip is logged when the voxel is new or its occupancy changed.
+    fn update_leaf(
+        &mut self,
+        blk: u32,
+        slot: usize,
+        u: &Upd,
+        just_created: bool,
+        log: &mut PassLog,
+    ) {
+        let v = self.blocks[blk as usize].value[slot];
+        let p = self.params;
+        let was_occ = v >= 0.0;
+        let mut nv = v;
+        if !self.at_clamp(v, u.hit) {
+            nv = v + if u.hit { p.hit_log } else { p.miss_log };
+            if nv < p.clamp_min_log {
+                nv = p.clamp_min_log;
+            } else if nv > p.clamp_max_log {
+                nv = p.clamp_max_log;
+            }
+        }
+        self.blocks[blk as usize].value[slot] = nv;
+        let now_occ = nv >= 0.0;
+        if just_created || was_occ != now_occ {
+            // The colour is the colour pass's to give (`color_pass`).
+            log.flips.push(Change {
+                code: u.code,
+                occupied: now_occ,
+                color: None,
+                recolor: false,
+            });
+        }
+    }
+
+    /// [`collapse_by_value`](Self::collapse_by_value) on the node at `depth` that holds voxel
+    /// `code`, logging the occupied voxels whose colour it changed; true if it collapsed.
+    fn prune_logged(
+        &mut self,
+        blk: u32,
+        slot: usize,
+        cb: u32,
+        depth: u32,
+        code: u64,
+        log: &mut PassLog,
+    ) -> bool {
+        let Some(children) = self.collapse_by_value(blk, slot, cb) else {
+            return false;
+        };
+        if self.colors.is_some() && self.blocks[blk as usize].value[slot] >= 0.0 {
+            let now = self.color(blk, slot);
+            let shift = 3 * (TREE_DEPTH - 1 - depth);
+            for (i, old) in children.into_iter().enumerate() {
+                if old != now {
+                    let child = (code & !(0o7u64 << shift)) | ((i as u64) << shift);
+                    push_voxels(&mut log.recolored, child, depth + 1);
                 }
             }
-        } else {
-            self.set_max(blk, slot, child_blk);
+        }
+        true
+    }
+
+    /// OctoMap's `updateNode` of one voxel (`lazy_eval` off): nothing if the node holding it is
+    /// already clamped in the update's direction; else down from the root, expanding pruned
+    /// nodes and creating missing ones, the voxel updated, then back up, each node pruned if it
+    /// can be, else set to the maximum of its children. The way up stops at the first node that
+    /// neither collapsed nor changed value: nothing above it can change.
+    fn update_voxel(&mut self, u: &Upd, root_created: bool, log: &mut PassLog) {
+        // Per depth: the node (block, slot), and its value before, `None` if it is new.
+        let mut path = [(0u32, 0usize, None::<f32>); TREE_DEPTH as usize + 1];
+        let (mut blk, mut slot, mut just_created) = (0u32, 0usize, root_created);
+        path[0] = (0, 0, (!root_created).then(|| self.blocks[0].value[0]));
+        for depth in 0..TREE_DEPTH {
+            if self.blocks[blk as usize].child[slot] == NONE && !just_created {
+                let v = self.blocks[blk as usize].value[slot];
+                if self.at_clamp(v, u.hit) {
+                    return;
+                }
+            }
+            let cb = self.children_block(blk, slot, !just_created);
+            let digit = ((u.code >> (3 * (TREE_DEPTH - 1 - depth))) & 7) as usize;
+            just_created = self.create_child(cb, digit);
+            let before = (!just_created).then(|| self.blocks[cb as usize].value[digit]);
+            (blk, slot) = (cb, digit);
+            path[depth as usize + 1] = (blk, slot, before);
+        }
+        self.update_leaf(blk, slot, u, just_created, log);
+        for depth in (0..TREE_DEPTH).rev() {
+            let (b, s, before) = path[depth as usize];
+            let cb = self.blocks[b as usize].child[s];
+            if self.prune_logged(b, s, cb, depth, u.code, log) {
+                continue;
+            }
+            self.set_max(b, s, cb);
+            if before.is_some_and(|v| v.to_bits() == self.blocks[b as usize].value[s].to_bits()) {
+                break;
+            }
         }
     }
 
