@@ -272,3 +272,63 @@ fn coloured_structure_is_the_octree_of_the_same_scans() {
         compare_ot(&colored, &ref_ot, true);
     }
 }
+
+#[test]
+fn a_color_octree_bt_from_convert_octree_is_read_as_its_octree() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mcap = synth(d, 7, 10, "survey.mcap");
+    let (colored, plain) = (d.join("colored.ot"), d.join("plain.ot"));
+    build(d, &mcap, "0.1", &[], &colored);
+    build(d, &mcap, "0.1", &["--no-color"], &plain);
+    let (colored_bt, plain_bt) = (d.join("colored.bt"), d.join("plain.bt"));
+    octomap_tool("convert_octree", &[s(&colored), s(&colored_bt)]);
+    octomap_tool("convert_octree", &[s(&plain), s(&plain_bt)]);
+    let bytes = std::fs::read(&colored_bt).unwrap();
+    assert!(
+        String::from_utf8_lossy(&bytes[..200]).contains("id ColorOcTree"),
+        "convert_octree did not write a ColorOcTree .bt"
+    );
+    // `full` and `apply` take it, and give the OcTree's view.
+    let views: Vec<Vec<u8>> = [&colored_bt, &plain_bt]
+        .iter()
+        .map(|bt| {
+            let (odl, view) = (d.join("f.odl"), d.join("v.ot"));
+            let out = run(OCTO, &["full", s(bt), "-o", s(&odl)], b"");
+            assert_eq!(out.code, 0, "full {bt:?}: {}", out.stderr);
+            let out = run(OCTO, &["apply", s(&odl), "-o", s(&view)], b"");
+            assert_eq!(out.code, 0, "apply: {}", out.stderr);
+            std::fs::read(&view).unwrap()
+        })
+        .collect();
+    assert!(
+        views[0] == views[1],
+        "the ColorOcTree .bt's view is not the OcTree's"
+    );
+
+    // Cut short or damaged: one line naming the file and the offset, exit 2, no output.
+    let body = bytes
+        .windows(5)
+        .position(|w| w == b"data\n")
+        .expect("data line")
+        + 5;
+    let garbage = [&bytes[..body], &[0xffu8; 7][..]].concat();
+    for (name, damaged) in [
+        ("cut.bt", bytes[..bytes.len() - 5].to_vec()),
+        ("garbage.bt", garbage),
+    ] {
+        let path = d.join(name);
+        std::fs::write(&path, &damaged).unwrap();
+        let out_file = d.join(format!("{name}.odl"));
+        let out = run(OCTO, &["full", s(&path), "-o", s(&out_file)], b"");
+        assert_eq!(out.code, 2, "{name}: {}", out.stderr);
+        let lines: Vec<&str> = out.stderr.lines().collect();
+        assert_eq!(lines.len(), 1, "{name}: one line: {}", out.stderr);
+        assert!(
+            lines[0].contains(name) && lines[0].contains("offset"),
+            "{name}: {}",
+            lines[0]
+        );
+        assert!(!out_file.exists(), "{name}: partial output");
+    }
+}

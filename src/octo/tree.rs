@@ -18,7 +18,8 @@
 //! order of the tree) and applied in one recursive pass, so each touched inner node is visited
 //! once and pruned once, after all its children are final. Because every voxel is updated at
 //! most once per scan and pruning always ends in the same fully pruned tree, the outcome is
-//! OctoMap's.
+//! OctoMap's. That holds for log-odds, not for colours: a coloured tree is updated voxel by
+//! voxel in OctoMap's own order ([`super::hashorder`]), on one thread.
 //!
 //! Colour is OctoMap 1.9's `ColorOcTree`, driven by the calls a colour mapper makes after each
 //! `insertPointCloud`: `search` the node that holds each point's voxel and, when the point's
@@ -539,7 +540,8 @@ impl OcTree {
         }
     }
 
-    /// Sets how many threads cast a scan's rays (1: none besides the caller).
+    /// Sets how many threads cast a scan's rays (1: none besides the caller). A coloured tree
+    /// casts on the caller's thread: the order of its cells is the order of the points.
     pub fn set_threads(&mut self, threads: usize) {
         self.threads = threads.max(1);
     }
