@@ -1632,6 +1632,70 @@ mod tests {
         assert_eq!(t.node(n).color, Some([100, 100, 100]));
     }
 
+    fn octant_points(n: usize) -> Vec<[f32; 3]> {
+        (0..n)
+            .map(|i| {
+                [
+                    10.25 + 0.5 * (i & 1) as f32,
+                    10.25 + 0.5 * ((i >> 1) & 1) as f32,
+                    10.25 + 0.5 * ((i >> 2) & 1) as f32,
+                ]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn coloured_leaves_prune_by_value_into_their_mean_colour() {
+        let mut t = OcTree::new(0.5);
+        t.enable_color();
+        let mut plain = OcTree::new(0.5);
+        // Seven of a depth-15 node's children, in seven colours: no pruning yet.
+        // Rays from below for the seven, from above for the eighth: none crosses another's cell.
+        let mut s = scan_at([0.0; 3], octant_points(7));
+        s.colors = Some((0..7).map(|i| [10 + 10 * i as u8, 20, 30]).collect());
+        t.insert_scan(&s, None);
+        plain.insert_scan(&s, None);
+        // The eighth, with the same log-odds: the node collapses, whatever the colours, into
+        // the mean of the set ones (the new child has none yet); its own darker point does not
+        // replace that.
+        let mut s = scan_at([20.0; 3], octant_points(8)[7..].to_vec());
+        s.colors = Some(vec![[1, 1, 1]]);
+        let up = t.insert_scan(&s, None);
+        plain.insert_scan(&s, None);
+        assert_eq!(t.num_nodes(), plain.num_nodes());
+        let code = morton(t.key_of(octant_points(1)[0]).unwrap());
+        let (n, d) = t.search(code, 16).unwrap();
+        assert_eq!(d, 15);
+        assert_eq!(t.node(n).color, Some([40, 20, 30]));
+        // The six voxels whose colour the pruning changed are recoloured changes (the fourth
+        // had the mean colour already), the new one is a change of state with that colour.
+        assert_eq!(up.changes.iter().filter(|c| c.recolor).count(), 6);
+        let occupied: Vec<_> = up.changes.iter().filter(|c| c.occupied).collect();
+        assert_eq!(occupied.len(), 7);
+        assert!(occupied.iter().all(|c| c.color == Some([40, 20, 30])));
+    }
+
+    #[test]
+    fn white_is_no_colour() {
+        let mut t = OcTree::new(0.1);
+        t.enable_color();
+        let mut s = scan(vec![[1.05, 0.05, 0.05], [1.06, 0.06, 0.06]]);
+        s.colors = Some(vec![[255, 255, 255], [5, 6, 7]]);
+        let up = t.insert_scan(&s, None);
+        let occ: Vec<_> = up.changes.iter().filter(|c| c.occupied).collect();
+        assert_eq!(occ[0].color, Some([5, 6, 7]));
+        // Equal luma (5870): the larger red wins, whatever the order of the points.
+        assert_eq!(luma([0, 10, 0]), luma([4, 0, 41]));
+        for colors in [[[0, 10, 0], [4, 0, 41]], [[4, 0, 41], [0, 10, 0]]] {
+            let mut t = OcTree::new(0.1);
+            t.enable_color();
+            s.colors = Some(colors.to_vec());
+            let up = t.insert_scan(&s, None);
+            let occ: Vec<_> = up.changes.iter().filter(|c| c.occupied).collect();
+            assert_eq!(occ[0].color, Some([4, 0, 41]));
+        }
+    }
+
     #[test]
     fn node_count_matches_a_walk() {
         let mut t = OcTree::new(0.2);
