@@ -1613,15 +1613,24 @@ mod tests {
         assert!(up.free_voxels >= 9 && up.free_voxels <= 11);
     }
 
-    #[test]
-    fn brightest_colour_wins() {
+    /// A coloured tree after a scan of two points, coloured `colors`, in one voxel; the scan;
+    /// the occupied voxel's change.
+    fn two_points_in_a_voxel(colors: [[u8; 3]; 2]) -> (OcTree, Scan, Change) {
         let mut t = OcTree::new(0.1);
         t.enable_color();
         let mut s = scan(vec![[1.05, 0.05, 0.05], [1.06, 0.06, 0.06]]);
-        s.colors = Some(vec![[10, 10, 10], [200, 0, 0]]);
+        s.colors = Some(colors.to_vec());
         let up = t.insert_scan(&s, None);
-        let occ: Vec<_> = up.changes.iter().filter(|c| c.occupied).collect();
-        assert_eq!(occ[0].color, Some([200, 0, 0]));
+        let occ: Vec<_> = up.changes.into_iter().filter(|c| c.occupied).collect();
+        assert_eq!(occ.len(), 1);
+        (t, s, occ[0])
+    }
+
+    #[test]
+    fn brightest_colour_wins() {
+        let (mut t, mut s, occ) = two_points_in_a_voxel([[10, 10, 10], [200, 0, 0]]);
+        assert_eq!(occ.color, Some([200, 0, 0]));
+        let occ = [occ];
         s.colors = Some(vec![[100, 100, 100], [50, 50, 50]]);
         t.insert_scan(&s, None);
         let (n, _) = t.search(occ[0].code, 16).unwrap();
@@ -1676,23 +1685,15 @@ mod tests {
     }
 
     #[test]
-    fn white_is_no_colour() {
-        let mut t = OcTree::new(0.1);
-        t.enable_color();
-        let mut s = scan(vec![[1.05, 0.05, 0.05], [1.06, 0.06, 0.06]]);
-        s.colors = Some(vec![[255, 255, 255], [5, 6, 7]]);
-        let up = t.insert_scan(&s, None);
-        let occ: Vec<_> = up.changes.iter().filter(|c| c.occupied).collect();
-        assert_eq!(occ[0].color, Some([5, 6, 7]));
+    fn white_is_no_colour_and_equal_luma_is_decided_by_rgb() {
+        assert_eq!(
+            two_points_in_a_voxel([WHITE, [5, 6, 7]]).2.color,
+            Some([5, 6, 7])
+        );
         // Equal luma (5870): the larger red wins, whatever the order of the points.
         assert_eq!(luma([0, 10, 0]), luma([4, 0, 41]));
         for colors in [[[0, 10, 0], [4, 0, 41]], [[4, 0, 41], [0, 10, 0]]] {
-            let mut t = OcTree::new(0.1);
-            t.enable_color();
-            s.colors = Some(colors.to_vec());
-            let up = t.insert_scan(&s, None);
-            let occ: Vec<_> = up.changes.iter().filter(|c| c.occupied).collect();
-            assert_eq!(occ[0].color, Some([4, 0, 41]));
+            assert_eq!(two_points_in_a_voxel(colors).2.color, Some([4, 0, 41]));
         }
     }
 
