@@ -80,6 +80,12 @@ impl CellSet {
     /// Adds a key.
     #[inline(always)]
     pub fn insert(&mut self, k: Key) {
+        self.insert_new(k);
+    }
+
+    /// Adds a key; true if it was not in the set.
+    #[inline(always)]
+    pub fn insert_new(&mut self, k: Key) -> bool {
         let block = (k[0] >> 3) as u64 | ((k[1] >> 3) as u64) << 13 | ((k[2] >> 3) as u64) << 26;
         if block != self.last {
             let next = self.blocks.len() as u32;
@@ -91,7 +97,11 @@ impl CellSet {
             self.last_idx = idx;
         }
         let local = LOCAL[((k[0] & 7) | (k[1] & 7) << 3 | (k[2] & 7) << 6) as usize];
-        self.blocks[self.last_idx as usize].1[(local >> 6) as usize] |= 1 << (local & 63);
+        let word = &mut self.blocks[self.last_idx as usize].1[(local >> 6) as usize];
+        let bit = 1 << (local & 63);
+        let new = *word & bit == 0;
+        *word |= bit;
+        new
     }
 
     /// Appends every key's Morton code, ascending, to `out`, and empties the set (keeping its

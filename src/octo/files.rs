@@ -8,7 +8,9 @@
 //! - `.ot`: every node in pre-order: `f32` log-odds (little-endian), for `ColorOcTree` then
 //!   `u8` r, g, b, then a `u8` whose bit i says child i exists.
 //! - `.bt`: for every inner node in pre-order, 2 bytes: child i's code at bits `2 * (i % 4)` of
-//!   byte `i / 4` (0 unknown, 1 free leaf, 2 occupied leaf, 3 inner, whose record follows).
+//!   byte `i / 4` (0 unknown, 1 free leaf, 2 occupied leaf, 3 inner, whose record follows). A
+//!   `ColorOcTree`'s `.bt` (`convert_octree` of a coloured `.ot`) has the same body, no colours:
+//!   it reads as an `OcTree`.
 //!
 //! The readers never panic on any input; errors give the byte offset and what was expected.
 //! Allocation is bounded by the input: every node read consumes at least one byte.
@@ -374,11 +376,17 @@ fn read_ot_body(bytes: &[u8], h: &MapHeader) -> Result<OcTree, ParseError> {
     )
 }
 
+/// A `.bt` body: the same for `OcTree` and `ColorOcTree` (OctoMap's `writeBinary` writes the
+/// occupancy bits of any occupancy tree, and a `ColorOcTree`'s pruning is by occupancy only), so
+/// both read as a colourless tree.
 fn read_bt_body(bytes: &[u8], h: &MapHeader) -> Result<OcTree, ParseError> {
-    if h.id != "OcTree" {
+    if h.id != "OcTree" && h.id != "ColorOcTree" {
         return Err(ParseError::new(
             h.body_offset as u64,
-            format!("a .bt file holds an OcTree, found id {:?}", h.id),
+            format!(
+                "a .bt file holds an OcTree or a ColorOcTree, found id {:?}",
+                h.id
+            ),
         ));
     }
     if h.size == 0 {
@@ -510,6 +518,26 @@ mod tests {
         let bytes = write_bt(&t);
         let back = read_map(&bytes).unwrap();
         assert_eq!(write_bt(&back), bytes);
+    }
+
+    #[test]
+    fn a_color_octree_bt_reads_as_its_octree() {
+        let t = sample_tree(false);
+        let bytes = write_bt(&t);
+        let body = &bytes[read_header(&bytes).unwrap().body_offset..];
+        let as_type = |id: &str| {
+            let mut ml = t.clone();
+            ml.to_max_likelihood(2);
+            [header(BT_HEADER, id, ml.num_nodes(), 0.1), body.to_vec()].concat()
+        };
+        let file = as_type("ColorOcTree");
+        let back = read_map(&file).unwrap();
+        assert!(!back.is_colored());
+        assert_eq!(write_bt(&back), bytes);
+        let e = read_map(&file[..file.len() - 3]).unwrap_err();
+        assert!(e.message.contains("expected 2 bytes"), "{e}");
+        let e = read_map(&as_type("CountingOcTree")).unwrap_err();
+        assert!(e.message.contains("CountingOcTree"), "{e}");
     }
 
     #[test]

@@ -27,6 +27,7 @@ pub mod cloud;
 pub mod delta;
 pub mod files;
 pub mod graph;
+pub mod hashorder;
 pub mod pipeline;
 pub mod recording;
 pub mod ros;

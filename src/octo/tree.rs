@@ -18,19 +18,59 @@
 //! order of the tree) and applied in one recursive pass, so each touched inner node is visited
 //! once and pruned once, after all its children are final. Because every voxel is updated at
 //! most once per scan and pruning always ends in the same fully pruned tree, the outcome is
-//! OctoMap's.
+//! OctoMap's. That holds for log-odds, not for colours: a coloured tree is updated voxel by
+//! voxel in OctoMap's own order ([`super::hashorder`]), on one thread.
 //!
-//! Colour (the second paper's rule): an occupied voxel keeps the brightest colour (highest
-//! luma) of the points that fell in it. Leaves with different colours are not pruned together,
-//! so no voxel's colour is lost; OctoMap 1.9's `ColorOcTree` prunes by value alone and keeps
-//! the first child's colour, so a coloured tree's structure (not its occupancy) differs from
-//! what OctoMap would build. A `.bt` (no colour) is written from a colour-blind copy, exactly as
-//! for an `OcTree`.
+//! Colour is OctoMap 1.9's `ColorOcTree`, driven by the calls a colour mapper makes after each
+//! `insertPointCloud`: `search` the node that holds each point's voxel and, when the point's
+//! colour is brighter than the node's (or the node has none), `setNodeColor`. Brighter means a
+//! higher BT.601 luma, ties broken by r, then g, then b, so the outcome does not depend on the
+//! order of the points. White (255, 255, 255) is `ColorOcTree`'s "no colour": a white point
+//! colours nothing. Occupancy decides pruning alone (`ColorOcTree::isNodeCollapsible`): eight
+//! leaf children of equal log-odds collapse whatever their colours, and the collapsed node takes
+//! child 0's colour, replaced, when that one is set, by the integer mean of the children's set
+//! colours (`ColorOcTree::pruneNode`); an expanded node's children copy its colour. So a
+//! coloured tree has exactly the structure of the `OcTree` of the same scans, and its colours
+//! are those `ColorOcTree` holds after the same calls (`tests/octomap_color.rs` checks both
+//! against liboctomap). Inner colours are written as `updateInnerOccupancy()` sets them: the
+//! mean of the children's set colours, from the leaves up.
+//!
+//! [`OcTree::set_node`] (the operator's views, built voxel by voxel from delta messages) prunes
+//! only children equal in value and colour, so no voxel's colour sent over the link is lost.
+//!
+//! Nothing here panics on any input: points and colours of any value are inserted or skipped.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::cellset::CellSet;
+use super::hashorder::KeySet;
 use super::{Pose, Scan};
+
+/// Where a ray's free cells go, in the order the ray meets them, one ray at a time.
+trait RaySink {
+    fn begin_ray(&mut self) {}
+    fn add(&mut self, k: Key);
+    fn end_ray(&mut self) {}
+}
+
+impl RaySink for CellSet {
+    fn add(&mut self, k: Key) {
+        self.insert(k);
+    }
+}
+
+/// OctoMap inserts each ray's cells into its free `KeySet` with one range insert.
+impl RaySink for KeySet {
+    fn begin_ray(&mut self) {
+        self.begin_range();
+    }
+    fn add(&mut self, k: Key) {
+        self.add_to_range(k);
+    }
+    fn end_ray(&mut self) {
+        self.end_range();
+    }
+}
 
 /// How many points a scan's rays are cast between two looks at the stop flag.
 const STOP_CHECK_POINTS: usize = 2048;
@@ -113,7 +153,17 @@ pub fn luma(rgb: [u8; 3]) -> u32 {
     299 * rgb[0] as u32 + 587 * rgb[1] as u32 + 114 * rgb[2] as u32
 }
 
-/// A colour slot: r, g, b and a flag (1: set, 0: the voxel has no colour).
+/// The brightness order of colours: luma, then r, g, b (a total order, so "the brightest of
+/// several colours" does not depend on their order).
+pub fn brightness_key(rgb: [u8; 3]) -> u64 {
+    ((luma(rgb) as u64) << 24) | ((rgb[0] as u64) << 16) | ((rgb[1] as u64) << 8) | rgb[2] as u64
+}
+
+/// White, `ColorOcTree`'s "no colour".
+pub const WHITE: [u8; 3] = [255, 255, 255];
+
+/// A colour slot: r, g, b and a flag (1: set, 0: the voxel has no colour, and r, g, b are
+/// white). The flag is 1 exactly when the colour is not white, as `ColorOcTree::isColorSet`.
 pub type ColorSlot = [u8; 4];
 
 #[derive(Clone)]
@@ -134,7 +184,8 @@ impl Block {
 }
 
 /// A voxel whose state changed in a scan (OctoMap's change detection: it was unknown, or its
-/// occupancy flipped), or, with `recolor`, an occupied voxel that only got a brighter colour.
+/// occupancy flipped), or, with `recolor`, an occupied voxel whose colour changed (a brighter
+/// point fell in it, or its node was pruned with siblings of other colours).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Change {
     /// Morton code of the depth-16 voxel.
@@ -168,7 +219,17 @@ pub struct ScanUpdate {
 struct Upd {
     code: u64,
     hit: bool,
-    color: ColorSlot,
+}
+
+/// No colour: white, flag 0.
+const NO_COLOR: ColorSlot = [255, 255, 255, 0];
+
+/// What one scan's structural pass found besides the occupancy flips: voxels whose colour may
+/// have changed (a pruned node took its children's mean colour).
+#[derive(Default)]
+struct PassLog {
+    flips: Vec<Change>,
+    recolored: Vec<u64>,
 }
 
 /// One node as a view: its value and whether it has children.
@@ -207,6 +268,7 @@ pub struct OcTree {
     nodes: usize,
     threads: usize,
     scratch: CellSet,
+    free_keys: KeySet,
 }
 
 impl std::fmt::Debug for OcTree {
@@ -333,13 +395,14 @@ impl OcTree {
             nodes: 0,
             threads: 1,
             scratch: CellSet::new(),
+            free_keys: KeySet::new(),
         }
     }
 
     /// Makes the tree keep colours (a `ColorOcTree`).
     pub fn enable_color(&mut self) {
         if self.colors.is_none() {
-            self.colors = Some(vec![[[255, 255, 255, 0]; 8]; self.blocks.len()]);
+            self.colors = Some(vec![[NO_COLOR; 8]; self.blocks.len()]);
         }
     }
 
@@ -406,14 +469,14 @@ impl OcTree {
     /// The free cells of the ray from `origin` to `end` (OctoMap's `computeRayKeys`): from the
     /// origin's cell up to, not including, the end's cell. `false` when either end is outside
     /// the key range.
-    fn ray_keys(&self, origin: [f32; 3], end: [f32; 3], out: &mut CellSet) -> bool {
+    fn ray_keys(&self, origin: [f32; 3], end: [f32; 3], out: &mut impl RaySink) -> bool {
         let (Some(ko), Some(ke)) = (self.key_of(origin), self.key_of(end)) else {
             return false;
         };
         if ko == ke {
             return true;
         }
-        out.insert(ko);
+        out.add(ko);
         let (dir, length) = ray_direction(origin, end);
         let mut step = [0i32; 3];
         let mut t_max = [f64::MAX; 3];
@@ -473,11 +536,12 @@ impl OcTree {
             if steps_left == 0 {
                 return true;
             }
-            out.insert([kx, ky, kz]);
+            out.add([kx, ky, kz]);
         }
     }
 
-    /// Sets how many threads cast a scan's rays (1: none besides the caller).
+    /// Sets how many threads cast a scan's rays (1: none besides the caller). A coloured tree
+    /// casts on the caller's thread: the order of its cells is the order of the points.
     pub fn set_threads(&mut self, threads: usize) {
         self.threads = threads.max(1);
     }
@@ -491,7 +555,7 @@ impl OcTree {
         origin: [f32; 3],
         colors: Option<&[[u8; 3]]>,
         max_range_m: Option<f64>,
-        free: &mut CellSet,
+        free: &mut impl RaySink,
         occ: &mut Vec<(u64, ColorSlot)>,
         stop: Option<&AtomicBool>,
     ) -> Option<(usize, usize)> {
@@ -509,12 +573,12 @@ impl OcTree {
             let diff = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
             let within = max_range_m.is_none_or(|r| r < 0.0 || norm_f32(diff) <= r);
             if within {
+                free.begin_ray();
                 self.ray_keys(origin, p, free);
+                free.end_ray();
                 match self.key_of(p) {
                     Some(k) => {
-                        let color = colors
-                            .and_then(|c| c.get(i))
-                            .map_or([255, 255, 255, 0], |c| [c[0], c[1], c[2], 1]);
+                        let color = color_slot(colors.and_then(|c| c.get(i)).copied());
                         occ.push((morton(k), color));
                     }
                     None => skipped += 1,
@@ -535,7 +599,9 @@ impl OcTree {
                     origin[1] + dir[1] * r,
                     origin[2] + dir[2] * r,
                 ];
+                free.begin_ray();
                 self.ray_keys(origin, end, free);
+                free.end_ray();
             }
         }
         Some((skipped, beyond))
@@ -563,11 +629,18 @@ impl OcTree {
             points: pts.len(),
             ..ScanUpdate::default()
         };
-        let colors = if self.colors.is_some() {
-            scan.colors.as_deref()
-        } else {
-            None
-        };
+        if self.colors.is_some() {
+            self.insert_in_octomap_order(
+                &pts,
+                origin,
+                scan.colors.as_deref(),
+                max_range_m,
+                stop,
+                &mut report,
+            )?;
+            return Some(report);
+        }
+        let colors = None;
         let mut free: Vec<u64> = Vec::new();
         let mut occ: Vec<(u64, ColorSlot)> = Vec::with_capacity(pts.len());
         // At least 4096 points a thread, at most 64 threads.
@@ -635,11 +708,9 @@ impl OcTree {
             }
             free = merge_sorted(lists);
         }
-        occ.sort_unstable_by(|a, b| {
-            a.0.cmp(&b.0)
-                .then(luma([b.1[0], b.1[1], b.1[2]]).cmp(&luma([a.1[0], a.1[1], a.1[2]])))
-                .then(b.1[3].cmp(&a.1[3]))
-        });
+        // Per voxel, the brightest colour first (set before unset): `brightness_key` is a total
+        // order, so equal keys are equal colours and the unstable sort decides nothing.
+        occ.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(slot_order(b.1).cmp(&slot_order(a.1))));
         occ.dedup_by_key(|e| e.0);
         // Merge: a voxel hit by a point is updated as occupied only.
         let mut ups = Vec::with_capacity(free.len() + occ.len());
@@ -649,7 +720,6 @@ impl OcTree {
                 ups.push(Upd {
                     code: free[i],
                     hit: false,
-                    color: [255, 255, 255, 0],
                 });
                 i += 1;
             } else {
@@ -659,7 +729,6 @@ impl OcTree {
                 ups.push(Upd {
                     code: occ[j].0,
                     hit: true,
-                    color: occ[j].1,
                 });
                 j += 1;
             }
@@ -668,9 +737,144 @@ impl OcTree {
         report.free_voxels = ups.len() - occ.len();
         if !ups.is_empty() {
             let created = self.ensure_root();
-            self.apply(0, 0, 0, &ups, created, &mut report.changes);
+            let mut log = PassLog::default();
+            self.apply(0, 0, 0, &ups, created, &mut log);
+            report.changes = log.flips;
         }
         Some(report)
+    }
+
+    /// A coloured tree's scan, cell by cell in the order OctoMap's `insertPointCloud` updates
+    /// them (its free `KeySet`, less the occupied cells, then the occupied `KeySet`; see
+    /// [`KeySet`]), each update OctoMap's `updateNode` (pruning the path after it), then the
+    /// colour calls. The order only matters for colours (a node pruned and expanded again in
+    /// one scan), so plain trees take the faster sorted pass. One thread: the sets' order is
+    /// that of the points.
+    fn insert_in_octomap_order(
+        &mut self,
+        pts: &[[f32; 3]],
+        origin: [f32; 3],
+        colors: Option<&[[u8; 3]]>,
+        max_range_m: Option<f64>,
+        stop: &AtomicBool,
+        report: &mut ScanUpdate,
+    ) -> Option<()> {
+        let mut free = std::mem::take(&mut self.free_keys);
+        free.clear();
+        let mut occ: Vec<(u64, ColorSlot)> = Vec::with_capacity(pts.len());
+        let cast = self.cast(
+            pts,
+            0,
+            origin,
+            colors,
+            max_range_m,
+            &mut free,
+            &mut occ,
+            Some(stop),
+        );
+        let Some((skipped, beyond)) = cast else {
+            self.free_keys = free;
+            return None;
+        };
+        report.points_skipped = skipped;
+        report.points_beyond_range = beyond;
+        let mut occupied = KeySet::new();
+        for &(code, _) in &occ {
+            occupied.insert(unmorton(code));
+        }
+        let mut log = PassLog::default();
+        let mut created = false;
+        if !free.is_empty() || !occupied.is_empty() {
+            created = self.ensure_root();
+        }
+        let mut free_count = 0;
+        let ups = free
+            .iter()
+            .filter(|k| !occupied.contains(*k))
+            .map(|k| (k, false))
+            .chain(occupied.iter().map(|k| (k, true)));
+        for (k, hit) in ups {
+            free_count += !hit as usize;
+            let u = Upd {
+                code: morton(k),
+                hit,
+            };
+            self.update_voxel(&u, created, &mut log);
+            created = false;
+        }
+        self.free_keys = free;
+        report.free_voxels = free_count;
+        report.occupied_voxels = occupied.len();
+        occ.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(slot_order(b.1).cmp(&slot_order(a.1))));
+        occ.dedup_by_key(|e| e.0);
+        log.flips.sort_unstable_by_key(|c| c.code);
+        report.changes = self.color_pass(&occ, log);
+        Some(())
+    }
+
+    /// The colour calls after a scan's occupancy updates (`ColorOcTree`'s `search` and
+    /// `setNodeColor`): each hit voxel's brightest colour goes to the node that holds the voxel
+    /// (the voxel itself or a pruned ancestor) if it is brighter than that node's, or the node
+    /// has none. Then the changes get their final colours, and the occupied voxels whose colour
+    /// changed without a flip are added as recolours, all in Morton order.
+    fn color_pass(&mut self, occ: &[(u64, ColorSlot)], log: PassLog) -> Vec<Change> {
+        let PassLog {
+            flips,
+            mut recolored,
+        } = log;
+        for &(code, c) in occ {
+            if c[3] == 0 {
+                continue;
+            }
+            let Some((r, depth)) = self.search(code, TREE_DEPTH) else {
+                continue;
+            };
+            let old = self.color(r.blk, r.slot as usize);
+            if old[3] == 1 && !brighter(c, old) {
+                continue;
+            }
+            self.set_color(r.blk, r.slot as usize, c);
+            if self.blocks[r.blk as usize].value[r.slot as usize] >= 0.0 {
+                push_voxels(&mut recolored, code, depth);
+            }
+        }
+        recolored.sort_unstable();
+        recolored.dedup();
+        let color_at = |t: &OcTree, code: u64| {
+            t.search(code, TREE_DEPTH)
+                .and_then(|(r, _)| t.node(r).color)
+        };
+        let mut out = Vec::with_capacity(flips.len() + recolored.len());
+        let mut k = 0;
+        for f in flips {
+            while k < recolored.len() && recolored[k] < f.code {
+                out.push(Change {
+                    code: recolored[k],
+                    occupied: true,
+                    color: color_at(self, recolored[k]),
+                    recolor: true,
+                });
+                k += 1;
+            }
+            if k < recolored.len() && recolored[k] == f.code {
+                k += 1;
+            }
+            let color = if f.occupied {
+                color_at(self, f.code)
+            } else {
+                None
+            };
+            out.push(Change { color, ..f });
+        }
+        for &code in &recolored[k..] {
+            out.push(Change {
+                code,
+                occupied: true,
+                color: color_at(self, code),
+                recolor: true,
+            });
+        }
+        out
     }
 
     /// Creates the root (log-odds 0, no colour) if the tree is empty; true if it did.
@@ -680,7 +884,7 @@ impl OcTree {
             self.blocks[0].mask = 1;
             self.blocks[0].value[0] = 0.0;
             self.blocks[0].child[0] = NONE;
-            self.set_color(0, 0, [255, 255, 255, 0]);
+            self.set_color(0, 0, NO_COLOR);
             self.nodes += 1;
         }
         created
@@ -695,28 +899,23 @@ impl OcTree {
     fn color(&self, blk: u32, slot: usize) -> ColorSlot {
         self.colors
             .as_ref()
-            .map_or([255, 255, 255, 0], |cs| cs[blk as usize][slot])
+            .map_or(NO_COLOR, |cs| cs[blk as usize][slot])
     }
 
     fn alloc_block(&mut self) -> u32 {
         if let Some(b) = self.free_list.pop() {
             self.blocks[b as usize] = Block::empty();
             if let Some(cs) = &mut self.colors {
-                cs[b as usize] = [[255, 255, 255, 0]; 8];
+                cs[b as usize] = [NO_COLOR; 8];
             }
             b
         } else {
             self.blocks.push(Block::empty());
             if let Some(cs) = &mut self.colors {
-                cs.push([[255, 255, 255, 0]; 8]);
+                cs.push([NO_COLOR; 8]);
             }
             (self.blocks.len() - 1) as u32
         }
-    }
-
-    /// Whether an update would leave a leaf of value `v` and colour `c` unchanged.
-    fn is_noop(&self, v: f32, c: ColorSlot, u: &Upd) -> bool {
-        self.at_clamp(v, u.hit) && (u.color[3] == 0 || (c[3] == 1 && !brighter(u.color, c)))
     }
 
     /// OctoMap's early abort: a value already clamped in the update's direction stays as it is.
@@ -761,7 +960,7 @@ impl OcTree {
             b.mask |= 1 << digit;
             b.value[digit] = 0.0;
             b.child[digit] = NONE;
-            self.set_color(cb, digit, [255, 255, 255, 0]);
+            self.set_color(cb, digit, NO_COLOR);
             self.nodes += 1;
         }
         created
@@ -774,46 +973,17 @@ impl OcTree {
         depth: u32,
         ups: &[Upd],
         just_created: bool,
-        changes: &mut Vec<Change>,
+        log: &mut PassLog,
     ) {
         if depth == TREE_DEPTH {
-            let u = &ups[0];
-            let v = self.blocks[blk as usize].value[slot];
-            let c = self.color(blk, slot);
-            let p = self.params;
-            let was_occ = v >= 0.0;
-            let mut nv = v;
-            if !self.at_clamp(v, u.hit) {
-                nv = v + if u.hit { p.hit_log } else { p.miss_log };
-                if nv < p.clamp_min_log {
-                    nv = p.clamp_min_log;
-                } else if nv > p.clamp_max_log {
-                    nv = p.clamp_max_log;
-                }
-            }
-            self.blocks[blk as usize].value[slot] = nv;
-            let mut nc = c;
-            if u.color[3] == 1 && (c[3] == 0 || brighter(u.color, c)) {
-                nc = u.color;
-                self.set_color(blk, slot, nc);
-            }
-            let now_occ = nv >= 0.0;
-            let flipped = just_created || was_occ != now_occ;
-            if flipped || (now_occ && nc != c) {
-                changes.push(Change {
-                    code: u.code,
-                    occupied: now_occ,
-                    color: (nc[3] == 1).then_some([nc[0], nc[1], nc[2]]),
-                    recolor: !flipped,
-                });
-            }
+            self.update_leaf(blk, slot, &ups[0], just_created, log);
             return;
         }
         if self.blocks[blk as usize].child[slot] == NONE && !just_created {
-            // A pruned node: expand it unless no update would change anything.
+            // A pruned node: expand it unless every update finds it clamped (OctoMap's early
+            // abort in `updateNode`).
             let v = self.blocks[blk as usize].value[slot];
-            let c = self.color(blk, slot);
-            if ups.iter().all(|u| self.is_noop(v, c, u)) {
+            if ups.iter().all(|u| self.at_clamp(v, u.hit)) {
                 return;
             }
         }
@@ -827,18 +997,114 @@ impl OcTree {
                 end += 1;
             }
             let created = self.create_child(child_blk, digit);
-            self.apply(
-                child_blk,
-                digit,
-                depth + 1,
-                &ups[start..end],
-                created,
-                changes,
-            );
+            self.apply(child_blk, digit, depth + 1, &ups[start..end], created, log);
             start = end;
         }
-        // Prune if the eight children are equal leaves, else hold the maximum of the children.
-        self.prune_or_max(blk, slot, child_blk);
+        // Prune if the eight children are leaves of equal value (`ColorOcTree::pruneNode`),
+        // else hold the maximum of the children.
+        if !self.prune_logged(blk, slot, child_blk, depth, ups[0].code, log) {
+            self.set_max(blk, slot, child_blk);
+        }
+    }
+
+    /// OctoMap's update of a depth-16 voxel (`updateNodeLogOdds` with its clamping) and its
+    /// change detection: a flip is logged when the voxel is new or its occupancy changed.
+    fn update_leaf(
+        &mut self,
+        blk: u32,
+        slot: usize,
+        u: &Upd,
+        just_created: bool,
+        log: &mut PassLog,
+    ) {
+        let v = self.blocks[blk as usize].value[slot];
+        let p = self.params;
+        let was_occ = v >= 0.0;
+        let mut nv = v;
+        if !self.at_clamp(v, u.hit) {
+            nv = v + if u.hit { p.hit_log } else { p.miss_log };
+            if nv < p.clamp_min_log {
+                nv = p.clamp_min_log;
+            } else if nv > p.clamp_max_log {
+                nv = p.clamp_max_log;
+            }
+        }
+        self.blocks[blk as usize].value[slot] = nv;
+        let now_occ = nv >= 0.0;
+        if just_created || was_occ != now_occ {
+            // The colour is the colour pass's to give (`color_pass`).
+            log.flips.push(Change {
+                code: u.code,
+                occupied: now_occ,
+                color: None,
+                recolor: false,
+            });
+        }
+    }
+
+    /// [`collapse_by_value`](Self::collapse_by_value) on the node at `depth` that holds voxel
+    /// `code`, logging the occupied voxels whose colour it changed; true if it collapsed.
+    fn prune_logged(
+        &mut self,
+        blk: u32,
+        slot: usize,
+        cb: u32,
+        depth: u32,
+        code: u64,
+        log: &mut PassLog,
+    ) -> bool {
+        let Some(children) = self.collapse_by_value(blk, slot, cb) else {
+            return false;
+        };
+        if self.colors.is_some() && self.blocks[blk as usize].value[slot] >= 0.0 {
+            let now = self.color(blk, slot);
+            let shift = 3 * (TREE_DEPTH - 1 - depth);
+            for (i, old) in children.into_iter().enumerate() {
+                if old != now {
+                    let child = (code & !(0o7u64 << shift)) | ((i as u64) << shift);
+                    push_voxels(&mut log.recolored, child, depth + 1);
+                }
+            }
+        }
+        true
+    }
+
+    /// OctoMap's `updateNode` of one voxel (`lazy_eval` off): nothing if the node holding it is
+    /// already clamped in the update's direction; else down from the root, expanding pruned
+    /// nodes and creating missing ones, the voxel updated, then back up, each node pruned if it
+    /// can be, else set to the maximum of its children. The way up stops at the first node that
+    /// neither collapsed nor changed value: nothing above it can change.
+    fn update_voxel(&mut self, u: &Upd, root_created: bool, log: &mut PassLog) {
+        // Per depth: the node (block, slot), and its value before, `None` if it is new.
+        let mut path = [(0u32, 0usize, None::<f32>); TREE_DEPTH as usize + 1];
+        let (mut blk, mut slot, mut just_created) = (0u32, 0usize, root_created);
+        path[0] = (0, 0, (!root_created).then(|| self.blocks[0].value[0]));
+        for depth in 0..TREE_DEPTH {
+            if self.blocks[blk as usize].child[slot] == NONE && !just_created {
+                let v = self.blocks[blk as usize].value[slot];
+                if self.at_clamp(v, u.hit) {
+                    return;
+                }
+            }
+            let cb = self.children_block(blk, slot, !just_created);
+            let digit = ((u.code >> (3 * (TREE_DEPTH - 1 - depth))) & 7) as usize;
+            just_created = self.create_child(cb, digit);
+            let before = (!just_created).then(|| self.blocks[cb as usize].value[digit]);
+            (blk, slot) = (cb, digit);
+            path[depth as usize + 1] = (blk, slot, before);
+        }
+        self.update_leaf(blk, slot, u, just_created, log);
+        for depth in (0..TREE_DEPTH).rev() {
+            let (b, s, before) = path[depth as usize];
+            let cb = self.blocks[b as usize].child[s];
+            if self.prune_logged(b, s, cb, depth, u.code, log) {
+                continue;
+            }
+            self.set_max(b, s, cb);
+            if before.is_some_and(|v| v.to_bits() == self.blocks[b as usize].value[s].to_bits()) {
+                break;
+            }
+        }
     }
 
     /// The root node, if the tree is not empty.
@@ -976,42 +1242,59 @@ impl OcTree {
         self.prune_or_max(blk, slot, cb);
     }
 
-    /// After a node's children changed: collapse them if they are eight equal leaves, else set
-    /// the node to the maximum of its children.
+    /// After a view's node's children changed: collapse them if they are eight leaves equal in
+    /// value and colour, else set the node to the maximum of its children.
     fn prune_or_max(&mut self, blk: u32, slot: usize, cb: u32) {
-        if !self.try_collapse(blk, slot, cb) {
-            let b = &self.blocks[cb as usize];
-            let mut max = -f32::MAX;
-            for i in 0..8 {
-                if b.mask & (1 << i) != 0 && b.value[i] > max {
-                    max = b.value[i];
-                }
-            }
-            self.blocks[blk as usize].value[slot] = max;
+        let same_colors = self.colors.as_ref().is_none_or(|cs| {
+            let row = &cs[cb as usize];
+            row.iter().all(|x| *x == row[0])
+        });
+        if !(same_colors && self.collapse_by_value(blk, slot, cb).is_some()) {
+            self.set_max(blk, slot, cb);
         }
     }
 
-    /// OctoMap's `pruneNode`: if the node's children (block `cb`) are eight leaves with equal
-    /// values (and colours), they are deleted and the node takes their value; true if so.
-    fn try_collapse(&mut self, blk: u32, slot: usize, cb: u32) -> bool {
+    /// Sets a node to the maximum of its children (block `cb`).
+    fn set_max(&mut self, blk: u32, slot: usize, cb: u32) {
+        let b = &self.blocks[cb as usize];
+        let mut max = -f32::MAX;
+        for i in 0..8 {
+            if b.mask & (1 << i) != 0 && b.value[i] > max {
+                max = b.value[i];
+            }
+        }
+        self.blocks[blk as usize].value[slot] = max;
+    }
+
+    /// `ColorOcTree::pruneNode`: if the node's children (block `cb`) are eight leaves of equal
+    /// log-odds, whatever their colours (`isNodeCollapsible`), they are deleted and the node
+    /// takes child 0's value and colour, the colour then replaced, when it is set, by the mean of
+    /// the children's set colours (`getAverageChildColor`). Returns the children's colours when
+    /// it collapsed.
+    fn collapse_by_value(&mut self, blk: u32, slot: usize, cb: u32) -> Option<[ColorSlot; 8]> {
         let b = &self.blocks[cb as usize];
         let collapsible = b.mask == 0xff
             && b.child.iter().all(|&x| x == NONE)
-            && b.value.iter().all(|&x| x == b.value[0])
-            && self.colors.as_ref().is_none_or(|cs| {
-                let row = &cs[cb as usize];
-                row.iter().all(|x| *x == row[0])
-            });
-        if collapsible {
-            let v0 = b.value[0];
-            let c0 = self.color(cb, 0);
-            self.free_list.push(cb);
-            self.nodes -= 8;
-            self.blocks[blk as usize].child[slot] = NONE;
-            self.blocks[blk as usize].value[slot] = v0;
-            self.set_color(blk, slot, c0);
+            && b.value.iter().all(|&x| x == b.value[0]);
+        if !collapsible {
+            return None;
         }
-        collapsible
+        let v0 = b.value[0];
+        let children = self
+            .colors
+            .as_ref()
+            .map_or([NO_COLOR; 8], |cs| cs[cb as usize]);
+        let color = if children[0][3] == 1 {
+            mean_color(&children)
+        } else {
+            children[0]
+        };
+        self.free_list.push(cb);
+        self.nodes -= 8;
+        self.blocks[blk as usize].child[slot] = NONE;
+        self.blocks[blk as usize].value[slot] = v0;
+        self.set_color(blk, slot, color);
+        Some(children)
     }
 
     /// Sets every inner node to the maximum of its children (after reading a `.bt`).
@@ -1101,7 +1384,7 @@ impl OcTree {
             }
             return;
         }
-        if self.try_collapse(blk, slot, cb) {
+        if self.collapse_by_value(blk, slot, cb).is_some() {
             *pruned += 1;
         }
     }
@@ -1157,15 +1440,43 @@ fn merge_sorted(mut lists: Vec<Vec<u64>>) -> Vec<u64> {
     lists.pop().unwrap_or_default()
 }
 
+/// The slot of a colour: white or none is no colour.
 fn color_slot(c: Option<[u8; 3]>) -> ColorSlot {
     match c {
-        Some(c) => [c[0], c[1], c[2], 1],
-        None => [255, 255, 255, 0],
+        Some(c) if c != WHITE => [c[0], c[1], c[2], 1],
+        _ => NO_COLOR,
     }
 }
 
+/// Sort key of a slot: set colours above unset ones, then by brightness.
+fn slot_order(c: ColorSlot) -> (u8, u64) {
+    (c[3], brightness_key([c[0], c[1], c[2]]))
+}
+
 fn brighter(a: ColorSlot, b: ColorSlot) -> bool {
-    luma([a[0], a[1], a[2]]) > luma([b[0], b[1], b[2]])
+    brightness_key([a[0], a[1], a[2]]) > brightness_key([b[0], b[1], b[2]])
+}
+
+/// `getAverageChildColor`: the integer mean, per channel, of the set colours; none if none is.
+fn mean_color(colors: &[ColorSlot]) -> ColorSlot {
+    let (mut sum, mut n) = ([0u32; 3], 0u32);
+    for c in colors.iter().filter(|c| c[3] == 1) {
+        for k in 0..3 {
+            sum[k] += c[k] as u32;
+        }
+        n += 1;
+    }
+    if n == 0 {
+        return NO_COLOR;
+    }
+    color_slot(Some(sum.map(|s| (s / n) as u8)))
+}
+
+/// Appends the depth-16 codes of the node at `depth` that holds voxel `code`.
+fn push_voxels(out: &mut Vec<u64>, code: u64, depth: u32) {
+    let shift = 3 * (TREE_DEPTH - depth.min(TREE_DEPTH));
+    let first = (code >> shift) << shift;
+    out.extend(first..first + (1u64 << shift));
 }
 
 /// A node of the tree (a handle, valid until the tree changes).
@@ -1302,15 +1613,24 @@ mod tests {
         assert!(up.free_voxels >= 9 && up.free_voxels <= 11);
     }
 
-    #[test]
-    fn brightest_colour_wins() {
+    /// A coloured tree after a scan of two points, coloured `colors`, in one voxel; the scan;
+    /// the occupied voxel's change.
+    fn two_points_in_a_voxel(colors: [[u8; 3]; 2]) -> (OcTree, Scan, Change) {
         let mut t = OcTree::new(0.1);
         t.enable_color();
         let mut s = scan(vec![[1.05, 0.05, 0.05], [1.06, 0.06, 0.06]]);
-        s.colors = Some(vec![[10, 10, 10], [200, 0, 0]]);
+        s.colors = Some(colors.to_vec());
         let up = t.insert_scan(&s, None);
-        let occ: Vec<_> = up.changes.iter().filter(|c| c.occupied).collect();
-        assert_eq!(occ[0].color, Some([200, 0, 0]));
+        let occ: Vec<_> = up.changes.into_iter().filter(|c| c.occupied).collect();
+        assert_eq!(occ.len(), 1);
+        (t, s, occ[0])
+    }
+
+    #[test]
+    fn brightest_colour_wins() {
+        let (mut t, mut s, occ) = two_points_in_a_voxel([[10, 10, 10], [200, 0, 0]]);
+        assert_eq!(occ.color, Some([200, 0, 0]));
+        let occ = [occ];
         s.colors = Some(vec![[100, 100, 100], [50, 50, 50]]);
         t.insert_scan(&s, None);
         let (n, _) = t.search(occ[0].code, 16).unwrap();
@@ -1319,6 +1639,62 @@ mod tests {
         t.insert_scan(&s, None);
         let (n, _) = t.search(occ[0].code, 16).unwrap();
         assert_eq!(t.node(n).color, Some([100, 100, 100]));
+    }
+
+    fn octant_points(n: usize) -> Vec<[f32; 3]> {
+        (0..n)
+            .map(|i| {
+                [
+                    10.25 + 0.5 * (i & 1) as f32,
+                    10.25 + 0.5 * ((i >> 1) & 1) as f32,
+                    10.25 + 0.5 * ((i >> 2) & 1) as f32,
+                ]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn coloured_leaves_prune_by_value_into_their_mean_colour() {
+        let mut t = OcTree::new(0.5);
+        t.enable_color();
+        let mut plain = OcTree::new(0.5);
+        // Seven of a depth-15 node's children, in seven colours: no pruning yet.
+        // Rays from below for the seven, from above for the eighth: none crosses another's cell.
+        let mut s = scan_at([0.0; 3], octant_points(7));
+        s.colors = Some((0..7).map(|i| [10 + 10 * i as u8, 20, 30]).collect());
+        t.insert_scan(&s, None);
+        plain.insert_scan(&s, None);
+        // The eighth, with the same log-odds: the node collapses, whatever the colours, into
+        // the mean of the set ones (the new child has none yet); its own darker point does not
+        // replace that.
+        let mut s = scan_at([20.0; 3], octant_points(8)[7..].to_vec());
+        s.colors = Some(vec![[1, 1, 1]]);
+        let up = t.insert_scan(&s, None);
+        plain.insert_scan(&s, None);
+        assert_eq!(t.num_nodes(), plain.num_nodes());
+        let code = morton(t.key_of(octant_points(1)[0]).unwrap());
+        let (n, d) = t.search(code, 16).unwrap();
+        assert_eq!(d, 15);
+        assert_eq!(t.node(n).color, Some([40, 20, 30]));
+        // The six voxels whose colour the pruning changed are recoloured changes (the fourth
+        // had the mean colour already), the new one is a change of state with that colour.
+        assert_eq!(up.changes.iter().filter(|c| c.recolor).count(), 6);
+        let occupied: Vec<_> = up.changes.iter().filter(|c| c.occupied).collect();
+        assert_eq!(occupied.len(), 7);
+        assert!(occupied.iter().all(|c| c.color == Some([40, 20, 30])));
+    }
+
+    #[test]
+    fn white_is_no_colour_and_equal_luma_is_decided_by_rgb() {
+        assert_eq!(
+            two_points_in_a_voxel([WHITE, [5, 6, 7]]).2.color,
+            Some([5, 6, 7])
+        );
+        // Equal luma (5870): the larger red wins, whatever the order of the points.
+        assert_eq!(luma([0, 10, 0]), luma([4, 0, 41]));
+        for colors in [[[0, 10, 0], [4, 0, 41]], [[4, 0, 41], [0, 10, 0]]] {
+            assert_eq!(two_points_in_a_voxel(colors).2.color, Some([4, 0, 41]));
+        }
     }
 
     #[test]
