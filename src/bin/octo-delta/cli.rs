@@ -184,8 +184,9 @@ pub struct BuildArgs {
     #[arg(long)]
     pub no_color: bool,
 
-    /// Also resend an occupied voxel when a brighter colour is found for it (by default a
-    /// voxel's colour is sent once, when it becomes occupied, as in the paper).
+    /// Also resend an occupied voxel when its colour changes (a brighter point, or pruning
+    /// averaging it as OctoMap's ColorOcTree does); by default a voxel's colour is sent once,
+    /// when it becomes occupied, as in the paper.
     #[arg(long, conflicts_with = "no_color")]
     pub color_updates: bool,
 
