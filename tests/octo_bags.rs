@@ -184,6 +184,13 @@ fn pose_topics_pose_the_clouds() {
         &["--pose-topic", "/odom"],
         "Odometry named",
     );
+    let bag = write_bag(dir.path(), "rosbag2-mcap", &["--pose", "transform"]);
+    assert_same_map(
+        dir.path(),
+        &bag,
+        &["--pose-topic", "/sensor_pose"],
+        "TransformStamped named",
+    );
 }
 
 #[test]

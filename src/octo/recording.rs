@@ -452,3 +452,206 @@ fn pose_of(
     t.to_pose()
         .ok_or_else(|| format!("no pose for cloud frame {frame:?} in {to}: not finite as f32"))
 }
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+    use std::io::Cursor;
+
+    use super::*;
+    use crate::octo::ros::{ByteOrder, TransformStamped};
+
+    const S: i64 = 1_000_000_000;
+
+    fn tf(stamp_ns: i64, parent: &str, child: &str, x: f64, yaw_rad: f64) -> TransformStamped {
+        TransformStamped {
+            header: Header {
+                stamp_ns,
+                frame_id: parent.into(),
+            },
+            child_frame_id: child.into(),
+            transform: Transform {
+                translation_m: [x, 0.0, 0.0],
+                rotation: [(yaw_rad / 2.0).cos(), 0.0, 0.0, (yaw_rad / 2.0).sin()],
+            },
+        }
+    }
+
+    /// An MCAP of `(topic, schema, log time, payload)` messages.
+    fn mcap(messages: &[(&str, &str, i64, Vec<u8>)]) -> Vec<u8> {
+        let mut w = ::mcap::WriteOptions::new()
+            .compression(None)
+            .create(Cursor::new(Vec::new()))
+            .unwrap();
+        let mut channels = BTreeMap::new();
+        for (topic, schema, t, data) in messages {
+            let id = match channels.get(topic) {
+                Some(&id) => id,
+                None => {
+                    let s = w.add_schema(schema, "ros2msg", b"").unwrap();
+                    let id = w.add_channel(s, topic, "cdr", &BTreeMap::new()).unwrap();
+                    channels.insert(*topic, id);
+                    id
+                }
+            };
+            let header = ::mcap::records::MessageHeader {
+                channel_id: id,
+                sequence: 0,
+                log_time: *t as u64,
+                publish_time: *t as u64,
+            };
+            w.write_to_known_channel(&header, data).unwrap();
+        }
+        w.finish().unwrap();
+        w.into_inner().into_inner()
+    }
+
+    fn cloud(stamp_ns: i64, frame: &str) -> Vec<u8> {
+        let scan = Scan {
+            points: vec![[1.0, 0.0, 0.0]],
+            ..Scan::default()
+        };
+        let header = Header {
+            stamp_ns,
+            frame_id: frame.into(),
+        };
+        ros::encode_point_cloud2(&header, &scan, ByteOrder::Little)
+    }
+
+    fn tf_msg(transforms: &[TransformStamped]) -> Vec<u8> {
+        ros::encode_tf_message(transforms, ByteOrder::Little)
+    }
+
+    fn read(bytes: Vec<u8>, options: &RecordingOptions) -> Result<Vec<Item>, RecordingError> {
+        let stop = AtomicBool::new(false);
+        let mut rec = Recording::from_mcap_bytes("t.mcap", bytes, options, &stop)?;
+        let items = rec.scans(&stop)?.collect::<Result<Vec<_>, _>>()?;
+        Ok(items)
+    }
+
+    fn pose(item: &Item) -> Pose {
+        match item {
+            Item::Scan(s) => s.pose,
+            Item::Skipped(r) => panic!("skipped: {r}"),
+        }
+    }
+
+    #[test]
+    fn a_cloud_between_two_transforms_is_posed_between_them_through_the_chain() {
+        let quarter = std::f64::consts::FRAC_PI_2;
+        let bytes = mcap(&[
+            (
+                "/tf_static",
+                TF_TYPE,
+                0,
+                tf_msg(&[tf(0, "base", "lidar", 0.5, 0.0)]),
+            ),
+            ("/tf", TF_TYPE, 0, tf_msg(&[tf(0, "map", "base", 0.0, 0.0)])),
+            (
+                "/tf",
+                TF_TYPE,
+                2 * S,
+                tf_msg(&[tf(2 * S, "map", "base", 2.0, quarter)]),
+            ),
+            ("/points", ros::POINT_CLOUD2_SCHEMA, S, cloud(S, "lidar")),
+            (
+                "/points",
+                ros::POINT_CLOUD2_SCHEMA,
+                2 * S,
+                cloud(2 * S, "lidar"),
+            ),
+            (
+                "/points",
+                ros::POINT_CLOUD2_SCHEMA,
+                3 * S,
+                cloud(3 * S, "lidar"),
+            ),
+        ]);
+        let items = read(bytes, &RecordingOptions::default()).unwrap();
+        assert_eq!(items.len(), 3);
+        // Halfway: base at x = 1 turned 45 degrees; the lidar 0.5 m ahead of it.
+        let p = pose(&items[0]);
+        let h = std::f64::consts::FRAC_1_SQRT_2 * 0.5;
+        let expect = [1.0 + h, h, 0.0];
+        for (got, want) in p.translation_m.iter().zip(expect) {
+            assert!((f64::from(*got) - want).abs() < 1e-6, "{p:?}");
+        }
+        let yaw = 2.0 * f64::from(p.rotation[3]).atan2(f64::from(p.rotation[0]));
+        assert!((yaw - quarter / 2.0).abs() < 1e-6, "{p:?}");
+        // At the last sample: exactly it (x = 2 + lidar offset turned 90 degrees).
+        let p = pose(&items[1]);
+        assert!((p.translation_m[0] - 2.0).abs() < 1e-6 && (p.translation_m[1] - 0.5).abs() < 1e-6);
+        // After it: skipped, naming the frames.
+        match &items[2] {
+            Item::Skipped(r) => assert!(
+                r.contains("\"lidar\"") && r.contains("\"map\"") && r.contains("after"),
+                "{r}"
+            ),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_named_fixed_frame_is_used_and_an_unknown_one_refused() {
+        let bytes = || {
+            mcap(&[
+                (
+                    "/tf_static",
+                    TF_TYPE,
+                    0,
+                    tf_msg(&[
+                        tf(0, "map", "odom", 10.0, 0.0),
+                        tf(0, "odom", "lidar", 1.0, 0.0),
+                    ]),
+                ),
+                ("/points", ros::POINT_CLOUD2_SCHEMA, S, cloud(S, "lidar")),
+            ])
+        };
+        let odom = RecordingOptions {
+            fixed_frame: Some("odom".into()),
+            ..RecordingOptions::default()
+        };
+        assert_eq!(
+            pose(&read(bytes(), &odom).unwrap()[0]).translation_m,
+            [1.0, 0.0, 0.0]
+        );
+        assert_eq!(
+            pose(&read(bytes(), &RecordingOptions::default()).unwrap()[0]).translation_m,
+            [11.0, 0.0, 0.0]
+        );
+        let nowhere = RecordingOptions {
+            fixed_frame: Some("nowhere".into()),
+            ..RecordingOptions::default()
+        };
+        let e = read(bytes(), &nowhere).err().unwrap().to_string();
+        assert!(e.starts_with("t.mcap: --fixed-frame \"nowhere\""), "{e}");
+    }
+
+    #[test]
+    fn no_pose_source_is_an_error_unless_the_origin_is_given() {
+        let bytes = || mcap(&[("/points", ros::POINT_CLOUD2_SCHEMA, S, cloud(S, "lidar"))]);
+        let e = read(bytes(), &RecordingOptions::default()).err().unwrap();
+        assert!(e.to_string().contains("--origin"), "{e}");
+        let given = RecordingOptions {
+            origin_given: true,
+            ..RecordingOptions::default()
+        };
+        assert_eq!(pose(&read(bytes(), &given).unwrap()[0]), Pose::IDENTITY);
+    }
+
+    #[test]
+    fn a_bad_message_names_the_file_and_its_offset() {
+        let mut bad = tf_msg(&[tf(0, "map", "lidar", 0.0, 0.0)]);
+        bad.truncate(bad.len() - 3);
+        let bytes = mcap(&[
+            ("/tf", TF_TYPE, 0, bad),
+            ("/points", ros::POINT_CLOUD2_SCHEMA, S, cloud(S, "lidar")),
+        ]);
+        let e = read(bytes, &RecordingOptions::default())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.starts_with("t.mcap: offset "), "{e}");
+        assert!(e.contains("TFMessage"), "{e}");
+    }
+}

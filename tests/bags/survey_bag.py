@@ -9,6 +9,7 @@ float32, optionally coloured and organised with NaN holes) and the node's pose a
           node's pose exactly
   pose    /pose geometry_msgs/msg/PoseStamped at every cloud's stamp
   odom    /odom nav_msgs/msg/Odometry at every cloud's stamp
+  transform  /sensor_pose geometry_msgs/msg/TransformStamped at every cloud's stamp
   none    no pose at all
 
 Kinds (the container and its writer):
@@ -156,6 +157,9 @@ def messages(scans, pose_kind, color, organised, late, fault=None):
             elif pose_kind == "pose":
                 out.append(("/pose", "geometry_msgs/msg/PoseStamped", ns, T["geometry_msgs/msg/PoseStamped"](
                     header=header(ns, "map"), pose=pose(t, q))))
+            elif pose_kind == "transform":
+                out.append(("/sensor_pose", "geometry_msgs/msg/TransformStamped", ns,
+                            tf_stamped(ns, "map", "sensor", t, q)))
             elif pose_kind == "odom":
                 cov = np.zeros(36, dtype=np.float64)
                 out.append(("/odom", "nav_msgs/msg/Odometry", ns, T["nav_msgs/msg/Odometry"](
@@ -229,7 +233,7 @@ def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--graph", required=True)
     p.add_argument("--kind", required=True, choices=["db3", "rosbag2-mcap", "mcap-zstd", "mcap-lz4", "mcap-none", "mcap-ros2"])
-    p.add_argument("--pose", default="tf", choices=["tf", "pose", "odom", "none"])
+    p.add_argument("--pose", default="tf", choices=["tf", "pose", "odom", "transform", "none"])
     p.add_argument("--color", action="store_true")
     p.add_argument("--organised", action="store_true")
     p.add_argument("--late", action="store_true")
