@@ -990,6 +990,10 @@ fn lz4_into(input: &[u8], max: u64, out: &mut Vec<u8>) -> Result<(), String> {
 
 fn read_limited(reader: impl Read, max: u64, out: &mut Vec<u8>) -> io::Result<()> {
     out.clear();
+    // Room for exactly what the chunk says (and the one byte that shows it lied), so the buffer
+    // is one chunk, not read_to_end's doubling of it; claims above 256 MiB grow as they prove true.
+    let want = usize::try_from(max.saturating_add(1).min(1 << 28)).unwrap_or(1 << 28);
+    out.reserve_exact(want);
     reader.take(max.saturating_add(1)).read_to_end(out)?;
     Ok(())
 }
