@@ -115,7 +115,7 @@ impl Recording {
         options: &RecordingOptions,
         stop: &AtomicBool,
     ) -> Result<Recording, RecordingError> {
-        let bag = Bag::open(path)?;
+        let bag = Bag::open_until(path, stop)?;
         Self::with_bag(bag, path.display().to_string(), options, stop)
     }
 
@@ -126,7 +126,7 @@ impl Recording {
         options: &RecordingOptions,
         stop: &AtomicBool,
     ) -> Result<Recording, RecordingError> {
-        let bag = Bag::from_mcap_bytes(name, bytes)?;
+        let bag = Bag::from_mcap_bytes_until(name, bytes, stop)?;
         Self::with_bag(bag, name.to_string(), options, stop)
     }
 

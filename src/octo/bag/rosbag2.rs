@@ -8,6 +8,7 @@
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
 
 use rusqlite::types::ValueRef;
 use rusqlite::{Connection, OpenFlags};
@@ -42,7 +43,7 @@ fn shown(path: &Path) -> String {
 }
 
 /// A bag at `path`: a rosbag2 directory, its metadata.yaml, one .db3 file, or an MCAP file.
-pub(super) fn open(path: &Path) -> Result<Bag, BagError> {
+pub(super) fn open(path: &Path, stop: &AtomicBool) -> Result<Bag, BagError> {
     let name = shown(path);
     if path.is_dir() {
         let yaml = path.join("metadata.yaml");
@@ -52,12 +53,12 @@ pub(super) fn open(path: &Path) -> Result<Bag, BagError> {
                 "not a rosbag2 directory (expected a metadata.yaml in it, found none)",
             ));
         }
-        return open_directory(&yaml, path);
+        return open_directory(&yaml, path, stop);
     }
     let file_name = path.file_name().map(|n| n.to_string_lossy().into_owned());
     let dir = path.parent().unwrap_or(Path::new("."));
     if file_name.as_deref() == Some("metadata.yaml") {
-        return open_directory(path, dir);
+        return open_directory(path, dir, stop);
     }
     // One file alone: with the directory's compression mode when its metadata lists the file.
     let beside = dir.join("metadata.yaml");
@@ -75,7 +76,7 @@ pub(super) fn open(path: &Path) -> Result<Bag, BagError> {
     let source = if db3 {
         Source::Db3(Db3File::open(&name, path, &mut topics, true)?)
     } else {
-        Source::Mcap(McapFile::open(&name, path, &mut topics, true)?)
+        Source::Mcap(McapFile::open(&name, path, &mut topics, true, stop)?)
     };
     Ok(Bag {
         topics,
@@ -84,7 +85,7 @@ pub(super) fn open(path: &Path) -> Result<Bag, BagError> {
     })
 }
 
-fn open_directory(yaml: &Path, dir: &Path) -> Result<Bag, BagError> {
+fn open_directory(yaml: &Path, dir: &Path, stop: &AtomicBool) -> Result<Bag, BagError> {
     let meta = read_metadata(yaml)?;
     let mut topics: Vec<Topic> = Vec::new();
     for (name, schema, encoding, count) in &meta.topics {
@@ -102,7 +103,7 @@ fn open_directory(yaml: &Path, dir: &Path) -> Result<Bag, BagError> {
         let name = shown(&path);
         sources.push(match meta.storage {
             Storage::Sqlite3 => Source::Db3(Db3File::open(&name, &path, &mut topics, false)?),
-            Storage::Mcap => Source::Mcap(McapFile::open(&name, &path, &mut topics, false)?),
+            Storage::Mcap => Source::Mcap(McapFile::open(&name, &path, &mut topics, false, stop)?),
         });
     }
     Ok(Bag {
