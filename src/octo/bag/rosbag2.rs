@@ -12,6 +12,8 @@ use std::sync::atomic::AtomicBool;
 
 use rusqlite::types::ValueRef;
 use rusqlite::{Connection, OpenFlags};
+use yaml_rust2::parser::{Event, MarkedEventReceiver, Parser};
+use yaml_rust2::scanner::Marker;
 use yaml_rust2::{Yaml, YamlLoader};
 
 use super::mcap::{McapFile, topic_index};
@@ -163,9 +165,25 @@ fn text<'y>(y: &'y Yaml, field: &str) -> Result<&'y str, String> {
     }
 }
 
+/// Finds the first YAML alias (`*name`) of a document, where it is.
+#[derive(Default)]
+struct FirstAlias(Option<Marker>);
+
+impl MarkedEventReceiver for FirstAlias {
+    fn on_event(&mut self, ev: Event, mark: Marker) {
+        if matches!(ev, Event::Alias(_)) && self.0.is_none() {
+            self.0 = Some(mark);
+        }
+    }
+}
+
 /// `metadata.yaml`'s text parsed; the error says which field is wrong.
+///
+/// Aliases are refused before the document is loaded: the loader copies the anchored value at
+/// each alias, so a few lines of nested aliases (a "billion laughs") would fill memory, and
+/// rosbag2 never writes any.
 fn parse_metadata(text_in: &str) -> Result<Metadata, String> {
-    let docs = YamlLoader::load_from_str(text_in).map_err(|e| {
+    let yaml_error = |e: yaml_rust2::ScanError| {
         let m = e.marker();
         format!(
             "rosbag2 metadata: line {} column {}: expected YAML, found an error: {}",
@@ -173,7 +191,20 @@ fn parse_metadata(text_in: &str) -> Result<Metadata, String> {
             m.col() + 1,
             e.info()
         )
-    })?;
+    };
+    let mut alias = FirstAlias::default();
+    Parser::new_from_str(text_in)
+        .load(&mut alias, true)
+        .map_err(yaml_error)?;
+    if let Some(m) = alias.0 {
+        return Err(format!(
+            "rosbag2 metadata: line {} column {}: expected plain YAML (rosbag2 writes no \
+             anchors or aliases), found an alias",
+            m.line(),
+            m.col() + 1
+        ));
+    }
+    let docs = YamlLoader::load_from_str(text_in).map_err(yaml_error)?;
     let root = docs.first().unwrap_or(&Yaml::BadValue);
     let info = &root["rosbag2_bagfile_information"];
     if !matches!(info, Yaml::Hash(_)) {
