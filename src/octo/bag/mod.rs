@@ -244,6 +244,12 @@ impl Bag {
         })
     }
 
+    /// The files opening the bag at `path` may read (the path itself, its directory's
+    /// `metadata.yaml` and the files that lists), so a caller can refuse to write over them.
+    pub fn files(path: &Path) -> Vec<std::path::PathBuf> {
+        rosbag2::files(path)
+    }
+
     /// Whether `path` is a bag this module opens by its name/shape (a directory with
     /// metadata.yaml, a metadata.yaml, a .db3, a .mcap), for format detection.
     pub fn is_bag_path(path: &Path) -> bool {

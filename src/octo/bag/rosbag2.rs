@@ -87,6 +87,28 @@ pub(super) fn open(path: &Path, stop: &AtomicBool) -> Result<Bag, BagError> {
     })
 }
 
+/// The files reading the bag at `path` reads: the path itself when it is a file, the
+/// `metadata.yaml` of its directory (when there is one) and the files that metadata lists (all
+/// of them; when it does not parse, none).
+pub(super) fn files(path: &Path) -> Vec<PathBuf> {
+    let (dir, mut out) = if path.is_dir() {
+        (path, Vec::new())
+    } else {
+        (
+            path.parent().unwrap_or(Path::new(".")),
+            vec![path.to_path_buf()],
+        )
+    };
+    let yaml = dir.join("metadata.yaml");
+    if yaml.is_file() {
+        if let Ok(meta) = read_metadata(&yaml) {
+            out.extend(meta.files.iter().map(|f| dir.join(f)));
+        }
+        out.push(yaml);
+    }
+    out
+}
+
 fn open_directory(yaml: &Path, dir: &Path, stop: &AtomicBool) -> Result<Bag, BagError> {
     let meta = read_metadata(yaml)?;
     let mut topics: Vec<Topic> = Vec::new();
