@@ -343,6 +343,14 @@ impl Recording {
         self.poses.is_some()
     }
 
+    /// The name of the cloud topic read.
+    pub fn cloud_topic(&self) -> &str {
+        self.bag
+            .topics()
+            .get(self.cloud_topic)
+            .map_or("", |t| t.name.as_str())
+    }
+
     /// How many clouds the bag says it holds, when it says.
     pub fn cloud_count(&self) -> Option<u64> {
         self.bag.topics()[self.cloud_topic].messages
