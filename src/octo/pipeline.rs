@@ -844,6 +844,20 @@ pub fn build(
             }
         }
         if let Some(rec) = &recording {
+            // A bag that says it has clouds but gives none (its metadata.yaml lists a topic its
+            // .db3 lacks) is not an empty survey.
+            if posed == 0
+                && skipped == 0
+                && let Some(n) = rec.cloud_count().filter(|&n| n > 0)
+            {
+                return Err(PipelineError::Recording(RecordingError::Unusable {
+                    file: name,
+                    message: format!(
+                        "cloud topic {:?}: expected {n} messages (as the bag says), found none",
+                        rec.cloud_topic()
+                    ),
+                }));
+            }
             if posed == 0
                 && let Some(reason) = first_reason
             {

@@ -115,7 +115,7 @@ impl Recording {
         options: &RecordingOptions,
         stop: &AtomicBool,
     ) -> Result<Recording, RecordingError> {
-        let bag = Bag::open(path)?;
+        let bag = Bag::open_until(path, stop)?;
         Self::with_bag(bag, path.display().to_string(), options, stop)
     }
 
@@ -126,7 +126,7 @@ impl Recording {
         options: &RecordingOptions,
         stop: &AtomicBool,
     ) -> Result<Recording, RecordingError> {
-        let bag = Bag::from_mcap_bytes(name, bytes)?;
+        let bag = Bag::from_mcap_bytes_until(name, bytes, stop)?;
         Self::with_bag(bag, name.to_string(), options, stop)
     }
 
@@ -341,6 +341,14 @@ impl Recording {
     /// `--origin` (only possible when [`RecordingOptions::origin_given`]).
     pub fn has_poses(&self) -> bool {
         self.poses.is_some()
+    }
+
+    /// The name of the cloud topic read.
+    pub fn cloud_topic(&self) -> &str {
+        self.bag
+            .topics()
+            .get(self.cloud_topic)
+            .map_or("", |t| t.name.as_str())
     }
 
     /// How many clouds the bag says it holds, when it says.

@@ -374,13 +374,17 @@ impl TfTree {
             }
         }
         // Walk up from every frame; a frame met twice on one walk closes a cycle. Frames known
-        // to reach a root are not walked again, so this is linear in the frames.
+        // to reach a root are not walked again, and a walk's frames are also kept in a set, so
+        // this is n log n in the frames (a chain of 100 000 frames too).
         let mut reach_root: BTreeSet<&str> = BTreeSet::new();
         for start in self.links.keys() {
             let mut path: Vec<&str> = Vec::new();
+            let mut on_path: BTreeSet<&str> = BTreeSet::new();
             let mut frame = start.as_str();
             while !reach_root.contains(frame) {
-                if let Some(k) = path.iter().position(|&f| f == frame) {
+                if !on_path.insert(frame)
+                    && let Some(k) = path.iter().position(|&f| f == frame)
+                {
                     return Err(TfError::Cycle {
                         frames: path
                             .get(k..)
@@ -492,10 +496,17 @@ impl TfTree {
         }
         let up = self.path_up(frame);
         let down = self.path_up(fixed);
+        // Indexed, so a deep chain costs its length, not its length squared.
+        let down_at: BTreeMap<&str, usize> = down
+            .iter()
+            .enumerate()
+            .rev()
+            .map(|(j, f)| (*f, j))
+            .collect();
         let common = up
             .iter()
             .enumerate()
-            .find_map(|(i, f)| down.iter().position(|g| g == f).map(|j| (i, j)));
+            .find_map(|(i, f)| down_at.get(f).map(|&j| (i, j)));
         let Some((i, j)) = common else {
             return Err(Unavailable::NotConnected {
                 frame: frame.to_string(),

@@ -14,6 +14,7 @@ use rovlink::cli::output::{Dest, Kind, Outputs};
 use rovlink::cli::rows::{RowFormat, RowWriter};
 use rovlink::cli::{UsageError, progress, stop};
 use rovlink::io::EXIT_OK;
+use rovlink::octo::bag::Bag;
 use rovlink::octo::pipeline::{self, Hooks, SinkError, StatsRow};
 use rovlink::octo::{files, transfer, view};
 use rovlink::say;
@@ -55,6 +56,14 @@ fn build(a: &BuildArgs) -> Result<u8> {
     let link = link.map_err(|e| UsageError(format!("--link: {e}")))?;
     let mut outs = Outputs::new();
     outs.inputs(a.inputs.iter().map(PathBuf::as_path));
+    // A bag's own files (a rosbag2 directory's .db3 files and metadata.yaml) are inputs too.
+    let bag_files: Vec<PathBuf> = a
+        .inputs
+        .iter()
+        .filter(|p| Bag::is_bag_path(p) || a.format.is_some_and(|f| f.is_bag()))
+        .flat_map(|p| Bag::files(p))
+        .collect();
+    outs.inputs(bag_files.iter().map(PathBuf::as_path));
     outs.input(a.link.as_deref().map(Path::new));
     let stream = outs.claim("-o", &a.output, Kind::Binary)?;
     let bt = outs.claim_opt("--bt", a.bt.as_deref(), Kind::Binary)?;

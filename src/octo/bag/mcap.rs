@@ -260,6 +260,7 @@ impl McapFile {
         path: &std::path::Path,
         topics: &mut Vec<Topic>,
         count: bool,
+        stop: &AtomicBool,
     ) -> Result<McapFile, BagError> {
         let file =
             File::open(path).map_err(|e| BagError::io(Location::file(name), "opening", e))?;
@@ -268,6 +269,7 @@ impl McapFile {
             Box::new(BufReader::with_capacity(1 << 16, file)),
             topics,
             count,
+            stop,
         )
     }
 
@@ -276,8 +278,9 @@ impl McapFile {
         name: &str,
         bytes: Vec<u8>,
         topics: &mut Vec<Topic>,
+        stop: &AtomicBool,
     ) -> Result<McapFile, BagError> {
-        Self::new(name, Box::new(Cursor::new(bytes)), topics, true)
+        Self::new(name, Box::new(Cursor::new(bytes)), topics, true, stop)
     }
 
     pub(crate) fn name(&self) -> &str {
@@ -289,6 +292,7 @@ impl McapFile {
         mut input: Box<dyn Input>,
         topics: &mut Vec<Topic>,
         count: bool,
+        stop: &AtomicBool,
     ) -> Result<McapFile, BagError> {
         let io = |e| BagError::io(Location::file(name), "reading", e);
         let len = input.seek(SeekFrom::End(0)).map_err(io)?;
@@ -317,7 +321,13 @@ impl McapFile {
         if found.channels.is_empty() {
             // No summary to trust: a first walk over the file finds the channels and counts.
             let mut walk = Walk::new(true);
-            while walk.next(&mut file, &[], None)?.is_some() {}
+            while walk.next(&mut file, &[], Some(stop))?.is_some() {}
+            if stop.load(Ordering::Relaxed) {
+                return Err(BagError::new(
+                    Location::file(name),
+                    "stopped (by a signal) during the first walk over the file",
+                ));
+            }
             found = walk.found;
             found.counted = true;
         }
@@ -746,6 +756,10 @@ impl Walk {
     ) -> Result<Option<Message>, BagError> {
         let name = file.name.clone();
         loop {
+            // Also inside a chunk: a decompressed chunk of a million small records is a long walk.
+            if stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
+                return Ok(None);
+            }
             if let Some(chunk) = &mut self.chunk {
                 let buf = if chunk.compressed_at.is_some() {
                     &self.records
@@ -783,9 +797,6 @@ impl Walk {
                     }
                 }
                 continue;
-            }
-            if stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
-                return Ok(None);
             }
             let at_file =
                 |e: ParseError| BagError::new(Location::offset(&name, e.offset), e.message);

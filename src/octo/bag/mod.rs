@@ -49,6 +49,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 pub(crate) mod mcap;
 mod rosbag2;
 
+/// A stop flag never set, for the openings that cannot be stopped.
+static NEVER: AtomicBool = AtomicBool::new(false);
+
 /// The largest decompressed MCAP chunk or rosbag2 payload accepted: 1 GiB.
 pub const MAX_CHUNK_BYTES: u64 = 1 << 30;
 
@@ -212,18 +215,39 @@ type Messages<'a> = Box<dyn Iterator<Item = Result<Message, BagError>> + 'a>;
 impl Bag {
     /// An MCAP file, a rosbag2 directory, its metadata.yaml, or one .db3 (or .mcap) file of it.
     pub fn open(path: &Path) -> Result<Bag, BagError> {
-        rosbag2::open(path)
+        Bag::open_until(path, &NEVER)
+    }
+
+    /// [`Bag::open`], giving up (with an error) once `stop` is set: opening an MCAP file
+    /// without a summary walks the whole file.
+    pub fn open_until(path: &Path, stop: &AtomicBool) -> Result<Bag, BagError> {
+        rosbag2::open(path, stop)
     }
 
     /// An MCAP file already in memory (standard input), named `name` in errors.
     pub fn from_mcap_bytes(name: &str, bytes: Vec<u8>) -> Result<Bag, BagError> {
+        Bag::from_mcap_bytes_until(name, bytes, &NEVER)
+    }
+
+    /// [`Bag::from_mcap_bytes`], giving up (with an error) once `stop` is set.
+    pub fn from_mcap_bytes_until(
+        name: &str,
+        bytes: Vec<u8>,
+        stop: &AtomicBool,
+    ) -> Result<Bag, BagError> {
         let mut topics = Vec::new();
-        let file = mcap::McapFile::from_bytes(name, bytes, &mut topics)?;
+        let file = mcap::McapFile::from_bytes(name, bytes, &mut topics, stop)?;
         Ok(Bag {
             topics,
             sources: vec![Source::Mcap(file)],
             compressed_messages: false,
         })
+    }
+
+    /// The files opening the bag at `path` may read (the path itself, its directory's
+    /// `metadata.yaml` and the files that lists), so a caller can refuse to write over them.
+    pub fn files(path: &Path) -> Vec<std::path::PathBuf> {
+        rosbag2::files(path)
     }
 
     /// Whether `path` is a bag this module opens by its name/shape (a directory with

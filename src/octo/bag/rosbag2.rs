@@ -8,9 +8,12 @@
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
 
 use rusqlite::types::ValueRef;
 use rusqlite::{Connection, OpenFlags};
+use yaml_rust2::parser::{Event, MarkedEventReceiver, Parser};
+use yaml_rust2::scanner::Marker;
 use yaml_rust2::{Yaml, YamlLoader};
 
 use super::mcap::{McapFile, topic_index};
@@ -42,7 +45,7 @@ fn shown(path: &Path) -> String {
 }
 
 /// A bag at `path`: a rosbag2 directory, its metadata.yaml, one .db3 file, or an MCAP file.
-pub(super) fn open(path: &Path) -> Result<Bag, BagError> {
+pub(super) fn open(path: &Path, stop: &AtomicBool) -> Result<Bag, BagError> {
     let name = shown(path);
     if path.is_dir() {
         let yaml = path.join("metadata.yaml");
@@ -52,12 +55,12 @@ pub(super) fn open(path: &Path) -> Result<Bag, BagError> {
                 "not a rosbag2 directory (expected a metadata.yaml in it, found none)",
             ));
         }
-        return open_directory(&yaml, path);
+        return open_directory(&yaml, path, stop);
     }
     let file_name = path.file_name().map(|n| n.to_string_lossy().into_owned());
     let dir = path.parent().unwrap_or(Path::new("."));
     if file_name.as_deref() == Some("metadata.yaml") {
-        return open_directory(path, dir);
+        return open_directory(path, dir, stop);
     }
     // One file alone: with the directory's compression mode when its metadata lists the file.
     let beside = dir.join("metadata.yaml");
@@ -75,7 +78,7 @@ pub(super) fn open(path: &Path) -> Result<Bag, BagError> {
     let source = if db3 {
         Source::Db3(Db3File::open(&name, path, &mut topics, true)?)
     } else {
-        Source::Mcap(McapFile::open(&name, path, &mut topics, true)?)
+        Source::Mcap(McapFile::open(&name, path, &mut topics, true, stop)?)
     };
     Ok(Bag {
         topics,
@@ -84,7 +87,29 @@ pub(super) fn open(path: &Path) -> Result<Bag, BagError> {
     })
 }
 
-fn open_directory(yaml: &Path, dir: &Path) -> Result<Bag, BagError> {
+/// The files reading the bag at `path` reads: the path itself when it is a file, the
+/// `metadata.yaml` of its directory (when there is one) and the files that metadata lists (all
+/// of them; when it does not parse, none).
+pub(super) fn files(path: &Path) -> Vec<PathBuf> {
+    let (dir, mut out) = if path.is_dir() {
+        (path, Vec::new())
+    } else {
+        (
+            path.parent().unwrap_or(Path::new(".")),
+            vec![path.to_path_buf()],
+        )
+    };
+    let yaml = dir.join("metadata.yaml");
+    if yaml.is_file() {
+        if let Ok(meta) = read_metadata(&yaml) {
+            out.extend(meta.files.iter().map(|f| dir.join(f)));
+        }
+        out.push(yaml);
+    }
+    out
+}
+
+fn open_directory(yaml: &Path, dir: &Path, stop: &AtomicBool) -> Result<Bag, BagError> {
     let meta = read_metadata(yaml)?;
     let mut topics: Vec<Topic> = Vec::new();
     for (name, schema, encoding, count) in &meta.topics {
@@ -102,7 +127,7 @@ fn open_directory(yaml: &Path, dir: &Path) -> Result<Bag, BagError> {
         let name = shown(&path);
         sources.push(match meta.storage {
             Storage::Sqlite3 => Source::Db3(Db3File::open(&name, &path, &mut topics, false)?),
-            Storage::Mcap => Source::Mcap(McapFile::open(&name, &path, &mut topics, false)?),
+            Storage::Mcap => Source::Mcap(McapFile::open(&name, &path, &mut topics, false, stop)?),
         });
     }
     Ok(Bag {
@@ -162,9 +187,25 @@ fn text<'y>(y: &'y Yaml, field: &str) -> Result<&'y str, String> {
     }
 }
 
+/// Finds the first YAML alias (`*name`) of a document, where it is.
+#[derive(Default)]
+struct FirstAlias(Option<Marker>);
+
+impl MarkedEventReceiver for FirstAlias {
+    fn on_event(&mut self, ev: Event, mark: Marker) {
+        if matches!(ev, Event::Alias(_)) && self.0.is_none() {
+            self.0 = Some(mark);
+        }
+    }
+}
+
 /// `metadata.yaml`'s text parsed; the error says which field is wrong.
+///
+/// Aliases are refused before the document is loaded: the loader copies the anchored value at
+/// each alias, so a few lines of nested aliases (a "billion laughs") would fill memory, and
+/// rosbag2 never writes any.
 fn parse_metadata(text_in: &str) -> Result<Metadata, String> {
-    let docs = YamlLoader::load_from_str(text_in).map_err(|e| {
+    let yaml_error = |e: yaml_rust2::ScanError| {
         let m = e.marker();
         format!(
             "rosbag2 metadata: line {} column {}: expected YAML, found an error: {}",
@@ -172,7 +213,20 @@ fn parse_metadata(text_in: &str) -> Result<Metadata, String> {
             m.col() + 1,
             e.info()
         )
-    })?;
+    };
+    let mut alias = FirstAlias::default();
+    Parser::new_from_str(text_in)
+        .load(&mut alias, true)
+        .map_err(yaml_error)?;
+    if let Some(m) = alias.0 {
+        return Err(format!(
+            "rosbag2 metadata: line {} column {}: expected plain YAML (rosbag2 writes no \
+             anchors or aliases), found an alias",
+            m.line(),
+            m.col() + 1
+        ));
+    }
+    let docs = YamlLoader::load_from_str(text_in).map_err(yaml_error)?;
     let root = docs.first().unwrap_or(&Yaml::BadValue);
     let info = &root["rosbag2_bagfile_information"];
     if !matches!(info, Yaml::Hash(_)) {
