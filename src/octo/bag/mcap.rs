@@ -974,6 +974,23 @@ static CRC32: crc::Crc<u32, crc::Table<16>> =
 /// Decompresses `input` (zstd frames) into `out` (cleared first), at most `max + 1` bytes (so a
 /// caller sees when there is more than `max`). The error text says what went wrong.
 pub(crate) fn zstd_into(input: &[u8], max: u64, out: &mut Vec<u8>) -> Result<(), String> {
+    // A single frame that states its size (what MCAP and rosbag2 writers make) goes in one call
+    // into a buffer of exactly that size: no streaming window buffer beside the output (4 MB
+    // less at the peak). Anything else (several frames, no size) streams.
+    out.clear();
+    if let Ok(Some(size)) = zstd::zstd_safe::get_frame_content_size(input)
+        && size <= max
+        && let Ok(size) = usize::try_from(size)
+    {
+        out.reserve_exact(size);
+        let whole = zstd::bulk::Decompressor::new()
+            .and_then(|mut d| d.decompress_to_buffer(input, out))
+            .is_ok();
+        if whole && out.len() == size {
+            return Ok(());
+        }
+        out.clear();
+    }
     let decoder =
         zstd::stream::read::Decoder::with_buffer(input).map_err(|e| format!("zstd: {e}"))?;
     read_limited(decoder, max, out).map_err(|e| format!("zstd: {e}"))
