@@ -235,6 +235,8 @@ fn the_fixed_frame_can_be_named_and_must_exist() {
     let dir = tempfile::tempdir().unwrap();
     let bag = write_bag(dir.path(), "mcap-zstd", &[]);
     assert_same_map(dir.path(), &bag, &["--fixed-frame", "map"], "map named");
+    // /tf named as the pose topic: read with /tf_static beside it.
+    assert_same_map(dir.path(), &bag, &["--pose-topic", "/tf"], "/tf named");
     let (out, _) = build(dir.path(), &bag, &["--fixed-frame", "nowhere"]);
     assert_eq!(out.code, 2, "{}", out.stderr);
     assert!(out.stderr.contains("nowhere"), "{}", out.stderr);

@@ -230,7 +230,10 @@ impl Recording {
                 let i = rec.find_topic(t, "pose")?;
                 let schema = rec.bag.topics()[i].schema.clone();
                 if schema == TF_TYPE {
-                    Some(Source::Tf(vec![(i, is_tf_topic(t) == Some(true))]))
+                    // A named TF topic, with the static transforms beside it.
+                    let mut topics = vec![(i, is_tf_topic(t) == Some(true))];
+                    topics.extend(tf_topics.iter().filter(|&&(j, s)| s && j != i));
+                    Some(Source::Tf(topics))
                 } else if POSE_TYPES.contains(&schema.as_str()) {
                     Some(Source::Track(i))
                 } else {
