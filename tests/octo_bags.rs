@@ -1,6 +1,6 @@
 //! octo-delta on robot logs written by the real ROS 2 writers (Python `rosbags` for rosbag2
 //! sqlite3 and mcap storage, the official `mcap` and `mcap_ros2` writers for MCAP with zstd, lz4
-//! and no compression; `tests/bags/survey_bag.py`), posed by /tf + /tf_static, PoseStamped or
+//! and no compression, rosbag2's zstd FILE and MESSAGE compression; `tests/bags/survey_bag.py`), posed by /tf + /tf_static, PoseStamped or
 //! Odometry: every map must be graph2tree's map of the same scans (the .bt byte for byte, and
 //! compare_octrees' KLD 0). Also the ways a log can be unusable: no pose, malformed TF, a
 //! database that is not a bag, a cut compressed chunk: exit 2, one line, no output left.
@@ -140,6 +140,8 @@ fn every_bag_kind_gives_graph2trees_map() {
     let dir = tempfile::tempdir().unwrap();
     for kind in [
         "db3",
+        "db3-file-zstd",
+        "db3-message-zstd",
         "rosbag2-mcap",
         "mcap-zstd",
         "mcap-lz4",

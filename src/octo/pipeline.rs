@@ -148,7 +148,15 @@ impl InputFormat {
         if ext("graph") {
             return Some(InputFormat::Graph);
         }
-        if ext("db3") || path.file_name().is_some_and(|n| n == "metadata.yaml") {
+        let zstd_file = |inner: &str| {
+            path.to_str()
+                .is_some_and(|p| p.to_ascii_lowercase().ends_with(&format!(".{inner}.zstd")))
+        };
+        if ext("db3")
+            || zstd_file("db3")
+            || zstd_file("mcap")
+            || path.file_name().is_some_and(|n| n == "metadata.yaml")
+        {
             return Some(InputFormat::Rosbag2);
         }
         CloudFormat::from_path(path).map(InputFormat::from)

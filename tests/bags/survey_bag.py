@@ -15,6 +15,8 @@ float32, optionally coloured and organised with NaN holes) and the node's pose a
 Kinds (the container and its writer):
   db3            rosbags' rosbag2 writer, sqlite3 storage (a directory)
   rosbag2-mcap   rosbags' rosbag2 writer, mcap storage (a directory)
+  db3-file-zstd / db3-message-zstd
+                 rosbags' writer, sqlite3 storage, compression_mode FILE / MESSAGE (zstd)
   mcap-zstd / mcap-lz4 / mcap-none
                  the official `mcap` writer, chunks compressed so
   mcap-ros2      the official `mcap_ros2` writer (zstd chunks, its default), messages as dicts
@@ -176,10 +178,15 @@ def messages(scans, pose_kind, color, organised, late, fault=None):
     return out, len(clouds)
 
 
-def write_rosbags(path, msgs, storage):
+def write_rosbags(path, msgs, storage, compression=None):
     from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2.writer import CompressionFormat, CompressionMode
     plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
-    with Writer(path, version=9, storage_plugin=plugin) as w:
+    w = Writer(path, version=9, storage_plugin=plugin)
+    if compression:
+        mode = {"file": CompressionMode.FILE, "message": CompressionMode.MESSAGE}[compression]
+        w.set_compression(mode, CompressionFormat.ZSTD)
+    with w:
         conns = {}
         for topic, typ, ns, msg in msgs:
             if topic not in conns:
@@ -232,7 +239,7 @@ def write_mcap_ros2(path, msgs):
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--graph", required=True)
-    p.add_argument("--kind", required=True, choices=["db3", "rosbag2-mcap", "mcap-zstd", "mcap-lz4", "mcap-none", "mcap-ros2"])
+    p.add_argument("--kind", required=True, choices=["db3", "db3-file-zstd", "db3-message-zstd", "rosbag2-mcap", "mcap-zstd", "mcap-lz4", "mcap-none", "mcap-ros2"])
     p.add_argument("--pose", default="tf", choices=["tf", "pose", "odom", "transform", "none"])
     p.add_argument("--color", action="store_true")
     p.add_argument("--organised", action="store_true")
@@ -243,6 +250,10 @@ def main():
     msgs, clouds = messages(read_graph(a.graph), a.pose, a.color, a.organised, a.late, a.tf_fault)
     if a.kind == "db3":
         write_rosbags(a.out, msgs, "sqlite3")
+    elif a.kind == "db3-file-zstd":
+        write_rosbags(a.out, msgs, "sqlite3", "file")
+    elif a.kind == "db3-message-zstd":
+        write_rosbags(a.out, msgs, "sqlite3", "message")
     elif a.kind == "rosbag2-mcap":
         write_rosbags(a.out, msgs, "mcap")
     elif a.kind == "mcap-ros2":

@@ -207,6 +207,9 @@ pub struct Bag {
     sources: Vec<Source>,
     /// rosbag2 `compression_mode: MESSAGE`: every payload is a zstd frame.
     compressed_messages: bool,
+    /// rosbag2 `compression_mode: FILE`: the decompressed copies the sources read, removed
+    /// with the bag (after the sources, which are dropped first).
+    _temps: Vec<rosbag2::TempFile>,
 }
 
 /// A stream of messages in log-time order.
@@ -241,6 +244,7 @@ impl Bag {
             topics,
             sources: vec![Source::Mcap(file)],
             compressed_messages: false,
+            _temps: Vec::new(),
         })
     }
 
@@ -256,10 +260,14 @@ impl Bag {
         if path.is_dir() {
             return path.join("metadata.yaml").is_file();
         }
-        path.file_name().is_some_and(|n| n == "metadata.yaml")
-            || path
-                .extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("db3") || e.eq_ignore_ascii_case("mcap"))
+        let named = |ext: &str| {
+            path.extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case(ext))
+                || path
+                    .to_str()
+                    .is_some_and(|p| p.to_ascii_lowercase().ends_with(&format!(".{ext}.zstd")))
+        };
+        path.file_name().is_some_and(|n| n == "metadata.yaml") || named("db3") || named("mcap")
     }
 
     /// The topics, in the order the bag lists them.

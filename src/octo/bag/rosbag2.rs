@@ -32,6 +32,8 @@ struct Metadata {
     topics: Vec<(String, String, String, Option<u64>)>,
     /// `compression_mode: MESSAGE` with `compression_format: zstd`.
     compressed_messages: bool,
+    /// `compression_mode: FILE` with `compression_format: zstd`: every file is a zstd stream.
+    compressed_files: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -72,18 +74,32 @@ pub(super) fn open(path: &Path, stop: &AtomicBool) -> Result<Bag, BagError> {
         }
     }
     let mut topics = Vec::new();
-    let db3 = path
+    // A file of a FILE-compressed bag (`bag_0.db3.zstd`): its decompressed copy is read.
+    let zstd = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("zstd"));
+    let mut temps = Vec::new();
+    let (inner, read) = if zstd {
+        let temp = decompress_file(path, stop)?;
+        let read = temp.path.clone();
+        temps.push(temp);
+        (path.with_extension(""), read)
+    } else {
+        (path.to_path_buf(), path.to_path_buf())
+    };
+    let db3 = inner
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("db3"));
     let source = if db3 {
-        Source::Db3(Db3File::open(&name, path, &mut topics, true)?)
+        Source::Db3(Db3File::open(&name, &read, &mut topics, true)?)
     } else {
-        Source::Mcap(McapFile::open(&name, path, &mut topics, true, stop)?)
+        Source::Mcap(McapFile::open(&name, &read, &mut topics, true, stop)?)
     };
     Ok(Bag {
         topics,
         sources: vec![source],
         compressed_messages,
+        _temps: temps,
     })
 }
 
@@ -109,6 +125,86 @@ pub(super) fn files(path: &Path) -> Vec<PathBuf> {
     out
 }
 
+/// The largest decompressed file of a FILE-compressed bag: 64 GiB (it goes to a temporary file).
+pub const MAX_DECOMPRESSED_FILE_BYTES: u64 = 64 << 30;
+
+/// A temporary file, removed when dropped.
+#[derive(Debug)]
+pub(super) struct TempFile {
+    path: PathBuf,
+}
+
+impl Drop for TempFile {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// Decompresses the zstd file `path` (a file of a `compression_mode: FILE` bag) into a
+/// temporary file (in `$TMPDIR`), at most [`MAX_DECOMPRESSED_FILE_BYTES`]; SQLite and the MCAP
+/// reader then read that. Gives up (an error) once `stop` is set.
+fn decompress_file(path: &Path, stop: &AtomicBool) -> Result<TempFile, BagError> {
+    use std::io::{Read, Write};
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static NEXT: AtomicU64 = AtomicU64::new(0);
+    let name = shown(path);
+    let at = Location::file(&name);
+    let input = std::fs::File::open(path).map_err(|e| BagError::io(at.clone(), "opening", e))?;
+    let mut decoder = zstd::stream::read::Decoder::new(input)
+        .map_err(|e| BagError::io(at.clone(), "reading zstd", e))?;
+    let stem = path
+        .file_stem()
+        .map_or_else(|| "bag".into(), |s| s.to_string_lossy().into_owned());
+    let temp = TempFile {
+        path: std::env::temp_dir().join(format!(
+            "rovlink-{}-{}-{stem}",
+            std::process::id(),
+            NEXT.fetch_add(1, Ordering::Relaxed)
+        )),
+    };
+    let mut out = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&temp.path)
+        .map_err(|e| {
+            BagError::io(
+                at.clone(),
+                &format!("creating {} for the decompressed file", temp.path.display()),
+                e,
+            )
+        })?;
+    let mut buf = vec![0u8; 1 << 20];
+    let mut total = 0u64;
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            return Err(BagError::new(at, "stopped while decompressing"));
+        }
+        let n = decoder.read(&mut buf).map_err(|e| {
+            BagError::new(
+                at.clone(),
+                format!("zstd (compression_mode FILE): {e} after {total} decompressed bytes"),
+            )
+        })?;
+        if n == 0 {
+            break;
+        }
+        total += n as u64;
+        if total > MAX_DECOMPRESSED_FILE_BYTES {
+            return Err(BagError::new(
+                at,
+                format!(
+                    "zstd (compression_mode FILE): expected at most {MAX_DECOMPRESSED_FILE_BYTES} \
+                     bytes decompressed, found more"
+                ),
+            ));
+        }
+        out.write_all(&buf[..n]).map_err(|e| {
+            BagError::io(at.clone(), &format!("writing {}", temp.path.display()), e)
+        })?;
+    }
+    Ok(temp)
+}
+
 fn open_directory(yaml: &Path, dir: &Path, stop: &AtomicBool) -> Result<Bag, BagError> {
     let meta = read_metadata(yaml)?;
     let mut topics: Vec<Topic> = Vec::new();
@@ -122,9 +218,18 @@ fn open_directory(yaml: &Path, dir: &Path, stop: &AtomicBool) -> Result<Bag, Bag
         }
     }
     let mut sources = Vec::new();
+    let mut temps = Vec::new();
     for file in &meta.files {
-        let path = dir.join(file);
-        let name = shown(&path);
+        let given = dir.join(file);
+        let name = shown(&given);
+        let path = if meta.compressed_files {
+            let temp = decompress_file(&given, stop)?;
+            let path = temp.path.clone();
+            temps.push(temp);
+            path
+        } else {
+            given
+        };
         sources.push(match meta.storage {
             Storage::Sqlite3 => Source::Db3(Db3File::open(&name, &path, &mut topics, false)?),
             Storage::Mcap => Source::Mcap(McapFile::open(&name, &path, &mut topics, false, stop)?),
@@ -134,6 +239,7 @@ fn open_directory(yaml: &Path, dir: &Path, stop: &AtomicBool) -> Result<Bag, Bag
         topics,
         sources,
         compressed_messages: meta.compressed_messages,
+        _temps: temps,
     })
 }
 
@@ -334,13 +440,12 @@ fn parse_metadata(text_in: &str) -> Result<Metadata, String> {
                 field("compression_format")
             ));
         }
+        "FILE" if format == "zstd" => false,
         "FILE" => {
             return Err(format!(
-                "rosbag2 metadata field {}: FILE (whole files {format}-compressed) is not read \
-                 here; expected \"\", NONE or MESSAGE; decompress the files first (e.g. `zstd \
-                 -d` each one, then drop the compression fields and the .zstd suffixes from \
-                 metadata.yaml)",
-                field("compression_mode")
+                "rosbag2 metadata field {}: expected zstd (with compression_mode FILE), found \
+                 {format:?}",
+                field("compression_format")
             ));
         }
         _ => {
@@ -350,11 +455,13 @@ fn parse_metadata(text_in: &str) -> Result<Metadata, String> {
             ));
         }
     };
+    let compressed_files = mode.eq_ignore_ascii_case("FILE");
     Ok(Metadata {
         storage,
         files,
         topics,
         compressed_messages,
+        compressed_files,
     })
 }
 
@@ -607,7 +714,7 @@ rosbag2_bagfile_information:
             ),
             (
                 META.replace("compression_mode: \"\"", "compression_mode: FILE"),
-                "compression_mode: FILE (whole files",
+                "compression_format: expected zstd (with compression_mode FILE)",
             ),
             (
                 META.replace("compression_mode: \"\"", "compression_mode: MESSAGE"),
