@@ -401,7 +401,8 @@ fn a_signal_stops_the_walk_of_a_huge_decompressed_chunk_at_once() {
         assert_contract(&r, &[code], &format!("{signal:?} during the walk"));
         let late = started.elapsed().saturating_sub(after);
         assert!(
-            late < whole.mul_f64(0.2) + Duration::from_millis(300),
+            // Loose, for loaded machines: before the fix it went on to the end of the walk.
+            late < whole.mul_f64(0.4) + Duration::from_secs(1),
             "{signal:?}: stopped {late:?} after the signal (a whole run takes {whole:?})"
         );
         assert!(temp_files(d).is_empty());
