@@ -436,28 +436,25 @@ fn pose_of(
     stamp_ns: i64,
 ) -> Result<Pose, String> {
     let (t, to) = match poses {
-        Poses::Track(track, topic) => (
-            track
-                .lookup(stamp_ns)
-                .map_err(|e| reason(frame, &format!("pose topic {topic}"), &e))?,
-            format!("pose topic {topic}"),
-        ),
+        Poses::Track(track, topic) => {
+            let to = format!("pose topic {topic}");
+            let t = track.lookup_named(stamp_ns, || to.clone());
+            (t.map_err(|e| reason(frame, &to, &e))?, to)
+        }
         Poses::Tf(tree) => {
-            if fixed.is_none() {
-                *fixed = tree.root_of(frame).map(str::to_string);
-            }
-            let Some(fixed) = fixed.as_deref() else {
-                let e = Unavailable::UnknownFrame {
-                    frame: frame.to_string(),
-                };
-                return Err(reason(frame, "the TF tree", &e));
+            // The default fixed frame: the root of the first posable cloud's tree.
+            let fixed: &str = match fixed {
+                Some(f) => f,
+                None => {
+                    let root = tree
+                        .default_fixed_frame(frame)
+                        .map_err(|e| reason(frame, "the TF tree", &e))?;
+                    fixed.insert(root.to_string())
+                }
             };
             let to = format!("fixed frame {fixed:?}");
-            (
-                tree.lookup(fixed, frame, stamp_ns)
-                    .map_err(|e| reason(frame, &to, &e))?,
-                to,
-            )
+            let t = tree.lookup(fixed, frame, stamp_ns);
+            (t.map_err(|e| reason(frame, &to, &e))?, to)
         }
     };
     t.to_pose()

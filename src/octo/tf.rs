@@ -31,12 +31,11 @@
 //! # Pose tracks
 //!
 //! A [`PoseTrack`] is one topic's stamped poses of the sensor (or the vehicle) in a fixed
-//! frame, interpolated by the same rules. [`PoseSource`] is either kind, as octo-delta uses it.
+//! frame, interpolated by the same rules.
 //!
 //! Nothing here panics, on any input; memory is what the added transforms take.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::fmt;
 
 use crate::octo::ros::{Header, Transform, TransformProblem, TransformStamped};
 
@@ -593,7 +592,8 @@ impl PoseTrack {
         self.lookup_named(stamp_ns, || "the pose track".into())
     }
 
-    fn lookup_named(
+    /// [`PoseTrack::lookup`], the track called `name` in what it says (`pose topic /odom`).
+    pub fn lookup_named(
         &self,
         stamp_ns: i64,
         name: impl FnOnce() -> String,
@@ -604,48 +604,6 @@ impl PoseTrack {
         self.samples
             .at(stamp_ns)
             .map_err(|o| o.named(name(), stamp_ns))
-    }
-}
-
-/// Where octo-delta takes each cloud's pose from.
-#[derive(Debug, Clone, PartialEq)]
-pub enum PoseSource {
-    /// `/tf` and `/tf_static`: each cloud's frame looked up in the fixed frame.
-    Tf {
-        /// The TF buffer (finished).
-        tree: TfTree,
-        /// The frame the map is built in.
-        fixed_frame: String,
-    },
-    /// A pose topic (`--pose-topic`): the pose at the cloud's stamp, whatever its frame.
-    Track {
-        /// The poses (finished).
-        track: PoseTrack,
-        /// The topic, for messages.
-        topic: String,
-    },
-}
-
-impl PoseSource {
-    /// The pose of a cloud in `frame` stamped `stamp_ns` (for a track, `frame` is not used).
-    pub fn pose_at(&self, frame: &str, stamp_ns: i64) -> Result<Transform, Unavailable> {
-        match self {
-            PoseSource::Tf { tree, fixed_frame } => tree.lookup(fixed_frame, frame, stamp_ns),
-            PoseSource::Track { track, topic } => {
-                track.lookup_named(stamp_ns, || format!("pose topic {topic}"))
-            }
-        }
-    }
-}
-
-impl fmt::Display for PoseSource {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            PoseSource::Tf { fixed_frame, .. } => {
-                write!(f, "TF (/tf, /tf_static) in fixed frame {fixed_frame:?}")
-            }
-            PoseSource::Track { topic, .. } => write!(f, "pose topic {topic}"),
-        }
     }
 }
 
@@ -982,27 +940,14 @@ mod tests {
         track.finish();
         assert_eq!(track.frame_ids(), ["map", "odom"]);
 
-        let source = PoseSource::Track {
-            track,
-            topic: "/nav/pose".into(),
-        };
-        assert_eq!(source.pose_at("anything", 0).unwrap(), a);
+        assert_eq!(track.lookup(0).unwrap(), a);
         assert_eq!(
-            source.pose_at("x", -1).unwrap_err().to_string(),
+            track
+                .lookup_named(-1, || "pose topic /nav/pose".into())
+                .unwrap_err()
+                .to_string(),
             "stamp -0.000000001 s is before the first sample of pose topic /nav/pose (samples \
              0.000000000 .. 0.000000100 s)"
         );
-        assert_eq!(source.to_string(), "pose topic /nav/pose");
-        let t = tree();
-        let fixed = t.default_fixed_frame("sensor").unwrap().to_string();
-        let source = PoseSource::Tf {
-            tree: t.clone(),
-            fixed_frame: fixed,
-        };
-        assert_eq!(
-            source.pose_at("sensor", 2_000_000_000),
-            t.lookup("map", "sensor", 2_000_000_000)
-        );
-        assert!(source.to_string().contains("\"map\""));
     }
 }
