@@ -148,15 +148,7 @@ impl InputFormat {
         if ext("graph") {
             return Some(InputFormat::Graph);
         }
-        let zstd_file = |inner: &str| {
-            path.to_str()
-                .is_some_and(|p| p.to_ascii_lowercase().ends_with(&format!(".{inner}.zstd")))
-        };
-        if ext("db3")
-            || zstd_file("db3")
-            || zstd_file("mcap")
-            || path.file_name().is_some_and(|n| n == "metadata.yaml")
-        {
+        if super::bag::is_rosbag2_file_name(path) {
             return Some(InputFormat::Rosbag2);
         }
         CloudFormat::from_path(path).map(InputFormat::from)

@@ -215,6 +215,19 @@ pub struct Bag {
 /// A stream of messages in log-time order.
 type Messages<'a> = Box<dyn Iterator<Item = Result<Message, BagError>> + 'a>;
 
+/// Whether the name alone says a rosbag2 file: `metadata.yaml`, a `.db3`, or a file of a
+/// `compression_mode: FILE` bag (`.db3.zstd`, `.mcap.zstd`). Looks at no file.
+pub fn is_rosbag2_file_name(path: &Path) -> bool {
+    let db3 = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("db3"));
+    let compressed = path.to_str().is_some_and(|p| {
+        let p = p.to_ascii_lowercase();
+        p.ends_with(".db3.zstd") || p.ends_with(".mcap.zstd")
+    });
+    path.file_name().is_some_and(|n| n == "metadata.yaml") || db3 || compressed
+}
+
 impl Bag {
     /// An MCAP file, a rosbag2 directory, its metadata.yaml, or one .db3 (or .mcap) file of it.
     pub fn open(path: &Path) -> Result<Bag, BagError> {
@@ -255,19 +268,16 @@ impl Bag {
     }
 
     /// Whether `path` is a bag this module opens by its name/shape (a directory with
-    /// metadata.yaml, a metadata.yaml, a .db3, a .mcap), for format detection.
+    /// metadata.yaml, a [rosbag2 file name](is_rosbag2_file_name), a .mcap), for format
+    /// detection.
     pub fn is_bag_path(path: &Path) -> bool {
         if path.is_dir() {
             return path.join("metadata.yaml").is_file();
         }
-        let named = |ext: &str| {
-            path.extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case(ext))
-                || path
-                    .to_str()
-                    .is_some_and(|p| p.to_ascii_lowercase().ends_with(&format!(".{ext}.zstd")))
-        };
-        path.file_name().is_some_and(|n| n == "metadata.yaml") || named("db3") || named("mcap")
+        is_rosbag2_file_name(path)
+            || path
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
     }
 
     /// The topics, in the order the bag lists them.
