@@ -29,18 +29,19 @@ Prints one JSON line: the kind, the clouds written, the path.
 """
 import argparse
 import json
-import math
 import struct
 import sys
 from pathlib import Path
 
 import numpy as np
-from rosbags.typesys import Stores, get_typestore
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from write_bag import TYPESTORE, msgdef, write_mcap, write_rosbag2  # noqa: E402  the same writers
 
 STAMP0_NS = 1_700_000_000 * 10**9
 PERIOD_NS = 500_000_000
 
-TS = get_typestore(Stores.ROS2_HUMBLE)
+TS = TYPESTORE
 T = TS.types
 
 
@@ -178,40 +179,9 @@ def messages(scans, pose_kind, color, organised, late, fault=None):
     return out, len(clouds)
 
 
-def write_rosbags(path, msgs, storage, compression=None):
-    from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.rosbag2.writer import CompressionFormat, CompressionMode
-    plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
-    w = Writer(path, version=9, storage_plugin=plugin)
-    if compression:
-        mode = {"file": CompressionMode.FILE, "message": CompressionMode.MESSAGE}[compression]
-        w.set_compression(mode, CompressionFormat.ZSTD)
-    with w:
-        conns = {}
-        for topic, typ, ns, msg in msgs:
-            if topic not in conns:
-                conns[topic] = w.add_connection(topic, typ, typestore=TS)
-            w.write(conns[topic], ns, TS.serialize_cdr(msg, typ))
-
-
-def msgdef(typ):
-    text, _ = TS.generate_msgdef(typ, ros_version=2)
-    return text
-
-
-def write_mcap(path, msgs, compression):
-    from mcap.writer import CompressionType, Writer
-    comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[compression]
-    with open(path, "wb") as f:
-        w = Writer(f, compression=comp)
-        w.start(profile="ros2", library="survey_bag.py")
-        channels = {}
-        for topic, typ, ns, msg in msgs:
-            if topic not in channels:
-                sid = w.register_schema(name=typ, encoding="ros2msg", data=msgdef(typ).encode())
-                channels[topic] = w.register_channel(topic=topic, message_encoding="cdr", schema_id=sid)
-            w.add_message(channel_id=channels[topic], log_time=ns, publish_time=ns, data=TS.serialize_cdr(msg, typ))
-        w.finish()
+def raw(msgs):
+    """The messages as (topic, type, log_time_ns, CDR bytes), as write_bag.py's writers take them."""
+    return [(topic, typ, ns, TS.serialize_cdr(msg, typ)) for topic, typ, ns, msg in msgs]
 
 
 def as_dict(msg):
@@ -248,18 +218,22 @@ def main():
     p.add_argument("--out", required=True)
     a = p.parse_args()
     msgs, clouds = messages(read_graph(a.graph), a.pose, a.color, a.organised, a.late, a.tf_fault)
+    from mcap.writer import CompressionType
+    from rosbags.rosbag2 import StoragePlugin
+    # MCAP files in the writer's default 1 MiB chunks, as recorders make them.
+    mcap = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
     if a.kind == "db3":
-        write_rosbags(a.out, msgs, "sqlite3")
+        write_rosbag2(a.out, raw(msgs), StoragePlugin.SQLITE3)
     elif a.kind == "db3-file-zstd":
-        write_rosbags(a.out, msgs, "sqlite3", "file")
+        write_rosbag2(a.out, raw(msgs), StoragePlugin.SQLITE3, "file")
     elif a.kind == "db3-message-zstd":
-        write_rosbags(a.out, msgs, "sqlite3", "message")
+        write_rosbag2(a.out, raw(msgs), StoragePlugin.SQLITE3, "message")
     elif a.kind == "rosbag2-mcap":
-        write_rosbags(a.out, msgs, "mcap")
+        write_rosbag2(a.out, raw(msgs), StoragePlugin.MCAP)
     elif a.kind == "mcap-ros2":
         write_mcap_ros2(a.out, msgs)
     else:
-        write_mcap(a.out, msgs, a.kind.split("-")[1])
+        write_mcap(a.out, raw(msgs), mcap[a.kind.split("-")[1]], True, chunk_size=1 << 20)
     print(json.dumps({"kind": a.kind, "clouds": clouds, "path": a.out}))
 
 

@@ -45,34 +45,37 @@ def msgdef(typename):
     return TYPESTORE.generate_msgdef(typename, ros_version=2)[0]
 
 
-def write_mcap(out, messages, compression, chunked):
+def write_mcap(out, messages, compression, chunked, chunk_size=4096):
+    """Writes (topic, type, log_time_ns, CDR bytes) messages as one MCAP file, raw CDR payloads
+    under ros2msg schemas (small chunks by default: several per file)."""
     with open(out, "wb") as f:
-        w = McapWriter(f, chunk_size=4096, compression=compression, use_chunking=chunked)
+        w = McapWriter(f, chunk_size=chunk_size, compression=compression, use_chunking=chunked)
         w.start(profile="ros2", library="rovlink tests")
         schemas, channels = {}, {}
-        for m in messages:
-            if m["type"] not in schemas:
-                schemas[m["type"]] = w.register_schema(
-                    name=m["type"], encoding="ros2msg", data=msgdef(m["type"]).encode())
-            if m["topic"] not in channels:
-                channels[m["topic"]] = w.register_channel(
-                    topic=m["topic"], message_encoding="cdr", schema_id=schemas[m["type"]])
-            t = int(m["log_time_ns"])
-            w.add_message(channel_id=channels[m["topic"]], log_time=t, publish_time=t,
-                          data=bytes.fromhex(m["cdr"]))
+        for topic, typ, t, data in messages:
+            if typ not in schemas:
+                schemas[typ] = w.register_schema(
+                    name=typ, encoding="ros2msg", data=msgdef(typ).encode())
+            if topic not in channels:
+                channels[topic] = w.register_channel(
+                    topic=topic, message_encoding="cdr", schema_id=schemas[typ])
+            w.add_message(channel_id=channels[topic], log_time=t, publish_time=t, data=data)
         w.finish()
 
 
-def write_rosbag2(out, messages, storage, compressed):
+def write_rosbag2(out, messages, storage, compression=None):
+    """Writes (topic, type, log_time_ns, CDR bytes) messages as a rosbag2 directory;
+    compression: None, "message" or "file" (zstd)."""
     w = Rosbag2Writer(out, version=9, storage_plugin=storage)
-    if compressed:
-        w.set_compression(CompressionMode.MESSAGE, CompressionFormat.ZSTD)
+    if compression:
+        mode = {"message": CompressionMode.MESSAGE, "file": CompressionMode.FILE}[compression]
+        w.set_compression(mode, CompressionFormat.ZSTD)
     w.open()
     conns = {}
-    for m in messages:
-        if m["topic"] not in conns:
-            conns[m["topic"]] = w.add_connection(m["topic"], m["type"], typestore=TYPESTORE)
-        w.write(conns[m["topic"]], int(m["log_time_ns"]), bytes.fromhex(m["cdr"]))
+    for topic, typ, t, data in messages:
+        if topic not in conns:
+            conns[topic] = w.add_connection(topic, typ, typestore=TYPESTORE)
+        w.write(conns[topic], t, data)
     w.close()
 
 
@@ -112,14 +115,16 @@ def main():
     p.add_argument("--out", required=True)
     a = p.parse_args()
     messages = [json.loads(line) for line in sys.stdin if line.strip()]
+    raw = [(m["topic"], m["type"], int(m["log_time_ns"]), bytes.fromhex(m["cdr"]))
+           for m in messages]
     kinds = {
-        "mcap-zstd": lambda: write_mcap(a.out, messages, CompressionType.ZSTD, True),
-        "mcap-lz4": lambda: write_mcap(a.out, messages, CompressionType.LZ4, True),
-        "mcap-none": lambda: write_mcap(a.out, messages, CompressionType.NONE, True),
-        "mcap-unchunked": lambda: write_mcap(a.out, messages, CompressionType.NONE, False),
-        "db3": lambda: write_rosbag2(a.out, messages, StoragePlugin.SQLITE3, False),
-        "db3-message-zstd": lambda: write_rosbag2(a.out, messages, StoragePlugin.SQLITE3, True),
-        "rosbag2-mcap": lambda: write_rosbag2(a.out, messages, StoragePlugin.MCAP, False),
+        "mcap-zstd": lambda: write_mcap(a.out, raw, CompressionType.ZSTD, True),
+        "mcap-lz4": lambda: write_mcap(a.out, raw, CompressionType.LZ4, True),
+        "mcap-none": lambda: write_mcap(a.out, raw, CompressionType.NONE, True),
+        "mcap-unchunked": lambda: write_mcap(a.out, raw, CompressionType.NONE, False),
+        "db3": lambda: write_rosbag2(a.out, raw, StoragePlugin.SQLITE3),
+        "db3-message-zstd": lambda: write_rosbag2(a.out, raw, StoragePlugin.SQLITE3, "message"),
+        "rosbag2-mcap": lambda: write_rosbag2(a.out, raw, StoragePlugin.MCAP),
         "mcap-ros2": lambda: write_mcap_ros2(a.out, messages),
     }
     if a.kind not in kinds:
