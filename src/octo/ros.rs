@@ -35,7 +35,7 @@
 //! the remaining bytes could hold is an error before anything is allocated. The decoders are
 //! fuzzed (`fuzz/fuzz_targets/octo_ros.rs`) and property-tested (`tests/proptest_octo_tf.rs`).
 
-use crate::octo::cloud::{CloudBuilder, Scalar, err, shown, unpack_rgb};
+use crate::octo::cloud::{CloudBuilder, Scalar, err, shown_names, unpack_rgb};
 use crate::octo::{ParseError, Pose, Scan};
 
 /// Schema name of point clouds: ROS 2's `sensor_msgs/msg/PointCloud2`.
@@ -698,14 +698,7 @@ pub fn decode_point_cloud2(
                 fields_at,
                 format!(
                     "PointCloud2 fields: expected x, y and z, found {}",
-                    shown(
-                        fields
-                            .iter()
-                            .map(|f| f.name.as_str())
-                            .collect::<Vec<_>>()
-                            .join(" ")
-                            .as_bytes()
-                    )
+                    shown_names(fields.iter().map(|f| f.name.as_str()))
                 ),
             ));
         };

@@ -200,6 +200,12 @@ pub(crate) fn shown(text: &[u8]) -> String {
     s
 }
 
+/// Field or property names, space-separated, as [`shown`] shows text (for "expected x, y and z,
+/// found ..." messages).
+pub(crate) fn shown_names<'a>(names: impl IntoIterator<Item = &'a str>) -> String {
+    shown(names.into_iter().collect::<Vec<_>>().join(" ").as_bytes())
+}
+
 /// How many items to reserve room for: what the input claims, but no more than the remaining
 /// bytes could hold at `min_bytes` each (so a lying header cannot make us allocate).
 fn capacity(claimed: u64, remaining: usize, min_bytes: usize) -> usize {

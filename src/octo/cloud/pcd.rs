@@ -3,7 +3,9 @@
 
 use std::fmt::Write as _;
 
-use super::{CloudBuilder, Lines, Scalar, Tokens, capacity, err, shown, text, unpack_rgb};
+use super::{
+    CloudBuilder, Lines, Scalar, Tokens, capacity, err, shown, shown_names, text, unpack_rgb,
+};
 use crate::octo::{ParseError, Pose, Scan};
 
 /// How a PCD file stores its points (the header's `DATA` line).
@@ -341,14 +343,7 @@ fn parse_header(bytes: &[u8]) -> Result<Header, ParseError> {
             names.offset,
             format!(
                 "PCD header field FIELDS: expected x, y and z among the fields, found {}",
-                shown(
-                    fields
-                        .iter()
-                        .map(|f| f.name.as_str())
-                        .collect::<Vec<_>>()
-                        .join(" ")
-                        .as_bytes()
-                )
+                shown_names(fields.iter().map(|f| f.name.as_str()))
             ),
         ));
     };

@@ -3,7 +3,7 @@
 
 use std::fmt::Write as _;
 
-use super::{CloudBuilder, Lines, Scalar, Tokens, capacity, err, shown, text};
+use super::{CloudBuilder, Lines, Scalar, Tokens, capacity, err, shown, shown_names, text};
 use crate::octo::{ParseError, Pose, Scan};
 
 /// How a PLY file stores its rows (the header's `format` line).
@@ -134,15 +134,7 @@ pub fn read_ply(bytes: &[u8]) -> Result<Scan, ParseError> {
                 vertex.offset,
                 format!(
                     "PLY element vertex: expected scalar properties x, y and z, found {}",
-                    shown(
-                        vertex
-                            .properties
-                            .iter()
-                            .map(|p| p.name.as_str())
-                            .collect::<Vec<_>>()
-                            .join(" ")
-                            .as_bytes()
-                    )
+                    shown_names(vertex.properties.iter().map(|p| p.name.as_str()))
                 ),
             ));
         }
