@@ -31,7 +31,7 @@
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
-use super::bag::{Bag, BagError, Location};
+use super::bag::{self, Bag, BagError, Location};
 use super::ros::{self, Header, Transform};
 use super::tf::{PoseTrack, TfTree, Unavailable};
 use super::{ParseError, Pose, Scan};
@@ -139,19 +139,7 @@ impl Recording {
 
     /// The topics, for messages: `"/points" (sensor_msgs/msg/PointCloud2), ...`.
     fn topic_list(&self) -> String {
-        let topics = self.bag.topics();
-        if topics.is_empty() {
-            return "no topics".into();
-        }
-        let mut list: Vec<String> = topics
-            .iter()
-            .take(10)
-            .map(|t| format!("{:?} ({})", t.name, t.schema))
-            .collect();
-        if topics.len() > 10 {
-            list.push(format!("and {} more", topics.len() - 10));
-        }
-        format!("topics {}", list.join(", "))
+        bag::listing(self.bag.topics(), "topics")
     }
 
     fn find_topic(&self, name: &str, role: &str) -> Result<usize, RecordingError> {

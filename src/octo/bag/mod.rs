@@ -215,6 +215,30 @@ pub struct Bag {
 /// A stream of messages in log-time order.
 type Messages<'a> = Box<dyn Iterator<Item = Result<Message, BagError>> + 'a>;
 
+/// The first ten topics with their types, for error messages: `NOUN "/points"
+/// (sensor_msgs/msg/PointCloud2), ..., and 3 more`, or `no NOUN`.
+pub fn listing(topics: &[Topic], noun: &str) -> String {
+    if topics.is_empty() {
+        return format!("no {noun}");
+    }
+    let mut list: Vec<String> = topics
+        .iter()
+        .take(10)
+        .map(|t| {
+            let schema = if t.schema.is_empty() {
+                "no schema"
+            } else {
+                &t.schema
+            };
+            format!("{:?} ({schema})", t.name)
+        })
+        .collect();
+    if topics.len() > 10 {
+        list.push(format!("and {} more", topics.len() - 10));
+    }
+    format!("{noun} {}", list.join(", "))
+}
+
 /// Whether the name alone says a rosbag2 file: `metadata.yaml`, a `.db3`, or a file of a
 /// `compression_mode: FILE` bag (`.db3.zstd`, `.mcap.zstd`). Looks at no file.
 pub fn is_rosbag2_file_name(path: &Path) -> bool {

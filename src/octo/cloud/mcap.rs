@@ -11,7 +11,7 @@ use std::io::Cursor;
 use std::sync::atomic::AtomicBool;
 
 use super::err;
-use crate::octo::bag::{Bag, BagError, Message, Topic};
+use crate::octo::bag::{Bag, BagError, Message, Topic, listing};
 use crate::octo::ros::{
     self, ByteOrder, Header, POINT_CLOUD2_DEFINITION, POSE_STAMPED_DEFINITION, Transform,
     decode_point_cloud2, decode_pose_stamped_as_pose,
@@ -83,7 +83,7 @@ pub fn read_mcap(bytes: &[u8], options: &McapOptions) -> Result<McapScans, Parse
             end,
             format!(
                 "MCAP: expected a channel with schema {POINT_CLOUD2_SCHEMA}, found {}",
-                listing(&topics)
+                listing(&topics, "channels")
             ),
         ));
     };
@@ -187,29 +187,6 @@ fn decoded<T>(
     }
 }
 
-/// The topics, for error messages.
-fn listing(topics: &[Topic]) -> String {
-    if topics.is_empty() {
-        return "no channels".into();
-    }
-    let mut list: Vec<String> = topics
-        .iter()
-        .take(10)
-        .map(|t| {
-            let schema = if t.schema.is_empty() {
-                "no schema"
-            } else {
-                &t.schema
-            };
-            format!("{:?} ({schema})", t.name)
-        })
-        .collect();
-    if topics.len() > 10 {
-        list.push(format!("and {} more", topics.len() - 10));
-    }
-    format!("channels {}", list.join(", "))
-}
-
 /// The topic to read `schema` messages from and its indices in `topics`: `wanted`, or the
 /// first topic with that schema (`None` if there is none).
 fn pick(
@@ -226,7 +203,7 @@ fn pick(
                     end,
                     format!(
                         "MCAP {role} topic {t:?}: expected a channel with that topic, found {}",
-                        listing(topics)
+                        listing(topics, "channels")
                     ),
                 ));
             }
