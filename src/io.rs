@@ -634,6 +634,31 @@ impl Read for StopReader<'_> {
     }
 }
 
+/// The MCAP writer of the project's Foxglove files (the session log, the map view): no
+/// compression, never seeking (chunks are assembled in memory), so a pipe is as good as a file.
+pub fn json_mcap_writer<W: Write>(
+    out: W,
+) -> Result<mcap::Writer<mcap::write::NoSeek<W>>, mcap::McapError> {
+    mcap::WriteOptions::new()
+        .profile("")
+        .library(concat!("rovlink ", env!("CARGO_PKG_VERSION")))
+        .compression(None)
+        .disable_seeking(true)
+        .create(mcap::write::NoSeek::new(out))
+}
+
+/// A JSON channel on `topic` whose messages follow the JSON Schema `schema_text` named
+/// `schema_name` (a Foxglove well-known schema such as `foxglove.SceneUpdate`); its id.
+pub fn json_mcap_channel<W: Write + io::Seek>(
+    writer: &mut mcap::Writer<W>,
+    schema_name: &str,
+    schema_text: &str,
+    topic: &str,
+    metadata: &std::collections::BTreeMap<String, String>,
+) -> Result<u16, mcap::McapError> {
+    let schema = writer.add_schema(schema_name, "jsonschema", schema_text.as_bytes())?;
+    writer.add_channel(schema, topic, "json", metadata)
+}
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -918,23 +918,14 @@ pub fn apply_with_view(
         name: out_name.to_string(),
         source,
     };
-    let mut writer = mcap::WriteOptions::new()
-        .profile("")
-        .library(concat!("rovlink ", env!("CARGO_PKG_VERSION")))
-        .compression(None)
-        .disable_seeking(true)
-        .create(mcap::write::NoSeek::new(out))
-        .map_err(wrap)?;
-    let schema = writer
-        .add_schema(SCHEMA_NAME, "jsonschema", SCENE_UPDATE_SCHEMA.as_bytes())
-        .map_err(wrap)?;
+    let mut writer = crate::io::json_mcap_writer(out).map_err(wrap)?;
     let spec = header.spec;
     let mut about = BTreeMap::new();
     about.insert("resolution_m".to_string(), spec.resolution_m.to_string());
     about.insert("coarse_depth".to_string(), spec.coarse_depth.to_string());
-    let channel = writer
-        .add_channel(schema, TOPIC, "json", &about)
-        .map_err(wrap)?;
+    let channel =
+        crate::io::json_mcap_channel(&mut writer, SCHEMA_NAME, SCENE_UPDATE_SCHEMA, TOPIC, &about)
+            .map_err(wrap)?;
     let mut scene = SceneBuilder::new(spec);
     let mut report = ViewReport::default();
     for (k, (m, &t_ns)) in msgs.iter().zip(&times).enumerate() {

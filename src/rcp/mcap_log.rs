@@ -116,22 +116,12 @@ impl McapLog {
             source,
         };
         let out = dest.open()?;
-        let options = mcap::WriteOptions::new()
-            .profile("")
-            .library(concat!("rovlink ", env!("CARGO_PKG_VERSION")))
-            .compression(None)
-            .disable_seeking(true);
-        let mut writer = options.create(NoSeek::new(out)).map_err(wrap)?;
+        let mut writer = crate::io::json_mcap_writer(out).map_err(wrap)?;
         let mut channels = Vec::new();
         for (topic, schema, text) in TOPICS {
-            let schema_id = writer
-                .add_schema(schema, "jsonschema", text.as_bytes())
-                .map_err(wrap)?;
-            channels.push(
-                writer
-                    .add_channel(schema_id, topic, "json", &BTreeMap::new())
-                    .map_err(wrap)?,
-            );
+            let channel =
+                crate::io::json_mcap_channel(&mut writer, schema, text, topic, &BTreeMap::new());
+            channels.push(channel.map_err(wrap)?);
         }
         Ok(McapLog {
             path: name,
