@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
-use common::run;
+use common::{assert_kld_zero, octomap_tool, run};
 
 const OCTO: &str = env!("CARGO_BIN_EXE_octo-delta");
 const WRITER: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/bags/survey_bag.py");
@@ -40,13 +40,10 @@ fn survey() -> &'static Survey {
         let out = run(OCTO, &["synth", "--scans", "6", "-o", s(&graph)], b"");
         assert_eq!(out.code, 0, "{}", out.stderr);
         let reference = dir.path().join("ref.bt");
-        let g2t = Command::new("graph2tree")
-            .args(["-i", s(&graph), "-o", s(&reference), "-res", RES])
-            .output()
-            .unwrap_or_else(|e| {
-                panic!("graph2tree not runnable ({e}): apt-get install octomap-tools")
-            });
-        assert!(g2t.status.success(), "graph2tree failed");
+        octomap_tool(
+            "graph2tree",
+            &["-i", s(&graph), "-o", s(&reference), "-res", RES],
+        );
         Survey {
             reference_bt: std::fs::read(&reference).unwrap(),
             reference_bt_path: reference,
@@ -125,13 +122,7 @@ fn assert_same_map(dir: &Path, input: &Path, flags: &[&str], what: &str) -> comm
     let plain = run(OCTO, &args, b"");
     assert_eq!(plain.code, 0, "{what}: {}", plain.stderr);
     let reference_ot = survey().reference_bt_path.with_extension("bt.ot");
-    let cmp = Command::new("compare_octrees")
-        .args([s(&ot), s(&reference_ot)])
-        .output()
-        .expect("compare_octrees (apt-get install octomap-tools)");
-    let text =
-        String::from_utf8_lossy(&cmp.stdout).into_owned() + &String::from_utf8_lossy(&cmp.stderr);
-    assert!(text.contains("KLD: 0\n"), "{what}: {text}");
+    assert_kld_zero(&ot, &reference_ot, what);
     out
 }
 

@@ -10,7 +10,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::run;
+use common::{assert_kld_zero, octomap_tool, run};
 use rovlink::octo::synth::{SurveyParams, survey};
 
 const OCTO: &str = env!("CARGO_BIN_EXE_octo-delta");
@@ -42,19 +42,6 @@ fn reference() -> PathBuf {
             exe
         })
         .clone()
-}
-
-fn octomap_tool(name: &str, args: &[&str]) -> String {
-    let out = Command::new(name)
-        .args(args)
-        .output()
-        .unwrap_or_else(|e| panic!("{name} not runnable ({e}): install Debian's octomap-tools"));
-    assert!(
-        out.status.success(),
-        "{name} {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr)
 }
 
 /// The scans of `octo-delta synth --seed SEED --scans N` in the reference's dump format.
@@ -262,12 +249,7 @@ fn coloured_structure_is_the_octree_of_the_same_scans() {
             std::fs::read(&plain).unwrap() == std::fs::read(&ref_ot).unwrap(),
             "--no-color map is not graph2tree's at {res} m"
         );
-        let cmp = octomap_tool("compare_octrees", &[s(&plain), s(&ref_ot)]);
-        let kld = cmp
-            .lines()
-            .find_map(|l| l.split("KLD: ").nth(1))
-            .unwrap_or_else(|| panic!("no KLD in {cmp}"));
-        assert_eq!(kld.trim().parse::<f64>().unwrap(), 0.0, "{cmp}");
+        assert_kld_zero(&plain, &ref_ot, &format!("--no-color at {res} m"));
         // The coloured map: the same nodes with the same values.
         compare_ot(&colored, &ref_ot, true);
     }

@@ -71,6 +71,28 @@ pub fn golden(name: &str, actual: &str) {
     assert_eq!(actual, expected, "output differs from {}", path.display());
 }
 
+/// Runs one of OctoMap's tools (Debian's octomap-tools): its standard output and error. Fails
+/// the test with a clear message when the tool is not installed or fails.
+pub fn octomap_tool(name: &str, args: &[&str]) -> String {
+    let out = Command::new(name).args(args).output().unwrap_or_else(|e| {
+        panic!("{name} not runnable ({e}): install Debian's octomap-tools (apt-get install octomap-tools)")
+    });
+    assert!(
+        out.status.success(),
+        "{name} {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr)
+}
+
+/// OctoMap's `compare_octrees` finds the two `.ot` maps equal: it says `KLD: 0`.
+pub fn assert_kld_zero(ours: &Path, theirs: &Path, what: &str) {
+    let path = |p: &Path| p.to_str().expect("UTF-8 path").to_string();
+    let cmp = octomap_tool("compare_octrees", &[&path(ours), &path(theirs)]);
+    let kld = cmp.lines().find_map(|l| l.split("KLD: ").nth(1));
+    assert_eq!(kld.map(str::trim), Some("0"), "{what}: {cmp}");
+}
+
 /// The frames of testdata/wire-vectors.hex, as bytes.
 pub fn vector_frames() -> Vec<Vec<u8>> {
     std::fs::read_to_string(testdata("wire-vectors.hex"))
