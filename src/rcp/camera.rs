@@ -129,6 +129,37 @@ pub fn load(path: &Path) -> Result<Pictures, CameraError> {
     Ok(pictures)
 }
 
+/// The ROV's camera: one picture each time the ROV starts a new image.
+pub trait Camera: Send {
+    /// A picture now; `Err` says why there is none (the ROV sends status only and tries again
+    /// at the next slot).
+    fn capture(&mut self) -> Result<debt::Image, String>;
+}
+
+/// Pictures loaded before the session, cycled (`--images`, or the built-in ones).
+pub struct Cycle {
+    images: Vec<debt::Image>,
+    next: usize,
+}
+
+impl Cycle {
+    /// A camera yielding `images` in turn, forever (none: every capture fails).
+    pub fn new(images: Vec<debt::Image>) -> Cycle {
+        Cycle { images, next: 0 }
+    }
+}
+
+impl Camera for Cycle {
+    fn capture(&mut self) -> Result<debt::Image, String> {
+        if self.images.is_empty() {
+            return Err("no pictures".into());
+        }
+        let picture = self.images[self.next % self.images.len()].clone();
+        self.next = self.next.wrapping_add(1);
+        Ok(picture)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

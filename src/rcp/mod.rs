@@ -9,8 +9,10 @@
 //! [`outputs`] writes a session's CSV rows, images and [`mcap_log`] (Foxglove) as it goes.
 
 pub mod camera;
+pub mod drive;
 pub mod mcap_log;
 pub mod operator;
+pub mod orders;
 pub mod outputs;
 pub mod realtime;
 pub mod rov;
@@ -54,6 +56,55 @@ pub enum Event {
     LinkLost,
     /// ROV: heartbeats again.
     LinkRecovered,
+    /// Operator: high-level order number `index` went out in a slot for the first time.
+    OrderSent {
+        /// Its number, in the order orders were queued.
+        index: u64,
+        /// The order.
+        order: Order,
+    },
+    /// Operator: the ROV answered a cancel request with LOC: the order in execution was
+    /// cancelled.
+    CancelConfirmed,
+    /// Operator: a ROV frame with a status arrived: the frame as parsed, its trunk emptied.
+    Status(MessageRepr),
+    /// Operator: a trunk of the image in progress arrived.
+    ImageProgress {
+        /// Trunks received so far.
+        trunks: usize,
+        /// Trunks in the image, once its last trunk (LT) has arrived.
+        of: Option<usize>,
+        /// The trunks received from the first on without a gap, concatenated: a DEBT prefix
+        /// that decodes to the image so far.
+        prefix: Vec<u8>,
+    },
+    /// Operator: no ROV frame for the heartbeat timeout (5 s).
+    AnswersLost,
+    /// Operator: ROV frames arrive again.
+    AnswersBack,
+    /// ROV: the vehicle (autopilot) reported something.
+    Vehicle(drive::DriveEvent),
+    /// ROV: the camera gave no picture; why.
+    CameraFailed(String),
+}
+
+/// Which end of the session an event or a process is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    /// The TDMA master at the surface.
+    Operator,
+    /// The vehicle.
+    Rov,
+}
+
+impl Role {
+    /// `operator` or `rov`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Role::Operator => "operator",
+            Role::Rov => "rov",
+        }
+    }
 }
 
 /// The vehicle's state at one instant: what logs, plots and the MCAP file show.

@@ -29,14 +29,7 @@ use crate::link::SimTime;
 use crate::stats::Running;
 use crate::wire::operator::Order;
 
-/// Which end of the session this process is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Role {
-    /// The TDMA master at the surface.
-    Operator,
-    /// The vehicle.
-    Rov,
-}
+pub use super::Role;
 
 /// How a real-time run ended.
 #[derive(Debug)]

@@ -376,6 +376,9 @@ pub trait Observer {
     /// The vehicle after a step (the ROV's side), or as the last status reported it (an
     /// operator in real time).
     fn pose(&mut self, _pose: &PoseSample) {}
+    /// Something happened at `end`, at `t_s` (orders, images in progress, statuses, the link
+    /// and the vehicle): what `--telemetry` and a live Foxglove view show.
+    fn event(&mut self, _end: super::Role, _t_s: f64, _event: &Event) {}
     /// True once the observer can record nothing more (an output failed): the run ends at the
     /// next event, as if stopped.
     fn failed(&self) -> bool {

@@ -54,7 +54,7 @@ pub enum JsonError {
 }
 
 /// Shortened JSON text of a value, for error messages.
-fn show(value: &Value) -> String {
+pub fn show(value: &Value) -> String {
     let text = value.to_string();
     if text.chars().count() > 40 {
         format!("{}...", text.chars().take(37).collect::<String>())
@@ -241,18 +241,35 @@ fn heading(f: &Fields<'_>) -> Result<u16, JsonError> {
     Ok(f.int("heading_deg", 0, 359)? as u16)
 }
 
+/// Reads an order object (the `order` of an operator message in wire.md's JSON form:
+/// `{"type":"goto","x_cm":...}`); errors name the field as it is in the object.
+pub fn parse_order(map: &Map<String, Value>) -> Result<Order, JsonError> {
+    order_fields(&Fields { map, prefix: "" })
+}
+
 fn parse_operator(f: &Fields<'_>) -> Result<operator::Repr, JsonError> {
     let order_map = f.object("order")?;
-    let o = Fields {
+    let order = order_fields(&Fields {
         map: &order_map,
         prefix: "order.",
-    };
+    })?;
+    Ok(operator::Repr {
+        oid: f.bit("oid")?,
+        clo: f.bool("clo")?,
+        eisn: f.bit("eisn")?,
+        ic: f.bool("ic")?,
+        rit: f.int("rit", 0, 63)? as u8,
+        order,
+    })
+}
+
+fn order_fields(o: &Fields<'_>) -> Result<Order, JsonError> {
     let order = match o.str("type")? {
         "velocity" => Order::Velocity {
-            vx: thrust(&o, "vx")?,
-            vy: thrust(&o, "vy")?,
-            vz: thrust(&o, "vz")?,
-            vyaw: thrust(&o, "vyaw")?,
+            vx: thrust(o, "vx")?,
+            vy: thrust(o, "vy")?,
+            vz: thrust(o, "vz")?,
+            vyaw: thrust(o, "vyaw")?,
             arm: o.bool("arm")?,
             disarm: o.bool("disarm")?,
             nav: o.nav("nav")?,
@@ -261,7 +278,7 @@ fn parse_operator(f: &Fields<'_>) -> Result<operator::Repr, JsonError> {
             x_cm: o.int("x_cm", i16::MIN.into(), i16::MAX.into())? as i16,
             y_cm: o.int("y_cm", i16::MIN.into(), i16::MAX.into())? as i16,
             z_cm: o.int("z_cm", i16::MIN.into(), i16::MAX.into())? as i16,
-            heading_deg: heading(&o)?,
+            heading_deg: heading(o)?,
         },
         "image_settings" => {
             let roi_value = o.get("roi")?;
@@ -286,7 +303,7 @@ fn parse_operator(f: &Fields<'_>) -> Result<operator::Repr, JsonError> {
             }
         }
         "hold_heading" => Order::HoldHeading {
-            heading_deg: heading(&o)?,
+            heading_deg: heading(o)?,
             enable: o.bool("enable")?,
         },
         "unknown" => {
@@ -309,14 +326,7 @@ fn parse_operator(f: &Fields<'_>) -> Result<operator::Repr, JsonError> {
             ));
         }
     };
-    Ok(operator::Repr {
-        oid: f.bit("oid")?,
-        clo: f.bool("clo")?,
-        eisn: f.bit("eisn")?,
-        ic: f.bool("ic")?,
-        rit: f.int("rit", 0, 63)? as u8,
-        order,
-    })
+    Ok(order)
 }
 
 fn nav_value(nav: Nav) -> Value {

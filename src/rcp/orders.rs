@@ -1,0 +1,246 @@
+//! Where the operator's orders come from: a script played in time, or a live console (JSON
+//! Lines on a pipe, a Foxglove client), all as [`OrderSource`]s the operator's harness drains.
+//!
+//! A source yields [`Live`] orders: the joystick state (kept until the next one), a high-level
+//! order (queued, sent at the next free slot, resent until acknowledged) or a cancel. A
+//! scripted source knows when its next order is due ([`OrderSource::next_at`]), so virtual
+//! time jumps to it; a live one does not, and is drained at every slot.
+
+use super::operator::Joystick;
+use super::session::{JoystickChange, Waypoint};
+use crate::link::SimTime;
+use crate::wire::Nav;
+use crate::wire::operator::Order;
+
+/// One thing the operator does.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Live {
+    /// The joystick and the mode buttons, kept until the next.
+    Joystick {
+        /// Thrust, percent of full.
+        joystick: Joystick,
+        /// Asks to arm.
+        arm: bool,
+        /// Asks to disarm.
+        disarm: bool,
+        /// The navigation mode asked for.
+        nav: Nav,
+    },
+    /// A high-level order (GoTo, ImageSettings, HoldHeading).
+    Order(Order),
+    /// Cancel the order in execution (CLO).
+    Cancel,
+}
+
+impl Live {
+    /// The joystick as the scripts give it: armed, manual.
+    pub fn scripted_joystick(joystick: Joystick) -> Live {
+        Live::Joystick {
+            joystick,
+            arm: true,
+            disarm: false,
+            nav: Nav::Manual,
+        }
+    }
+}
+
+/// Why a console line is not an order.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LiveError {
+    /// Not JSON, a field missing or out of range (wire.md's order JSON).
+    #[error(transparent)]
+    Json(#[from] crate::wire::json::JsonError),
+    /// An order type a console cannot give (`unknown`).
+    #[error(
+        "field type: expected velocity, goto, image_settings, hold_heading or cancel, found {0}"
+    )]
+    Kind(String),
+}
+
+impl Live {
+    /// Reads one console line: an order object in wire.md's JSON form (the `order` of an
+    /// operator message, e.g. `{"type":"goto","x_cm":300,"y_cm":0,"z_cm":50,"heading_deg":90}`)
+    /// or `{"type":"cancel"}`. Other fields (such as `t_s`) are ignored.
+    pub fn parse(line: &str) -> Result<Live, LiveError> {
+        use crate::wire::json::JsonError;
+        let value: serde_json::Value =
+            serde_json::from_str(line).map_err(|e| JsonError::Syntax {
+                column: e.column(),
+                message: e.to_string(),
+            })?;
+        let Some(map) = value.as_object() else {
+            return Err(JsonError::BadValue {
+                field: "(line)".into(),
+                expected: "a JSON object".into(),
+                found: crate::wire::json::show(&value),
+            }
+            .into());
+        };
+        Live::from_object(map)
+    }
+
+    /// [`Live::parse`] of an object already read.
+    pub fn from_object(
+        map: &serde_json::Map<String, serde_json::Value>,
+    ) -> Result<Live, LiveError> {
+        if map.get("type").and_then(|t| t.as_str()) == Some("cancel") {
+            return Ok(Live::Cancel);
+        }
+        match crate::wire::json::parse_order(map)? {
+            Order::Velocity {
+                vx,
+                vy,
+                vz,
+                vyaw,
+                arm,
+                disarm,
+                nav,
+            } => {
+                let percent = |v: i8| f64::from(v) * 100.0 / 127.0;
+                Ok(Live::Joystick {
+                    joystick: Joystick {
+                        vx: percent(vx),
+                        vy: percent(vy),
+                        vz: percent(vz),
+                        vyaw: percent(vyaw),
+                    },
+                    arm,
+                    disarm,
+                    nav,
+                })
+            }
+            Order::Unknown { .. } => Err(LiveError::Kind("unknown".into())),
+            order => Ok(Live::Order(order)),
+        }
+    }
+}
+
+/// Orders as they become due.
+pub trait OrderSource: Send {
+    /// The orders due at or before `now`, in the order they were given.
+    fn poll(&mut self, now: SimTime) -> Vec<Live>;
+    /// When the next order is due, if the source knows (a script); `None` for a live source
+    /// or one that has nothing more.
+    fn next_at(&self) -> Option<SimTime> {
+        None
+    }
+    /// What went wrong since the last call (a bad line, skipped), one line each.
+    fn take_warnings(&mut self) -> Vec<String> {
+        Vec::new()
+    }
+}
+
+/// A script: joystick changes and GoTo waypoints at their times.
+pub struct Script {
+    /// (time, order), sorted by time (stable: a joystick change before a waypoint at the same
+    /// instant, as the sessions always played them).
+    items: Vec<(SimTime, Live)>,
+    next: usize,
+}
+
+impl Script {
+    /// The joystick changes and waypoints of a session, each at its time.
+    pub fn new(script: &[JoystickChange], waypoints: &[Waypoint]) -> Script {
+        let mut items: Vec<(SimTime, Live)> = script
+            .iter()
+            .map(|c| {
+                (
+                    SimTime::from_secs_f64(c.t_s),
+                    Live::scripted_joystick(c.joystick),
+                )
+            })
+            .chain(waypoints.iter().map(|w| {
+                (
+                    SimTime::from_secs_f64(w.t_s),
+                    Live::Order(super::realtime::goto_order(w.position_m, w.heading_deg)),
+                )
+            }))
+            .collect();
+        items.sort_by_key(|(t, _)| *t);
+        Script { items, next: 0 }
+    }
+
+    /// Orders at given times (a test's, or a file's lines with their `t_s`).
+    pub fn timed(mut items: Vec<(SimTime, Live)>) -> Script {
+        items.sort_by_key(|(t, _)| *t);
+        Script { items, next: 0 }
+    }
+}
+
+impl OrderSource for Script {
+    fn poll(&mut self, now: SimTime) -> Vec<Live> {
+        let start = self.next;
+        while self.items.get(self.next).is_some_and(|(t, _)| *t <= now) {
+            self.next += 1;
+        }
+        self.items[start..self.next]
+            .iter()
+            .map(|(_, live)| *live)
+            .collect()
+    }
+
+    fn next_at(&self) -> Option<SimTime> {
+        self.items.get(self.next).map(|(t, _)| *t)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn console_lines_parse_as_wire_md_orders() {
+        let live = Live::parse(
+            r#"{"type":"velocity","vx":64,"vy":0,"vz":0,"vyaw":-127,"arm":true,"disarm":false,"nav":"depth_hold"}"#,
+        )
+        .unwrap();
+        let Live::Joystick {
+            joystick, arm, nav, ..
+        } = live
+        else {
+            panic!("{live:?}");
+        };
+        assert!((joystick.vx - 50.39).abs() < 0.01 && joystick.vyaw == -100.0);
+        assert!(arm && nav == Nav::DepthHold);
+        assert_eq!(
+            Live::parse(r#"{"type":"goto","x_cm":300,"y_cm":-20,"z_cm":50,"heading_deg":90}"#),
+            Ok(Live::Order(Order::GoTo {
+                x_cm: 300,
+                y_cm: -20,
+                z_cm: 50,
+                heading_deg: 90
+            }))
+        );
+        assert_eq!(
+            Live::parse(r#"{"type":"cancel","t_s":3}"#),
+            Ok(Live::Cancel)
+        );
+        let error = Live::parse(r#"{"type":"goto","x_cm":300,"y_cm":0,"z_cm":0}"#).unwrap_err();
+        assert_eq!(error.to_string(), "field heading_deg: missing");
+        let error = Live::parse("[1]").unwrap_err();
+        assert!(
+            error.to_string().contains("expected a JSON object"),
+            "{error}"
+        );
+        assert!(Live::parse(r#"{"type":"unknown","ot":5,"body":"000000000000000000"}"#).is_err());
+    }
+
+    #[test]
+    fn a_script_yields_each_order_once_at_its_time() {
+        let mut script = Script::timed(vec![
+            (SimTime::from_secs_f64(2.0), Live::Cancel),
+            (
+                SimTime::from_secs_f64(1.0),
+                Live::Order(Order::HoldHeading {
+                    heading_deg: 1,
+                    enable: true,
+                }),
+            ),
+        ]);
+        assert_eq!(script.next_at(), Some(SimTime::from_secs_f64(1.0)));
+        assert!(script.poll(SimTime::from_secs_f64(0.5)).is_empty());
+        assert_eq!(script.poll(SimTime::from_secs_f64(5.0)).len(), 2);
+        assert!(script.poll(SimTime::from_secs_f64(6.0)).is_empty());
+        assert_eq!(script.next_at(), None);
+    }
+}
