@@ -10,6 +10,7 @@
 
 pub mod camera;
 pub mod drive;
+pub mod mavlink;
 pub mod mcap_log;
 pub mod operator;
 pub mod orders;
