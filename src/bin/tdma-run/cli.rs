@@ -30,6 +30,12 @@ Real time, one end per process (through link-sim standing in for the modems):
 Real modems: --port /dev/ttyUSB0 (transparent, e.g. WFS S100), --dialect evologics with
 --port tcp:192.168.0.209:9200, or --port udp:BIND_ADDR=PEER_ADDR. Start the ROV end first.
 
+In the field (docs/tdma-mavlink.md, docs/tdma-console.md, docs/tdma-foxglove.md):
+  tdma-run --role rov --port /dev/ttyUSB0 --vehicle mavlink:udpin:0.0.0.0:14550 --camera cam/
+  mkfifo orders; tdma-run --role operator --port /dev/ttyUSB0 --orders orders --telemetry - &
+  echo '{\"type\":\"goto\",\"x_cm\":300,\"y_cm\":0,\"z_cm\":50,\"heading_deg\":90}' > orders
+  tdma-run --role operator --port /dev/ttyUSB0 --foxglove 127.0.0.1:8765 --images-out rx/ --preview
+
 --script: CSV t_s,vx,vy,vz,vyaw (joystick, percent of full thrust, from t on).
 --waypoints: CSV t_s,x_m,y_m,z_m,heading_deg (a GoTo order queued at t; NED metres, within
   the GoTo order's +-327.67 m).
