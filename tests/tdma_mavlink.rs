@@ -1,10 +1,12 @@
 //! The ROV end's MAVLink drive against stand-in ArduSubs: the Rust one in
 //! `tests/common/ardusub.rs` (over UDP, TCP and a pseudo-terminal as a serial port) and the
-//! independent pymavlink one in `tests/mavlink/ardusub.py`. The drive is stepped as the ROV
-//! engine steps it, with a demand every 0.1 s of wall time.
+//! independent pymavlink one in `tests/mavlink/ardusub.py`. The library tests step the drive
+//! as the ROV engine steps it, with a demand every 0.1 s of wall time; the process tests run
+//! `tdma-run --vehicle mavlink:...` between `link-sim --pty` and the stand-in.
 
 #[path = "common/ardusub.rs"]
 mod ardusub;
+mod common;
 
 use std::process::{Child, Command as Process, Stdio};
 use std::time::{Duration, Instant};
@@ -442,4 +444,125 @@ fn the_drive_works_against_the_pymavlink_standin() {
         .sum::<f64>()
         .sqrt();
     assert!(error < 0.05, "ours {ours:?} theirs {theirs:?}");
+}
+
+const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
+
+fn last_track_position(track: &std::path::Path) -> [f64; 3] {
+    let text = std::fs::read_to_string(track).unwrap();
+    let last = text.lines().last().expect("a track row");
+    let fields: Vec<f64> = last
+        .split(',')
+        .skip(1)
+        .take(3)
+        .map(|v| v.parse().unwrap())
+        .collect();
+    [fields[0], fields[1], fields[2]]
+}
+
+#[test]
+fn tdma_run_drives_the_standin_through_link_sim() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    std::fs::write(
+        path("script.csv"),
+        "t_s,vx,vy,vz,vyaw\n0,50,0,0,0\n4,0,0,0,0\n",
+    )
+    .unwrap();
+    std::fs::write(
+        path("wp.csv"),
+        "t_s,x_m,y_m,z_m,heading_deg\n5,1.5,0.5,0.5,90\n",
+    )
+    .unwrap();
+    let (mut link, a, b) = common::link_sim_pty(&["--model", "s100", "--half-duplex", "false"]);
+    let port = free_udp_port();
+    let mut rov = Process::new(TDMA_RUN)
+        .args(["--role", "rov", "--port", &b, "--duration", "16"])
+        .args(["--vehicle", &format!("mavlink:udpin:127.0.0.1:{port}")])
+        .args(["--image-size", "400", "--metrics", &path("rov.json")])
+        .args(["--track", &path("track.csv")])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let standin = StandIn::start(&format!("udpout:127.0.0.1:{port}"), Config::default());
+    std::thread::sleep(Duration::from_millis(300));
+    let op = Process::new(TDMA_RUN)
+        .args(["--role", "operator", "--port", &a, "--duration", "14"])
+        .args(["--ipg", "200", "--image-size", "400"])
+        .args([
+            "--script",
+            &path("script.csv"),
+            "--waypoints",
+            &path("wp.csv"),
+        ])
+        .args(["--metrics", &path("op.json")])
+        .output()
+        .unwrap();
+    let rov_status = common::wait_for_exit(&mut rov, Duration::from_secs(20));
+    let seen = standin.stop();
+    let _ = link.kill();
+    let _ = link.wait();
+    let mut rov_err = String::new();
+    std::io::Read::read_to_string(&mut rov.stderr.take().unwrap(), &mut rov_err).unwrap();
+    assert!(
+        op.status.success(),
+        "{}",
+        String::from_utf8_lossy(&op.stderr)
+    );
+    assert!(rov_status.success(), "{rov_err}");
+    assert!(seen.ever_armed, "{seen:?}\n{rov_err}");
+    // 50 % is 64 of 127 on the wire, 50.4 % of full stick: x 504.
+    assert!((495..=510).contains(&seen.max_manual_x), "{seen:?}");
+    assert!(seen.modes.contains(&GUIDED), "{seen:?}");
+    let (point, local) = *seen.setpoints.last().expect("a setpoint");
+    assert!(local);
+    assert_eq!(point[..3], [1.5, 0.5, 0.5]);
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path("rov.json")).unwrap()).unwrap();
+    assert_eq!(r["orders_executed"], 1, "{r}\n{rov_err}");
+    let o: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path("op.json")).unwrap()).unwrap();
+    assert_eq!(o["orders_acknowledged"], 1, "{o}");
+    // The ROV's track is the autopilot's pose: the GoTo was reached and the vehicle stopped.
+    let tracked = last_track_position(&dir.path().join("track.csv"));
+    let error = (0..3)
+        .map(|k| (tracked[k] - seen.position_m[k]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(
+        error < 0.3,
+        "track {tracked:?}, autopilot {:?}",
+        seen.position_m
+    );
+}
+
+#[test]
+fn an_unreachable_autopilot_is_exit_2_with_one_line() {
+    for endpoint in [
+        "mavlink:tcpout:127.0.0.1:1",
+        "mavlink:serial:/dev/nonexistent:115200",
+        "mavlink:udpout:127.0.0.1:notaport",
+    ] {
+        let out = Process::new(TDMA_RUN)
+            .args([
+                "--role",
+                "rov",
+                "--port",
+                "/dev/null",
+                "--vehicle",
+                endpoint,
+            ])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{endpoint}: {stderr}");
+        assert_eq!(stderr.lines().count(), 1, "{stderr}");
+        assert!(
+            stderr.starts_with(&format!(
+                "tdma-run: mavlink endpoint '{}': ",
+                endpoint.trim_start_matches("mavlink:")
+            )),
+            "{stderr}"
+        );
+    }
 }
