@@ -213,11 +213,13 @@ fn field_usage(args: &Args, role: Option<Role>) -> Result<()> {
 
 /// What the ends run beyond the config: order sources, the vehicle, the camera.
 fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
-    let parts = Parts::from_config(config);
+    let mut parts = Parts::from_config(config);
     if let Vehicle::Mavlink(endpoint) = &args.vehicle {
-        anyhow::bail!(rovlink::cli::UsageError(format!(
-            "--vehicle mavlink:{endpoint}: MAVLink is not wired into this build yet"
-        )));
+        let options = rovlink::rcp::mavlink::MavlinkOptions::default();
+        let drive = rovlink::rcp::mavlink::connect(endpoint, &options)
+            .map_err(|e| rovlink::cli::UsageError(format!("--vehicle: {e}")))?;
+        say!("vehicle: ArduSub over MAVLink at {}", drive.endpoint());
+        parts.drive = Box::new(drive);
     }
     let pending = [
         ("--camera", args.camera.is_some()),
