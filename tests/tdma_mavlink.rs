@@ -559,7 +559,7 @@ fn an_unreachable_autopilot_is_exit_2_with_one_line() {
         assert_eq!(stderr.lines().count(), 1, "{stderr}");
         assert!(
             stderr.starts_with(&format!(
-                "tdma-run: mavlink endpoint '{}': ",
+                "tdma-run: --vehicle: mavlink endpoint '{}': ",
                 endpoint.trim_start_matches("mavlink:")
             )),
             "{stderr}"
