@@ -566,3 +566,86 @@ fn an_unreachable_autopilot_is_exit_2_with_one_line() {
         );
     }
 }
+
+#[test]
+fn garbage_and_non_finite_numbers_on_the_link_change_nothing() {
+    use mavlink::dialects::ardupilotmega::{
+        HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavMessage, MavModeFlag, MavState,
+        MavType,
+    };
+    let port = free_udp_port();
+    let mut drive = connect(
+        &format!("udpin:127.0.0.1:{port}"),
+        &MavlinkOptions::default(),
+    )
+    .unwrap();
+    let peer = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    peer.connect(("127.0.0.1", port)).unwrap();
+    let frame = |message: &MavMessage| {
+        let mut bytes = Vec::new();
+        let header = mavlink::MavHeader {
+            system_id: 1,
+            component_id: 1,
+            sequence: 0,
+        };
+        mavlink::write_versioned_msg(&mut bytes, mavlink::MavlinkVersion::V2, header, message)
+            .unwrap();
+        bytes
+    };
+    let heartbeat = frame(&MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+        custom_mode: 19,
+        mavtype: MavType::MAV_TYPE_SUBMARINE,
+        autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+        base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+        system_status: MavState::MAV_STATE_ACTIVE,
+        mavlink_version: 3,
+    }));
+    let nan_position = frame(&MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
+        x: f32::NAN,
+        y: f32::INFINITY,
+        ..LOCAL_POSITION_NED_DATA::DEFAULT
+    }));
+    // Pseudo-random bytes, truncated frames and frames with a wrong checksum.
+    let mut seed = 0x2545_f491_u32;
+    let mut noise = || {
+        seed ^= seed << 13;
+        seed ^= seed >> 17;
+        seed ^= seed << 5;
+        seed
+    };
+    let clock = Instant::now();
+    let (events, _) = drive_until(
+        &mut drive,
+        clock,
+        2.0,
+        |_| demand(thrust(0.0), false, Nav::Manual),
+        |_| {
+            for _ in 0..20 {
+                let len = (noise() % 300) as usize;
+                let junk: Vec<u8> = (0..len).map(|_| noise() as u8).collect();
+                peer.send(&junk).unwrap();
+                let mut broken = heartbeat.clone();
+                let k = noise() as usize % broken.len();
+                broken[k] ^= 0x5a;
+                peer.send(&broken).unwrap();
+                peer.send(&heartbeat[..heartbeat.len() / 2]).unwrap();
+            }
+            peer.send(&heartbeat).unwrap();
+            peer.send(&nan_position).unwrap();
+            false
+        },
+    );
+    let state = drive.state();
+    assert!(state.responsive, "{events:?}");
+    assert_eq!(drive.autopilot(), Some((1, 1)));
+    assert_eq!(
+        state.position_m, [0.0; 3],
+        "non-finite positions are dropped"
+    );
+    assert!(
+        events
+            .iter()
+            .all(|e| matches!(e, DriveEvent::Note(n) if n.contains("autopilot found"))),
+        "{events:?}"
+    );
+}
