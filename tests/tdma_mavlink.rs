@@ -245,6 +245,45 @@ fn the_drive_speaks_over_tcp_and_a_serial_port() {
     drop(drive);
     standin.stop();
 
+    // tcpin: the drive listens; the autopilot connects, goes away, and a new one connects.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let mut drive = connect(
+        &format!("tcpin:127.0.0.1:{port}"),
+        &MavlinkOptions::default(),
+    )
+    .unwrap();
+    let address = format!("tcpout:127.0.0.1:{port}");
+    let standin = StandIn::start(&address, Config::default());
+    let events = arms_with_half_stick(&mut drive, &standin, Instant::now(), "tcpin");
+    assert!(
+        events.contains(&DriveEvent::Note(
+            "mavlink: TCP connection established".into()
+        )),
+        "{events:?}"
+    );
+    standin.stop();
+    let standin = StandIn::start(&address, Config::default());
+    let (events, again) = drive_until(
+        &mut drive,
+        Instant::now(),
+        5.0,
+        |_| demand(thrust(50.0), true, Nav::Manual),
+        |_| standin.seen().manual_controls > 0,
+    );
+    assert!(again, "tcpin, second connection: {events:?}");
+    assert!(
+        events.iter().any(
+            |e| matches!(e, DriveEvent::Note(n) if n.starts_with("mavlink: TCP connection closed"))
+        ),
+        "{events:?}"
+    );
+    drop(drive);
+    standin.stop();
+
     // serial: a pseudo-terminal, the stand-in on its master side.
     use nix::fcntl::OFlag;
     use nix::pty::{grantpt, posix_openpt, ptsname_r, unlockpt};

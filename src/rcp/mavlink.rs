@@ -684,7 +684,11 @@ fn receive(shared: &Shared, reopen: Reopen, polls: bool, our_system: u8) {
             let fresh = match &reopen {
                 Reopen::Never => return,
                 Reopen::Connect(to) => {
-                    std::thread::sleep(RECONNECT_PERIOD);
+                    let again = std::time::Instant::now() + RECONNECT_PERIOD;
+                    while std::time::Instant::now() < again && !shared.stop.load(Ordering::Relaxed)
+                    {
+                        std::thread::sleep(READ_TIMEOUT);
+                    }
                     tcp_connection(*to, READ_TIMEOUT * 5).ok()
                 }
                 Reopen::Accept(listener) => match listener.accept() {
