@@ -9,6 +9,7 @@
 //! [`outputs`] writes a session's CSV rows, images and [`mcap_log`] (Foxglove) as it goes.
 
 pub mod camera;
+pub mod console;
 pub mod drive;
 pub mod mcap_log;
 pub mod operator;
