@@ -62,21 +62,7 @@ impl Live {
     /// operator message, e.g. `{"type":"goto","x_cm":300,"y_cm":0,"z_cm":50,"heading_deg":90}`)
     /// or `{"type":"cancel"}`. Other fields (such as `t_s`) are ignored.
     pub fn parse(line: &str) -> Result<Live, LiveError> {
-        use crate::wire::json::JsonError;
-        let value: serde_json::Value =
-            serde_json::from_str(line).map_err(|e| JsonError::Syntax {
-                column: e.column(),
-                message: e.to_string(),
-            })?;
-        let Some(map) = value.as_object() else {
-            return Err(JsonError::BadValue {
-                field: "(line)".into(),
-                expected: "a JSON object".into(),
-                found: crate::wire::json::show(&value),
-            }
-            .into());
-        };
-        Live::from_object(map)
+        Live::from_object(&object_of(line)?)
     }
 
     /// [`Live::parse`] of an object already read.
@@ -112,6 +98,25 @@ impl Live {
             Order::Unknown { .. } => Err(LiveError::Kind("unknown".into())),
             order => Ok(Live::Order(order)),
         }
+    }
+}
+
+/// A console line as a JSON object: the syntax error, or what it is when it is not an object.
+pub(crate) fn object_of(
+    line: &str,
+) -> Result<serde_json::Map<String, serde_json::Value>, crate::wire::json::JsonError> {
+    use crate::wire::json::JsonError;
+    let value: serde_json::Value = serde_json::from_str(line).map_err(|e| JsonError::Syntax {
+        column: e.column(),
+        message: e.to_string(),
+    })?;
+    match value {
+        serde_json::Value::Object(map) => Ok(map),
+        other => Err(JsonError::BadValue {
+            field: "(line)".into(),
+            expected: "a JSON object".into(),
+            found: crate::wire::json::show(&other),
+        }),
     }
 }
 
