@@ -11,6 +11,7 @@
 //! images and [`mcap_log`] (Foxglove) as it goes.
 
 pub mod camera;
+pub mod console;
 pub mod drive;
 pub mod harness;
 pub mod mavlink;
