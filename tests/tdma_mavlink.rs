@@ -499,24 +499,38 @@ fn last_track_position(track: &std::path::Path) -> [f64; 3] {
     [fields[0], fields[1], fields[2]]
 }
 
+/// Feeds `lines` into the FIFO at `path` as an operator types them: each after its delay, s;
+/// the FIFO stays open for `hold_s` after the last.
+fn type_orders(
+    path: String,
+    lines: Vec<(f64, String)>,
+    hold_s: f64,
+) -> std::thread::JoinHandle<()> {
+    std::thread::spawn(move || {
+        use std::io::Write;
+        let mut fifo = std::fs::OpenOptions::new().write(true).open(&path).unwrap();
+        for (delay_s, line) in lines {
+            std::thread::sleep(Duration::from_secs_f64(delay_s));
+            writeln!(fifo, "{line}").unwrap();
+            fifo.flush().unwrap();
+        }
+        std::thread::sleep(Duration::from_secs_f64(hold_s));
+    })
+}
+
 #[test]
-fn tdma_run_drives_the_standin_through_link_sim() {
+fn tdma_run_drives_the_standin_through_link_sim_with_live_orders() {
     let dir = tempfile::tempdir().unwrap();
     let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
-    std::fs::write(
-        path("script.csv"),
-        "t_s,vx,vy,vz,vyaw\n0,50,0,0,0\n4,0,0,0,0\n",
-    )
-    .unwrap();
-    std::fs::write(
-        path("wp.csv"),
-        "t_s,x_m,y_m,z_m,heading_deg\n5,1.5,0.5,0.5,90\n",
+    nix::unistd::mkfifo(
+        dir.path().join("orders").as_path(),
+        nix::sys::stat::Mode::S_IRWXU,
     )
     .unwrap();
     let (mut link, a, b) = common::link_sim_pty(&["--model", "s100", "--half-duplex", "false"]);
     let port = free_udp_port();
     let mut rov = Process::new(TDMA_RUN)
-        .args(["--role", "rov", "--port", &b, "--duration", "16"])
+        .args(["--role", "rov", "--port", &b, "--duration", "17"])
         .args(["--vehicle", &format!("mavlink:udpin:127.0.0.1:{port}")])
         .args(["--image-size", "400", "--metrics", &path("rov.json")])
         .args(["--track", &path("track.csv")])
@@ -525,18 +539,34 @@ fn tdma_run_drives_the_standin_through_link_sim() {
         .unwrap();
     let standin = StandIn::start(&format!("udpout:127.0.0.1:{port}"), Config::default());
     std::thread::sleep(Duration::from_millis(300));
-    let op = Process::new(TDMA_RUN)
-        .args(["--role", "operator", "--port", &a, "--duration", "14"])
+    let operator = Process::new(TDMA_RUN)
+        .args(["--role", "operator", "--port", &a, "--duration", "15"])
         .args(["--ipg", "200", "--image-size", "400"])
-        .args([
-            "--script",
-            &path("script.csv"),
-            "--waypoints",
-            &path("wp.csv"),
-        ])
-        .args(["--metrics", &path("op.json")])
-        .output()
+        .args(["--orders", &path("orders"), "--metrics", &path("op.json")])
+        .stderr(Stdio::piped())
+        .spawn()
         .unwrap();
+    // Half stick forward for 4 s, then stop and go to a point.
+    let typist = type_orders(
+        path("orders"),
+        vec![
+            (
+                1.0,
+                r#"{"type":"velocity","vx":64,"vy":0,"vz":0,"vyaw":0,"arm":true,"disarm":false,"nav":"manual"}"#.into(),
+            ),
+            (
+                4.0,
+                r#"{"type":"velocity","vx":0,"vy":0,"vz":0,"vyaw":0,"arm":true,"disarm":false,"nav":"manual"}"#.into(),
+            ),
+            (
+                0.0,
+                r#"{"type":"goto","x_cm":150,"y_cm":50,"z_cm":50,"heading_deg":90}"#.into(),
+            ),
+        ],
+        8.0,
+    );
+    let op = operator.wait_with_output().unwrap();
+    typist.join().unwrap();
     let rov_status = common::wait_for_exit(&mut rov, Duration::from_secs(20));
     let seen = standin.stop();
     let _ = link.kill();
@@ -550,7 +580,7 @@ fn tdma_run_drives_the_standin_through_link_sim() {
     );
     assert!(rov_status.success(), "{rov_err}");
     assert!(seen.ever_armed, "{seen:?}\n{rov_err}");
-    // 50 % is 64 of 127 on the wire, 50.4 % of full stick: x 504.
+    // vx 64 of 127 is 50.4 % of full stick: x 504.
     assert!((495..=510).contains(&seen.max_manual_x), "{seen:?}");
     assert!(seen.modes.contains(&GUIDED), "{seen:?}");
     let (point, local) = *seen.setpoints.last().expect("a setpoint");
@@ -572,6 +602,10 @@ fn tdma_run_drives_the_standin_through_link_sim() {
         error < 0.3,
         "track {tracked:?}, autopilot {:?}",
         seen.position_m
+    );
+    assert!(
+        (0..3).all(|k| (seen.position_m[k] - [1.5, 0.5, 0.5][k]).abs() < 0.3),
+        "{seen:?}"
     );
 }
 
