@@ -1,5 +1,7 @@
-//! A session log in MCAP that Foxglove displays: the vehicle's pose, its commanded and actual
-//! velocities, the link's events, and every completed image.
+//! The session's view in Foxglove: one definition of its channels (topics, JSON Schemas) and of
+//! its messages, which [`McapLog`] writes into an MCAP file and [`crate::rcp::foxglove`] serves
+//! live: the vehicle's pose, its commanded and actual velocities, the link's events, and every
+//! completed image.
 //!
 //! Messages are JSON with JSON-Schema schemas. Channels and schemas:
 //!
@@ -12,9 +14,15 @@
 //! | `/link/frames` | `rovlink.LinkFrame` | one message per frame: direction, kind, bytes, fate, delay |
 //! | `/link/log` | `foxglove.Log` | link lost and recovered, lost frames |
 //! | `/camera/image` | `foxglove.CompressedImage` | every completed image, decoded and stored as PNG |
+//! | `/camera/preview` | `foxglove.CompressedImage` | live only: the image in progress, decoded from the trunks so far |
+//! | `/session/log` | `foxglove.Log` | live only: orders sent, acknowledged, executed; the vehicle's and the camera's reports |
 //!
-//! Log times are nanoseconds: the session's time plus a base (0 in simulation, so the same seed
-//! gives the same file; the wall clock at the start in real time).
+//! [`View`] turns what an [`Observer`] is told into [`ViewMessage`]s: a topic, a log time and
+//! the JSON text. Log times are nanoseconds, by the view's [`Clock`]: for the MCAP file the
+//! session's time plus a base (0 in simulation, so the same seed gives the same file; the wall
+//! clock at the start in real time), for the live view the wall clock. Building a message
+//! never fails and never panics: an image that does not decode becomes a warning on
+//! `/link/log`.
 
 use std::collections::BTreeMap;
 
@@ -23,8 +31,8 @@ use serde_json::json;
 
 use mcap::write::NoSeek;
 
-use super::PoseSample;
 use super::session::{FrameEvent, Observer};
+use super::{Event, PoseSample, Role};
 use crate::cli::output::Dest;
 use crate::io::{IoError, Output};
 
@@ -54,54 +62,343 @@ const BODY_VELOCITY: &str = r#"{"title":"rovlink.BodyVelocity","type":"object","
 
 const LINK_FRAME: &str = r#"{"title":"rovlink.LinkFrame","type":"object","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"direction":{"type":"string"},"kind":{"type":"string"},"bytes":{"type":"integer"},"fate":{"type":"string"},"t_sent_s":{"type":["number","null"]},"t_received_s":{"type":["number","null"]},"delay_ms":{"type":["number","null"]}}}"#;
 
-/// Foxglove's log levels.
-const INFO: u8 = 2;
-const WARNING: u8 = 3;
+/// Foxglove's log level DEBUG.
+pub const DEBUG: u8 = 1;
+/// Foxglove's log level INFO.
+pub const INFO: u8 = 2;
+/// Foxglove's log level WARNING.
+pub const WARNING: u8 = 3;
 
-/// The channels, in the order they are added.
-#[derive(Clone, Copy)]
-enum Topic {
+/// A channel of the session's view.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Topic {
+    /// `/rov/pose`.
     Pose,
+    /// `/rov/goal`.
     Goal,
+    /// `/rov/velocity/actual`.
     Actual,
+    /// `/rov/velocity/commanded`.
     Commanded,
+    /// `/link/frames`.
     Frames,
+    /// `/link/log`.
     Log,
+    /// `/camera/image`.
     Image,
+    /// `/camera/preview` (live only).
+    Preview,
+    /// `/session/log` (live only).
+    Events,
 }
 
-const TOPICS: [(&str, &str, &str); 7] = [
-    ("/rov/pose", "foxglove.PoseInFrame", POSE_IN_FRAME),
-    ("/rov/goal", "foxglove.PoseInFrame", POSE_IN_FRAME),
-    (
-        "/rov/velocity/actual",
-        "rovlink.BodyVelocity",
-        BODY_VELOCITY,
-    ),
-    (
-        "/rov/velocity/commanded",
-        "rovlink.BodyVelocity",
-        BODY_VELOCITY,
-    ),
-    ("/link/frames", "rovlink.LinkFrame", LINK_FRAME),
-    ("/link/log", "foxglove.Log", LOG),
-    (
-        "/camera/image",
-        "foxglove.CompressedImage",
-        COMPRESSED_IMAGE,
-    ),
-];
+impl Topic {
+    /// Every channel, in the order a view adds them: the MCAP log's first.
+    pub const ALL: [Topic; 9] = [
+        Topic::Pose,
+        Topic::Goal,
+        Topic::Actual,
+        Topic::Commanded,
+        Topic::Frames,
+        Topic::Log,
+        Topic::Image,
+        Topic::Preview,
+        Topic::Events,
+    ];
+
+    /// The topic, e.g. `/rov/pose`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Topic::Pose => "/rov/pose",
+            Topic::Goal => "/rov/goal",
+            Topic::Actual => "/rov/velocity/actual",
+            Topic::Commanded => "/rov/velocity/commanded",
+            Topic::Frames => "/link/frames",
+            Topic::Log => "/link/log",
+            Topic::Image => "/camera/image",
+            Topic::Preview => "/camera/preview",
+            Topic::Events => "/session/log",
+        }
+    }
+
+    /// The schema's name, e.g. `foxglove.PoseInFrame`.
+    pub fn schema_name(self) -> &'static str {
+        match self {
+            Topic::Pose | Topic::Goal => "foxglove.PoseInFrame",
+            Topic::Actual | Topic::Commanded => "rovlink.BodyVelocity",
+            Topic::Frames => "rovlink.LinkFrame",
+            Topic::Log | Topic::Events => "foxglove.Log",
+            Topic::Image | Topic::Preview => "foxglove.CompressedImage",
+        }
+    }
+
+    /// The JSON Schema of its messages.
+    pub fn schema(self) -> &'static str {
+        match self {
+            Topic::Pose | Topic::Goal => POSE_IN_FRAME,
+            Topic::Actual | Topic::Commanded => BODY_VELOCITY,
+            Topic::Frames => LINK_FRAME,
+            Topic::Log | Topic::Events => LOG,
+            Topic::Image | Topic::Preview => COMPRESSED_IMAGE,
+        }
+    }
+
+    /// True for the channels of the MCAP log; false for the live view's own (the image in
+    /// progress, the session's events).
+    pub fn in_log(self) -> bool {
+        !matches!(self, Topic::Preview | Topic::Events)
+    }
+
+    /// Its place in [`Topic::ALL`].
+    pub fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// How a view stamps its messages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Clock {
+    /// `base_ns` plus the session's time (the MCAP log).
+    Session {
+        /// Nanoseconds at the session's time 0.
+        base_ns: u64,
+    },
+    /// The wall clock when the message is built, ns since the Unix epoch (a live view).
+    Wall,
+}
+
+/// Nanoseconds since the Unix epoch now (0 for a clock set before 1970).
+pub fn wall_clock_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
+}
+
+/// One message of the view.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ViewMessage {
+    /// Its channel.
+    pub topic: Topic,
+    /// Its log time, ns.
+    pub log_time_ns: u64,
+    /// The message, JSON text following the channel's schema.
+    pub json: String,
+}
+
+/// Builds the view's messages from what an [`Observer`] is told.
+#[derive(Debug, Clone)]
+pub struct View {
+    clock: Clock,
+    link_up: Option<bool>,
+}
+
+impl View {
+    /// A view stamping its messages by `clock`.
+    pub fn new(clock: Clock) -> View {
+        View {
+            clock,
+            link_up: None,
+        }
+    }
+
+    fn stamp(&self, t_s: f64) -> (u64, serde_json::Value) {
+        let ns = match self.clock {
+            Clock::Session { base_ns } => {
+                base_ns.saturating_add((t_s.max(0.0) * 1e9).round() as u64)
+            }
+            Clock::Wall => wall_clock_ns(),
+        };
+        (
+            ns,
+            json!({"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000}),
+        )
+    }
+
+    fn message(topic: Topic, log_time_ns: u64, json: &serde_json::Value) -> ViewMessage {
+        ViewMessage {
+            topic,
+            log_time_ns,
+            json: json.to_string(),
+        }
+    }
+
+    fn log(&self, topic: Topic, t_s: f64, level: u8, name: &str, message: &str) -> ViewMessage {
+        let (ns, timestamp) = self.stamp(t_s);
+        View::message(
+            topic,
+            ns,
+            &json!({"timestamp": timestamp, "level": level, "message": message,
+                    "name": name, "file": "", "line": 0}),
+        )
+    }
+
+    /// A frame's fate: its `/link/frames` message, and a warning on `/link/log` when it was
+    /// not delivered.
+    pub fn frame(&self, e: &FrameEvent) -> Vec<ViewMessage> {
+        let t_s = e.t_received_s.or(e.t_sent_s).unwrap_or(0.0);
+        let (ns, timestamp) = self.stamp(t_s);
+        let delay_ms = e.t_sent_s.zip(e.t_received_s).map(|(s, r)| (r - s) * 1e3);
+        let mut out = vec![View::message(
+            Topic::Frames,
+            ns,
+            &json!({"timestamp": timestamp, "direction": e.direction, "kind": e.kind,
+                    "bytes": e.bytes, "fate": e.fate, "t_sent_s": e.t_sent_s,
+                    "t_received_s": e.t_received_s, "delay_ms": delay_ms}),
+        )];
+        if !matches!(e.fate, "delivered" | "sent" | "received") {
+            out.push(self.log(
+                Topic::Log,
+                t_s,
+                WARNING,
+                TOOL,
+                &format!(
+                    "{} {} frame ({} B) {}",
+                    e.direction, e.kind, e.bytes, e.fate
+                ),
+            ));
+        }
+        out
+    }
+
+    fn picture(&self, topic: Topic, t_s: f64, stream: &[u8]) -> Option<ViewMessage> {
+        let png = crate::debt::decode(stream)
+            .ok()
+            .and_then(|img| crate::debt::picture::to_png(&img).ok())?;
+        let (ns, timestamp) = self.stamp(t_s);
+        let data = base64::engine::general_purpose::STANDARD.encode(png);
+        Some(View::message(
+            topic,
+            ns,
+            &json!({"timestamp": timestamp, "frame_id": "camera", "data": data, "format": "png"}),
+        ))
+    }
+
+    /// A completed image (its DEBT stream) as PNG on `/camera/image`, or a warning on
+    /// `/link/log` when it does not decode.
+    pub fn image(&self, t_s: f64, stream: &[u8]) -> ViewMessage {
+        self.picture(Topic::Image, t_s, stream).unwrap_or_else(|| {
+            self.log(
+                Topic::Log,
+                t_s,
+                WARNING,
+                TOOL,
+                "a completed image did not decode",
+            )
+        })
+    }
+
+    /// The image in progress (a DEBT prefix) as PNG on `/camera/preview`; nothing when the
+    /// prefix does not decode yet.
+    pub fn preview(&self, t_s: f64, prefix: &[u8]) -> Option<ViewMessage> {
+        self.picture(Topic::Preview, t_s, prefix)
+    }
+
+    /// The vehicle's pose, goal and velocities; a line on `/link/log` when the link was lost
+    /// or recovered since the last pose.
+    pub fn pose(&mut self, pose: &PoseSample) -> Vec<ViewMessage> {
+        let (ns, timestamp) = self.stamp(pose.t_s);
+        let mut out = vec![View::message(
+            Topic::Pose,
+            ns,
+            &pose_json(&timestamp, pose.position_m, pose.heading_deg),
+        )];
+        if let Some(goal) = pose.goal_m {
+            out.push(View::message(
+                Topic::Goal,
+                ns,
+                &pose_json(&timestamp, goal, pose.heading_deg),
+            ));
+        }
+        out.push(View::message(
+            Topic::Actual,
+            ns,
+            &velocity_json(&timestamp, pose.velocity),
+        ));
+        out.push(View::message(
+            Topic::Commanded,
+            ns,
+            &velocity_json(&timestamp, pose.commanded_velocity),
+        ));
+        if self.link_up.is_some_and(|up| up != pose.link_up) {
+            let message = if pose.link_up {
+                "link recovered: heartbeats again"
+            } else {
+                "link lost: no heartbeat for 5 s, backtracking"
+            };
+            let level = if pose.link_up { INFO } else { WARNING };
+            out.push(self.log(Topic::Log, pose.t_s, level, TOOL, message));
+        }
+        self.link_up = Some(pose.link_up);
+        out
+    }
+
+    /// What happened at `end`: a line on `/session/log` (the operator's lost and recovered
+    /// answers on `/link/log`), the image in progress on `/camera/preview`. Statuses,
+    /// completed images and the ROV's link changes are told through [`View::pose`] and
+    /// [`View::image`], so they give nothing here.
+    pub fn event(&self, end: Role, t_s: f64, event: &Event) -> Vec<ViewMessage> {
+        let name = match end {
+            Role::Operator => "tdma-run operator",
+            Role::Rov => "tdma-run rov",
+        };
+        let line = |topic, level, text: &str| vec![self.log(topic, t_s, level, name, text)];
+        let events = |level, text: &str| line(Topic::Events, level, text);
+        match event {
+            Event::OrderSent { index, order } => {
+                events(INFO, &format!("order {index} sent: {order:?}"))
+            }
+            Event::OrderAcknowledged(index) => events(INFO, &format!("order {index} acknowledged")),
+            Event::CancelConfirmed => events(
+                INFO,
+                "cancel confirmed: the order in execution was cancelled",
+            ),
+            Event::OrderExecuted(order) => events(INFO, &format!("executing {order:?}")),
+            Event::OrderCancelled => events(INFO, "the order in execution was cancelled"),
+            Event::ImageStarted { trunks, bytes } => {
+                events(DEBUG, &format!("image started: {trunks} trunks, {bytes} B"))
+            }
+            Event::ImageCancelled => events(INFO, "the image in flight was cancelled"),
+            Event::Vehicle(drive) => match drive {
+                super::drive::DriveEvent::Silent { silent_s } => {
+                    events(WARNING, &format!("autopilot silent for {silent_s:.1} s"))
+                }
+                super::drive::DriveEvent::Heard => events(INFO, "autopilot heard again"),
+                super::drive::DriveEvent::CommandAck {
+                    command,
+                    result,
+                    accepted,
+                } => events(
+                    if *accepted { INFO } else { WARNING },
+                    &format!("autopilot answered {command}: {result}"),
+                ),
+                super::drive::DriveEvent::Note(note) => events(INFO, &format!("vehicle: {note}")),
+            },
+            Event::CameraFailed(why) => events(WARNING, &format!("camera: {why}")),
+            Event::AnswersLost => line(Topic::Log, WARNING, "answers lost: no ROV frame for 5 s"),
+            Event::AnswersBack => line(Topic::Log, INFO, "answers back: ROV frames again"),
+            Event::ImageProgress { prefix, .. } => self.preview(t_s, prefix).into_iter().collect(),
+            Event::Status(_)
+            | Event::ImageCompleted(_)
+            | Event::LinkLost
+            | Event::LinkRecovered => Vec::new(),
+        }
+    }
+}
+
+/// The name the log's lines carry.
+const TOOL: &str = "tdma-run";
 
 /// An [`Observer`] that writes the session into an MCAP file, committed by [`McapLog::finish`]
 /// (nothing is left at the path when the run fails before), or to standard output. The writer
-/// never seeks (chunks are assembled in memory), so a pipe is as good as a file.
+/// never seeks (chunks are assembled in memory), so a pipe is as good as a file. It has the
+/// channels whose [`Topic::in_log`] is true.
 pub struct McapLog {
     path: String,
     writer: Option<mcap::Writer<NoSeek<Output>>>,
-    channels: Vec<u16>,
+    /// The MCAP channel id of each [`Topic`] the log has, by [`Topic::index`].
+    channels: Vec<Option<u16>>,
     sequence: u32,
-    base_ns: u64,
-    link_up: Option<bool>,
+    view: View,
     /// The first write error; later messages are dropped.
     error: Option<McapLogError>,
 }
@@ -117,19 +414,23 @@ impl McapLog {
         };
         let out = dest.open()?;
         let mut writer = crate::io::json_mcap_writer(out).map_err(wrap)?;
-        let mut channels = Vec::new();
-        for (topic, schema, text) in TOPICS {
-            let channel =
-                crate::io::json_mcap_channel(&mut writer, schema, text, topic, &BTreeMap::new());
-            channels.push(channel.map_err(wrap)?);
+        let mut channels = vec![None; Topic::ALL.len()];
+        for topic in Topic::ALL.into_iter().filter(|t| t.in_log()) {
+            let channel = crate::io::json_mcap_channel(
+                &mut writer,
+                topic.schema_name(),
+                topic.schema(),
+                topic.name(),
+                &BTreeMap::new(),
+            );
+            channels[topic.index()] = Some(channel.map_err(wrap)?);
         }
         Ok(McapLog {
             path: name,
             writer: Some(writer),
             channels,
             sequence: 0,
-            base_ns,
-            link_up: None,
+            view: View::new(Clock::Session { base_ns }),
             error: None,
         })
     }
@@ -150,32 +451,24 @@ impl McapLog {
         Ok(())
     }
 
-    fn stamp(&self, t_s: f64) -> (u64, serde_json::Value) {
-        let ns = self
-            .base_ns
-            .saturating_add((t_s.max(0.0) * 1e9).round() as u64);
-        (
-            ns,
-            json!({"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000}),
-        )
-    }
-
-    fn write(&mut self, topic: Topic, log_time_ns: u64, message: &serde_json::Value) {
+    fn write(&mut self, message: &ViewMessage) {
         if self.error.is_some() {
             return;
         }
         let Some(writer) = self.writer.as_mut() else {
             return;
         };
+        let Some(&Some(channel_id)) = self.channels.get(message.topic.index()) else {
+            return;
+        };
         let header = mcap::records::MessageHeader {
-            channel_id: self.channels[topic as usize],
+            channel_id,
             sequence: self.sequence,
-            log_time: log_time_ns,
-            publish_time: log_time_ns,
+            log_time: message.log_time_ns,
+            publish_time: message.log_time_ns,
         };
         self.sequence = self.sequence.wrapping_add(1);
-        let data = message.to_string();
-        if let Err(source) = writer.write_to_known_channel(&header, data.as_bytes()) {
+        if let Err(source) = writer.write_to_known_channel(&header, message.json.as_bytes()) {
             self.error = Some(McapLogError::Mcap {
                 path: self.path.clone(),
                 source,
@@ -183,14 +476,10 @@ impl McapLog {
         }
     }
 
-    fn log(&mut self, t_s: f64, level: u8, message: &str) {
-        let (ns, timestamp) = self.stamp(t_s);
-        self.write(
-            Topic::Log,
-            ns,
-            &json!({"timestamp": timestamp, "level": level, "message": message,
-                    "name": "tdma-run", "file": "", "line": 0}),
-        );
+    fn write_all(&mut self, messages: &[ViewMessage]) {
+        for message in messages {
+            self.write(message);
+        }
     }
 }
 
@@ -223,73 +512,17 @@ impl Observer for McapLog {
     }
 
     fn frame(&mut self, e: &FrameEvent) {
-        let t_s = e.t_received_s.or(e.t_sent_s).unwrap_or(0.0);
-        let (ns, timestamp) = self.stamp(t_s);
-        let delay_ms = e.t_sent_s.zip(e.t_received_s).map(|(s, r)| (r - s) * 1e3);
-        self.write(
-            Topic::Frames,
-            ns,
-            &json!({"timestamp": timestamp, "direction": e.direction, "kind": e.kind,
-                    "bytes": e.bytes, "fate": e.fate, "t_sent_s": e.t_sent_s,
-                    "t_received_s": e.t_received_s, "delay_ms": delay_ms}),
-        );
-        if !matches!(e.fate, "delivered" | "sent" | "received") {
-            self.log(
-                t_s,
-                WARNING,
-                &format!(
-                    "{} {} frame ({} B) {}",
-                    e.direction, e.kind, e.bytes, e.fate
-                ),
-            );
-        }
+        let messages = self.view.frame(e);
+        self.write_all(&messages);
     }
 
     fn image(&mut self, t_s: f64, stream: &[u8]) {
-        let png = crate::debt::decode(stream)
-            .ok()
-            .and_then(|img| crate::debt::picture::to_png(&img).ok());
-        let Some(png) = png else {
-            self.log(t_s, WARNING, "a completed image did not decode");
-            return;
-        };
-        let (ns, timestamp) = self.stamp(t_s);
-        let data = base64::engine::general_purpose::STANDARD.encode(png);
-        self.write(
-            Topic::Image,
-            ns,
-            &json!({"timestamp": timestamp, "frame_id": "camera", "data": data, "format": "png"}),
-        );
+        let message = self.view.image(t_s, stream);
+        self.write(&message);
     }
 
     fn pose(&mut self, pose: &PoseSample) {
-        let (ns, timestamp) = self.stamp(pose.t_s);
-        self.write(
-            Topic::Pose,
-            ns,
-            &pose_json(&timestamp, pose.position_m, pose.heading_deg),
-        );
-        if let Some(goal) = pose.goal_m {
-            self.write(
-                Topic::Goal,
-                ns,
-                &pose_json(&timestamp, goal, pose.heading_deg),
-            );
-        }
-        self.write(Topic::Actual, ns, &velocity_json(&timestamp, pose.velocity));
-        self.write(
-            Topic::Commanded,
-            ns,
-            &velocity_json(&timestamp, pose.commanded_velocity),
-        );
-        if self.link_up.is_some_and(|up| up != pose.link_up) {
-            let message = if pose.link_up {
-                "link recovered: heartbeats again"
-            } else {
-                "link lost: no heartbeat for 5 s, backtracking"
-            };
-            self.log(pose.t_s, if pose.link_up { INFO } else { WARNING }, message);
-        }
-        self.link_up = Some(pose.link_up);
+        let messages = self.view.pose(pose);
+        self.write_all(&messages);
     }
 }
