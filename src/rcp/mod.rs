@@ -6,10 +6,12 @@
 //! bitmap and RIT resends, EISN/ISN toggles, CI/IC cancellation, heartbeats and the recovery
 //! algorithm. [`session`] runs both ends and a link in virtual time, [`realtime`] one end over a
 //! port; [`camera`] reads the ROV camera's pictures and [`script`] what the operator plays;
-//! [`outputs`] writes a session's CSV rows, images and [`mcap_log`] (Foxglove) as it goes.
+//! [`outputs`] writes a session's CSV rows, images and [`mcap_log`] (Foxglove) as it goes;
+//! [`foxglove`] serves the same view live and takes orders from Foxglove.
 
 pub mod camera;
 pub mod drive;
+pub mod foxglove;
 pub mod mcap_log;
 pub mod operator;
 pub mod orders;
