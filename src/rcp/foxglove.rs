@@ -659,6 +659,30 @@ mod tests {
         }
     }
 
+    proptest::proptest! {
+        #[test]
+        fn any_bytes_parse_or_fail_without_panicking(data in proptest::collection::vec(proptest::num::u8::ANY, 0..200)) {
+            let _ = ClientTopic::Orders.parse(&data);
+            let _ = ClientTopic::Twist.parse(&data);
+        }
+
+        #[test]
+        fn any_twist_numbers_give_a_joystick_in_range(
+            v in proptest::collection::vec(-1e300f64..1e300, 4),
+        ) {
+            let text = format!(
+                r#"{{"linear":{{"x":{},"y":{},"z":{}}},"angular":{{"z":{}}}}}"#,
+                v[0], v[1], v[2], v[3]
+            );
+            let Ok(Live::Joystick { joystick, .. }) = ClientTopic::Twist.parse(text.as_bytes()) else {
+                panic!("{text}");
+            };
+            for axis in [joystick.vx, joystick.vy, joystick.vz, joystick.vyaw] {
+                proptest::prop_assert!((-100.0..=100.0).contains(&axis));
+            }
+        }
+    }
+
     #[test]
     fn warnings_stay_one_short_line() {
         assert_eq!(shorten("a\nb"), "ab");
