@@ -221,6 +221,29 @@ fn the_two_ends_run_in_real_time_through_link_sim() {
     assert_eq!(o["orders_sent"], 2, "{o}");
     assert_eq!(o["orders_acknowledged"], 2, "{o}");
     assert_eq!(r["orders_executed"], 2, "{r}");
+    // One harness for both drivers: every end reports the simulation's fields.
+    for key in [
+        "measured_by",
+        "rov_to_operator",
+        "operator_to_rov",
+        "images_started",
+        "images_completed",
+        "image_period_s",
+        "orders_sent",
+        "orders_acknowledged",
+        "orders_executed",
+        "orders_executed_twice",
+        "orders_acknowledged_unexecuted",
+        "link_losses",
+        "link_recoveries",
+        "duration_s",
+    ] {
+        assert!(
+            o.get(key).is_some() && r.get(key).is_some(),
+            "{key}: {o} {r}"
+        );
+    }
+    assert_eq!(r["orders_executed_twice"], 0, "{r}");
     let sent = o["operator_to_rov"]["frames_sent"].as_u64().unwrap();
     let heard = r["operator_to_rov"]["frames_delivered"].as_u64().unwrap();
     assert!(

@@ -585,3 +585,33 @@ fn images_out_never_overwrites_a_camera_picture() {
     assert_contract(&tdma(&args), &[0], "another directory");
     assert!(received.join("image-0001.png").exists());
 }
+
+#[test]
+fn field_flags_on_the_wrong_end_or_malformed_are_one_line_and_exit_2() {
+    let cases: [(&[&str], &str); 6] = [
+        (&["--vehicle", "bogus"], "--vehicle"),
+        (
+            &["--vehicle", "mavlink:"],
+            "expected sim or mavlink:ENDPOINT",
+        ),
+        (
+            &["--vehicle", "mavlink:udpin:127.0.0.1:14550"],
+            "needs --role rov",
+        ),
+        (
+            &["--role", "operator", "--port", "/dev/null", "--camera", "."],
+            "--camera only applies to the ROV end",
+        ),
+        (
+            &["--role", "rov", "--port", "/dev/null", "--orders", "-"],
+            "--orders only applies to the operator end",
+        ),
+        (&["--preview"], "--images-out"),
+    ];
+    for (args, message) in cases {
+        let out = tdma(args);
+        assert_contract(&out, &[2], message);
+        assert!(out.stderr.contains(message), "{args:?}: {}", out.stderr);
+        assert_eq!(out.stderr.trim().lines().count(), 1, "{}", out.stderr);
+    }
+}

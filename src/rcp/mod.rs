@@ -4,14 +4,17 @@
 //! The semantics are wire.md's: orders with one-bit ids acknowledged by the ROV's EOID toggle
 //! (so an order is never executed twice), images sent trunk by trunk with a received-trunk
 //! bitmap and RIT resends, EISN/ISN toggles, CI/IC cancellation, heartbeats and the recovery
-//! algorithm. [`session`] runs both ends and a link in virtual time, [`realtime`] one end over a
-//! port; [`camera`] reads the ROV camera's pictures and [`script`] what the operator plays;
-//! [`outputs`] writes a session's CSV rows, images and [`mcap_log`] (Foxglove) as it goes;
-//! [`foxglove`] serves the same view live and takes orders from Foxglove.
+//! algorithm. [`harness`] holds the two ends around the engines (order sources, the vehicle, the
+//! counters), which [`session`] runs with a link in virtual time and [`realtime`] one at a time
+//! over a port; [`drive`] is what moves the vehicle, [`camera`] what takes its pictures,
+//! [`orders`] and [`script`] what the operator plays; [`outputs`] writes a session's CSV rows,
+//! images and [`mcap_log`] (Foxglove) as it goes; [`foxglove`] serves the same view live and
+//! takes orders from Foxglove.
 
 pub mod camera;
 pub mod drive;
 pub mod foxglove;
+pub mod harness;
 pub mod mcap_log;
 pub mod operator;
 pub mod orders;

@@ -42,6 +42,8 @@ pub struct Operator {
     ipg_ns: u64,
     next_slot: SimTime,
     joystick: Joystick,
+    /// The mode buttons sent with the joystick: arm, disarm, navigation mode.
+    modes: (bool, bool, Nav),
     orders: VecDeque<(u64, Order)>,
     next_index: u64,
     /// OID the head order was first sent with.
@@ -66,6 +68,7 @@ impl Operator {
             ipg_ns: ipg_ns.max(1),
             next_slot: SimTime::ZERO,
             joystick: Joystick::default(),
+            modes: (true, false, Nav::Manual),
             orders: VecDeque::new(),
             next_index: 0,
             head_oid: None,
@@ -84,6 +87,11 @@ impl Operator {
     /// Sets the joystick.
     pub fn set_joystick(&mut self, joystick: Joystick) {
         self.joystick = joystick;
+    }
+
+    /// Sets the mode buttons the Velocity orders carry (from the start: arm, manual).
+    pub fn set_modes(&mut self, arm: bool, disarm: bool, nav: Nav) {
+        self.modes = (arm, disarm, nav);
     }
 
     /// Queues a high-level order; returns its index.
@@ -121,7 +129,13 @@ impl Operator {
         }
         let (order, oid, content) = match self.orders.front() {
             Some(&(index, order)) => {
-                let oid = *self.head_oid.get_or_insert(self.last_eoid);
+                let oid = match self.head_oid {
+                    Some(oid) => oid,
+                    None => {
+                        self.events.push(Event::OrderSent { index, order });
+                        *self.head_oid.insert(self.last_eoid)
+                    }
+                };
                 (order, oid, SlotContent::Order(index))
             }
             None => {
@@ -131,9 +145,9 @@ impl Operator {
                     vy: scale(self.joystick.vy),
                     vz: scale(self.joystick.vz),
                     vyaw: scale(self.joystick.vyaw),
-                    arm: true,
-                    disarm: false,
-                    nav: Nav::Manual,
+                    arm: self.modes.0,
+                    disarm: self.modes.1,
+                    nav: self.modes.2,
                 };
                 // OID is ignored for Velocity, except with CLO: the ROV cancels only when OID
                 // is its last announced EOID (so a CLO can never cancel a newer order).
@@ -160,6 +174,7 @@ impl Operator {
         let Ok(repr) = MessageRepr::parse(&frame) else {
             return;
         };
+        let mut shown = repr.clone();
         let Message::Rov(msg) = repr.message else {
             return;
         };
@@ -176,10 +191,17 @@ impl Operator {
                 self.events.push(Event::OrderAcknowledged(index));
             }
             // Cancelled (LOC), or nothing left to cancel (RD): the request is done.
+            if self.cancel && status.loc {
+                self.events.push(Event::CancelConfirmed);
+            }
             if status.loc || status.rd {
                 self.cancel = false;
             }
             self.last_status = Some(status);
+            if let Message::Rov(rov) = &mut shown.message {
+                rov.trunk.clear();
+            }
+            self.events.push(Event::Status(shown));
         }
         if msg.ci {
             self.ic = true;
@@ -192,10 +214,20 @@ impl Operator {
             return;
         }
         let k = usize::from(msg.itsn);
+        let new = self.bitmap & (1 << k) == 0 || (msg.lt && self.count.is_none());
         self.trunks[k] = msg.trunk;
         self.bitmap |= 1 << k;
         if msg.lt {
             self.count = Some(k + 1);
+        }
+        if new {
+            let whole = usize::from(self.rit()).min(self.count.unwrap_or(64));
+            let whole = if self.bitmap == u64::MAX { 64 } else { whole };
+            self.events.push(Event::ImageProgress {
+                trunks: self.bitmap.count_ones() as usize,
+                of: self.count,
+                prefix: self.trunks[..whole].concat(),
+            });
         }
         if let Some(n) = self.count {
             let all = if n == 64 { u64::MAX } else { (1u64 << n) - 1 };
@@ -426,7 +458,6 @@ mod tests {
             panic!()
         };
         assert!(on.hh);
-        assert_eq!(pair.rov.vehicle.heading_hold_deg, Some(90.0));
         pair.operator.push_order(Order::HoldHeading {
             heading_deg: 0,
             enable: false,

@@ -18,12 +18,8 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use super::operator::Operator;
-use super::rov::{Rov, RovConfig};
-use super::session::{
-    Direction, FrameEvent, Metrics, Observer, SessionConfig, image_period_s, kind_of,
-};
-use super::{Event, PoseSample};
+use super::harness::{OperatorEnd, Out, RovEnd, Tally};
+use super::session::{Direction, FrameEvent, Metrics, Observer, Parts, SessionConfig, kind_of};
 use crate::gll::{Endpoint, GllError};
 use crate::link::SimTime;
 use crate::stats::Running;
@@ -66,51 +62,56 @@ impl Clock {
 
 /// Runs one end of `config`'s session over `endpoint` until its duration has passed, `stop`
 /// is set, or the endpoint fails. The link model, seed and buoy of `config` are not used (the
-/// link is real); the operator plays the script and waypoints, the ROV starts at
-/// `config.start_m` with `config.settings` and `config.images`.
+/// link is real); the operator takes its orders from `parts.orders`, the ROV is moved by
+/// `parts.drive` and takes pictures with `parts.camera` (the other end's parts are unused).
 pub fn run(
     role: Role,
     config: &SessionConfig,
+    parts: Parts,
     endpoint: &mut dyn Endpoint,
     stop: &AtomicBool,
     observer: &mut dyn Observer,
 ) -> (Metrics, Ended) {
-    let mut end = End {
-        config,
+    let clock = Clock {
+        start: Instant::now(),
+    };
+    let end = SimTime::from_secs_f64(config.duration_s);
+    let (mut operator, rov) = parts.ends(config);
+    operator.status_poses = true;
+    let mut tally = Tally::new(false);
+    let mut directions = [Direction::default(), Direction::default()];
+    let mut out = Out {
+        tally: &mut tally,
+        observer,
+    };
+    let mut io = Io {
         endpoint,
         stop,
-        observer,
-        clock: Clock {
-            start: Instant::now(),
-        },
-        end: SimTime::from_secs_f64(config.duration_s),
-        metrics: Metrics::default(),
-        directions: [Direction::default(), Direction::default()],
-    };
-    let outcome = match role {
-        Role::Operator => end.operator(),
-        Role::Rov => end.rov(),
-    };
-    let End {
-        clock,
+        clock: &clock,
         end,
-        mut metrics,
-        directions,
-        ..
-    } = end;
+        directions: &mut directions,
+    };
+    let (outcome, round_trip_ms) = match role {
+        Role::Operator => {
+            let mut round_trip_ms = Running::new();
+            let outcome = io.operator(operator, &mut out, &mut round_trip_ms);
+            (outcome, Some(round_trip_ms))
+        }
+        Role::Rov => (io.rov(rov, &mut out), None),
+    };
     let ended = match outcome {
         Ok(true) => Ended::Done,
         Ok(false) => Ended::Stopped,
         Err(error) => Ended::Failed(error),
     };
     let duration_s = clock.now().min(end).as_secs_f64();
-    metrics.measured_by = match role {
-        Role::Operator => "operator",
-        Role::Rov => "rov",
-    };
-    metrics.duration_s = duration_s;
+    let mut metrics = tally.finish(role.name(), duration_s);
     metrics.operator_to_rov = directions[0].metrics(duration_s);
     metrics.rov_to_operator = directions[1].metrics(duration_s);
+    if let Some(rtt) = round_trip_ms.filter(|r| r.count() > 0) {
+        metrics.round_trip_ms = Some(rtt.mean());
+        metrics.round_trip_jitter_ms = Some(rtt.std());
+    }
     (metrics, ended)
 }
 
@@ -138,100 +139,77 @@ fn received_event(direction: &'static str, frame: &[u8], t: SimTime) -> FrameEve
     }
 }
 
-/// One end's run: what it talks through, and what it counts.
-struct End<'a> {
-    config: &'a SessionConfig,
+/// One end's link to the world: the port, the clock, and the frame counts.
+struct Io<'a> {
     endpoint: &'a mut dyn Endpoint,
     stop: &'a AtomicBool,
-    observer: &'a mut dyn Observer,
-    clock: Clock,
+    clock: &'a Clock,
     end: SimTime,
-    metrics: Metrics,
     /// Operator to ROV, ROV to operator.
-    directions: [Direction; 2],
+    directions: &'a mut [Direction; 2],
 }
 
-impl End<'_> {
+impl Io<'_> {
+    fn stopped(&self, out: &Out<'_>) -> bool {
+        self.stop.load(Ordering::SeqCst) || out.observer.failed()
+    }
+
     /// The operator's loop; `Ok(true)` when the duration ran out, `Ok(false)` when stopped.
-    fn operator(&mut self) -> Result<bool, GllError> {
-        let End {
-            config,
-            endpoint,
-            stop,
-            observer,
-            clock,
-            end,
-            metrics,
-            directions,
-        } = self;
-        let (config, stop, end) = (*config, *stop, *end);
-        let mut operator = Operator::new(1, (config.ipg_s * 1e9).round().max(1.0) as u64);
-        let mut script = config.script.iter().peekable();
-        let mut waypoints = config.waypoints.iter().peekable();
-        let mut image_times = Vec::new();
-        let mut round_trip_ms = Running::new();
+    fn operator(
+        &mut self,
+        mut operator: OperatorEnd,
+        out: &mut Out<'_>,
+        round_trip_ms: &mut Running,
+    ) -> Result<bool, GllError> {
+        let clock = self.clock;
         // The last slot's send time, until its answer arrives.
         let mut awaiting: Option<SimTime> = None;
         // Set when a slot went out while the previous one was still unanswered: the next
         // answer may be that late one, so it is not timed against the new slot's frame (it
         // would give a round trip shorter than the link allows).
         let mut ambiguous = false;
-        let mut last_status: Option<crate::wire::rov::BasicStatus> = None;
         let mut drained = false;
         loop {
-            if stop.load(Ordering::SeqCst) || observer.failed() {
+            if self.stopped(out) {
                 return Ok(false);
             }
             let now = clock.now();
-            if now >= end {
-                break;
+            if now >= self.end {
+                return Ok(true);
             }
-            while let Some(change) = script.next_if(|c| SimTime::from_secs_f64(c.t_s) <= now) {
-                operator.set_joystick(change.joystick);
-            }
-            while let Some(w) = waypoints.next_if(|w| SimTime::from_secs_f64(w.t_s) <= now) {
-                operator.push_order(goto_order(w.position_m, w.heading_deg));
-                metrics.orders_sent += 1;
-            }
-            let late = now.0.saturating_sub(operator.poll_at().0) > 1_000_000;
-            if operator.poll_at() <= now && (drained || !late) {
-                let (frame, _) = operator.poll(now);
-                endpoint.send(&frame)?;
-                directions[0].sent();
-                observer.frame(&sent_event("operator_to_rov", &frame, now));
+            let late = now.0.saturating_sub(operator.slot_at().0) > 1_000_000;
+            if (operator.slot_at() > now || drained || !late)
+                && let Some((frame, _)) = operator.poll(now, out)
+            {
+                self.endpoint.send(&frame)?;
+                self.directions[0].sent();
+                out.observer
+                    .frame(&sent_event("operator_to_rov", &frame, now));
                 ambiguous = awaiting.is_some();
                 awaiting = Some(now);
                 drained = false;
             }
-            let wake = [
-                Some(operator.poll_at()),
-                script.peek().map(|c| SimTime::from_secs_f64(c.t_s)),
-                waypoints.peek().map(|w| SimTime::from_secs_f64(w.t_s)),
-                Some(end),
-            ]
-            .into_iter()
-            .flatten()
-            .min()
-            .unwrap_or(end);
-            // Wake at least every 0.2 s to notice Ctrl-C.
+            let wake = operator.next_at().min(self.end);
+            // Wake at least every 0.2 s to notice Ctrl-C and live orders.
             let mut deadline = clock
                 .instant(wake)
                 .min(Instant::now() + Duration::from_millis(200));
-            if operator.poll_at() <= now {
+            if operator.slot_at() <= now {
                 // Late for the slot (busy with an image): what arrived meanwhile is read
                 // first, so a late answer is not timed against the new slot's frame.
                 drained = true;
                 deadline = Instant::now() + Duration::from_millis(1);
             }
-            let Some(received) = endpoint.receive(deadline)? else {
+            let Some(received) = self.endpoint.receive(deadline)? else {
                 continue;
             };
             let t = clock.at(received.at);
             if received.damaged {
                 continue;
             }
-            directions[1].delivered(t, received.bytes.len(), None);
-            observer.frame(&received_event("rov_to_operator", &received.bytes, t));
+            self.directions[1].delivered(t, received.bytes.len(), None);
+            out.observer
+                .frame(&received_event("rov_to_operator", &received.bytes, t));
             if let Some(sent) = awaiting.take() {
                 if ambiguous {
                     ambiguous = false;
@@ -239,96 +217,44 @@ impl End<'_> {
                     round_trip_ms.push(t.0.saturating_sub(sent.0) as f64 * 1e-6);
                 }
             }
-            operator.receive(t, &received.bytes);
-            for event in operator.take_events() {
-                match event {
-                    Event::OrderAcknowledged(_) => metrics.orders_acknowledged += 1,
-                    Event::ImageCompleted(stream) => {
-                        metrics.images_completed += 1;
-                        image_times.push(t.as_secs_f64());
-                        observer.image(t.as_secs_f64(), &stream);
-                    }
-                    _ => {}
-                }
-            }
-            if operator.last_status != last_status {
-                last_status = operator.last_status;
-                if let Some(status) = last_status {
-                    observer.pose(&status_pose(t, &status));
-                }
-            }
+            operator.receive(t, &received.bytes, out);
         }
-        metrics.image_period_s = image_period_s(&image_times);
-        if round_trip_ms.count() > 0 {
-            metrics.round_trip_ms = Some(round_trip_ms.mean());
-            metrics.round_trip_jitter_ms = Some(round_trip_ms.std());
-        }
-        Ok(true)
     }
 
     /// The ROV's loop; `Ok(true)` when the duration ran out, `Ok(false)` when stopped.
-    fn rov(&mut self) -> Result<bool, GllError> {
-        let End {
-            config,
-            endpoint,
-            stop,
-            observer,
-            clock,
-            end,
-            metrics,
-            directions,
-        } = self;
-        let (config, stop, end) = (*config, *stop, *end);
-        let rov_config = RovConfig {
-            settings: config.settings,
-            ..RovConfig::default()
-        };
-        let mut rov = Rov::new(rov_config, config.start_m, config.images.clone());
-        let tally = |rov: &mut Rov, metrics: &mut Metrics| {
-            for event in rov.take_events() {
-                match event {
-                    Event::OrderExecuted(_) => metrics.orders_executed += 1,
-                    Event::ImageStarted { .. } => metrics.images_started += 1,
-                    Event::LinkLost => metrics.link_losses += 1,
-                    Event::LinkRecovered => metrics.link_recoveries += 1,
-                    _ => {}
-                }
-            }
-        };
+    fn rov(&mut self, mut rov: RovEnd, out: &mut Out<'_>) -> Result<bool, GllError> {
+        let clock = self.clock;
         let mut last = SimTime::ZERO;
         loop {
-            if stop.load(Ordering::SeqCst) || observer.failed() {
+            if self.stopped(out) {
                 return Ok(false);
             }
             let now = clock.now().max(last);
-            if now >= end {
+            if now >= self.end {
                 return Ok(true);
             }
-            while rov.poll_at() <= now {
-                let step = rov.poll_at();
-                rov.poll(step);
-                observer.pose(&rov.pose(step.as_secs_f64()));
-            }
-            tally(&mut rov, metrics);
+            rov.poll(now, out);
             last = now;
             let deadline = clock
-                .instant(rov.poll_at().min(end))
+                .instant(rov.next_at().min(self.end))
                 .min(Instant::now() + Duration::from_millis(200));
-            let Some(received) = endpoint.receive(deadline)? else {
+            let Some(received) = self.endpoint.receive(deadline)? else {
                 continue;
             };
             if received.damaged {
                 continue;
             }
             let t = clock.at(received.at).max(last);
-            directions[0].delivered(t, received.bytes.len(), None);
-            observer.frame(&received_event("operator_to_rov", &received.bytes, t));
-            if let Some(reply) = rov.receive(t, &received.bytes) {
-                endpoint.send(&reply)?;
-                directions[1].sent();
-                observer.frame(&sent_event("rov_to_operator", &reply, clock.now().max(t)));
+            self.directions[0].delivered(t, received.bytes.len(), None);
+            out.observer
+                .frame(&received_event("operator_to_rov", &received.bytes, t));
+            if let Some(reply) = rov.receive(t, &received.bytes, None, out) {
+                self.endpoint.send(&reply)?;
+                self.directions[1].sent();
+                let sent_at = clock.now().max(t);
+                out.observer
+                    .frame(&sent_event("rov_to_operator", &reply, sent_at));
             }
-            tally(&mut rov, metrics);
         }
     }
 }
@@ -341,23 +267,5 @@ pub(crate) fn goto_order(position_m: [f64; 3], heading_deg: f64) -> Order {
         y_cm: cm(position_m[1]),
         z_cm: cm(position_m[2]),
         heading_deg: (heading_deg.rem_euclid(360.0).round() as u16) % 360,
-    }
-}
-
-/// What the operator knows of the vehicle: the position and heading of its last status.
-fn status_pose(t: SimTime, status: &crate::wire::rov::BasicStatus) -> PoseSample {
-    PoseSample {
-        t_s: t.as_secs_f64(),
-        position_m: [
-            f64::from(status.x_cm) / 100.0,
-            f64::from(status.y_cm) / 100.0,
-            f64::from(status.z_cm) / 100.0,
-        ],
-        heading_deg: f64::from(status.yaw_deg),
-        velocity: [0.0; 4],
-        commanded_velocity: [0.0; 4],
-        goal_m: None,
-        backtrack_m: None,
-        link_up: true,
     }
 }

@@ -13,10 +13,12 @@
 
 use std::collections::VecDeque;
 
+use super::camera::{Camera, Cycle};
+use super::drive::{Demand, Drive, DriveState, SimDrive};
 use super::{Event, ImageSettings, PoseSample, emit, trunks_of};
 use crate::debt;
 use crate::link::SimTime;
-use crate::vehicle::{Command, Vehicle};
+use crate::vehicle::Command;
 use crate::wire::frame::{ADDR_OPERATOR, Frame};
 use crate::wire::operator::Order;
 use crate::wire::rov::{BasicStatus, Status};
@@ -68,10 +70,11 @@ struct Outgoing {
 /// The ROV engine.
 pub struct Rov {
     cfg: RovConfig,
-    /// The simulated vehicle (read it for poses; the engine drives it).
-    pub vehicle: Vehicle,
-    images: Vec<debt::Image>,
-    next_image: usize,
+    drive: Box<dyn Drive>,
+    camera: Box<dyn Camera>,
+    /// The reason of the last failed capture, to report a failing camera once per reason.
+    camera_failure: Option<String>,
+    heading_hold_deg: Option<f64>,
     settings: ImageSettings,
     eoid: bool,
     loc: bool,
@@ -91,13 +94,23 @@ pub struct Rov {
 }
 
 impl Rov {
-    /// A ROV at `start` (NED, m) whose camera yields `images`, cycled.
+    /// A simulated ROV at `start` (NED, m) whose camera yields `images`, cycled.
     pub fn new(cfg: RovConfig, start: [f64; 3], images: Vec<debt::Image>) -> Rov {
+        Rov::with(
+            cfg,
+            Box::new(SimDrive::new(start)),
+            Box::new(Cycle::new(images)),
+        )
+    }
+
+    /// A ROV moved by `drive` (the built-in model or an autopilot) with `camera`.
+    pub fn with(cfg: RovConfig, drive: Box<dyn Drive>, camera: Box<dyn Camera>) -> Rov {
         Rov {
             settings: cfg.settings,
-            vehicle: Vehicle::new(start),
-            images,
-            next_image: 0,
+            drive,
+            camera,
+            camera_failure: None,
+            heading_hold_deg: None,
             eoid: false,
             loc: false,
             executing: None,
@@ -127,14 +140,20 @@ impl Rov {
         self.link_up
     }
 
+    /// The vehicle as last known.
+    pub fn state(&self) -> DriveState {
+        self.drive.state()
+    }
+
     /// The vehicle's state at `t_s` for logs and plots.
     pub fn pose(&self, t_s: f64) -> PoseSample {
+        let state = self.drive.state();
         PoseSample {
             t_s,
-            position_m: self.vehicle.position_m,
-            heading_deg: self.vehicle.heading_deg,
-            velocity: self.vehicle.velocity,
-            commanded_velocity: self.vehicle.commanded_velocity,
+            position_m: state.position_m,
+            heading_deg: state.heading_deg,
+            velocity: state.velocity,
+            commanded_velocity: state.commanded_velocity,
             goal_m: self.executing.map(|Executing::GoTo(target, _)| target),
             backtrack_m: if self.link_up {
                 None
@@ -172,13 +191,13 @@ impl Rov {
             if self.stack.len() == self.cfg.stack_depth {
                 self.stack.pop_front();
             }
-            self.stack.push_back(self.vehicle.position_m);
+            self.stack.push_back(self.drive.state().position_m);
             self.next_push = now.after_secs(self.cfg.stack_period_s);
         }
         let command = if !self.link_up {
             // Backtracking: drive to the newest stacked position, pop it when reached.
             while let Some(&back) = self.stack.back() {
-                if self.vehicle.distance_to(back) > crate::vehicle::ARRIVAL_M
+                if self.drive.state().distance_to(back) > self.drive.arrival_m()
                     || self.stack.len() == 1
                 {
                     break;
@@ -190,14 +209,14 @@ impl Rov {
                     x,
                     y,
                     z,
-                    heading_deg: self.vehicle.heading_deg,
+                    heading_deg: self.drive.state().heading_deg,
                 },
                 None => idle(),
             }
         } else {
             match self.executing {
                 Some(Executing::GoTo([x, y, z], heading_deg)) => {
-                    if self.vehicle.reached([x, y, z], heading_deg) {
+                    if self.drive.reached([x, y, z], heading_deg) {
                         self.executing = None;
                         idle()
                     } else {
@@ -218,7 +237,19 @@ impl Rov {
                 None => idle(),
             }
         };
-        self.vehicle.step(self.cfg.step_s, command);
+        let demand = Demand {
+            command,
+            arm: self.arm,
+            nav: match command {
+                Command::GoTo { .. } => Nav::Guided,
+                Command::Thrust { .. } => self.nav,
+            },
+            heading_hold_deg: self.heading_hold_deg,
+            link_up: self.link_up,
+        };
+        self.drive.step(now, self.cfg.step_s, &demand);
+        self.events
+            .extend(self.drive.take_events().into_iter().map(Event::Vehicle));
     }
 
     /// Takes an operator frame received at `now`; returns the reply frame.
@@ -307,7 +338,7 @@ impl Rov {
                 heading_deg,
                 enable,
             } => {
-                self.vehicle.heading_hold_deg = enable.then_some(f64::from(heading_deg));
+                self.heading_hold_deg = enable.then_some(f64::from(heading_deg));
             }
             Order::ImageSettings {
                 roi,
@@ -337,13 +368,21 @@ impl Rov {
 
     /// Encodes the next camera image with the current settings.
     fn capture(&mut self) {
-        if self.images.is_empty() {
-            self.image = None;
-            return;
-        }
-        let picture = &self.images[self.next_image % self.images.len()];
-        self.next_image += 1;
-        let trunks = trunks_of(picture, &self.settings);
+        let picture = match self.camera.capture() {
+            Ok(picture) => {
+                self.camera_failure = None;
+                picture
+            }
+            Err(reason) => {
+                self.image = None;
+                if self.camera_failure.as_ref() != Some(&reason) {
+                    self.camera_failure = Some(reason.clone());
+                    self.events.push(Event::CameraFailed(reason));
+                }
+                return;
+            }
+        };
+        let trunks = trunks_of(&picture, &self.settings);
         if trunks.is_empty() {
             // A picture the codec refuses (e.g. larger than DEBT holds): nothing to send.
             self.image = None;
@@ -360,23 +399,26 @@ impl Rov {
     }
 
     fn reply(&mut self, rit: u8) -> Vec<u8> {
-        let [x_cm, y_cm, z_cm] = self
-            .vehicle
+        let state = self.drive.state();
+        let [x_cm, y_cm, z_cm] = state
             .position_m
             .map(|m| (m * 100.0).round().clamp(-32768.0, 32767.0) as i16);
+        // Whole degrees 0..=359 (NaN, never given by a drive, would be 0).
+        let degrees = |a: f64| (a.rem_euclid(360.0).round() as u16) % 360;
         let status = BasicStatus {
-            rd: self.executing.is_none(),
+            // Not ready while executing an order, or while the vehicle does not answer.
+            rd: self.executing.is_none() && state.responsive,
             eoid: self.eoid,
             loc: self.loc,
-            hh: self.vehicle.heading_hold_deg.is_some(),
-            arm: self.arm,
-            nav: self.nav,
+            hh: self.heading_hold_deg.is_some(),
+            arm: state.armed,
+            nav: state.nav,
             x_cm,
             y_cm,
             z_cm,
-            roll_deg: 0,
-            pitch_deg: 0,
-            yaw_deg: (self.vehicle.heading_deg.round() as u16) % 360,
+            roll_deg: degrees(state.roll_deg),
+            pitch_deg: degrees(state.pitch_deg),
+            yaw_deg: degrees(state.heading_deg),
         };
         let (mut ft, mut lt, mut itsn, mut trunk) = (false, false, 0u8, Vec::new());
         if let (false, Some(image)) = (

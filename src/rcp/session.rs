@@ -10,7 +10,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use serde::Serialize;
 
-use super::operator::{Joystick, Operator, SlotContent};
+use std::collections::HashMap;
+
+use super::harness::{OperatorEnd, Out, RovEnd, Tally};
+use super::operator::{Joystick, SlotContent};
 use super::rov::{Rov, RovConfig};
 use super::{Event, ImageSettings, PoseSample};
 use crate::debt;
@@ -379,6 +382,8 @@ pub trait Observer {
     /// Something happened at `end`, at `t_s` (orders, images in progress, statuses, the link
     /// and the vehicle): what `--telemetry` and a live Foxglove view show.
     fn event(&mut self, _end: super::Role, _t_s: f64, _event: &Event) {}
+    /// Something to tell the user at `t_s` (an order source's bad line): one line.
+    fn warning(&mut self, _t_s: f64, _text: &str) {}
     /// True once the observer can record nothing more (an output failed): the run ends at the
     /// next event, as if stopped.
     fn failed(&self) -> bool {
@@ -481,49 +486,83 @@ pub enum SessionError {
     Model(#[from] ModelError),
 }
 
-/// Runs a session after [`SessionConfig::validate`]; `observer` sees frames, images and poses
-/// as they happen. `stop` is checked at every event: once set, the run ends there, and the
-/// metrics cover the virtual time reached, with `interrupted` set to [`STOPPED`]. The run also
-/// ends early once the observer has [`failed`](Observer::failed).
+/// The ends a session runs beyond what its [`SessionConfig`] says: where the operator's
+/// orders come from and what moves the ROV and takes its pictures.
+pub struct Parts {
+    /// The operator's order sources, drained in turn (the config's script comes first when
+    /// built by [`Parts::from_config`]).
+    pub orders: Vec<Box<dyn super::orders::OrderSource>>,
+    /// What moves the vehicle.
+    pub drive: Box<dyn super::drive::Drive>,
+    /// The camera.
+    pub camera: Box<dyn super::camera::Camera>,
+}
+
+impl Parts {
+    /// The config's own: its script and waypoints, the built-in vehicle at its start, its
+    /// pictures cycled.
+    pub fn from_config(config: &SessionConfig) -> Parts {
+        Parts {
+            orders: vec![Box::new(super::orders::Script::new(
+                &config.script,
+                &config.waypoints,
+            ))],
+            drive: Box::new(super::drive::SimDrive::new(config.start_m)),
+            camera: Box::new(super::camera::Cycle::new(config.images.clone())),
+        }
+    }
+
+    /// The two ends these parts make for `config`.
+    pub(crate) fn ends(self, config: &SessionConfig) -> (OperatorEnd, RovEnd) {
+        let rov_config = RovConfig {
+            settings: config.settings,
+            ..RovConfig::default()
+        };
+        (
+            OperatorEnd::new(rov_config.address, config.ipg_s, self.orders),
+            RovEnd::new(Rov::with(rov_config, self.drive, self.camera)),
+        )
+    }
+}
+
+/// Runs a session after [`SessionConfig::validate`] with the config's own [`Parts`];
+/// see [`run_with`].
 pub fn run(
     config: &SessionConfig,
     observer: &mut dyn Observer,
     stop: &AtomicBool,
 ) -> Result<Metrics, SessionError> {
+    run_with(config, Parts::from_config(config), observer, stop)
+}
+
+/// Runs a session after [`SessionConfig::validate`]; `observer` sees frames, images, poses and
+/// events as they happen. `stop` is checked at every event: once set, the run ends there, and
+/// the metrics cover the virtual time reached, with `interrupted` set to [`STOPPED`]. The run
+/// also ends early once the observer has [`failed`](Observer::failed).
+pub fn run_with(
+    config: &SessionConfig,
+    parts: Parts,
+    observer: &mut dyn Observer,
+    stop: &AtomicBool,
+) -> Result<Metrics, SessionError> {
     config.validate()?;
     let mut link = Link::symmetric(config.model.clone(), config.seed, Distance::Fixed(1.0))?;
-    let rov_config = RovConfig {
-        settings: config.settings,
-        ..RovConfig::default()
-    };
-    let mut rov = Rov::new(rov_config, config.start_m, config.images.clone());
-    let mut operator = Operator::new(1, (config.ipg_s * 1e9).round().max(1.0) as u64);
-    link.set_distance(rov.vehicle.distance_to(config.buoy_m));
+    let (mut operator, mut rov) = parts.ends(config);
+    link.set_distance(rov.engine.state().distance_to(config.buoy_m));
     let end = SimTime::from_secs_f64(config.duration_s);
-    let (mut script, mut waypoints) = (
-        config.script.iter().peekable(),
-        config.waypoints.iter().peekable(),
-    );
     let mut directions = [Direction::default(), Direction::default()];
-    let mut slot_orders: std::collections::HashMap<u64, u64> = std::collections::HashMap::new();
-    let mut executions: std::collections::HashMap<u64, u64> = std::collections::HashMap::new();
-    let mut metrics = Metrics::default();
-    let mut image_times: Vec<f64> = Vec::new();
+    let mut slot_orders: HashMap<u64, u64> = HashMap::new();
+    let mut tally = Tally::new(true);
     // What each frame in flight is, by (sender, link sequence number): a lost frame's report
     // no longer has its bytes.
-    let mut kinds: std::collections::HashMap<(Side, u64), &'static str> =
-        std::collections::HashMap::new();
+    let mut kinds: HashMap<(Side, u64), &'static str> = HashMap::new();
     let (mut interrupted_at, mut failed_at) = (None, None);
 
     loop {
-        let next_script = script.peek().map(|c| SimTime::from_secs_f64(c.t_s));
-        let next_waypoint = waypoints.peek().map(|w| SimTime::from_secs_f64(w.t_s));
         let candidates = [
             link.next_event_time(),
-            Some(operator.poll_at()),
-            Some(rov.poll_at()),
-            next_script,
-            next_waypoint,
+            Some(operator.next_at()),
+            Some(rov.next_at()),
         ];
         let Some(t) = candidates.iter().flatten().min().copied() else {
             break;
@@ -539,31 +578,33 @@ pub fn run(
             failed_at = Some(link.now());
             break;
         }
+        let mut out = Out {
+            tally: &mut tally,
+            observer: &mut *observer,
+        };
         if link.next_event_time() == Some(t) {
             link.step();
             while let Some(report) = link.pop_report() {
                 let from_operator = report.from == Side::A;
                 directions[usize::from(!from_operator)].record(&report);
+                let kind = if report.duplicate {
+                    kinds.get(&(report.from, report.seq)).copied()
+                } else {
+                    kinds.remove(&(report.from, report.seq))
+                };
                 let event = FrameEvent {
                     direction: if from_operator {
                         "operator_to_rov"
                     } else {
                         "rov_to_operator"
                     },
-                    kind: if report.duplicate {
-                        kinds
-                            .get(&(report.from, report.seq))
-                            .copied()
-                            .unwrap_or("raw")
-                    } else {
-                        kinds.remove(&(report.from, report.seq)).unwrap_or("raw")
-                    },
+                    kind: kind.unwrap_or("raw"),
                     bytes: report.len,
                     t_sent_s: Some(report.t_offered.as_secs_f64()),
                     t_received_s: report.t_rx.map(SimTime::as_secs_f64),
                     fate: report.fate.as_str(),
                 };
-                observer.frame(&event);
+                out.observer.frame(&event);
                 // The order a slot carried is forgotten at its first report, whatever its fate
                 // (a lost slot's entry would otherwise stay for the whole session).
                 let order = if from_operator && !report.duplicate {
@@ -575,99 +616,43 @@ pub fn run(
                     continue;
                 }
                 if from_operator {
-                    if let Some(reply) = rov.receive(link.now(), &report.bytes) {
+                    if let Some(reply) = rov.receive(link.now(), &report.bytes, order, &mut out) {
                         let kind = kind_of(&reply);
                         let seq = link.offer(Side::B, reply);
                         kinds.insert((Side::B, seq), kind);
                     }
-                    for event in rov.take_events() {
-                        match event {
-                            Event::OrderExecuted(_) => {
-                                metrics.orders_executed += 1;
-                                if let Some(index) = order {
-                                    let count = executions.entry(index).or_insert(0);
-                                    *count += 1;
-                                    if *count > 1 {
-                                        metrics.orders_executed_twice += 1;
-                                    }
-                                }
-                            }
-                            Event::ImageStarted { .. } => metrics.images_started += 1,
-                            Event::LinkLost => metrics.link_losses += 1,
-                            Event::LinkRecovered => metrics.link_recoveries += 1,
-                            _ => {}
-                        }
-                    }
                 } else {
-                    operator.receive(link.now(), &report.bytes);
-                    for event in operator.take_events() {
-                        match event {
-                            Event::OrderAcknowledged(index) => {
-                                metrics.orders_acknowledged += 1;
-                                if !executions.contains_key(&index) {
-                                    metrics.orders_acknowledged_unexecuted += 1;
-                                }
-                            }
-                            Event::ImageCompleted(stream) => {
-                                metrics.images_completed += 1;
-                                image_times.push(link.now().as_secs_f64());
-                                observer.image(link.now().as_secs_f64(), &stream);
-                            }
-                            _ => {}
-                        }
-                    }
+                    operator.receive(link.now(), &report.bytes, &mut out);
                 }
             }
             continue;
         }
         link.advance(t);
-        if next_script == Some(t) {
-            if let Some(change) = script.next() {
-                operator.set_joystick(change.joystick);
-            }
-            continue;
-        }
-        if next_waypoint == Some(t) {
-            if let Some(w) = waypoints.next() {
-                operator.push_order(super::realtime::goto_order(w.position_m, w.heading_deg));
-                metrics.orders_sent += 1;
-            }
-            continue;
-        }
-        if operator.poll_at() == t {
-            let (frame, content) = operator.poll(t);
-            let kind = kind_of(&frame);
-            let seq = link.offer(Side::A, frame);
-            kinds.insert((Side::A, seq), kind);
-            if let SlotContent::Order(index) = content {
-                slot_orders.insert(seq, index);
-            }
-            continue;
-        }
-        if rov.poll_at() == t {
-            rov.poll(t);
-            link.set_distance(rov.vehicle.distance_to(config.buoy_m));
-            for event in rov.take_events() {
-                match event {
-                    Event::LinkLost => metrics.link_losses += 1,
-                    Event::LinkRecovered => metrics.link_recoveries += 1,
-                    _ => {}
+        if operator.next_at() == t {
+            if let Some((frame, content)) = operator.poll(t, &mut out) {
+                let kind = kind_of(&frame);
+                let seq = link.offer(Side::A, frame);
+                kinds.insert((Side::A, seq), kind);
+                if let SlotContent::Order(index) = content {
+                    slot_orders.insert(seq, index);
                 }
             }
-            observer.pose(&rov.pose(t.as_secs_f64()));
+            continue;
         }
-    }
-    if interrupted_at.is_some() {
-        metrics.interrupted = Some(STOPPED.to_string());
+        if rov.next_at() == t {
+            rov.poll(t, &mut out);
+            link.set_distance(rov.engine.state().distance_to(config.buoy_m));
+        }
     }
     let duration_s = interrupted_at
         .or(failed_at)
         .map_or(config.duration_s, SimTime::as_secs_f64);
-    metrics.measured_by = "simulation";
-    metrics.duration_s = duration_s;
+    let mut metrics = tally.finish("simulation", duration_s);
+    if interrupted_at.is_some() {
+        metrics.interrupted = Some(STOPPED.to_string());
+    }
     metrics.operator_to_rov = directions[0].metrics(duration_s);
     metrics.rov_to_operator = directions[1].metrics(duration_s);
-    metrics.image_period_s = image_period_s(&image_times);
     Ok(metrics)
 }
 

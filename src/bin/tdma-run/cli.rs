@@ -30,6 +30,12 @@ Real time, one end per process (through link-sim standing in for the modems):
 Real modems: --port /dev/ttyUSB0 (transparent, e.g. WFS S100), --dialect evologics with
 --port tcp:192.168.0.209:9200, or --port udp:BIND_ADDR=PEER_ADDR. Start the ROV end first.
 
+In the field (docs/tdma-mavlink.md, docs/tdma-console.md, docs/tdma-foxglove.md):
+  tdma-run --role rov --port /dev/ttyUSB0 --vehicle mavlink:udpin:0.0.0.0:14550 --camera cam/
+  mkfifo orders; tdma-run --role operator --port /dev/ttyUSB0 --orders orders --telemetry - &
+  echo '{\"type\":\"goto\",\"x_cm\":300,\"y_cm\":0,\"z_cm\":50,\"heading_deg\":90}' > orders
+  tdma-run --role operator --port /dev/ttyUSB0 --foxglove 127.0.0.1:8765 --images-out rx/ --preview
+
 --script: CSV t_s,vx,vy,vz,vyaw (joystick, percent of full thrust, from t on).
 --waypoints: CSV t_s,x_m,y_m,z_m,heading_deg (a GoTo order queued at t; NED metres, within
   the GoTo order's +-327.67 m).
@@ -203,6 +209,70 @@ pub struct Args {
     /// standard output, not a terminal).
     #[arg(long, value_name = "FILE")]
     pub mcap: Option<PathBuf>,
+
+    /// What moves the vehicle: `sim` (the built-in model) or `mavlink:ENDPOINT`, an ArduSub
+    /// autopilot (real time, --role rov): udpin:0.0.0.0:14550, udpout:HOST:PORT,
+    /// tcpout:HOST:PORT or serial:/dev/ttyACM0:115200.
+    #[arg(long, value_name = "sim|mavlink:ENDPOINT", default_value = "sim",
+          value_parser = vehicle, help_heading = "Field")]
+    pub vehicle: Vehicle,
+
+    /// Camera: the newest image file in DIR at each capture.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["images", "camera_cmd"],
+          help_heading = "Field")]
+    pub camera: Option<PathBuf>,
+
+    /// Camera: run CMD (with sh -c) at each capture and read one image from its standard
+    /// output, e.g. "ffmpeg -f v4l2 -i /dev/video0 -frames:v 1 -f image2pipe -c:v png -".
+    #[arg(
+        long,
+        value_name = "CMD",
+        conflicts_with = "images",
+        help_heading = "Field"
+    )]
+    pub camera_cmd: Option<String>,
+
+    /// Live orders: JSON Lines, each an order in wire.md's JSON form or {"type":"cancel"},
+    /// read as they come (a pipe or FIFO; - for standard input), each sent at the next free
+    /// slot. In simulation a line's "t_s" says when. Without --script/--waypoints the
+    /// built-in script is then not played.
+    #[arg(long, value_name = "FILE|-", help_heading = "Field")]
+    pub orders: Option<PathBuf>,
+
+    /// Write JSON Lines as things happen (- for standard output): each status received,
+    /// orders sent/acknowledged/cancelled, image progress, link lost/recovered.
+    #[arg(long, value_name = "FILE|-", help_heading = "Field")]
+    pub telemetry: Option<PathBuf>,
+
+    /// With --images-out: write the image in progress as its trunks arrive, so it sharpens.
+    #[arg(long, requires = "images_out", help_heading = "Field")]
+    pub preview: bool,
+
+    /// Serve a live Foxglove WebSocket view here (HOST:PORT; binds only there): the --mcap
+    /// channels live, and client channels /orders (JSON orders) and Twist (Teleop panel).
+    #[arg(long, value_name = "HOST:PORT", help_heading = "Field")]
+    pub foxglove: Option<String>,
+}
+
+/// What moves the vehicle.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Vehicle {
+    /// The built-in kinematic model.
+    Sim,
+    /// An autopilot over MAVLink at this endpoint.
+    Mavlink(String),
+}
+
+fn vehicle(text: &str) -> Result<Vehicle, String> {
+    match text.split_once(':') {
+        _ if text == "sim" => Ok(Vehicle::Sim),
+        Some(("mavlink", endpoint)) if !endpoint.is_empty() => {
+            Ok(Vehicle::Mavlink(endpoint.to_string()))
+        }
+        _ => Err(format!(
+            "expected sim or mavlink:ENDPOINT (e.g. mavlink:udpin:0.0.0.0:14550), found {text:?}"
+        )),
+    }
 }
 
 impl Args {
@@ -212,6 +282,7 @@ impl Args {
             &self.script,
             &self.waypoints,
             &self.images,
+            &self.orders,
             &self.model.model_file,
         ]
         .into_iter()

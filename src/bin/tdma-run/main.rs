@@ -13,15 +13,16 @@ use anyhow::Result;
 use rovlink::cli::output::{Kind, Outputs};
 use rovlink::cli::{progress, stop};
 use rovlink::io::{EXIT_CHECK_FAILED, EXIT_OK};
+use rovlink::rcp::harness::Tee;
 use rovlink::rcp::outputs::{
     Destinations, Recorder, check_images_out, summary, wall_clock_ns, write_metrics,
 };
 use rovlink::rcp::realtime::{self, Ended, Role};
-use rovlink::rcp::session::{self, SessionConfig};
+use rovlink::rcp::session::{self, Observer, Parts, SessionConfig};
 use rovlink::rcp::{camera, script};
 use rovlink::say;
 
-use cli::{Args, RoleArg};
+use cli::{Args, RoleArg, Vehicle};
 
 /// The tool's name, prefixed to everything it says on stderr.
 const TOOL: &str = "tdma-run";
@@ -55,8 +56,14 @@ fn run(args: &Args) -> Result<u8> {
         "--role",
         &[(port_flags, args.port_args.any_set())],
     )?;
+    field_usage(args, role)?;
     let model = args.model.resolve()?;
-    let (script, waypoints) = script::load(args.script.as_deref(), args.waypoints.as_deref())?;
+    let (script, waypoints) =
+        if args.orders.is_some() && args.script.is_none() && args.waypoints.is_none() {
+            (Vec::new(), Vec::new())
+        } else {
+            script::load(args.script.as_deref(), args.waypoints.as_deref())?
+        };
     let settings = args.settings();
     let pictures = camera::load_or_builtin(args.images.as_deref())?;
     if let Some(note) = pictures.note() {
@@ -76,12 +83,15 @@ fn run(args: &Args) -> Result<u8> {
         images: pictures.images,
     };
     config.validate()?;
+    let parts = parts(args, &config)?;
     // Opened (aside) before the run: a metrics file that cannot be created fails now.
     let mut metrics_out = metrics_dest.map(|dest| dest.open()).transpose()?;
     let base_ns = if role.is_some() { wall_clock_ns() } else { 0 };
     let template = "{spinner} {pos}/{len} s [{bar:30}] {msg}";
     let bar = progress::bar(role.is_none(), args.duration.ceil() as u64, template);
     let mut recorder = Recorder::new(dests, args.buoy, base_ns, bar)?;
+    let mut stderr = Stderr;
+    let mut observer = Tee(vec![&mut recorder, &mut stderr]);
     let (wall, mut done) = (std::time::Instant::now(), None);
     let (mut metrics, code) = match (role, &args.port) {
         (Some(role), Some(device)) => {
@@ -97,9 +107,10 @@ fn run(args: &Args) -> Result<u8> {
             let (metrics, ended) = realtime::run(
                 role,
                 &config,
+                parts,
                 endpoint.as_mut(),
                 stop::flag(),
-                &mut recorder,
+                &mut observer,
             );
             let code = match ended {
                 Ended::Done => EXIT_OK,
@@ -118,7 +129,7 @@ fn run(args: &Args) -> Result<u8> {
             (metrics, code)
         }
         _ => {
-            let metrics = session::run(&config, &mut recorder, stop::flag())?;
+            let metrics = session::run_with(&config, parts, &mut observer, stop::flag())?;
             let model_name = match model.name.as_str() {
                 "" => "a model file",
                 name => name,
@@ -133,6 +144,7 @@ fn run(args: &Args) -> Result<u8> {
             (metrics, stop::code_or(EXIT_OK))
         }
     };
+    drop(observer);
     if let Some(name) = stop::signal_name() {
         metrics.interrupted = Some(name.to_string());
     }
@@ -153,4 +165,72 @@ fn run(args: &Args) -> Result<u8> {
         say!("{line}");
     }
     Ok(code)
+}
+
+/// Warnings of the session (a bad order line) on standard error, as they come.
+struct Stderr;
+
+impl Observer for Stderr {
+    fn warning(&mut self, _t_s: f64, text: &str) {
+        say!("{text}");
+    }
+}
+
+/// The field flags that apply only to one end.
+fn field_usage(args: &Args, role: Option<Role>) -> Result<()> {
+    use rovlink::cli::UsageError;
+    let rov_side = role != Some(Role::Operator);
+    let operator_side = role != Some(Role::Rov);
+    if matches!(args.vehicle, Vehicle::Mavlink(_)) && role != Some(Role::Rov) {
+        return Err(UsageError(
+            "--vehicle mavlink:... drives a real autopilot: it needs --role rov (real time)".into(),
+        )
+        .into());
+    }
+    let checks = [
+        (rov_side, "--camera", args.camera.is_some(), "the ROV end"),
+        (
+            rov_side,
+            "--camera-cmd",
+            args.camera_cmd.is_some(),
+            "the ROV end",
+        ),
+        (
+            operator_side,
+            "--orders",
+            args.orders.is_some(),
+            "the operator end",
+        ),
+        (operator_side, "--preview", args.preview, "the operator end"),
+    ];
+    for (applies, flag, given, end) in checks {
+        if given && !applies {
+            return Err(UsageError(format!("{flag} only applies to {end}")).into());
+        }
+    }
+    Ok(())
+}
+
+/// What the ends run beyond the config: order sources, the vehicle, the camera.
+fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
+    let parts = Parts::from_config(config);
+    if let Vehicle::Mavlink(endpoint) = &args.vehicle {
+        anyhow::bail!(rovlink::cli::UsageError(format!(
+            "--vehicle mavlink:{endpoint}: MAVLink is not wired into this build yet"
+        )));
+    }
+    let pending = [
+        ("--camera", args.camera.is_some()),
+        ("--camera-cmd", args.camera_cmd.is_some()),
+        ("--orders", args.orders.is_some()),
+        ("--telemetry", args.telemetry.is_some()),
+        ("--preview", args.preview),
+        ("--foxglove", args.foxglove.is_some()),
+    ];
+    if let Some((flag, _)) = pending.iter().find(|(_, given)| *given) {
+        anyhow::bail!(rovlink::cli::UsageError(format!(
+            "{flag}: not wired into this build yet"
+        )));
+    }
+    Ok(parts)
 }
