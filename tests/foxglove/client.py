@@ -93,6 +93,19 @@ def garbage(ws, url):
     ws.send(json.dumps({"op": "unsubscribe", "subscriptionIds": [4242]}))
 
 
+def open_connection(url, within_s):
+    """Connects, trying again while the server is not listening yet (a process starting)."""
+    give_up = time.monotonic() + within_s
+    while True:
+        try:
+            return connect(url, subprotocols=[SUBPROTOCOL], max_size=None, open_timeout=5,
+                           close_timeout=1)
+        except (ConnectionRefusedError, ConnectionResetError):
+            if time.monotonic() >= give_up:
+                raise
+            time.sleep(0.1)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--url", required=True)
@@ -105,6 +118,8 @@ def main():
     ap.add_argument("--twist-schema", default="geometry_msgs/Twist")
     ap.add_argument("--rate", type=float, default=5.0, help="Twists per second")
     ap.add_argument("--publish-order", action="append", default=[], metavar="JSON")
+    ap.add_argument("--connect-within", type=float, default=0.0, metavar="S",
+                    help="retry a refused connection for this long")
     ap.add_argument("--garbage", action="store_true")
     ap.add_argument("--stall", action="store_true",
                     help="once subscribed, stop reading until the time is up (a stuck client)")
@@ -125,8 +140,7 @@ def main():
 
     deadline = time.monotonic() + args.seconds
     try:
-        with connect(args.url, subprotocols=[SUBPROTOCOL], max_size=None,
-                     open_timeout=5, close_timeout=1) as ws:
+        with open_connection(args.url, args.connect_within) as ws:
             while True:
                 now = time.monotonic()
                 if now >= deadline:
