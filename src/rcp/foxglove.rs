@@ -418,11 +418,12 @@ impl LiveView {
             .map_or(0, WebSocketServerHandle::client_count)
     }
 
-    /// True when some client subscribes to `topic`.
-    fn wanted(&self, topic: Topic) -> bool {
-        self.channels
-            .get(topic.index())
-            .is_some_and(|c| c.has_sinks())
+    /// Builds only what some client subscribes to: nothing at all with no client, and no
+    /// picture decoded for nobody.
+    fn follow_subscriptions(&mut self) {
+        let channels = &self.channels;
+        self.view
+            .want(|topic| channels.get(topic.index()).is_some_and(|c| c.has_sinks()));
     }
 
     fn publish(&self, message: &ViewMessage) {
@@ -473,30 +474,26 @@ impl Drop for LiveView {
 
 impl Observer for LiveView {
     fn frame(&mut self, e: &FrameEvent) {
-        if self.wanted(Topic::Frames) || self.wanted(Topic::Log) {
-            let messages = self.view.frame(e);
-            self.publish_all(&messages);
-        }
+        self.follow_subscriptions();
+        let messages = self.view.frame(e);
+        self.publish_all(&messages);
     }
 
     fn image(&mut self, t_s: f64, stream: &[u8]) {
-        // Decoding and PNG-encoding cost milliseconds: only for a subscriber.
-        if self.wanted(Topic::Image) || self.wanted(Topic::Log) {
-            let message = self.view.image(t_s, stream);
+        self.follow_subscriptions();
+        if let Some(message) = self.view.image(t_s, stream) {
             self.publish(&message);
         }
     }
 
     fn pose(&mut self, pose: &PoseSample) {
-        // Always built: the view follows the link's state from pose to pose.
+        self.follow_subscriptions();
         let messages = self.view.pose(pose);
         self.publish_all(&messages);
     }
 
     fn event(&mut self, end: Role, t_s: f64, event: &Event) {
-        if matches!(event, Event::ImageProgress { .. }) && !self.wanted(Topic::Preview) {
-            return;
-        }
+        self.follow_subscriptions();
         let messages = self.view.event(end, t_s, event);
         self.publish_all(&messages);
     }

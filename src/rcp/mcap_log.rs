@@ -185,20 +185,34 @@ pub struct ViewMessage {
     pub json: String,
 }
 
-/// Builds the view's messages from what an [`Observer`] is told.
+/// Builds the view's messages from what an [`Observer`] is told: every channel's, or only
+/// those of the channels [`View::want`]s (a live view builds nothing nobody subscribes to).
 #[derive(Debug, Clone)]
 pub struct View {
     clock: Clock,
     link_up: Option<bool>,
+    wanted: [bool; Topic::ALL.len()],
 }
 
 impl View {
-    /// A view stamping its messages by `clock`.
+    /// A view stamping its messages by `clock`, for every channel.
     pub fn new(clock: Clock) -> View {
         View {
             clock,
             link_up: None,
+            wanted: [true; Topic::ALL.len()],
         }
+    }
+
+    /// From now on, builds the messages of the channels `wanted` says yes to only.
+    pub fn want(&mut self, wanted: impl Fn(Topic) -> bool) {
+        for topic in Topic::ALL {
+            self.wanted[topic.index()] = wanted(topic);
+        }
+    }
+
+    fn wants(&self, topic: Topic) -> bool {
+        self.wanted[topic.index()]
     }
 
     fn stamp(&self, t_s: f64) -> (u64, serde_json::Value) {
@@ -222,31 +236,44 @@ impl View {
         }
     }
 
-    fn log(&self, topic: Topic, t_s: f64, level: u8, name: &str, message: &str) -> ViewMessage {
+    fn log(
+        &self,
+        topic: Topic,
+        t_s: f64,
+        level: u8,
+        name: &str,
+        message: &str,
+    ) -> Option<ViewMessage> {
+        if !self.wants(topic) {
+            return None;
+        }
         let (ns, timestamp) = self.stamp(t_s);
-        View::message(
+        Some(View::message(
             topic,
             ns,
             &json!({"timestamp": timestamp, "level": level, "message": message,
                     "name": name, "file": "", "line": 0}),
-        )
+        ))
     }
 
     /// A frame's fate: its `/link/frames` message, and a warning on `/link/log` when it was
     /// not delivered.
     pub fn frame(&self, e: &FrameEvent) -> Vec<ViewMessage> {
         let t_s = e.t_received_s.or(e.t_sent_s).unwrap_or(0.0);
-        let (ns, timestamp) = self.stamp(t_s);
-        let delay_ms = e.t_sent_s.zip(e.t_received_s).map(|(s, r)| (r - s) * 1e3);
-        let mut out = vec![View::message(
-            Topic::Frames,
-            ns,
-            &json!({"timestamp": timestamp, "direction": e.direction, "kind": e.kind,
-                    "bytes": e.bytes, "fate": e.fate, "t_sent_s": e.t_sent_s,
-                    "t_received_s": e.t_received_s, "delay_ms": delay_ms}),
-        )];
+        let mut out = Vec::new();
+        if self.wants(Topic::Frames) {
+            let (ns, timestamp) = self.stamp(t_s);
+            let delay_ms = e.t_sent_s.zip(e.t_received_s).map(|(s, r)| (r - s) * 1e3);
+            out.push(View::message(
+                Topic::Frames,
+                ns,
+                &json!({"timestamp": timestamp, "direction": e.direction, "kind": e.kind,
+                        "bytes": e.bytes, "fate": e.fate, "t_sent_s": e.t_sent_s,
+                        "t_received_s": e.t_received_s, "delay_ms": delay_ms}),
+            ));
+        }
         if !matches!(e.fate, "delivered" | "sent" | "received") {
-            out.push(self.log(
+            out.extend(self.log(
                 Topic::Log,
                 t_s,
                 WARNING,
@@ -261,6 +288,9 @@ impl View {
     }
 
     fn picture(&self, topic: Topic, t_s: f64, stream: &[u8]) -> Option<ViewMessage> {
+        if !self.wants(topic) {
+            return None;
+        }
         let png = crate::debt::decode(stream)
             .ok()
             .and_then(|img| crate::debt::picture::to_png(&img).ok())?;
@@ -275,8 +305,11 @@ impl View {
 
     /// A completed image (its DEBT stream) as PNG on `/camera/image`, or a warning on
     /// `/link/log` when it does not decode.
-    pub fn image(&self, t_s: f64, stream: &[u8]) -> ViewMessage {
-        self.picture(Topic::Image, t_s, stream).unwrap_or_else(|| {
+    pub fn image(&self, t_s: f64, stream: &[u8]) -> Option<ViewMessage> {
+        if !self.wants(Topic::Image) {
+            return None;
+        }
+        self.picture(Topic::Image, t_s, stream).or_else(|| {
             self.log(
                 Topic::Log,
                 t_s,
@@ -296,29 +329,34 @@ impl View {
     /// The vehicle's pose, goal and velocities; a line on `/link/log` when the link was lost
     /// or recovered since the last pose.
     pub fn pose(&mut self, pose: &PoseSample) -> Vec<ViewMessage> {
-        let (ns, timestamp) = self.stamp(pose.t_s);
-        let mut out = vec![View::message(
-            Topic::Pose,
-            ns,
-            &pose_json(&timestamp, pose.position_m, pose.heading_deg),
-        )];
-        if let Some(goal) = pose.goal_m {
-            out.push(View::message(
-                Topic::Goal,
-                ns,
-                &pose_json(&timestamp, goal, pose.heading_deg),
-            ));
+        let mut out = Vec::new();
+        let pose_topics = [Topic::Pose, Topic::Goal, Topic::Actual, Topic::Commanded];
+        if pose_topics.iter().any(|&t| self.wants(t)) {
+            let (ns, timestamp) = self.stamp(pose.t_s);
+            let goal = pose
+                .goal_m
+                .map(|goal| pose_json(&timestamp, goal, pose.heading_deg));
+            let messages = [
+                (
+                    Topic::Pose,
+                    Some(pose_json(&timestamp, pose.position_m, pose.heading_deg)),
+                ),
+                (Topic::Goal, goal),
+                (
+                    Topic::Actual,
+                    Some(velocity_json(&timestamp, pose.velocity)),
+                ),
+                (
+                    Topic::Commanded,
+                    Some(velocity_json(&timestamp, pose.commanded_velocity)),
+                ),
+            ];
+            for (topic, json) in messages {
+                if let Some(json) = json.filter(|_| self.wants(topic)) {
+                    out.push(View::message(topic, ns, &json));
+                }
+            }
         }
-        out.push(View::message(
-            Topic::Actual,
-            ns,
-            &velocity_json(&timestamp, pose.velocity),
-        ));
-        out.push(View::message(
-            Topic::Commanded,
-            ns,
-            &velocity_json(&timestamp, pose.commanded_velocity),
-        ));
         if self.link_up.is_some_and(|up| up != pose.link_up) {
             let message = if pose.link_up {
                 "link recovered: heartbeats again"
@@ -326,7 +364,7 @@ impl View {
                 "link lost: no heartbeat for 5 s, backtracking"
             };
             let level = if pose.link_up { INFO } else { WARNING };
-            out.push(self.log(Topic::Log, pose.t_s, level, TOOL, message));
+            out.extend(self.log(Topic::Log, pose.t_s, level, TOOL, message));
         }
         self.link_up = Some(pose.link_up);
         out
@@ -341,7 +379,11 @@ impl View {
             Role::Operator => "tdma-run operator",
             Role::Rov => "tdma-run rov",
         };
-        let line = |topic, level, text: &str| vec![self.log(topic, t_s, level, name, text)];
+        let line = |topic, level, text: &str| {
+            self.log(topic, t_s, level, name, text)
+                .into_iter()
+                .collect()
+        };
         let events = |level, text: &str| line(Topic::Events, level, text);
         match event {
             Event::OrderSent { index, order } => {
@@ -517,12 +559,88 @@ impl Observer for McapLog {
     }
 
     fn image(&mut self, t_s: f64, stream: &[u8]) {
-        let message = self.view.image(t_s, stream);
-        self.write(&message);
+        if let Some(message) = self.view.image(t_s, stream) {
+            self.write(&message);
+        }
     }
 
     fn pose(&mut self, pose: &PoseSample) {
         let messages = self.view.pose(pose);
         self.write_all(&messages);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::wire::operator::Order;
+
+    fn pose(t_s: f64, link_up: bool, goal: bool) -> PoseSample {
+        PoseSample {
+            t_s,
+            position_m: [1.0, 2.0, 3.0],
+            heading_deg: 180.0,
+            velocity: [0.0; 4],
+            commanded_velocity: [0.0; 4],
+            goal_m: goal.then_some([4.0, 5.0, 6.0]),
+            backtrack_m: None,
+            link_up,
+        }
+    }
+
+    fn topics(messages: &[ViewMessage]) -> Vec<Topic> {
+        messages.iter().map(|m| m.topic).collect()
+    }
+
+    #[test]
+    fn a_pose_gives_its_channels_and_the_links_changes() {
+        let mut view = View::new(Clock::Session { base_ns: 1_000 });
+        let first = view.pose(&pose(2.5, true, true));
+        use Topic::*;
+        assert_eq!(topics(&first), [Pose, Goal, Actual, Commanded]);
+        assert!(first.iter().all(|m| m.log_time_ns == 2_500_001_000));
+        let json: serde_json::Value = serde_json::from_str(&first[0].json).unwrap();
+        assert_eq!(json["timestamp"]["sec"], 2);
+        assert_eq!(json["timestamp"]["nsec"], 500_001_000);
+        assert!((json["pose"]["orientation"]["z"].as_f64().unwrap() - 1.0).abs() < 1e-12);
+        let lost = view.pose(&pose(3.0, false, false));
+        assert_eq!(topics(&lost), [Pose, Actual, Commanded, Log]);
+        assert!(lost[3].json.contains("link lost"), "{}", lost[3].json);
+        // Only the link log wanted: nothing else is built, the link is still followed.
+        view.want(|t| t == Log);
+        assert!(view.pose(&pose(3.5, false, false)).is_empty());
+        let back = view.pose(&pose(4.0, true, false));
+        assert_eq!(topics(&back), [Log]);
+        assert!(back[0].json.contains("link recovered"));
+        assert_eq!(view.image(4.0, b"not DEBT"), None, "images not wanted");
+    }
+
+    #[test]
+    fn events_become_session_lines_and_images_that_fail_a_warning() {
+        let view = View::new(Clock::Wall);
+        let order = Order::HoldHeading {
+            heading_deg: 90,
+            enable: true,
+        };
+        let sent = view.event(Role::Operator, 1.0, &Event::OrderSent { index: 3, order });
+        assert_eq!(topics(&sent), [Topic::Events]);
+        let json: serde_json::Value = serde_json::from_str(&sent[0].json).unwrap();
+        assert_eq!(json["name"], "tdma-run operator");
+        assert_eq!(json["level"], INFO);
+        assert!(
+            json["message"]
+                .as_str()
+                .unwrap()
+                .starts_with("order 3 sent: HoldHeading")
+        );
+        let lost = view.event(Role::Operator, 1.0, &Event::AnswersLost);
+        assert_eq!(topics(&lost), [Topic::Log]);
+        assert!(view.event(Role::Rov, 1.0, &Event::LinkLost).is_empty());
+        let wall_ns = wall_clock_ns();
+        assert!(sent[0].log_time_ns <= wall_ns && wall_ns - sent[0].log_time_ns < 10_000_000_000);
+        let bad = view.image(1.0, b"not DEBT").unwrap();
+        assert_eq!(bad.topic, Topic::Log);
+        assert!(bad.json.contains("did not decode"));
+        assert!(view.preview(1.0, b"").is_none());
     }
 }
