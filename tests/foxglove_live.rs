@@ -261,8 +261,15 @@ fn a_teleop_twist_and_json_orders_come_out_as_live_orders() {
         "good messages give no warning"
     );
 
-    // The first client's last Twists, still waiting, go.
-    orders.poll(SimTime::ZERO);
+    // The Teleop panel stops publishing when the button is released: the Twist holds for
+    // TWIST_HOLD, then the joystick goes neutral.
+    let released = Instant::now();
+    let neutral = Live::scripted_joystick(rovlink::rcp::operator::Joystick::default());
+    let got = drain(&mut orders, Duration::from_secs(10), |got| {
+        got.contains(&neutral)
+    });
+    assert_eq!(got.last(), Some(&neutral), "{got:?}");
+    assert!(released.elapsed() <= foxglove::TWIST_HOLD + Duration::from_secs(1));
     // The ROS 2 schema name on a topic of the user's choosing, and a full-left turn.
     let out = dir.path().join("b.json");
     let child = client(

@@ -15,7 +15,9 @@
 //!     `image_settings`, `hold_heading`) or `{"type":"cancel"}`, read by [`Live::from_object`];
 //!   - any topic whose schema is `geometry_msgs/Twist` or `geometry_msgs/msg/Twist` (Foxglove's
 //!     Teleop panel: topic of the user's choosing, `/cmd_vel` by convention): the joystick,
-//!     by [`twist_joystick`].
+//!     by [`twist_joystick`]. The panel publishes only while a button is held, so a Twist
+//!     holds for [`TWIST_HOLD`]: with none newer by then, the joystick goes neutral (a JSON
+//!     `velocity` on `/orders` is kept until the next, as wire.md's joystick is).
 //!
 //! The contract: nothing a client sends stops the session, panics, or grows memory without
 //! bound. Junk frames, unknown operations and messages on channels never advertised are
@@ -30,7 +32,7 @@
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex, MutexGuard};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use foxglove::websocket::{Capability, Client, ClientChannel, ServerListener};
 use foxglove::{Context, PartialMetadata, RawChannel, Schema, WebSocketServerHandle};
@@ -55,6 +57,9 @@ pub const BACKLOG_MESSAGES: usize = 256;
 pub const STOP_WAIT: Duration = Duration::from_secs(1);
 /// The topic of the JSON order channel.
 pub const ORDERS_TOPIC: &str = "/orders";
+/// How long a Twist stays in force without a newer one (the Teleop panel's default rate is
+/// 1 Hz).
+pub const TWIST_HOLD: Duration = Duration::from_secs(2);
 /// The schema names of a Twist channel (ROS 1 style, as the Teleop panel names it, and ROS 2).
 pub const TWIST_SCHEMAS: [&str; 2] = ["geometry_msgs/Twist", "geometry_msgs/msg/Twist"];
 
@@ -205,6 +210,8 @@ struct Inbox {
     dropped_orders: u64,
     warnings: VecDeque<String>,
     dropped_warnings: u64,
+    /// When the Twist in force arrived, while one is.
+    twist_at: Option<Instant>,
 }
 
 impl Inbox {
@@ -222,6 +229,23 @@ impl Inbox {
             self.dropped_orders += 1;
         }
         self.orders.push_back(live);
+    }
+
+    /// A Twist's joystick, arrived at `at`.
+    fn twist(&mut self, live: Live, at: Instant) {
+        self.push(live);
+        self.twist_at = Some(at);
+    }
+
+    /// At `now`: a neutral joystick when the Twist in force is older than [`TWIST_HOLD`].
+    fn expire(&mut self, now: Instant) {
+        if self
+            .twist_at
+            .is_some_and(|at| now.saturating_duration_since(at) > TWIST_HOLD)
+        {
+            self.twist_at = None;
+            self.push(Live::scripted_joystick(Joystick::default()));
+        }
     }
 
     fn warn(&mut self, warning: String) {
@@ -274,7 +298,14 @@ impl ServerListener for Listener {
         let parsed = kind.parse(payload);
         let mut inbox = lock(&self.inbox);
         match parsed {
-            Ok(live) => inbox.push(live),
+            Ok(live) if kind == ClientTopic::Twist => inbox.twist(live, Instant::now()),
+            Ok(live) => {
+                // A joystick from /orders is kept until the next: no Twist is in force.
+                if matches!(live, Live::Joystick { .. }) {
+                    inbox.twist_at = None;
+                }
+                inbox.push(live);
+            }
             Err(why) => inbox.warn(format!(
                 "{}: message skipped: {why}",
                 Listener::name(&client, channel)
@@ -290,7 +321,9 @@ pub struct LiveOrders {
 
 impl OrderSource for LiveOrders {
     fn poll(&mut self, _now: SimTime) -> Vec<Live> {
-        lock(&self.inbox).orders.drain(..).collect()
+        let mut inbox = lock(&self.inbox);
+        inbox.expire(Instant::now());
+        inbox.orders.drain(..).collect()
     }
 
     fn take_warnings(&mut self) -> Vec<String> {
@@ -641,6 +674,25 @@ mod tests {
     }
 
     #[test]
+    fn a_twist_holds_for_a_while_then_the_joystick_goes_neutral() {
+        let mut inbox = Inbox::default();
+        let t0 = Instant::now();
+        let ahead = Live::scripted_joystick(Joystick {
+            vx: 50.0,
+            ..Joystick::default()
+        });
+        inbox.twist(ahead, t0);
+        inbox.expire(t0 + TWIST_HOLD / 2);
+        assert_eq!(inbox.orders, [ahead]);
+        inbox.orders.clear();
+        inbox.expire(t0 + TWIST_HOLD + Duration::from_millis(1));
+        assert_eq!(inbox.orders, [Live::scripted_joystick(Joystick::default())]);
+        inbox.orders.clear();
+        inbox.expire(t0 + 10 * TWIST_HOLD);
+        assert!(inbox.orders.is_empty(), "neutral once");
+    }
+
+    #[test]
     fn addresses_are_host_and_port() {
         assert_eq!(host_port("127.0.0.1:8765").unwrap(), ("127.0.0.1", 8765));
         assert_eq!(host_port("[::1]:0").unwrap(), ("[::1]", 0));
@@ -678,6 +730,23 @@ mod tests {
                 proptest::prop_assert!((-100.0..=100.0).contains(&axis));
             }
         }
+    }
+
+    #[test]
+    fn the_docs_orders_are_orders() {
+        let doc = include_str!("../../docs/tdma-foxglove.md");
+        let block = doc
+            .split("```json\n")
+            .nth(1)
+            .and_then(|rest| rest.split("```").next())
+            .expect("docs/tdma-foxglove.md has a json block");
+        let orders: Vec<Live> = block
+            .lines()
+            .map(|line| ClientTopic::Orders.parse(line.as_bytes()))
+            .collect::<Result<_, _>>()
+            .unwrap();
+        assert_eq!(orders.len(), 5);
+        assert_eq!(orders[4], Live::Cancel);
     }
 
     #[test]
