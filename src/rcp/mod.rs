@@ -12,9 +12,11 @@
 //! takes orders from Foxglove.
 
 pub mod camera;
+pub mod console;
 pub mod drive;
 pub mod foxglove;
 pub mod harness;
+pub mod mavlink;
 pub mod mcap_log;
 pub mod operator;
 pub mod orders;

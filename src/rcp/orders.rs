@@ -62,29 +62,22 @@ impl Live {
     /// operator message, e.g. `{"type":"goto","x_cm":300,"y_cm":0,"z_cm":50,"heading_deg":90}`)
     /// or `{"type":"cancel"}`. Other fields (such as `t_s`) are ignored.
     pub fn parse(line: &str) -> Result<Live, LiveError> {
-        use crate::wire::json::JsonError;
-        let value: serde_json::Value =
-            serde_json::from_str(line).map_err(|e| JsonError::Syntax {
-                column: e.column(),
-                message: e.to_string(),
-            })?;
-        let Some(map) = value.as_object() else {
-            return Err(JsonError::BadValue {
-                field: "(line)".into(),
-                expected: "a JSON object".into(),
-                found: crate::wire::json::show(&value),
-            }
-            .into());
-        };
-        Live::from_object(map)
+        Live::from_object(&object_of(line)?)
     }
 
     /// [`Live::parse`] of an object already read.
     pub fn from_object(
         map: &serde_json::Map<String, serde_json::Value>,
     ) -> Result<Live, LiveError> {
-        if map.get("type").and_then(|t| t.as_str()) == Some("cancel") {
-            return Ok(Live::Cancel);
+        match map.get("type").and_then(|t| t.as_str()) {
+            Some("cancel") => return Ok(Live::Cancel),
+            Some("velocity" | "goto" | "image_settings" | "hold_heading") | None => {}
+            Some(_) => {
+                let found = map
+                    .get("type")
+                    .map_or_else(String::new, crate::wire::json::show);
+                return Err(LiveError::Kind(found));
+            }
         }
         match crate::wire::json::parse_order(map)? {
             Order::Velocity {
@@ -109,9 +102,28 @@ impl Live {
                     nav,
                 })
             }
-            Order::Unknown { .. } => Err(LiveError::Kind("unknown".into())),
+            Order::Unknown { .. } => Err(LiveError::Kind("\"unknown\"".into())),
             order => Ok(Live::Order(order)),
         }
+    }
+}
+
+/// A console line as a JSON object: the syntax error, or what it is when it is not an object.
+pub(crate) fn object_of(
+    line: &str,
+) -> Result<serde_json::Map<String, serde_json::Value>, crate::wire::json::JsonError> {
+    use crate::wire::json::JsonError;
+    let value: serde_json::Value = serde_json::from_str(line).map_err(|e| JsonError::Syntax {
+        column: e.column(),
+        message: e.to_string(),
+    })?;
+    match value {
+        serde_json::Value::Object(map) => Ok(map),
+        other => Err(JsonError::BadValue {
+            field: "(line)".into(),
+            expected: "a JSON object".into(),
+            found: crate::wire::json::show(&other),
+        }),
     }
 }
 
