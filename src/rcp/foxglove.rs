@@ -26,8 +26,9 @@
 //! queue of [`MAX_QUEUED`] (the oldest dropped and counted past that; a joystick replaces a
 //! joystick still waiting), warnings in one of [`MAX_WARNINGS`] (the rest counted), all drained
 //! by [`OrderSource::poll`] and [`OrderSource::take_warnings`]. Publishing never blocks the
-//! session: the SDK queues at most [`BACKLOG_MESSAGES`] messages per client and drops the
-//! oldest for a slow one. [`LiveView::stop`] (or dropping it) closes the server, waiting at
+//! session: nothing is built for a channel no client subscribes to, a preview at most every
+//! [`PREVIEW_EVERY`], and the SDK queues at most [`BACKLOG_MESSAGES`] messages per client,
+//! dropping the oldest for a slow one. [`LiveView::stop`] (or dropping it) closes the server, waiting at
 //! most [`STOP_WAIT`] for the clients to be told.
 
 use std::collections::VecDeque;
@@ -55,6 +56,9 @@ pub const MAX_WARNINGS: usize = 32;
 pub const BACKLOG_MESSAGES: usize = 256;
 /// The longest [`LiveView::stop`] waits for the clients to be closed.
 pub const STOP_WAIT: Duration = Duration::from_secs(1);
+/// The shortest wall time between two previews of the image in progress (decoding and
+/// PNG-encoding one costs milliseconds; a simulation makes trunks far faster than that).
+pub const PREVIEW_EVERY: Duration = Duration::from_millis(250);
 /// The topic of the JSON order channel.
 pub const ORDERS_TOPIC: &str = "/orders";
 /// How long a Twist stays in force without a newer one (the Teleop panel's default rate is
@@ -355,6 +359,8 @@ pub struct LiveView {
     _context: Arc<Context>,
     view: View,
     addr: String,
+    /// When the last preview was built.
+    last_preview: Option<Instant>,
 }
 
 /// Splits HOST:PORT (IPv6 in brackets, `[::1]:8765`).
@@ -429,6 +435,7 @@ pub fn start(addr: &str, role: Role) -> Result<(LiveView, LiveOrders), FoxgloveE
         _context: context,
         view: View::new(Clock::Wall),
         addr: addr.to_string(),
+        last_preview: None,
     };
     Ok((view, LiveOrders { inbox }))
 }
@@ -526,6 +533,16 @@ impl Observer for LiveView {
     }
 
     fn event(&mut self, end: Role, t_s: f64, event: &Event) {
+        if matches!(event, Event::ImageProgress { .. }) {
+            let now = Instant::now();
+            if self
+                .last_preview
+                .is_some_and(|at| now.saturating_duration_since(at) < PREVIEW_EVERY)
+            {
+                return;
+            }
+            self.last_preview = Some(now);
+        }
         self.follow_subscriptions();
         let messages = self.view.event(end, t_s, event);
         self.publish_all(&messages);
