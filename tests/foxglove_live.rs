@@ -475,7 +475,6 @@ fn free_port() -> u16 {
 }
 
 #[test]
-#[ignore = "needs tdma-run --foxglove wired to rcp::foxglove::start (the lead's binary)"]
 fn an_operator_driven_from_foxglove_over_link_sim() {
     const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
     let dir = tempfile::tempdir().unwrap();
