@@ -207,7 +207,7 @@ fn exercise(drive: &mut MavlinkDrive, standin: &StandIn) {
     );
     // MANUAL_CONTROL at about 10 Hz.
     let rate_hz = f64::from(seen.manual_controls) / elapsed_s;
-    assert!((8.0..=11.0).contains(&rate_hz), "{rate_hz} Hz");
+    assert!((6.0..=11.0).contains(&rate_hz), "{rate_hz} Hz");
 }
 
 #[test]
@@ -316,7 +316,7 @@ fn a_silent_autopilot_is_unresponsive_then_heard_again() {
     let (events, silent) = drive_until(&mut drive, clock, 3.0, idle, |d| !d.state().responsive);
     assert!(silent);
     assert!(
-        matches!(events.as_slice(), [DriveEvent::Silent { silent_s }] if *silent_s >= 1.0 && *silent_s < 1.3),
+        matches!(events.as_slice(), [DriveEvent::Silent { silent_s }] if *silent_s >= 1.0 && *silent_s < 2.0),
         "{events:?}"
     );
     // The last known pose stays.
@@ -436,12 +436,13 @@ fn the_drive_works_against_the_pymavlink_standin() {
         |d| d.reached(goal, 45.0),
     );
     assert!(reached, "{events:?} {:?}", drive.state());
-    std::thread::sleep(Duration::from_millis(300));
-    drive.step(
-        SimTime::from_secs_f64(clock.elapsed().as_secs_f64()),
-        0.1,
-        &demand(goto, true, Nav::Guided),
-    );
+    // Stop there (MANUAL, sticks neutral), then compare poses.
+    let stop = |_| demand(thrust(0.0), true, Nav::Manual);
+    let (_, stopped) = drive_until(&mut drive, clock, 4.0, stop, |d| {
+        d.state().nav == Nav::Manual
+    });
+    assert!(stopped);
+    drive_until(&mut drive, clock, 0.5, stop, |_| false);
     let ours = drive.state().position_m;
     nix::sys::signal::kill(
         nix::unistd::Pid::from_raw(python.id() as i32),
