@@ -14,6 +14,7 @@ pub mod camera;
 pub mod console;
 pub mod drive;
 pub mod harness;
+pub mod mavlink;
 pub mod mcap_log;
 pub mod operator;
 pub mod orders;

@@ -69,8 +69,15 @@ impl Live {
     pub fn from_object(
         map: &serde_json::Map<String, serde_json::Value>,
     ) -> Result<Live, LiveError> {
-        if map.get("type").and_then(|t| t.as_str()) == Some("cancel") {
-            return Ok(Live::Cancel);
+        match map.get("type").and_then(|t| t.as_str()) {
+            Some("cancel") => return Ok(Live::Cancel),
+            Some("velocity" | "goto" | "image_settings" | "hold_heading") | None => {}
+            Some(_) => {
+                let found = map
+                    .get("type")
+                    .map_or_else(String::new, crate::wire::json::show);
+                return Err(LiveError::Kind(found));
+            }
         }
         match crate::wire::json::parse_order(map)? {
             Order::Velocity {
@@ -95,7 +102,7 @@ impl Live {
                     nav,
                 })
             }
-            Order::Unknown { .. } => Err(LiveError::Kind("unknown".into())),
+            Order::Unknown { .. } => Err(LiveError::Kind("\"unknown\"".into())),
             order => Ok(Live::Order(order)),
         }
     }

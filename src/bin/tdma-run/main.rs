@@ -213,16 +213,31 @@ fn field_usage(args: &Args, role: Option<Role>) -> Result<()> {
 
 /// What the ends run beyond the config: order sources, the vehicle, the camera.
 fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
-    let parts = Parts::from_config(config);
+    let mut parts = Parts::from_config(config);
     if let Vehicle::Mavlink(endpoint) = &args.vehicle {
-        anyhow::bail!(rovlink::cli::UsageError(format!(
-            "--vehicle mavlink:{endpoint}: MAVLink is not wired into this build yet"
-        )));
+        let options = rovlink::rcp::mavlink::MavlinkOptions::default();
+        let drive = rovlink::rcp::mavlink::connect(endpoint, &options)
+            .map_err(|e| rovlink::cli::UsageError(format!("--vehicle: {e}")))?;
+        say!("vehicle: ArduSub over MAVLink at {}", drive.endpoint());
+        parts.drive = Box::new(drive);
+    }
+    if let Some(dir) = &args.camera {
+        parts.camera = Box::new(camera::newest_in_dir(dir)?);
+    }
+    if let Some(command) = &args.camera_cmd {
+        let command = camera::command_camera(command)?;
+        parts.camera = match args.role {
+            Some(_) => Box::new(command),
+            None => Box::new(Synchronous(command)),
+        };
+    }
+    if let Some(path) = &args.orders {
+        let live = args.role.is_some();
+        parts
+            .orders
+            .push(Box::new(rovlink::rcp::console::open_orders(path, live)?));
     }
     let pending = [
-        ("--camera", args.camera.is_some()),
-        ("--camera-cmd", args.camera_cmd.is_some()),
-        ("--orders", args.orders.is_some()),
         ("--telemetry", args.telemetry.is_some()),
         ("--preview", args.preview),
         ("--foxglove", args.foxglove.is_some()),
@@ -233,4 +248,26 @@ fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
         )));
     }
     Ok(parts)
+}
+
+/// A camera command in virtual time: each capture waits for its run (the session's time
+/// stands still meanwhile), so the pictures are the command's, not "still running".
+struct Synchronous(camera::CommandCamera);
+
+impl camera::Camera for Synchronous {
+    fn capture(&mut self) -> std::result::Result<rovlink::debt::Image, String> {
+        let deadline = std::time::Instant::now()
+            + std::time::Duration::from_secs_f64(camera::COMMAND_TIMEOUT_S + 1.0);
+        loop {
+            match self.0.capture() {
+                Err(why) if why == camera::WAITING && std::time::Instant::now() < deadline => {
+                    if stop::flag().load(std::sync::atomic::Ordering::Relaxed) {
+                        return Err(why);
+                    }
+                    std::thread::sleep(std::time::Duration::from_millis(5));
+                }
+                shot => return shot,
+            }
+        }
+    }
 }

@@ -1,0 +1,1450 @@
+//! The ROV end driving a real autopilot: ArduSub over MAVLink 2 (the `mavlink` crate, the
+//! ardupilotmega dialect), as a [`Drive`].
+//!
+//! We speak as a ground station, system [`MavlinkOptions::system_id`] (255, ArduSub's default
+//! `SYSID_MYGCS`), and address the autopilot found on the link: the first HEARTBEAT whose
+//! autopilot is not `MAV_AUTOPILOT_INVALID` and whose type is not a GCS (a submarine is
+//! preferred over anything else that claims to be an autopilot). Only that system and component
+//! is listened to afterwards: other ground stations, cameras and gimbals are ignored.
+//!
+//! What goes out, all from [`Drive::step`] and timed by the session clock it is given:
+//! - a GCS HEARTBEAT at [`MavlinkOptions::heartbeat_hz`], from the first step on;
+//! - MANUAL_CONTROL at [`MavlinkOptions::manual_control_hz`] once the autopilot is known: the
+//!   thrust command scaled as ArduSub reads it ([`manual_control_axes`]), neutral while a GoTo
+//!   runs and while the operator's link is lost (a steady neutral stream keeps ArduSub's pilot
+//!   input failsafe quiet, so the vehicle holds instead of being disarmed);
+//! - HoldHeading closed here on ATTITUDE's yaw into the r (yaw) axis, with the built-in model's
+//!   gain ([`crate::vehicle::Vehicle::thrust_for`]);
+//! - MAV_CMD_COMPONENT_ARM_DISARM and MAV_CMD_DO_SET_MODE (custom mode, [`custom_mode_of`]) when
+//!   the demand asks for an arm state or mode the autopilot does not report, retried every
+//!   [`COMMAND_RETRY_S`] until it does; a request that was met is not enforced again until the
+//!   demand changes, so a failsafe or another station is not fought;
+//! - for a GoTo: GUIDED, then SET_POSITION_TARGET_LOCAL_NED (position and yaw) at once, when
+//!   the target changes, when the mode becomes GUIDED, and every [`SETPOINT_RESEND_S`];
+//! - MAV_CMD_SET_MESSAGE_INTERVAL for ATTITUDE and LOCAL_POSITION_NED at [`STREAM_HZ`] while
+//!   they do not arrive.
+//!
+//! What comes back: HEARTBEAT (armed, mode: [`nav_of_custom_mode`]), LOCAL_POSITION_NED
+//! (position; velocity turned into the body frame), ATTITUDE (roll, pitch, heading, yaw rate),
+//! COMMAND_ACK ([`DriveEvent::CommandAck`]) and STATUSTEXT of warning severity or worse
+//! ([`DriveEvent::Note`]). An autopilot silent for [`MavlinkOptions::silence_s`] (or never heard)
+//! makes [`DriveState::responsive`] false, reported once as [`DriveEvent::Silent`]; the state keeps
+//! the last values known.
+//!
+//! Contract: nothing here panics on any input (a peer's non-finite numbers are dropped, locks
+//! that a panicking thread poisoned are still read) and nothing blocks the session: the
+//! connection is opened in [`connect`] (a TCP connect waits at most [`TCP_CONNECT_TIMEOUT`]), then
+//! a background thread receives with a [`READ_TIMEOUT`] and hands over what it learnt under a
+//! lock held for a copy; `step` does at most a few sends (TCP and serial writes time out after
+//! [`WRITE_TIMEOUT`]). A send that fails is a [`DriveEvent::Note`], once until sends work again.
+//! The messages kept between two steps are bounded ([`MAX_QUEUED`]). Dropping the drive stops
+//! the thread and waits for it (at most a read timeout, or a reconnect attempt).
+
+use std::collections::VecDeque;
+use std::fmt;
+use std::io;
+use std::net::{SocketAddr, TcpListener, TcpStream, ToSocketAddrs};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use mavlink::dialects::ardupilotmega::{
+    COMMAND_LONG_DATA, HEARTBEAT_DATA, MANUAL_CONTROL_DATA, MavAutopilot, MavCmd, MavFrame,
+    MavMessage, MavModeFlag, MavResult, MavSeverity, MavState, MavType, PositionTargetTypemask,
+    SET_POSITION_TARGET_LOCAL_NED_DATA,
+};
+use mavlink::error::MessageReadError;
+use mavlink::{Connectable, MavConnection, MavHeader, SerialConfig, TcpConfig, UdpConfig, UdpMode};
+
+use super::drive::{Demand, Drive, DriveEvent, DriveState};
+use crate::link::SimTime;
+use crate::vehicle::{Command, Vehicle, angle_diff_deg};
+use crate::wire::Nav;
+
+/// How often an arm or mode request the autopilot has not met is sent again, s.
+pub const COMMAND_RETRY_S: f64 = 1.5;
+
+/// How often a GoTo's setpoint is sent again while the target stays the same, s.
+pub const SETPOINT_RESEND_S: f64 = 1.0;
+
+/// The rate asked of the autopilot for ATTITUDE and LOCAL_POSITION_NED, Hz.
+pub const STREAM_HZ: f64 = 10.0;
+
+/// A stream missing for this long is asked for (again), s.
+pub const STREAM_MISSING_S: f64 = 2.0;
+
+/// The least time between two requests for the same stream, s.
+pub const STREAM_REQUEST_S: f64 = 10.0;
+
+/// How long the receiving thread waits for bytes before it looks at its stop flag.
+pub const READ_TIMEOUT: Duration = Duration::from_millis(100);
+
+/// How long a TCP or serial write may wait before it fails.
+pub const WRITE_TIMEOUT: Duration = Duration::from_millis(200);
+
+/// How long `tcpout:` waits for the autopilot to accept the connection.
+pub const TCP_CONNECT_TIMEOUT: Duration = Duration::from_secs(3);
+
+/// How often a closed `tcpout:` connection is tried again.
+pub const RECONNECT_PERIOD: Duration = Duration::from_secs(1);
+
+/// The most acknowledgements and notes kept between two steps (older ones are dropped).
+pub const MAX_QUEUED: usize = 64;
+
+/// ArduSub's custom modes that the status block's NAV has a value for, and back.
+const MODE_TABLE: [(u32, Nav); 5] = [
+    (19, Nav::Manual),
+    (0, Nav::Stabilize),
+    (2, Nav::DepthHold),
+    (16, Nav::HoldPosition),
+    (4, Nav::Guided),
+];
+
+/// The NAV reported while ArduSub is in a mode outside [`MODE_TABLE`] (ACRO, AUTO, CIRCLE,
+/// SURFACE, ...): 5, the first value wire.md leaves reserved, so the operator sees "none of
+/// ours" rather than a mode the vehicle is not in.
+pub const OTHER_MODE_NAV: Nav = Nav::Unknown(5);
+
+/// The NAV for an ArduSub custom mode (MANUAL 19, STABILIZE 0, ALT_HOLD 2, POSHOLD 16,
+/// GUIDED 4); `None` for the others.
+pub fn nav_of_custom_mode(custom_mode: u32) -> Option<Nav> {
+    MODE_TABLE
+        .iter()
+        .find(|(mode, _)| *mode == custom_mode)
+        .map(|(_, nav)| *nav)
+}
+
+/// The ArduSub custom mode for a NAV; `None` for a reserved NAV value.
+pub fn custom_mode_of(nav: Nav) -> Option<u32> {
+    MODE_TABLE
+        .iter()
+        .find(|(_, n)| *n == nav)
+        .map(|(mode, _)| *mode)
+}
+
+/// ArduSub's name for a custom mode (`mode 12` for a number it does not define).
+pub fn ardusub_mode_name(custom_mode: u32) -> String {
+    let name = match custom_mode {
+        0 => "STABILIZE",
+        1 => "ACRO",
+        2 => "ALT_HOLD",
+        3 => "AUTO",
+        4 => "GUIDED",
+        7 => "CIRCLE",
+        9 => "SURFACE",
+        16 => "POSHOLD",
+        19 => "MANUAL",
+        20 => "MOTOR_DETECT",
+        21 => "SURFTRAK",
+        other => return format!("mode {other}"),
+    };
+    name.to_string()
+}
+
+/// MANUAL_CONTROL's x, y, z, r for thrust in percent (surge, sway, heave down, yaw clockwise,
+/// each -100..=100), as ArduSub's `transform_manual_control_to_rc_override` reads them: x
+/// forward, y starboard and r clockwise in -1000..=1000; z is its throttle, 0..=1000 with 500
+/// neutral, where a larger z raises the vehicle, so heave down `h` gives `500 - 5 h`.
+/// Out-of-range or non-finite input is clamped (not-a-number gives neutral).
+pub fn manual_control_axes(thrust_percent: [f64; 4]) -> [i16; 4] {
+    let axis = |value: f64, scale: f64, centre: f64, low: f64, high: f64| -> i16 {
+        let raw = centre + value * scale;
+        if raw.is_nan() {
+            centre as i16
+        } else {
+            raw.round().clamp(low, high) as i16
+        }
+    };
+    let [surge, sway, heave, yaw] = thrust_percent;
+    [
+        axis(surge, 10.0, 0.0, -1000.0, 1000.0),
+        axis(sway, 10.0, 0.0, -1000.0, 1000.0),
+        axis(heave, -5.0, 500.0, 0.0, 1000.0),
+        axis(yaw, 10.0, 0.0, -1000.0, 1000.0),
+    ]
+}
+
+/// MANUAL_CONTROL with the sticks centred.
+pub const NEUTRAL_AXES: [i16; 4] = [0, 0, 500, 0];
+
+/// Where the autopilot is: one of the connection forms ArduSub users know.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Endpoint {
+    /// `udpin:HOST:PORT` (or `udp:`): listen there; answer whoever sent last (BlueOS and
+    /// MAVProxy send to a GCS at 14550).
+    UdpIn(String),
+    /// `udpout:HOST:PORT`: send there, from an ephemeral port, and listen on that port.
+    UdpOut(String),
+    /// `tcpin:HOST:PORT`: listen there for the autopilot to connect (one connection at a time).
+    TcpIn(String),
+    /// `tcpout:HOST:PORT` (or `tcp:`): connect there (ArduSub SITL listens on 5760).
+    TcpOut(String),
+    /// `serial:DEVICE:BAUD`: a serial port (the device may itself hold colons).
+    Serial {
+        /// The device path.
+        device: String,
+        /// Bits per second.
+        baud: u32,
+    },
+}
+
+/// The endpoint forms, for error messages.
+const FORMS: &str =
+    "udpin:HOST:PORT, udpout:HOST:PORT, tcpin:HOST:PORT, tcpout:HOST:PORT or serial:DEVICE:BAUD";
+
+impl Endpoint {
+    /// Parses an endpoint; an error names the text and what is wrong with it.
+    pub fn parse(text: &str) -> Result<Endpoint, MavlinkError> {
+        let syntax = |reason: String| MavlinkError::Syntax {
+            endpoint: text.to_string(),
+            reason,
+        };
+        let Some((scheme, rest)) = text.split_once(':') else {
+            return Err(syntax(format!("expected {FORMS}")));
+        };
+        match scheme {
+            "udpin" | "udp" => Ok(Endpoint::UdpIn(host_port(rest, true).map_err(syntax)?)),
+            "udpout" => Ok(Endpoint::UdpOut(host_port(rest, false).map_err(syntax)?)),
+            "tcpin" => Ok(Endpoint::TcpIn(host_port(rest, true).map_err(syntax)?)),
+            "tcpout" | "tcp" => Ok(Endpoint::TcpOut(host_port(rest, false).map_err(syntax)?)),
+            "serial" => {
+                let Some((device, baud)) = rest.rsplit_once(':') else {
+                    return Err(syntax("expected serial:DEVICE:BAUD".to_string()));
+                };
+                if device.is_empty() {
+                    return Err(syntax("the serial device is empty".to_string()));
+                }
+                match baud.parse::<u32>() {
+                    Ok(baud) if baud > 0 => Ok(Endpoint::Serial {
+                        device: device.to_string(),
+                        baud,
+                    }),
+                    _ => Err(syntax(format!(
+                        "expected a baud rate (bits per second) after the device, found '{baud}'"
+                    ))),
+                }
+            }
+            other => Err(syntax(format!(
+                "unknown connection type '{other}': expected {FORMS}"
+            ))),
+        }
+    }
+}
+
+/// Checks `HOST:PORT` (an IPv6 host in brackets); port 0 only where we listen.
+fn host_port(text: &str, listening: bool) -> Result<String, String> {
+    let Some((host, port)) = text.rsplit_once(':') else {
+        return Err(format!("expected HOST:PORT, found '{text}'"));
+    };
+    if host.is_empty() {
+        return Err(format!("expected HOST:PORT, found no host in '{text}'"));
+    }
+    let bracketed = host.starts_with('[') && host.ends_with(']') && host.len() > 2;
+    if host.contains(':') && !bracketed {
+        return Err(format!(
+            "an IPv6 host goes in brackets ([::1]:14550), found '{text}'"
+        ));
+    }
+    match port.parse::<u16>() {
+        Ok(0) if !listening => Err(format!("port 0 cannot be connected to, in '{text}'")),
+        Ok(_) => Ok(text.to_string()),
+        Err(_) => Err(format!(
+            "expected a port number 0..=65535 after the host, found '{port}'"
+        )),
+    }
+}
+
+impl fmt::Display for Endpoint {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Endpoint::UdpIn(a) => write!(f, "udpin:{a}"),
+            Endpoint::UdpOut(a) => write!(f, "udpout:{a}"),
+            Endpoint::TcpIn(a) => write!(f, "tcpin:{a}"),
+            Endpoint::TcpOut(a) => write!(f, "tcpout:{a}"),
+            Endpoint::Serial { device, baud } => write!(f, "serial:{device}:{baud}"),
+        }
+    }
+}
+
+/// Why the autopilot's endpoint could not be opened.
+#[derive(Debug, thiserror::Error)]
+pub enum MavlinkError {
+    /// The endpoint text is not one of the forms.
+    #[error("mavlink endpoint '{endpoint}': {reason}")]
+    Syntax {
+        /// The text given.
+        endpoint: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The endpoint is well-formed but cannot be opened (bind fails, TCP refused, no device).
+    #[error("mavlink endpoint '{endpoint}': cannot {action}: {source}")]
+    Open {
+        /// The endpoint.
+        endpoint: String,
+        /// What was tried (`bind`, `connect`, `open the serial port`, ...).
+        action: &'static str,
+        /// Why it failed.
+        source: io::Error,
+    },
+    /// An option out of its range.
+    #[error("mavlink options: {0}")]
+    Options(String),
+}
+
+/// How the ROV end talks to the autopilot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MavlinkOptions {
+    /// Our system id: 255, ArduSub's default `SYSID_MYGCS` (it takes MANUAL_CONTROL and
+    /// counts GCS heartbeats only from that system).
+    pub system_id: u8,
+    /// Our component id: 190, MAV_COMP_ID_MISSIONPLANNER, what a GCS uses.
+    pub component_id: u8,
+    /// GCS HEARTBEAT rate, Hz (1: what ArduPilot's GCS failsafe expects).
+    pub heartbeat_hz: f64,
+    /// MANUAL_CONTROL rate, Hz (10: the rate QGroundControl sends a joystick at; steps come
+    /// every 0.1 s, so more is sent at most once a step).
+    pub manual_control_hz: f64,
+    /// Silence after which the autopilot counts as unresponsive, s (3: three missed 1 Hz
+    /// heartbeats).
+    pub silence_s: f64,
+    /// GoTo arrival distance, m. 0.3: ArduSub's position controller, on a DVL-aided estimate
+    /// that wanders by a decimetre or so, settles within a few decimetres; a tighter bound
+    /// would leave orders unfinished while the vehicle hovers at its target.
+    pub arrival_m: f64,
+    /// GoTo arrival heading error, degrees. 5: the built-in model's bound and about what a
+    /// compass on a small ROV can be trusted to.
+    pub arrival_deg: f64,
+}
+
+impl Default for MavlinkOptions {
+    fn default() -> Self {
+        MavlinkOptions {
+            system_id: 255,
+            component_id: 190,
+            heartbeat_hz: 1.0,
+            manual_control_hz: 10.0,
+            silence_s: 3.0,
+            arrival_m: 0.3,
+            arrival_deg: 5.0,
+        }
+    }
+}
+
+impl MavlinkOptions {
+    fn check(&self) -> Result<(), MavlinkError> {
+        let positive = [
+            ("heartbeat_hz", self.heartbeat_hz),
+            ("manual_control_hz", self.manual_control_hz),
+            ("silence_s", self.silence_s),
+            ("arrival_m", self.arrival_m),
+            ("arrival_deg", self.arrival_deg),
+        ];
+        for (name, value) in positive {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(MavlinkError::Options(format!(
+                    "{name}: expected a positive number, found {value}"
+                )));
+            }
+        }
+        if self.system_id == 0 {
+            return Err(MavlinkError::Options(
+                "system_id: expected 1..=255, found 0 (the broadcast id)".to_string(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+type Conn = mavlink::Connection<MavMessage>;
+
+/// The autopilot the link settled on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Autopilot {
+    system: u8,
+    component: u8,
+    submarine: bool,
+}
+
+/// What the receiving thread learnt, handed to `step`.
+#[derive(Debug, Default)]
+struct Inbox {
+    autopilot: Option<Autopilot>,
+    /// Messages heard from the autopilot.
+    heard: u64,
+    /// Armed and custom mode from its last HEARTBEAT.
+    heartbeat: Option<(bool, u32)>,
+    /// LOCAL_POSITION_NED: x, y, z (m), vx, vy, vz (m/s); and how many.
+    position: Option<[f64; 6]>,
+    positions: u64,
+    /// ATTITUDE: roll, pitch, yaw (rad), yaw speed (rad/s); and how many.
+    attitude: Option<[f64; 4]>,
+    attitudes: u64,
+    acks: VecDeque<(MavCmd, MavResult)>,
+    notes: VecDeque<String>,
+}
+
+fn push_bounded<T>(queue: &mut VecDeque<T>, item: T) {
+    if queue.len() >= MAX_QUEUED {
+        queue.pop_front();
+    }
+    queue.push_back(item);
+}
+
+/// The connection and the inbox, shared by `step` and the receiving thread.
+struct Shared {
+    /// `None` while a TCP connection is (re)established.
+    conn: Mutex<Option<Arc<Conn>>>,
+    inbox: Mutex<Inbox>,
+    stop: AtomicBool,
+}
+
+fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// How the receiving thread gets a connection back when TCP closes.
+enum Reopen {
+    /// UDP and serial: the connection stays.
+    Never,
+    /// `tcpout:`: connect again.
+    Connect(SocketAddr),
+    /// `tcpin:`: accept the next connection.
+    Accept(TcpListener),
+}
+
+/// A time base for "every so often", on the session clock.
+#[derive(Debug, Clone, Copy)]
+struct Ticker {
+    period_s: f64,
+    next: Option<SimTime>,
+}
+
+impl Ticker {
+    fn new(period_s: f64) -> Ticker {
+        Ticker {
+            period_s,
+            next: None,
+        }
+    }
+
+    /// True when due at `now`, `slack_s` early allowed (steps jitter in real time); the next
+    /// time stays on the grid, or restarts from `now` after a gap.
+    fn due(&mut self, now: SimTime, slack_s: f64) -> bool {
+        match self.next {
+            Some(next) if now.after_secs(slack_s) < next => false,
+            Some(next) => {
+                let following = next.after_secs(self.period_s);
+                self.next = Some(if following <= now {
+                    now.after_secs(self.period_s)
+                } else {
+                    following
+                });
+                true
+            }
+            None => {
+                self.next = Some(now.after_secs(self.period_s));
+                true
+            }
+        }
+    }
+}
+
+/// An arm state or mode asked of the autopilot until it reports it.
+#[derive(Debug, Clone, Copy, Default)]
+struct Request<T> {
+    wanted: Option<T>,
+    sent_at: Option<SimTime>,
+    met: bool,
+}
+
+/// What a [`Request`] says at a step.
+#[derive(Debug, PartialEq, Eq)]
+enum Ask {
+    /// Nothing to send.
+    Nothing,
+    /// Send: the first time for this value (`true`) or a retry.
+    Send(bool),
+}
+
+impl<T: Copy + PartialEq> Request<T> {
+    fn ask(&mut self, want: T, reported: Option<T>, now: SimTime) -> Ask {
+        let fresh = self.wanted != Some(want);
+        if fresh {
+            *self = Request {
+                wanted: Some(want),
+                sent_at: None,
+                met: false,
+            };
+        }
+        if self.met || reported == Some(want) {
+            self.met = true;
+            return Ask::Nothing;
+        }
+        match self.sent_at {
+            Some(at) if now < at.after_secs(COMMAND_RETRY_S) => Ask::Nothing,
+            Some(_) => Ask::Send(false),
+            None => Ask::Send(true),
+        }
+    }
+}
+
+/// A stream of the autopilot's that we ask for while it is missing.
+#[derive(Debug, Clone, Copy)]
+struct Stream {
+    message_id: u32,
+    count: u64,
+    seen_at: Option<SimTime>,
+    asked_at: Option<SimTime>,
+}
+
+impl Stream {
+    fn new(message_id: u32) -> Stream {
+        Stream {
+            message_id,
+            count: 0,
+            seen_at: None,
+            asked_at: None,
+        }
+    }
+
+    /// True when the stream should be asked for at `now` (it has `count` messages so far).
+    fn wanted(&mut self, count: u64, now: SimTime, since: SimTime) -> bool {
+        if count != self.count {
+            self.count = count;
+            self.seen_at = Some(now);
+        }
+        let quiet_from = self.seen_at.unwrap_or(since);
+        let missing = now >= quiet_from.after_secs(STREAM_MISSING_S) || self.seen_at.is_none();
+        let may_ask = self
+            .asked_at
+            .is_none_or(|at| now >= at.after_secs(STREAM_REQUEST_S));
+        if missing && may_ask {
+            self.asked_at = Some(now);
+            true
+        } else {
+            false
+        }
+    }
+}
+
+/// A real autopilot behind a MAVLink endpoint, driven as the ROV's vehicle.
+pub struct MavlinkDrive {
+    endpoint: Endpoint,
+    options: MavlinkOptions,
+    shared: Arc<Shared>,
+    thread: Option<JoinHandle<()>>,
+    state: DriveState,
+    events: Vec<DriveEvent>,
+    started_at: Option<SimTime>,
+    target: Option<Autopilot>,
+    heard: u64,
+    heard_at: Option<SimTime>,
+    silent: bool,
+    custom_mode: Option<u32>,
+    noted_mode: Option<u32>,
+    have_attitude: bool,
+    heartbeat: Ticker,
+    manual: Ticker,
+    arm: Request<bool>,
+    mode: Request<u32>,
+    setpoint: Option<([f64; 4], SimTime)>,
+    was_guided: bool,
+    streams: [Stream; 2],
+    /// The last result reported per command, so that retries answered alike say it once.
+    reported: Vec<(MavCmd, MavResult)>,
+    send_error: Option<String>,
+}
+
+/// Opens `endpoint` (see [`Endpoint`]) and starts listening for the autopilot. A syntax error or
+/// an endpoint that cannot be opened (bind fails, TCP refused or unanswered for
+/// [`TCP_CONNECT_TIMEOUT`], no such serial device) is an error naming the endpoint and why. It
+/// does not wait for the autopilot: an absent autopilot shows as silence.
+pub fn connect(endpoint: &str, options: &MavlinkOptions) -> Result<MavlinkDrive, MavlinkError> {
+    options.check()?;
+    let parsed = Endpoint::parse(endpoint)?;
+    let open = |action: &'static str| {
+        let endpoint = parsed.to_string();
+        move |source: io::Error| MavlinkError::Open {
+            endpoint,
+            action,
+            source,
+        }
+    };
+    let (conn, reopen, polls) = match &parsed {
+        Endpoint::UdpIn(address) | Endpoint::UdpOut(address) => {
+            let (mode, action) = match parsed {
+                Endpoint::UdpIn(_) => (UdpMode::Udpin, "bind"),
+                _ => (UdpMode::Udpout, "resolve or bind"),
+            };
+            let config = UdpConfig::new(address.clone(), mode).read_timeout(READ_TIMEOUT);
+            let conn = config.connect::<MavMessage>().map_err(open(action))?;
+            (Some(conn), Reopen::Never, false)
+        }
+        Endpoint::TcpOut(address) => {
+            let to = resolve(address).map_err(open("resolve"))?;
+            let conn = tcp_connection(to, TCP_CONNECT_TIMEOUT).map_err(open("connect"))?;
+            (Some(conn), Reopen::Connect(to), false)
+        }
+        Endpoint::TcpIn(address) => {
+            let listener = TcpListener::bind(resolve(address).map_err(open("resolve"))?)
+                .and_then(|l| l.set_nonblocking(true).map(|()| l))
+                .map_err(open("listen"))?;
+            (None, Reopen::Accept(listener), false)
+        }
+        Endpoint::Serial { device, baud } => {
+            let config = SerialConfig::new(device.clone(), *baud).timeout(READ_TIMEOUT);
+            let conn = config
+                .connect::<MavMessage>()
+                .map_err(open("open the serial port"))?;
+            (Some(conn), Reopen::Never, true)
+        }
+    };
+    let conn = conn.map(|mut c| {
+        // ArduPilot answers in the version it is spoken to, but a port set to MAVLink 1 sends
+        // version 1 heartbeats: read both, send version 2.
+        c.set_allow_recv_any_version(true);
+        Arc::new(c)
+    });
+    let shared = Arc::new(Shared {
+        conn: Mutex::new(conn),
+        inbox: Mutex::new(Inbox::default()),
+        stop: AtomicBool::new(false),
+    });
+    let thread_shared = Arc::clone(&shared);
+    let our_system = options.system_id;
+    let thread = std::thread::Builder::new()
+        .name("mavlink-receive".to_string())
+        .spawn(move || receive(&thread_shared, reopen, polls, our_system))
+        .map_err(open("start its receiving thread"))?;
+    Ok(MavlinkDrive {
+        endpoint: parsed,
+        options: options.clone(),
+        shared,
+        thread: Some(thread),
+        state: DriveState {
+            position_m: [0.0; 3],
+            heading_deg: 0.0,
+            roll_deg: 0.0,
+            pitch_deg: 0.0,
+            velocity: [0.0; 4],
+            commanded_velocity: [0.0; 4],
+            armed: false,
+            nav: Nav::Manual,
+            responsive: false,
+        },
+        events: Vec::new(),
+        started_at: None,
+        target: None,
+        heard: 0,
+        heard_at: None,
+        silent: false,
+        custom_mode: None,
+        noted_mode: None,
+        have_attitude: false,
+        heartbeat: Ticker::new(1.0 / options.heartbeat_hz),
+        manual: Ticker::new(1.0 / options.manual_control_hz),
+        arm: Request::default(),
+        mode: Request::default(),
+        setpoint: None,
+        was_guided: false,
+        streams: [Stream::new(30), Stream::new(32)],
+        reported: Vec::new(),
+        send_error: None,
+    })
+}
+
+fn resolve(address: &str) -> io::Result<SocketAddr> {
+    address
+        .to_socket_addrs()?
+        .next()
+        .ok_or_else(|| io::Error::new(io::ErrorKind::NotFound, "the host has no address"))
+}
+
+/// A MAVLink connection over a TCP stream, with our read and write timeouts.
+fn tcp_stream_connection(stream: TcpStream) -> io::Result<Conn> {
+    stream.set_nonblocking(false)?;
+    stream.set_read_timeout(Some(READ_TIMEOUT))?;
+    stream.set_write_timeout(Some(WRITE_TIMEOUT))?;
+    stream.set_nodelay(true)?;
+    TcpConfig::from_stream(stream)?.connect::<MavMessage>()
+}
+
+fn tcp_connection(to: SocketAddr, timeout: Duration) -> io::Result<Conn> {
+    tcp_stream_connection(TcpStream::connect_timeout(&to, timeout)?)
+}
+
+/// The receiving thread: reads messages until told to stop, keeping what `step` needs.
+fn receive(shared: &Shared, reopen: Reopen, polls: bool, our_system: u8) {
+    let mut failed: Option<String> = None;
+    while !shared.stop.load(Ordering::Relaxed) {
+        let conn = lock(&shared.conn).clone();
+        let Some(conn) = conn else {
+            let fresh = match &reopen {
+                Reopen::Never => return,
+                Reopen::Connect(to) => {
+                    std::thread::sleep(RECONNECT_PERIOD);
+                    tcp_connection(*to, READ_TIMEOUT * 5).ok()
+                }
+                Reopen::Accept(listener) => match listener.accept() {
+                    Ok((stream, _)) => tcp_stream_connection(stream).ok(),
+                    Err(_) => {
+                        std::thread::sleep(READ_TIMEOUT / 2);
+                        None
+                    }
+                },
+            };
+            if let Some(mut fresh) = fresh {
+                fresh.set_allow_recv_any_version(true);
+                *lock(&shared.conn) = Some(Arc::new(fresh));
+                note(shared, "mavlink: TCP connection established".to_string());
+            }
+            continue;
+        };
+        // A serial read retries its timeouts inside `recv`: poll it instead.
+        let result = if polls { conn.try_recv() } else { conn.recv() };
+        match result {
+            Ok((header, message)) => {
+                failed = None;
+                keep(shared, &header, message, our_system);
+            }
+            Err(MessageReadError::Parse(_)) => {}
+            Err(MessageReadError::Io(error)) => match error.kind() {
+                io::ErrorKind::WouldBlock
+                | io::ErrorKind::TimedOut
+                | io::ErrorKind::Interrupted => {}
+                _ if !matches!(reopen, Reopen::Never) => {
+                    *lock(&shared.conn) = None;
+                    note(shared, format!("mavlink: TCP connection closed: {error}"));
+                }
+                _ => {
+                    let text = format!("mavlink: receive failed: {error}");
+                    if failed.as_deref() != Some(text.as_str()) {
+                        note(shared, text.clone());
+                        failed = Some(text);
+                    }
+                    std::thread::sleep(READ_TIMEOUT);
+                }
+            },
+        }
+    }
+}
+
+fn note(shared: &Shared, text: String) {
+    push_bounded(&mut lock(&shared.inbox).notes, text);
+}
+
+/// Keeps one message in the inbox if it comes from the autopilot.
+fn keep(shared: &Shared, header: &MavHeader, message: MavMessage, our_system: u8) {
+    let (Ok(system), component) = (u8::try_from(header.system_id), header.component_id) else {
+        return;
+    };
+    if system == our_system {
+        return; // Another ground station speaking as us, or our own echo.
+    }
+    let mut inbox = lock(&shared.inbox);
+    if let MavMessage::HEARTBEAT(heartbeat) = &message {
+        let autopilot = heartbeat.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID
+            && heartbeat.mavtype != MavType::MAV_TYPE_GCS;
+        let submarine = heartbeat.mavtype == MavType::MAV_TYPE_SUBMARINE;
+        let better = match inbox.autopilot {
+            None => autopilot,
+            Some(known) => autopilot && submarine && !known.submarine,
+        };
+        if better {
+            inbox.autopilot = Some(Autopilot {
+                system,
+                component,
+                submarine,
+            });
+            let text = format!(
+                "mavlink: autopilot found: system {system} component {component}, {:?}, {:?}{}",
+                heartbeat.mavtype,
+                heartbeat.autopilot,
+                if submarine {
+                    ""
+                } else {
+                    " (not a submarine: its modes are read as ArduSub's)"
+                }
+            );
+            push_bounded(&mut inbox.notes, text);
+        }
+    }
+    let from_autopilot = inbox
+        .autopilot
+        .is_some_and(|a| a.system == system && a.component == component);
+    if !from_autopilot {
+        return;
+    }
+    inbox.heard += 1;
+    match message {
+        MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            base_mode,
+            custom_mode,
+            ..
+        }) => {
+            let armed = base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+            inbox.heartbeat = Some((armed, custom_mode));
+        }
+        MavMessage::LOCAL_POSITION_NED(p) => {
+            let values = [p.x, p.y, p.z, p.vx, p.vy, p.vz].map(f64::from);
+            if values.iter().all(|v| v.is_finite()) {
+                inbox.position = Some(values);
+                inbox.positions += 1;
+            }
+        }
+        MavMessage::ATTITUDE(a) => {
+            let values = [a.roll, a.pitch, a.yaw, a.yawspeed].map(f64::from);
+            if values.iter().all(|v| v.is_finite()) {
+                inbox.attitude = Some(values);
+                inbox.attitudes += 1;
+            }
+        }
+        MavMessage::COMMAND_ACK(ack) => push_bounded(&mut inbox.acks, (ack.command, ack.result)),
+        MavMessage::STATUSTEXT(status) => {
+            let warning = matches!(
+                status.severity,
+                MavSeverity::MAV_SEVERITY_EMERGENCY
+                    | MavSeverity::MAV_SEVERITY_ALERT
+                    | MavSeverity::MAV_SEVERITY_CRITICAL
+                    | MavSeverity::MAV_SEVERITY_ERROR
+                    | MavSeverity::MAV_SEVERITY_WARNING
+            );
+            if warning {
+                let bytes: Vec<u8> = status
+                    .text
+                    .iter()
+                    .copied()
+                    .take_while(|&b| b != 0)
+                    .collect();
+                let text = format!("autopilot: {}", String::from_utf8_lossy(&bytes).trim());
+                push_bounded(&mut inbox.notes, text);
+            }
+        }
+        _ => {}
+    }
+}
+
+impl MavlinkDrive {
+    /// The endpoint, as parsed.
+    pub fn endpoint(&self) -> &Endpoint {
+        &self.endpoint
+    }
+
+    /// The autopilot's system and component ids, once its HEARTBEAT was heard.
+    pub fn autopilot(&self) -> Option<(u8, u8)> {
+        self.target.map(|a| (a.system, a.component))
+    }
+
+    /// The autopilot's custom mode from its last HEARTBEAT.
+    pub fn custom_mode(&self) -> Option<u32> {
+        self.custom_mode
+    }
+
+    fn send(&mut self, message: &MavMessage) {
+        let conn = lock(&self.shared.conn).clone();
+        let Some(conn) = conn else {
+            return; // TCP (re)connecting: nothing to send on.
+        };
+        let header = MavHeader {
+            system_id: u32::from(self.options.system_id),
+            component_id: self.options.component_id,
+            sequence: 0,
+        };
+        match conn.send(&header, message) {
+            Ok(_) => self.send_error = None,
+            Err(error) => {
+                let text = format!("mavlink {}: send failed: {error}", self.endpoint);
+                if self.send_error.as_deref() != Some(text.as_str()) {
+                    self.events.push(DriveEvent::Note(text.clone()));
+                    self.send_error = Some(text);
+                }
+            }
+        }
+    }
+
+    fn command(&mut self, target: Autopilot, command: MavCmd, params: [f32; 3]) {
+        let [param1, param2, param3] = params;
+        self.send(&MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            param1,
+            param2,
+            param3,
+            command,
+            target_system: target.system,
+            target_component: target.component,
+            ..COMMAND_LONG_DATA::DEFAULT
+        }));
+    }
+
+    /// Forgets the result reported for `command`: a new request's answer is news.
+    fn forget_result(&mut self, command: MavCmd) {
+        self.reported.retain(|(c, _)| *c != command);
+    }
+
+    /// Takes over what the receiving thread learnt.
+    fn absorb(&mut self, now: SimTime) {
+        let (autopilot, heard, heartbeat, position, attitude, counts, acks, notes) = {
+            let mut inbox = lock(&self.shared.inbox);
+            (
+                inbox.autopilot,
+                inbox.heard,
+                inbox.heartbeat,
+                inbox.position,
+                inbox.attitude,
+                [inbox.attitudes, inbox.positions],
+                std::mem::take(&mut inbox.acks),
+                std::mem::take(&mut inbox.notes),
+            )
+        };
+        self.events.extend(notes.into_iter().map(DriveEvent::Note));
+        if autopilot != self.target {
+            self.target = autopilot;
+            self.streams = [Stream::new(30), Stream::new(32)];
+        }
+        let started_at = *self.started_at.get_or_insert(now);
+        if heard != self.heard {
+            self.heard = heard;
+            self.heard_at = Some(now);
+            if self.silent {
+                self.silent = false;
+                self.events.push(DriveEvent::Heard);
+            }
+        }
+        let quiet_s = now.0.saturating_sub(self.heard_at.unwrap_or(started_at).0) as f64 * 1e-9;
+        self.state.responsive = self.heard_at.is_some() && quiet_s < self.options.silence_s;
+        if !self.state.responsive && !self.silent && quiet_s >= self.options.silence_s {
+            self.silent = true;
+            self.events.push(DriveEvent::Silent { silent_s: quiet_s });
+        }
+        if let Some((armed, custom_mode)) = heartbeat {
+            self.state.armed = armed;
+            self.custom_mode = Some(custom_mode);
+            self.state.nav = match nav_of_custom_mode(custom_mode) {
+                Some(nav) => nav,
+                None => {
+                    if self.noted_mode != Some(custom_mode) {
+                        self.events.push(DriveEvent::Note(format!(
+                            "mavlink: the autopilot is in {} ({custom_mode}), which NAV has no value for: reported as NAV {}",
+                            ardusub_mode_name(custom_mode),
+                            OTHER_MODE_NAV.bits()
+                        )));
+                    }
+                    OTHER_MODE_NAV
+                }
+            };
+            self.noted_mode = Some(custom_mode);
+        }
+        if let Some([roll, pitch, yaw, yaw_rate]) = attitude {
+            self.have_attitude = true;
+            self.state.roll_deg = angle_diff_deg(roll.to_degrees(), 0.0);
+            self.state.pitch_deg = angle_diff_deg(pitch.to_degrees(), 0.0);
+            self.state.heading_deg = yaw.to_degrees().rem_euclid(360.0);
+            self.state.velocity[3] = yaw_rate.to_degrees();
+        }
+        if let Some([x, y, z, vn, ve, vd]) = position {
+            self.state.position_m = [x, y, z];
+            let psi = self.state.heading_deg.to_radians();
+            self.state.velocity[0] = vn * psi.cos() + ve * psi.sin();
+            self.state.velocity[1] = -vn * psi.sin() + ve * psi.cos();
+            self.state.velocity[2] = vd;
+        }
+        for (command, result) in acks {
+            if self.reported.contains(&(command, result)) {
+                continue;
+            }
+            self.forget_result(command);
+            self.reported.push((command, result));
+            self.events.push(DriveEvent::CommandAck {
+                command: format!("{command:?}"),
+                result: format!("{result:?}"),
+                accepted: matches!(
+                    result,
+                    MavResult::MAV_RESULT_ACCEPTED | MavResult::MAV_RESULT_IN_PROGRESS
+                ),
+            });
+        }
+        if let Some(target) = self.target {
+            for (k, count) in counts.into_iter().enumerate() {
+                if self.streams[k].wanted(count, now, started_at) {
+                    let interval_us = 1e6 / STREAM_HZ;
+                    let id = self.streams[k].message_id as f32;
+                    self.command(
+                        target,
+                        MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                        [id, interval_us as f32, 0.0],
+                    );
+                }
+            }
+        }
+    }
+
+    /// The thrust, percent, that the demand's command asks of the sticks (HoldHeading closed
+    /// on the reported heading, a GoTo through the built-in model's controller).
+    fn thrust_percent(&self, demand: &Demand) -> [f64; 4] {
+        let mut model = Vehicle::new(self.state.position_m);
+        model.heading_deg = self.state.heading_deg;
+        model.heading_hold_deg = demand.heading_hold_deg.filter(|_| self.have_attitude);
+        model.thrust_for(demand.command)
+    }
+}
+
+/// The velocities full thrust stands for in [`DriveState::commanded_velocity`]: the built-in
+/// model's (0.5 m/s, 30 degrees/s). The autopilot's real response is its own; these only say
+/// what was asked, in the units of the other outputs.
+const NOMINAL_FULL: [f64; 4] = [0.5, 0.5, 0.5, 30.0];
+
+impl Drive for MavlinkDrive {
+    fn step(&mut self, now: SimTime, dt_s: f64, demand: &Demand) {
+        self.absorb(now);
+        let slack_s = if dt_s.is_finite() {
+            dt_s.max(0.0) / 2.0
+        } else {
+            0.0
+        };
+        if self.heartbeat.due(now, slack_s) {
+            self.send(&MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+                custom_mode: 0,
+                mavtype: MavType::MAV_TYPE_GCS,
+                autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+                base_mode: MavModeFlag::empty(),
+                system_status: MavState::MAV_STATE_ACTIVE,
+                mavlink_version: 3,
+            }));
+        }
+        let goto = match demand.command {
+            Command::GoTo {
+                x,
+                y,
+                z,
+                heading_deg,
+            } => Some([x, y, z, heading_deg]),
+            Command::Thrust { .. } => None,
+        };
+        let sticks_live = demand.link_up && goto.is_none();
+        let thrust = if sticks_live || goto.is_some() {
+            self.thrust_percent(demand)
+        } else {
+            [0.0; 4]
+        };
+        self.state.commanded_velocity = [0, 1, 2, 3].map(|k| thrust[k] / 100.0 * NOMINAL_FULL[k]);
+        let Some(target) = self.target else {
+            return; // Nothing to address yet.
+        };
+        if self.manual.due(now, slack_s) {
+            let [x, y, z, r] = if sticks_live {
+                manual_control_axes(thrust)
+            } else {
+                NEUTRAL_AXES
+            };
+            self.send(&MavMessage::MANUAL_CONTROL(MANUAL_CONTROL_DATA {
+                x,
+                y,
+                z,
+                r,
+                buttons: 0,
+                target: target.system,
+            }));
+        }
+        let armed = Some(self.state.armed).filter(|_| self.custom_mode.is_some());
+        match self.arm.ask(demand.arm, armed, now) {
+            Ask::Nothing => {}
+            Ask::Send(fresh) => {
+                if fresh {
+                    self.forget_result(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM);
+                }
+                self.arm.sent_at = Some(now);
+                let param1 = if demand.arm { 1.0 } else { 0.0 };
+                self.command(
+                    target,
+                    MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                    [param1, 0.0, 0.0],
+                );
+            }
+        }
+        let nav = if goto.is_some() {
+            Nav::Guided
+        } else {
+            demand.nav
+        };
+        if let Some(mode) = custom_mode_of(nav) {
+            match self.mode.ask(mode, self.custom_mode, now) {
+                Ask::Nothing => {}
+                Ask::Send(fresh) => {
+                    if fresh {
+                        self.forget_result(MavCmd::MAV_CMD_DO_SET_MODE);
+                    }
+                    self.mode.sent_at = Some(now);
+                    let custom = f32::from(MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.bits());
+                    self.command(
+                        target,
+                        MavCmd::MAV_CMD_DO_SET_MODE,
+                        [custom, mode as f32, 0.0],
+                    );
+                }
+            }
+        }
+        let guided = self.custom_mode == custom_mode_of(Nav::Guided);
+        let became_guided = guided && !self.was_guided;
+        self.was_guided = guided;
+        match goto {
+            Some(point) if point.iter().all(|v| v.is_finite()) => {
+                let due = match self.setpoint {
+                    Some((last, at)) => {
+                        last != point
+                            || became_guided
+                            || now >= at.after_secs(SETPOINT_RESEND_S - slack_s)
+                    }
+                    None => true,
+                };
+                if due {
+                    self.setpoint = Some((point, now));
+                    let [x, y, z, heading_deg] = point;
+                    let ignore = PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VX_IGNORE
+                        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VY_IGNORE
+                        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VZ_IGNORE
+                        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AX_IGNORE
+                        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AY_IGNORE
+                        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AZ_IGNORE
+                        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE;
+                    self.send(&MavMessage::SET_POSITION_TARGET_LOCAL_NED(
+                        SET_POSITION_TARGET_LOCAL_NED_DATA {
+                            time_boot_ms: (now.0 / 1_000_000) as u32,
+                            x: x as f32,
+                            y: y as f32,
+                            z: z as f32,
+                            yaw: angle_diff_deg(heading_deg, 0.0).to_radians() as f32,
+                            type_mask: ignore,
+                            target_system: target.system,
+                            target_component: target.component,
+                            coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
+                            ..SET_POSITION_TARGET_LOCAL_NED_DATA::DEFAULT
+                        },
+                    ));
+                }
+            }
+            _ => self.setpoint = None,
+        }
+    }
+
+    fn state(&self) -> DriveState {
+        self.state
+    }
+
+    fn arrival_m(&self) -> f64 {
+        self.options.arrival_m
+    }
+
+    fn arrival_deg(&self) -> f64 {
+        self.options.arrival_deg
+    }
+
+    fn take_events(&mut self) -> Vec<DriveEvent> {
+        std::mem::take(&mut self.events)
+    }
+}
+
+impl Drop for MavlinkDrive {
+    fn drop(&mut self) {
+        self.shared.stop.store(true, Ordering::Relaxed);
+        if let Some(thread) = self.thread.take() {
+            // The thread looks at the flag after each read timeout (or reconnect attempt).
+            let _ = thread.join();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_endpoint_form_parses() {
+        let cases = [
+            (
+                "udpin:0.0.0.0:14550",
+                Endpoint::UdpIn("0.0.0.0:14550".into()),
+            ),
+            ("udp:0.0.0.0:14550", Endpoint::UdpIn("0.0.0.0:14550".into())),
+            (
+                "udpout:192.168.2.2:14551",
+                Endpoint::UdpOut("192.168.2.2:14551".into()),
+            ),
+            (
+                "tcpout:localhost:5760",
+                Endpoint::TcpOut("localhost:5760".into()),
+            ),
+            (
+                "tcp:127.0.0.1:5760",
+                Endpoint::TcpOut("127.0.0.1:5760".into()),
+            ),
+            ("tcpin:[::1]:5761", Endpoint::TcpIn("[::1]:5761".into())),
+            (
+                "serial:/dev/ttyACM0:115200",
+                Endpoint::Serial {
+                    device: "/dev/ttyACM0".into(),
+                    baud: 115200,
+                },
+            ),
+            (
+                "serial:/dev/serial/by-path/pci-0000:00:14.0-usb-0:2:1.0:57600",
+                Endpoint::Serial {
+                    device: "/dev/serial/by-path/pci-0000:00:14.0-usb-0:2:1.0".into(),
+                    baud: 57600,
+                },
+            ),
+        ];
+        for (text, expected) in cases {
+            let parsed = Endpoint::parse(text).unwrap();
+            assert_eq!(parsed, expected, "{text}");
+            // Display gives the canonical form, which parses back to the same.
+            assert_eq!(Endpoint::parse(&parsed.to_string()).unwrap(), parsed);
+        }
+    }
+
+    #[test]
+    fn bad_endpoints_say_what_is_wrong() {
+        let cases = [
+            ("14550", "expected udpin:HOST:PORT"),
+            ("udpin:14550", "expected HOST:PORT, found '14550'"),
+            ("udpin::14550", "found no host"),
+            (
+                "udpout:host:port",
+                "expected a port number 0..=65535 after the host, found 'port'",
+            ),
+            ("udpout:host:70000", "found '70000'"),
+            ("tcpout:127.0.0.1:0", "port 0 cannot be connected to"),
+            ("tcpout:::1:5760", "an IPv6 host goes in brackets"),
+            ("serial:/dev/ttyACM0", "expected serial:DEVICE:BAUD"),
+            ("serial::115200", "the serial device is empty"),
+            (
+                "serial:/dev/ttyACM0:fast",
+                "expected a baud rate (bits per second) after the device, found 'fast'",
+            ),
+            ("serial:/dev/ttyACM0:0", "found '0'"),
+            ("file:log.tlog", "unknown connection type 'file'"),
+        ];
+        for (text, part) in cases {
+            let error = Endpoint::parse(text).unwrap_err().to_string();
+            assert!(
+                error.starts_with(&format!("mavlink endpoint '{text}': ")),
+                "{error}"
+            );
+            assert!(error.contains(part), "{text}: {error}");
+            assert!(!error.contains('\n'), "{error}");
+        }
+        // Listening on port 0 is allowed (an ephemeral port).
+        assert!(Endpoint::parse("udpin:127.0.0.1:0").is_ok());
+    }
+
+    #[test]
+    fn modes_map_both_ways() {
+        for (mode, nav) in [
+            (19, Nav::Manual),
+            (0, Nav::Stabilize),
+            (2, Nav::DepthHold),
+            (16, Nav::HoldPosition),
+            (4, Nav::Guided),
+        ] {
+            assert_eq!(nav_of_custom_mode(mode), Some(nav));
+            assert_eq!(custom_mode_of(nav), Some(mode));
+        }
+        for other in [1, 3, 7, 9, 20, 21, 99] {
+            assert_eq!(nav_of_custom_mode(other), None, "{other}");
+        }
+        for reserved in 5..8 {
+            assert_eq!(custom_mode_of(Nav::Unknown(reserved)), None);
+        }
+        assert_eq!(ardusub_mode_name(9), "SURFACE");
+        assert_eq!(ardusub_mode_name(12), "mode 12");
+        assert_eq!(OTHER_MODE_NAV.bits(), 5);
+    }
+
+    #[test]
+    fn sticks_scale_as_ardusub_reads_them() {
+        assert_eq!(manual_control_axes([0.0; 4]), NEUTRAL_AXES);
+        // Half surge forward: x 500; full sway starboard; full yaw anticlockwise.
+        assert_eq!(
+            manual_control_axes([50.0, 100.0, 0.0, -100.0]),
+            [500, 1000, 500, -1000]
+        );
+        // Heave down (positive in NED) lowers ArduSub's throttle z below 500.
+        assert_eq!(manual_control_axes([0.0, 0.0, 100.0, 0.0]), [0, 0, 0, 0]);
+        assert_eq!(
+            manual_control_axes([0.0, 0.0, -100.0, 0.0]),
+            [0, 0, 1000, 0]
+        );
+        assert_eq!(manual_control_axes([0.0, 0.0, 50.4, 0.0])[2], 248);
+        // Out of range and not-a-number.
+        assert_eq!(
+            manual_control_axes([250.0, -1e9, f64::NAN, f64::INFINITY]),
+            [1000, -1000, 500, 1000]
+        );
+    }
+
+    #[test]
+    fn ticker_keeps_its_grid_through_jitter() {
+        let mut tick = Ticker::new(0.1);
+        let mut sent = 0;
+        // Steps every 0.1 s with +-30 ms of jitter: one send per step.
+        for k in 0..100u64 {
+            let jitter_ms = [0i64, 30, -30, 10][(k % 4) as usize];
+            let t_ns = (k as i64 * 100 + 1000 + jitter_ms) as u64 * 1_000_000;
+            if tick.due(SimTime(t_ns), 0.05) {
+                sent += 1;
+            }
+        }
+        assert_eq!(sent, 100);
+        // A 1 Hz ticker stepped at 10 Hz sends every tenth step.
+        let mut slow = Ticker::new(1.0);
+        let due: Vec<u64> = (0..35u64)
+            .filter(|k| slow.due(SimTime(k * 100_000_000), 0.05))
+            .collect();
+        assert_eq!(due, [0, 10, 20, 30]);
+        // After a gap it restarts from the step, not with a burst.
+        assert!(slow.due(SimTime::from_secs_f64(10.0), 0.05));
+        assert!(!slow.due(SimTime::from_secs_f64(10.1), 0.05));
+    }
+
+    #[test]
+    fn a_request_is_retried_until_met_then_left_alone() {
+        let t = SimTime::from_secs_f64;
+        let mut arm: Request<bool> = Request::default();
+        // Met at once: nothing to send.
+        assert_eq!(arm.ask(false, Some(false), t(0.0)), Ask::Nothing);
+        // The demand changes: send, then retry every COMMAND_RETRY_S while it differs.
+        assert_eq!(arm.ask(true, Some(false), t(1.0)), Ask::Send(true));
+        arm.sent_at = Some(t(1.0));
+        assert_eq!(arm.ask(true, Some(false), t(2.0)), Ask::Nothing);
+        assert_eq!(arm.ask(true, Some(false), t(2.5)), Ask::Send(false));
+        arm.sent_at = Some(t(2.5));
+        assert_eq!(arm.ask(true, Some(true), t(3.0)), Ask::Nothing);
+        // Met: a disarm from elsewhere (a failsafe) is not fought.
+        assert_eq!(arm.ask(true, Some(false), t(9.0)), Ask::Nothing);
+        // Unknown state: ask.
+        let mut mode: Request<u32> = Request::default();
+        assert_eq!(mode.ask(4, None, t(0.0)), Ask::Send(true));
+    }
+
+    #[test]
+    fn a_missing_stream_is_asked_for_at_most_every_ten_seconds() {
+        let t = SimTime::from_secs_f64;
+        let mut stream = Stream::new(32);
+        assert!(stream.wanted(0, t(0.0), t(0.0)));
+        assert!(!stream.wanted(0, t(5.0), t(0.0)));
+        assert!(stream.wanted(0, t(10.0), t(0.0)));
+        // Arriving: not asked for again while it flows.
+        assert!(!stream.wanted(1, t(10.5), t(0.0)));
+        assert!(!stream.wanted(50, t(25.0), t(0.0)));
+        // Stops for more than STREAM_MISSING_S: asked for again.
+        assert!(stream.wanted(50, t(27.5), t(0.0)));
+    }
+
+    #[test]
+    fn bad_options_are_refused() {
+        for options in [
+            MavlinkOptions {
+                heartbeat_hz: 0.0,
+                ..MavlinkOptions::default()
+            },
+            MavlinkOptions {
+                silence_s: f64::NAN,
+                ..MavlinkOptions::default()
+            },
+            MavlinkOptions {
+                system_id: 0,
+                ..MavlinkOptions::default()
+            },
+        ] {
+            let error = connect("udpin:127.0.0.1:0", &options)
+                .err()
+                .unwrap()
+                .to_string();
+            assert!(error.starts_with("mavlink options: "), "{error}");
+        }
+    }
+
+    #[test]
+    fn endpoints_that_cannot_be_opened_are_errors() {
+        let options = MavlinkOptions::default();
+        let serial = connect("serial:/dev/nonexistent:115200", &options)
+            .err()
+            .unwrap();
+        assert!(
+            serial.to_string().starts_with(
+                "mavlink endpoint 'serial:/dev/nonexistent:115200': cannot open the serial port: "
+            ),
+            "{serial}"
+        );
+        // A port in use: bind fails.
+        let taken = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let port = taken.local_addr().unwrap().port();
+        let text = format!("udpin:127.0.0.1:{port}");
+        let error = connect(&text, &options).err().unwrap().to_string();
+        assert!(
+            error.starts_with(&format!("mavlink endpoint '{text}': cannot bind: ")),
+            "{error}"
+        );
+        // TCP refused: a port just released has nobody listening.
+        let closed = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let port = closed.local_addr().unwrap().port();
+        drop(closed);
+        let text = format!("tcpout:127.0.0.1:{port}");
+        let error = connect(&text, &options).err().unwrap().to_string();
+        assert!(
+            error.starts_with(&format!("mavlink endpoint '{text}': cannot connect: ")),
+            "{error}"
+        );
+    }
+
+    #[test]
+    fn an_absent_autopilot_is_silence_and_the_drive_stops_promptly() {
+        let mut drive = connect("udpin:127.0.0.1:0", &MavlinkOptions::default()).unwrap();
+        let demand = Demand {
+            command: Command::Thrust {
+                surge: 50.0,
+                sway: 0.0,
+                heave: 0.0,
+                yaw: 0.0,
+            },
+            arm: true,
+            nav: Nav::Manual,
+            heading_hold_deg: None,
+            link_up: true,
+        };
+        let mut events = Vec::new();
+        for k in 0..40u64 {
+            drive.step(SimTime(k * 100_000_000), 0.1, &demand);
+            events.extend(drive.take_events());
+        }
+        assert!(!drive.state().responsive);
+        assert_eq!(events.len(), 1, "{events:?}");
+        assert!(
+            matches!(events[0], DriveEvent::Silent { silent_s } if (silent_s - 3.0).abs() < 1e-9)
+        );
+        assert_eq!(drive.autopilot(), None);
+        // Commanded velocity follows the demand even with nobody to send it to.
+        assert!((drive.state().commanded_velocity[0] - 0.25).abs() < 1e-9);
+        let started = std::time::Instant::now();
+        drop(drive);
+        assert!(started.elapsed() < Duration::from_millis(500));
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn parsing_never_panics(text in "\\PC{0,40}") {
+            let _ = Endpoint::parse(&text);
+        }
+
+        #[test]
+        fn parsing_endpoint_like_text_never_panics(
+            scheme in "(udpin|udpout|tcpin|tcpout|serial|udp|tcp|x)",
+            rest in "[\\[\\]:0-9a-z./]{0,24}",
+        ) {
+            let text = format!("{scheme}:{rest}");
+            if let Ok(parsed) = Endpoint::parse(&text) {
+                proptest::prop_assert_eq!(Endpoint::parse(&parsed.to_string()).unwrap(), parsed);
+            }
+        }
+    }
+}
