@@ -312,11 +312,12 @@ type Shot = Result<debt::Image, String>;
 /// format the loader reads (PNG, JPEG, PNM, ...), from its standard output, e.g.
 /// `ffmpeg -loglevel error -f v4l2 -i /dev/video0 -frames:v 1 -f image2pipe -c:v png -`.
 ///
-/// In real time (`live`) runs happen in a background thread, one at a time: the first starts
-/// when the camera is made; each [`Camera::capture`] returns the picture finished since the
+/// In real time ([`command_camera`]) runs happen in a background thread, one at a time: the
+/// first starts when the camera is made; each [`Camera::capture`] returns the picture finished since the
 /// previous capture (or why the run failed: its exit status and the last line of its standard
 /// error), and starts the next run. While a run is under way a capture returns
-/// `Err(`[`WAITING`]`)` at once. In simulation a capture runs the command and waits for it:
+/// `Err(`[`WAITING`]`)` at once. In simulation ([`command_camera_waiting`]) a capture runs the
+/// command and waits for it:
 /// virtual time does not pass meanwhile, so the session is the same however long it takes. A
 /// run that takes longer than its timeout is killed with its whole process group; so is a run
 /// in progress when the camera is dropped.
@@ -334,13 +335,19 @@ struct Worker {
     running: bool,
 }
 
-/// A camera running `cmd` with the [`COMMAND_TIMEOUT_S`] timeout: in the background (`live`:
-/// its first run starts now) or at each capture (simulation).
-pub fn command_camera(cmd: &str, live: bool) -> Result<CommandCamera, CameraError> {
-    command_camera_timed(cmd, live, Duration::from_secs_f64(COMMAND_TIMEOUT_S))
+/// A camera running `cmd` in the background (real time), with the [`COMMAND_TIMEOUT_S`]
+/// timeout; its first run starts now.
+pub fn command_camera(cmd: &str) -> Result<CommandCamera, CameraError> {
+    command_camera_timed(cmd, true, Duration::from_secs_f64(COMMAND_TIMEOUT_S))
 }
 
-/// [`command_camera`] with another timeout.
+/// A camera running `cmd` at each capture and waiting for it (simulation: virtual time stands
+/// still meanwhile), with the [`COMMAND_TIMEOUT_S`] timeout.
+pub fn command_camera_waiting(cmd: &str) -> Result<CommandCamera, CameraError> {
+    command_camera_timed(cmd, false, Duration::from_secs_f64(COMMAND_TIMEOUT_S))
+}
+
+/// [`command_camera`] (`live`) or [`command_camera_waiting`] with another timeout.
 pub fn command_camera_timed(
     cmd: &str,
     live: bool,
@@ -676,7 +683,7 @@ mod tests {
         std::fs::write(&file, png(12, 7)).unwrap();
         let cmd = format!("sleep 0.5; cat '{}'", file.display());
         let started = Instant::now();
-        let mut camera = command_camera(&cmd, true).unwrap();
+        let mut camera = command_camera(&cmd).unwrap();
         assert_eq!(camera.capture().unwrap_err(), WAITING);
         assert!(
             started.elapsed() < Duration::from_millis(300),
@@ -689,28 +696,26 @@ mod tests {
         assert_eq!(camera.capture().unwrap_err(), WAITING);
         assert_eq!(shot(&mut camera).unwrap().width, 12);
         assert!(matches!(
-            command_camera("  ", true),
+            command_camera("  "),
             Err(CameraError::EmptyCommand)
         ));
     }
 
     #[test]
     fn a_failing_command_says_its_exit_status_and_last_line() {
-        let mut camera = command_camera(
-            "echo starting >&2; echo 'no such device /dev/video9' >&2; exit 3",
-            true,
-        )
-        .unwrap();
+        let mut camera =
+            command_camera("echo starting >&2; echo 'no such device /dev/video9' >&2; exit 3")
+                .unwrap();
         assert_eq!(
             shot(&mut camera).unwrap_err(),
             "camera command: exit status 3: no such device /dev/video9"
         );
-        let mut camera = command_camera("echo 'device busy' >&2", true).unwrap();
+        let mut camera = command_camera("echo 'device busy' >&2").unwrap();
         assert_eq!(
             shot(&mut camera).unwrap_err(),
             "camera command: no picture on its output: device busy"
         );
-        let mut camera = command_camera("printf 'P5 2 2 255 j'", true).unwrap();
+        let mut camera = command_camera("printf 'P5 2 2 255 j'").unwrap();
         let error = shot(&mut camera).unwrap_err();
         assert!(
             error.starts_with("camera command output: not a readable image"),
@@ -775,13 +780,13 @@ mod tests {
         let file = dir.path().join("frame.png");
         std::fs::write(&file, png(10, 4)).unwrap();
         let mut camera =
-            command_camera(&format!("sleep 0.2; cat '{}'", file.display()), false).unwrap();
+            command_camera_waiting(&format!("sleep 0.2; cat '{}'", file.display())).unwrap();
         for _ in 0..2 {
             let started = Instant::now();
             assert_eq!(camera.capture().unwrap().width, 10);
             assert!(started.elapsed() >= Duration::from_millis(200));
         }
-        let mut camera = command_camera("exit 1", false).unwrap();
+        let mut camera = command_camera_waiting("exit 1").unwrap();
         assert_eq!(
             camera.capture().unwrap_err(),
             "camera command: exit status 1"
