@@ -45,6 +45,8 @@ fn run(args: &Args) -> Result<u8> {
         images_out: (args.images_out.as_deref())
             .map(|dir| outs.claim_dir("--images-out", dir))
             .transpose()?,
+        telemetry: outs.claim_opt("--telemetry", args.telemetry.as_deref(), Kind::Text)?,
+        preview: args.preview,
     };
     if let Some(dir) = &dests.images_out {
         check_images_out(dir, args.inputs())?;
@@ -254,15 +256,6 @@ fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
         parts
             .orders
             .push(Box::new(rovlink::rcp::console::open_orders(path, live)?));
-    }
-    let pending = [
-        ("--telemetry", args.telemetry.is_some()),
-        ("--preview", args.preview),
-    ];
-    if let Some((flag, _)) = pending.iter().find(|(_, given)| *given) {
-        anyhow::bail!(rovlink::cli::UsageError(format!(
-            "{flag}: not wired into this build yet"
-        )));
     }
     Ok(parts)
 }
