@@ -1,5 +1,7 @@
-//! A session log in MCAP that Foxglove displays: the vehicle's pose, its commanded and actual
-//! velocities, the link's events, and every completed image.
+//! The session's view in Foxglove: one definition of its channels (topics, JSON Schemas) and of
+//! its messages, which [`McapLog`] writes into an MCAP file and [`crate::rcp::foxglove`] serves
+//! live: the vehicle's pose, its commanded and actual velocities, the link's events, and every
+//! completed image.
 //!
 //! Messages are JSON with JSON-Schema schemas. Channels and schemas:
 //!
@@ -12,9 +14,15 @@
 //! | `/link/frames` | `rovlink.LinkFrame` | one message per frame: direction, kind, bytes, fate, delay |
 //! | `/link/log` | `foxglove.Log` | link lost and recovered, lost frames |
 //! | `/camera/image` | `foxglove.CompressedImage` | every completed image, decoded and stored as PNG |
+//! | `/camera/preview` | `foxglove.CompressedImage` | live only: the image in progress, decoded from the trunks so far |
+//! | `/session/log` | `foxglove.Log` | live only: orders sent, acknowledged, executed; the vehicle's and the camera's reports |
 //!
-//! Log times are nanoseconds: the session's time plus a base (0 in simulation, so the same seed
-//! gives the same file; the wall clock at the start in real time).
+//! [`View`] turns what an [`Observer`] is told into [`ViewMessage`]s: a topic, a log time and
+//! the JSON text. Log times are nanoseconds, by the view's [`Clock`]: for the MCAP file the
+//! session's time plus a base (0 in simulation, so the same seed gives the same file; the wall
+//! clock at the start in real time), for the live view the wall clock. Building a message
+//! never fails and never panics: an image that does not decode becomes a warning on
+//! `/link/log`.
 
 use std::collections::BTreeMap;
 
@@ -23,8 +31,8 @@ use serde_json::json;
 
 use mcap::write::NoSeek;
 
-use super::PoseSample;
 use super::session::{FrameEvent, Observer};
+use super::{Event, PoseSample, Role};
 use crate::cli::output::Dest;
 use crate::io::{IoError, Output};
 
@@ -54,54 +62,385 @@ const BODY_VELOCITY: &str = r#"{"title":"rovlink.BodyVelocity","type":"object","
 
 const LINK_FRAME: &str = r#"{"title":"rovlink.LinkFrame","type":"object","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"direction":{"type":"string"},"kind":{"type":"string"},"bytes":{"type":"integer"},"fate":{"type":"string"},"t_sent_s":{"type":["number","null"]},"t_received_s":{"type":["number","null"]},"delay_ms":{"type":["number","null"]}}}"#;
 
-/// Foxglove's log levels.
-const INFO: u8 = 2;
-const WARNING: u8 = 3;
+/// Foxglove's log level DEBUG.
+pub const DEBUG: u8 = 1;
+/// Foxglove's log level INFO.
+pub const INFO: u8 = 2;
+/// Foxglove's log level WARNING.
+pub const WARNING: u8 = 3;
 
-/// The channels, in the order they are added.
-#[derive(Clone, Copy)]
-enum Topic {
+/// A channel of the session's view.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Topic {
+    /// `/rov/pose`.
     Pose,
+    /// `/rov/goal`.
     Goal,
+    /// `/rov/velocity/actual`.
     Actual,
+    /// `/rov/velocity/commanded`.
     Commanded,
+    /// `/link/frames`.
     Frames,
+    /// `/link/log`.
     Log,
+    /// `/camera/image`.
     Image,
+    /// `/camera/preview` (live only).
+    Preview,
+    /// `/session/log` (live only).
+    Events,
 }
 
-const TOPICS: [(&str, &str, &str); 7] = [
-    ("/rov/pose", "foxglove.PoseInFrame", POSE_IN_FRAME),
-    ("/rov/goal", "foxglove.PoseInFrame", POSE_IN_FRAME),
-    (
-        "/rov/velocity/actual",
-        "rovlink.BodyVelocity",
-        BODY_VELOCITY,
-    ),
-    (
-        "/rov/velocity/commanded",
-        "rovlink.BodyVelocity",
-        BODY_VELOCITY,
-    ),
-    ("/link/frames", "rovlink.LinkFrame", LINK_FRAME),
-    ("/link/log", "foxglove.Log", LOG),
-    (
-        "/camera/image",
-        "foxglove.CompressedImage",
-        COMPRESSED_IMAGE,
-    ),
-];
+impl Topic {
+    /// Every channel, in the order a view adds them: the MCAP log's first.
+    pub const ALL: [Topic; 9] = [
+        Topic::Pose,
+        Topic::Goal,
+        Topic::Actual,
+        Topic::Commanded,
+        Topic::Frames,
+        Topic::Log,
+        Topic::Image,
+        Topic::Preview,
+        Topic::Events,
+    ];
+
+    /// The topic, e.g. `/rov/pose`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Topic::Pose => "/rov/pose",
+            Topic::Goal => "/rov/goal",
+            Topic::Actual => "/rov/velocity/actual",
+            Topic::Commanded => "/rov/velocity/commanded",
+            Topic::Frames => "/link/frames",
+            Topic::Log => "/link/log",
+            Topic::Image => "/camera/image",
+            Topic::Preview => "/camera/preview",
+            Topic::Events => "/session/log",
+        }
+    }
+
+    /// The schema's name, e.g. `foxglove.PoseInFrame`.
+    pub fn schema_name(self) -> &'static str {
+        match self {
+            Topic::Pose | Topic::Goal => "foxglove.PoseInFrame",
+            Topic::Actual | Topic::Commanded => "rovlink.BodyVelocity",
+            Topic::Frames => "rovlink.LinkFrame",
+            Topic::Log | Topic::Events => "foxglove.Log",
+            Topic::Image | Topic::Preview => "foxglove.CompressedImage",
+        }
+    }
+
+    /// The JSON Schema of its messages.
+    pub fn schema(self) -> &'static str {
+        match self {
+            Topic::Pose | Topic::Goal => POSE_IN_FRAME,
+            Topic::Actual | Topic::Commanded => BODY_VELOCITY,
+            Topic::Frames => LINK_FRAME,
+            Topic::Log | Topic::Events => LOG,
+            Topic::Image | Topic::Preview => COMPRESSED_IMAGE,
+        }
+    }
+
+    /// True for the channels of the MCAP log; false for the live view's own (the image in
+    /// progress, the session's events).
+    pub fn in_log(self) -> bool {
+        !matches!(self, Topic::Preview | Topic::Events)
+    }
+
+    /// Its place in [`Topic::ALL`].
+    pub fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// How a view stamps its messages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Clock {
+    /// `base_ns` plus the session's time (the MCAP log).
+    Session {
+        /// Nanoseconds at the session's time 0.
+        base_ns: u64,
+    },
+    /// The wall clock when the message is built, ns since the Unix epoch (a live view).
+    Wall,
+}
+
+/// Nanoseconds since the Unix epoch now (0 for a clock set before 1970).
+pub fn wall_clock_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
+}
+
+/// One message of the view.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ViewMessage {
+    /// Its channel.
+    pub topic: Topic,
+    /// Its log time, ns.
+    pub log_time_ns: u64,
+    /// The message, JSON text following the channel's schema.
+    pub json: String,
+}
+
+/// Builds the view's messages from what an [`Observer`] is told: every channel's, or only
+/// those of the channels [`View::want`]s (a live view builds nothing nobody subscribes to).
+#[derive(Debug, Clone)]
+pub struct View {
+    clock: Clock,
+    link_up: Option<bool>,
+    wanted: [bool; Topic::ALL.len()],
+}
+
+impl View {
+    /// A view stamping its messages by `clock`, for every channel.
+    pub fn new(clock: Clock) -> View {
+        View {
+            clock,
+            link_up: None,
+            wanted: [true; Topic::ALL.len()],
+        }
+    }
+
+    /// From now on, builds the messages of the channels `wanted` says yes to only.
+    pub fn want(&mut self, wanted: impl Fn(Topic) -> bool) {
+        for topic in Topic::ALL {
+            self.wanted[topic.index()] = wanted(topic);
+        }
+    }
+
+    fn wants(&self, topic: Topic) -> bool {
+        self.wanted[topic.index()]
+    }
+
+    fn stamp(&self, t_s: f64) -> (u64, serde_json::Value) {
+        let ns = match self.clock {
+            Clock::Session { base_ns } => {
+                base_ns.saturating_add((t_s.max(0.0) * 1e9).round() as u64)
+            }
+            Clock::Wall => wall_clock_ns(),
+        };
+        (
+            ns,
+            json!({"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000}),
+        )
+    }
+
+    fn message(topic: Topic, log_time_ns: u64, json: &serde_json::Value) -> ViewMessage {
+        ViewMessage {
+            topic,
+            log_time_ns,
+            json: json.to_string(),
+        }
+    }
+
+    fn log(
+        &self,
+        topic: Topic,
+        t_s: f64,
+        level: u8,
+        name: &str,
+        message: &str,
+    ) -> Option<ViewMessage> {
+        if !self.wants(topic) {
+            return None;
+        }
+        let (ns, timestamp) = self.stamp(t_s);
+        Some(View::message(
+            topic,
+            ns,
+            &json!({"timestamp": timestamp, "level": level, "message": message,
+                    "name": name, "file": "", "line": 0}),
+        ))
+    }
+
+    /// A frame's fate: its `/link/frames` message, and a warning on `/link/log` when it was
+    /// not delivered.
+    pub fn frame(&self, e: &FrameEvent) -> Vec<ViewMessage> {
+        let t_s = e.t_received_s.or(e.t_sent_s).unwrap_or(0.0);
+        let mut out = Vec::new();
+        if self.wants(Topic::Frames) {
+            let (ns, timestamp) = self.stamp(t_s);
+            let delay_ms = e.t_sent_s.zip(e.t_received_s).map(|(s, r)| (r - s) * 1e3);
+            out.push(View::message(
+                Topic::Frames,
+                ns,
+                &json!({"timestamp": timestamp, "direction": e.direction, "kind": e.kind,
+                        "bytes": e.bytes, "fate": e.fate, "t_sent_s": e.t_sent_s,
+                        "t_received_s": e.t_received_s, "delay_ms": delay_ms}),
+            ));
+        }
+        if !matches!(e.fate, "delivered" | "sent" | "received") {
+            out.extend(self.log(
+                Topic::Log,
+                t_s,
+                WARNING,
+                TOOL,
+                &format!(
+                    "{} {} frame ({} B) {}",
+                    e.direction, e.kind, e.bytes, e.fate
+                ),
+            ));
+        }
+        out
+    }
+
+    fn picture(&self, topic: Topic, t_s: f64, stream: &[u8]) -> Option<ViewMessage> {
+        if !self.wants(topic) {
+            return None;
+        }
+        let png = crate::debt::decode(stream)
+            .ok()
+            .and_then(|img| crate::debt::picture::to_png(&img).ok())?;
+        let (ns, timestamp) = self.stamp(t_s);
+        let data = base64::engine::general_purpose::STANDARD.encode(png);
+        Some(View::message(
+            topic,
+            ns,
+            &json!({"timestamp": timestamp, "frame_id": "camera", "data": data, "format": "png"}),
+        ))
+    }
+
+    /// A completed image (its DEBT stream) as PNG on `/camera/image`, or a warning on
+    /// `/link/log` when it does not decode.
+    pub fn image(&self, t_s: f64, stream: &[u8]) -> Option<ViewMessage> {
+        if !self.wants(Topic::Image) {
+            return None;
+        }
+        self.picture(Topic::Image, t_s, stream).or_else(|| {
+            self.log(
+                Topic::Log,
+                t_s,
+                WARNING,
+                TOOL,
+                "a completed image did not decode",
+            )
+        })
+    }
+
+    /// The image in progress (a DEBT prefix) as PNG on `/camera/preview`; nothing when the
+    /// prefix does not decode yet.
+    pub fn preview(&self, t_s: f64, prefix: &[u8]) -> Option<ViewMessage> {
+        self.picture(Topic::Preview, t_s, prefix)
+    }
+
+    /// The vehicle's pose, goal and velocities; a line on `/link/log` when the link was lost
+    /// or recovered since the last pose.
+    pub fn pose(&mut self, pose: &PoseSample) -> Vec<ViewMessage> {
+        let mut out = Vec::new();
+        let pose_topics = [Topic::Pose, Topic::Goal, Topic::Actual, Topic::Commanded];
+        if pose_topics.iter().any(|&t| self.wants(t)) {
+            let (ns, timestamp) = self.stamp(pose.t_s);
+            let goal = pose
+                .goal_m
+                .map(|goal| pose_json(&timestamp, goal, pose.heading_deg));
+            let messages = [
+                (
+                    Topic::Pose,
+                    Some(pose_json(&timestamp, pose.position_m, pose.heading_deg)),
+                ),
+                (Topic::Goal, goal),
+                (
+                    Topic::Actual,
+                    Some(velocity_json(&timestamp, pose.velocity)),
+                ),
+                (
+                    Topic::Commanded,
+                    Some(velocity_json(&timestamp, pose.commanded_velocity)),
+                ),
+            ];
+            for (topic, json) in messages {
+                if let Some(json) = json.filter(|_| self.wants(topic)) {
+                    out.push(View::message(topic, ns, &json));
+                }
+            }
+        }
+        if self.link_up.is_some_and(|up| up != pose.link_up) {
+            let message = if pose.link_up {
+                "link recovered: heartbeats again"
+            } else {
+                "link lost: no heartbeat for 5 s, backtracking"
+            };
+            let level = if pose.link_up { INFO } else { WARNING };
+            out.extend(self.log(Topic::Log, pose.t_s, level, TOOL, message));
+        }
+        self.link_up = Some(pose.link_up);
+        out
+    }
+
+    /// What happened at `end`: a line on `/session/log` (the operator's lost and recovered
+    /// answers on `/link/log`), the image in progress on `/camera/preview`. Statuses,
+    /// completed images and the ROV's link changes are told through [`View::pose`] and
+    /// [`View::image`], so they give nothing here.
+    pub fn event(&self, end: Role, t_s: f64, event: &Event) -> Vec<ViewMessage> {
+        let name = match end {
+            Role::Operator => "tdma-run operator",
+            Role::Rov => "tdma-run rov",
+        };
+        let line = |topic, level, text: &str| {
+            self.log(topic, t_s, level, name, text)
+                .into_iter()
+                .collect()
+        };
+        let events = |level, text: &str| line(Topic::Events, level, text);
+        match event {
+            Event::OrderSent { index, order } => {
+                events(INFO, &format!("order {index} sent: {order:?}"))
+            }
+            Event::OrderAcknowledged(index) => events(INFO, &format!("order {index} acknowledged")),
+            Event::CancelConfirmed => events(
+                INFO,
+                "cancel confirmed: the order in execution was cancelled",
+            ),
+            Event::OrderExecuted(order) => events(INFO, &format!("executing {order:?}")),
+            Event::OrderCancelled => events(INFO, "the order in execution was cancelled"),
+            Event::ImageStarted { trunks, bytes } => {
+                events(DEBUG, &format!("image started: {trunks} trunks, {bytes} B"))
+            }
+            Event::ImageCancelled => events(INFO, "the image in flight was cancelled"),
+            Event::Vehicle(drive) => match drive {
+                super::drive::DriveEvent::Silent { silent_s } => {
+                    events(WARNING, &format!("autopilot silent for {silent_s:.1} s"))
+                }
+                super::drive::DriveEvent::Heard => events(INFO, "autopilot heard again"),
+                super::drive::DriveEvent::CommandAck {
+                    command,
+                    result,
+                    accepted,
+                } => events(
+                    if *accepted { INFO } else { WARNING },
+                    &format!("autopilot answered {command}: {result}"),
+                ),
+                super::drive::DriveEvent::Note(note) => events(INFO, &format!("vehicle: {note}")),
+            },
+            Event::CameraFailed(why) => events(WARNING, &format!("camera: {why}")),
+            Event::AnswersLost => line(Topic::Log, WARNING, "answers lost: no ROV frame for 5 s"),
+            Event::AnswersBack => line(Topic::Log, INFO, "answers back: ROV frames again"),
+            Event::ImageProgress { prefix, .. } => self.preview(t_s, prefix).into_iter().collect(),
+            Event::Status(_)
+            | Event::ImageCompleted(_)
+            | Event::LinkLost
+            | Event::LinkRecovered => Vec::new(),
+        }
+    }
+}
+
+/// The name the log's lines carry.
+const TOOL: &str = "tdma-run";
 
 /// An [`Observer`] that writes the session into an MCAP file, committed by [`McapLog::finish`]
 /// (nothing is left at the path when the run fails before), or to standard output. The writer
-/// never seeks (chunks are assembled in memory), so a pipe is as good as a file.
+/// never seeks (chunks are assembled in memory), so a pipe is as good as a file. It has the
+/// channels whose [`Topic::in_log`] is true.
 pub struct McapLog {
     path: String,
     writer: Option<mcap::Writer<NoSeek<Output>>>,
-    channels: Vec<u16>,
+    /// The MCAP channel id of each [`Topic`] the log has, by [`Topic::index`].
+    channels: Vec<Option<u16>>,
     sequence: u32,
-    base_ns: u64,
-    link_up: Option<bool>,
+    view: View,
     /// The first write error; later messages are dropped.
     error: Option<McapLogError>,
 }
@@ -117,19 +456,23 @@ impl McapLog {
         };
         let out = dest.open()?;
         let mut writer = crate::io::json_mcap_writer(out).map_err(wrap)?;
-        let mut channels = Vec::new();
-        for (topic, schema, text) in TOPICS {
-            let channel =
-                crate::io::json_mcap_channel(&mut writer, schema, text, topic, &BTreeMap::new());
-            channels.push(channel.map_err(wrap)?);
+        let mut channels = vec![None; Topic::ALL.len()];
+        for topic in Topic::ALL.into_iter().filter(|t| t.in_log()) {
+            let channel = crate::io::json_mcap_channel(
+                &mut writer,
+                topic.schema_name(),
+                topic.schema(),
+                topic.name(),
+                &BTreeMap::new(),
+            );
+            channels[topic.index()] = Some(channel.map_err(wrap)?);
         }
         Ok(McapLog {
             path: name,
             writer: Some(writer),
             channels,
             sequence: 0,
-            base_ns,
-            link_up: None,
+            view: View::new(Clock::Session { base_ns }),
             error: None,
         })
     }
@@ -150,32 +493,24 @@ impl McapLog {
         Ok(())
     }
 
-    fn stamp(&self, t_s: f64) -> (u64, serde_json::Value) {
-        let ns = self
-            .base_ns
-            .saturating_add((t_s.max(0.0) * 1e9).round() as u64);
-        (
-            ns,
-            json!({"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000}),
-        )
-    }
-
-    fn write(&mut self, topic: Topic, log_time_ns: u64, message: &serde_json::Value) {
+    fn write(&mut self, message: &ViewMessage) {
         if self.error.is_some() {
             return;
         }
         let Some(writer) = self.writer.as_mut() else {
             return;
         };
+        let Some(&Some(channel_id)) = self.channels.get(message.topic.index()) else {
+            return;
+        };
         let header = mcap::records::MessageHeader {
-            channel_id: self.channels[topic as usize],
+            channel_id,
             sequence: self.sequence,
-            log_time: log_time_ns,
-            publish_time: log_time_ns,
+            log_time: message.log_time_ns,
+            publish_time: message.log_time_ns,
         };
         self.sequence = self.sequence.wrapping_add(1);
-        let data = message.to_string();
-        if let Err(source) = writer.write_to_known_channel(&header, data.as_bytes()) {
+        if let Err(source) = writer.write_to_known_channel(&header, message.json.as_bytes()) {
             self.error = Some(McapLogError::Mcap {
                 path: self.path.clone(),
                 source,
@@ -183,14 +518,10 @@ impl McapLog {
         }
     }
 
-    fn log(&mut self, t_s: f64, level: u8, message: &str) {
-        let (ns, timestamp) = self.stamp(t_s);
-        self.write(
-            Topic::Log,
-            ns,
-            &json!({"timestamp": timestamp, "level": level, "message": message,
-                    "name": "tdma-run", "file": "", "line": 0}),
-        );
+    fn write_all(&mut self, messages: &[ViewMessage]) {
+        for message in messages {
+            self.write(message);
+        }
     }
 }
 
@@ -223,73 +554,93 @@ impl Observer for McapLog {
     }
 
     fn frame(&mut self, e: &FrameEvent) {
-        let t_s = e.t_received_s.or(e.t_sent_s).unwrap_or(0.0);
-        let (ns, timestamp) = self.stamp(t_s);
-        let delay_ms = e.t_sent_s.zip(e.t_received_s).map(|(s, r)| (r - s) * 1e3);
-        self.write(
-            Topic::Frames,
-            ns,
-            &json!({"timestamp": timestamp, "direction": e.direction, "kind": e.kind,
-                    "bytes": e.bytes, "fate": e.fate, "t_sent_s": e.t_sent_s,
-                    "t_received_s": e.t_received_s, "delay_ms": delay_ms}),
-        );
-        if !matches!(e.fate, "delivered" | "sent" | "received") {
-            self.log(
-                t_s,
-                WARNING,
-                &format!(
-                    "{} {} frame ({} B) {}",
-                    e.direction, e.kind, e.bytes, e.fate
-                ),
-            );
-        }
+        let messages = self.view.frame(e);
+        self.write_all(&messages);
     }
 
     fn image(&mut self, t_s: f64, stream: &[u8]) {
-        let png = crate::debt::decode(stream)
-            .ok()
-            .and_then(|img| crate::debt::picture::to_png(&img).ok());
-        let Some(png) = png else {
-            self.log(t_s, WARNING, "a completed image did not decode");
-            return;
-        };
-        let (ns, timestamp) = self.stamp(t_s);
-        let data = base64::engine::general_purpose::STANDARD.encode(png);
-        self.write(
-            Topic::Image,
-            ns,
-            &json!({"timestamp": timestamp, "frame_id": "camera", "data": data, "format": "png"}),
-        );
+        if let Some(message) = self.view.image(t_s, stream) {
+            self.write(&message);
+        }
     }
 
     fn pose(&mut self, pose: &PoseSample) {
-        let (ns, timestamp) = self.stamp(pose.t_s);
-        self.write(
-            Topic::Pose,
-            ns,
-            &pose_json(&timestamp, pose.position_m, pose.heading_deg),
-        );
-        if let Some(goal) = pose.goal_m {
-            self.write(
-                Topic::Goal,
-                ns,
-                &pose_json(&timestamp, goal, pose.heading_deg),
-            );
+        let messages = self.view.pose(pose);
+        self.write_all(&messages);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::wire::operator::Order;
+
+    fn pose(t_s: f64, link_up: bool, goal: bool) -> PoseSample {
+        PoseSample {
+            t_s,
+            position_m: [1.0, 2.0, 3.0],
+            heading_deg: 180.0,
+            velocity: [0.0; 4],
+            commanded_velocity: [0.0; 4],
+            goal_m: goal.then_some([4.0, 5.0, 6.0]),
+            backtrack_m: None,
+            link_up,
         }
-        self.write(Topic::Actual, ns, &velocity_json(&timestamp, pose.velocity));
-        self.write(
-            Topic::Commanded,
-            ns,
-            &velocity_json(&timestamp, pose.commanded_velocity),
+    }
+
+    fn topics(messages: &[ViewMessage]) -> Vec<Topic> {
+        messages.iter().map(|m| m.topic).collect()
+    }
+
+    #[test]
+    fn a_pose_gives_its_channels_and_the_links_changes() {
+        let mut view = View::new(Clock::Session { base_ns: 1_000 });
+        let first = view.pose(&pose(2.5, true, true));
+        use Topic::*;
+        assert_eq!(topics(&first), [Pose, Goal, Actual, Commanded]);
+        assert!(first.iter().all(|m| m.log_time_ns == 2_500_001_000));
+        let json: serde_json::Value = serde_json::from_str(&first[0].json).unwrap();
+        assert_eq!(json["timestamp"]["sec"], 2);
+        assert_eq!(json["timestamp"]["nsec"], 500_001_000);
+        assert!((json["pose"]["orientation"]["z"].as_f64().unwrap() - 1.0).abs() < 1e-12);
+        let lost = view.pose(&pose(3.0, false, false));
+        assert_eq!(topics(&lost), [Pose, Actual, Commanded, Log]);
+        assert!(lost[3].json.contains("link lost"), "{}", lost[3].json);
+        // Only the link log wanted: nothing else is built, the link is still followed.
+        view.want(|t| t == Log);
+        assert!(view.pose(&pose(3.5, false, false)).is_empty());
+        let back = view.pose(&pose(4.0, true, false));
+        assert_eq!(topics(&back), [Log]);
+        assert!(back[0].json.contains("link recovered"));
+        assert_eq!(view.image(4.0, b"not DEBT"), None, "images not wanted");
+    }
+
+    #[test]
+    fn events_become_session_lines_and_images_that_fail_a_warning() {
+        let view = View::new(Clock::Wall);
+        let order = Order::HoldHeading {
+            heading_deg: 90,
+            enable: true,
+        };
+        let sent = view.event(Role::Operator, 1.0, &Event::OrderSent { index: 3, order });
+        assert_eq!(topics(&sent), [Topic::Events]);
+        let json: serde_json::Value = serde_json::from_str(&sent[0].json).unwrap();
+        assert_eq!(json["name"], "tdma-run operator");
+        assert_eq!(json["level"], INFO);
+        assert!(
+            json["message"]
+                .as_str()
+                .unwrap()
+                .starts_with("order 3 sent: HoldHeading")
         );
-        if self.link_up.is_some_and(|up| up != pose.link_up) {
-            let message = if pose.link_up {
-                "link recovered: heartbeats again"
-            } else {
-                "link lost: no heartbeat for 5 s, backtracking"
-            };
-            self.log(pose.t_s, if pose.link_up { INFO } else { WARNING }, message);
-        }
-        self.link_up = Some(pose.link_up);
+        let lost = view.event(Role::Operator, 1.0, &Event::AnswersLost);
+        assert_eq!(topics(&lost), [Topic::Log]);
+        assert!(view.event(Role::Rov, 1.0, &Event::LinkLost).is_empty());
+        let wall_ns = wall_clock_ns();
+        assert!(sent[0].log_time_ns <= wall_ns && wall_ns - sent[0].log_time_ns < 10_000_000_000);
+        let bad = view.image(1.0, b"not DEBT").unwrap();
+        assert_eq!(bad.topic, Topic::Log);
+        assert!(bad.json.contains("did not decode"));
+        assert!(view.preview(1.0, b"").is_none());
     }
 }

@@ -8,11 +8,13 @@
 //! counters), which [`session`] runs with a link in virtual time and [`realtime`] one at a time
 //! over a port; [`drive`] is what moves the vehicle, [`camera`] what takes its pictures,
 //! [`orders`] and [`script`] what the operator plays; [`outputs`] writes a session's CSV rows,
-//! images and [`mcap_log`] (Foxglove) as it goes.
+//! images and [`mcap_log`] (Foxglove) as it goes; [`foxglove`] serves the same view live and
+//! takes orders from Foxglove.
 
 pub mod camera;
 pub mod console;
 pub mod drive;
+pub mod foxglove;
 pub mod harness;
 pub mod mavlink;
 pub mod mcap_log;

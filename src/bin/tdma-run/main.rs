@@ -83,7 +83,22 @@ fn run(args: &Args) -> Result<u8> {
         images: pictures.images,
     };
     config.validate()?;
-    let parts = parts(args, &config)?;
+    let mut parts = parts(args, &config)?;
+    let mut live = match &args.foxglove {
+        Some(addr) => {
+            let end = role.unwrap_or(Role::Operator);
+            let (view, orders) = rovlink::rcp::foxglove::start(addr, end)
+                .map_err(|e| rovlink::cli::UsageError(e.to_string()))?;
+            say!(
+                "Foxglove: ws://{}:{} (open it in Foxglove's WebSocket connection)",
+                host_of(addr),
+                view.port()
+            );
+            parts.orders.push(Box::new(orders));
+            Some(view)
+        }
+        None => None,
+    };
     // Opened (aside) before the run: a metrics file that cannot be created fails now.
     let mut metrics_out = metrics_dest.map(|dest| dest.open()).transpose()?;
     let base_ns = if role.is_some() { wall_clock_ns() } else { 0 };
@@ -92,6 +107,9 @@ fn run(args: &Args) -> Result<u8> {
     let mut recorder = Recorder::new(dests, args.buoy, base_ns, bar)?;
     let mut stderr = Stderr;
     let mut observer = Tee(vec![&mut recorder, &mut stderr]);
+    if let Some(view) = live.as_mut() {
+        observer.0.push(view);
+    }
     let (wall, mut done) = (std::time::Instant::now(), None);
     let (mut metrics, code) = match (role, &args.port) {
         (Some(role), Some(device)) => {
@@ -240,7 +258,6 @@ fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
     let pending = [
         ("--telemetry", args.telemetry.is_some()),
         ("--preview", args.preview),
-        ("--foxglove", args.foxglove.is_some()),
     ];
     if let Some((flag, _)) = pending.iter().find(|(_, given)| *given) {
         anyhow::bail!(rovlink::cli::UsageError(format!(
@@ -270,4 +287,9 @@ impl camera::Camera for Synchronous {
             }
         }
     }
+}
+
+/// The host part of HOST:PORT, for the URL said at start.
+fn host_of(addr: &str) -> &str {
+    addr.rsplit_once(':').map_or(addr, |(host, _)| host)
 }

@@ -1,0 +1,556 @@
+//! The live Foxglove view (`rcp::foxglove`) against an independent client: the Python
+//! Foxglove WebSocket client of tests/foxglove/client.py (the `websockets` package). Poses and
+//! images published through the Observer API arrive, decoded, equal to what was published;
+//! a Twist (as Foxglove's Teleop panel publishes it) and JSON orders come out of LiveOrders;
+//! garbage, cut connections and a stuck client break nothing; bad and busy addresses are
+//! errors; stopping is prompt.
+
+mod common;
+
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use base64::Engine;
+use rovlink::link::SimTime;
+use rovlink::rcp::foxglove::{self, LiveOrders, LiveView};
+use rovlink::rcp::orders::{Live, OrderSource};
+use rovlink::rcp::session::Observer;
+use rovlink::rcp::{Event, ImageSettings, PoseSample, Role};
+use rovlink::wire::Nav;
+use rovlink::wire::operator::Order;
+use serde_json::Value;
+
+const CLIENT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/foxglove/client.py");
+
+/// Starts the client against `view` with `args`; its JSON goes to `out`.
+fn client(view: &LiveView, out: &Path, args: &[&str]) -> Child {
+    Command::new("python3")
+        .arg(CLIENT)
+        .args(["--url", &format!("ws://127.0.0.1:{}", view.port())])
+        .args(["--out", out.to_str().unwrap()])
+        .args(args)
+        .stdin(Stdio::null())
+        .spawn()
+        .expect("python3 runs tests/foxglove/client.py")
+}
+
+/// Waits for the client (at most `limit`) and reads what it saw.
+fn finish(mut child: Child, out: &Path, limit: Duration) -> Value {
+    let start = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            assert!(status.success(), "client.py failed: {status}");
+            break;
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            panic!("client.py still running after {limit:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    serde_json::from_slice(&std::fs::read(out).unwrap()).unwrap()
+}
+
+/// Waits until `n` clients are connected.
+fn wait_for_clients(view: &LiveView, n: usize) {
+    let start = Instant::now();
+    while view.clients() < n {
+        assert!(
+            start.elapsed() < Duration::from_secs(10),
+            "no client connected"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+fn pose(t_s: f64, position_m: [f64; 3], heading_deg: f64) -> PoseSample {
+    PoseSample {
+        t_s,
+        position_m,
+        heading_deg,
+        velocity: [0.1, 0.0, 0.0, 1.0],
+        commanded_velocity: [0.2, 0.0, 0.0, 0.0],
+        goal_m: Some([3.0, 0.0, 0.5]),
+        backtrack_m: None,
+        link_up: true,
+    }
+}
+
+/// A built-in picture's DEBT stream, as the ROV sends it, and the trunks it is cut in.
+fn image_stream() -> (Vec<u8>, Vec<Vec<u8>>) {
+    let picture = rovlink::rcp::test_image(160, 120, 3);
+    let trunks = rovlink::rcp::trunks_of(&picture, &ImageSettings::default());
+    (trunks.concat(), trunks)
+}
+
+fn count(seen: &Value, topic: &str) -> u64 {
+    seen[topic].as_u64().unwrap_or(0)
+}
+
+fn png_size(message: &Value) -> (u32, u32) {
+    assert_eq!(message["format"], "png");
+    let png = base64::engine::general_purpose::STANDARD
+        .decode(message["data"].as_str().unwrap())
+        .unwrap();
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    let be = |at: usize| u32::from_be_bytes(png[at..at + 4].try_into().unwrap());
+    (be(16), be(20))
+}
+
+fn start(role: Role) -> (LiveView, LiveOrders) {
+    foxglove::start("127.0.0.1:0", role).expect("a server on a free port")
+}
+
+#[test]
+fn a_client_receives_poses_and_images_as_they_are_published() {
+    let (mut view, _orders) = start(Role::Operator);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("seen.json");
+    let child = client(
+        &view,
+        &out,
+        &[
+            "--topics",
+            "/rov/pose,/rov/goal,/camera/image,/camera/preview,/link/log,/session/log",
+            "--seconds",
+            "4",
+        ],
+    );
+    wait_for_clients(&view, 1);
+    let (stream, trunks) = image_stream();
+    let started = Instant::now();
+    let before_ns = rovlink::rcp::mcap_log::wall_clock_ns();
+    let mut k: u32 = 0;
+    let mut slowest_pose = Duration::ZERO;
+    while started.elapsed() < Duration::from_millis(2000) {
+        let t_s = f64::from(k) * 0.05;
+        let call = Instant::now();
+        view.pose(&pose(t_s, [f64::from(k) * 0.1, -1.0, 2.0], 10.0));
+        slowest_pose = slowest_pose.max(call.elapsed());
+        if k.is_multiple_of(10) {
+            view.event(
+                Role::Operator,
+                t_s,
+                &Event::ImageProgress {
+                    trunks: 8,
+                    of: None,
+                    prefix: trunks[..8].concat(),
+                },
+            );
+            view.image(t_s, &stream);
+            view.event(Role::Operator, t_s, &Event::OrderAcknowledged(k.into()));
+        }
+        k += 1;
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // The last pose, and nothing after it: the client's last pose must be this one.
+    view.pose(&pose(99.0, [12.5, -3.25, 7.0], 90.0));
+    view.event(Role::Operator, 99.0, &Event::AnswersLost);
+    let seen = finish(child, &out, Duration::from_secs(15));
+    let after_ns = rovlink::rcp::mcap_log::wall_clock_ns();
+    eprintln!("received {seen:.200}; {k} poses published, slowest Observer::pose {slowest_pose:?}");
+
+    assert!(count(&seen, "/rov/pose") >= 10, "{seen}");
+    assert!(count(&seen, "/rov/goal") >= 10, "{seen}");
+    assert!(count(&seen, "/camera/image") >= 2, "{seen}");
+    assert!(count(&seen, "/camera/preview") >= 2, "{seen}");
+    assert!(count(&seen, "/session/log") >= 2, "{seen}");
+    let last = &seen["last"]["/rov/pose"];
+    assert_eq!(last["frame_id"], "ned");
+    let position = &last["pose"]["position"];
+    assert_eq!(
+        (&position["x"], &position["y"], &position["z"]),
+        (&Value::from(12.5), &Value::from(-3.25), &Value::from(7.0)),
+        "{last}"
+    );
+    let q = &last["pose"]["orientation"];
+    let half = 45f64.to_radians();
+    assert!((q["z"].as_f64().unwrap() - half.sin()).abs() < 1e-12, "{q}");
+    assert!((q["w"].as_f64().unwrap() - half.cos()).abs() < 1e-12, "{q}");
+    // Wall-clock log times, and the message's own timestamp is the same instant.
+    let log_ns = seen["log_time_ns"]["/rov/pose"].as_u64().unwrap();
+    assert!((before_ns..=after_ns).contains(&log_ns), "{log_ns}");
+    assert_eq!(
+        last["timestamp"]["sec"].as_u64().unwrap(),
+        log_ns / 1_000_000_000
+    );
+    assert_eq!(png_size(&seen["last"]["/camera/image"]), (160, 120));
+    assert_eq!(png_size(&seen["last"]["/camera/preview"]), (160, 120));
+    assert_eq!(
+        seen["last"]["/link/log"]["message"],
+        "answers lost: no ROV frame for 5 s"
+    );
+    assert_eq!(seen["last"]["/link/log"]["level"], 3);
+    assert!(
+        seen["last"]["/session/log"]["message"]
+            .as_str()
+            .unwrap()
+            .ends_with("acknowledged"),
+        "{seen}"
+    );
+    // The channels carry the MCAP log's schemas.
+    assert_eq!(seen["schemas"]["/rov/pose"], "foxglove.PoseInFrame");
+    assert_eq!(seen["schemas"]["/link/frames"], "rovlink.LinkFrame");
+    assert_eq!(seen["schemas"]["/camera/image"], "foxglove.CompressedImage");
+    assert_eq!(seen["server"]["name"], "tdma-run operator");
+    assert!(slowest_pose < Duration::from_millis(50), "{slowest_pose:?}");
+    view.stop();
+}
+
+/// Every Live value the source yields within `limit`, until `enough` says so.
+fn drain(orders: &mut LiveOrders, limit: Duration, enough: impl Fn(&[Live]) -> bool) -> Vec<Live> {
+    let start = Instant::now();
+    let mut got = Vec::new();
+    while start.elapsed() < limit && !enough(&got) {
+        got.extend(orders.poll(SimTime::ZERO));
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    got
+}
+
+#[test]
+fn a_teleop_twist_and_json_orders_come_out_as_live_orders() {
+    let (view, mut orders) = start(Role::Operator);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("a.json");
+    let goto = r#"{"type":"goto","x_cm":300,"y_cm":-20,"z_cm":50,"heading_deg":90}"#;
+    let child = client(
+        &view,
+        &out,
+        &[
+            "--topics",
+            "/rov/pose",
+            "--seconds",
+            "1.5",
+            "--publish-twist",
+            "--publish-order",
+            goto,
+            "--publish-order",
+            r#"{"type":"cancel"}"#,
+        ],
+    );
+    let got = drain(&mut orders, Duration::from_secs(10), |got| {
+        got.contains(&Live::Cancel) && got.iter().any(|l| matches!(l, Live::Joystick { .. }))
+    });
+    let seen = finish(child, &out, Duration::from_secs(10));
+    assert!(seen["published"].as_u64().unwrap() >= 3, "{seen}");
+    let stick = Live::Joystick {
+        joystick: rovlink::rcp::operator::Joystick {
+            vx: 50.0,
+            vy: 0.0,
+            vz: 0.0,
+            vyaw: -25.0,
+        },
+        arm: true,
+        disarm: false,
+        nav: Nav::Manual,
+    };
+    assert!(got.contains(&stick), "{got:?}");
+    let order = Live::Order(Order::GoTo {
+        x_cm: 300,
+        y_cm: -20,
+        z_cm: 50,
+        heading_deg: 90,
+    });
+    let at = |wanted: &Live| got.iter().position(|l| l == wanted);
+    assert!(at(&order).unwrap() < at(&Live::Cancel).unwrap(), "{got:?}");
+    assert_eq!(got.iter().filter(|l| **l == order).count(), 1, "{got:?}");
+    assert!(
+        orders.take_warnings().is_empty(),
+        "good messages give no warning"
+    );
+
+    // The Teleop panel stops publishing when the button is released: the Twist holds for
+    // TWIST_HOLD, then the joystick goes neutral.
+    let released = Instant::now();
+    let neutral = Live::scripted_joystick(rovlink::rcp::operator::Joystick::default());
+    let got = drain(&mut orders, Duration::from_secs(10), |got| {
+        got.contains(&neutral)
+    });
+    assert_eq!(got.last(), Some(&neutral), "{got:?}");
+    assert!(released.elapsed() <= foxglove::TWIST_HOLD + Duration::from_secs(1));
+    // The ROS 2 schema name on a topic of the user's choosing, and a full-left turn.
+    let out = dir.path().join("b.json");
+    let child = client(
+        &view,
+        &out,
+        &[
+            "--seconds",
+            "1",
+            "--publish-twist",
+            r#"{"linear":{"x":0,"y":1,"z":0.5},"angular":{"x":0,"y":0,"z":1}}"#,
+            "--twist-topic",
+            "/teleop",
+            "--twist-schema",
+            "geometry_msgs/msg/Twist",
+        ],
+    );
+    let got = drain(&mut orders, Duration::from_secs(10), |got| !got.is_empty());
+    finish(child, &out, Duration::from_secs(10));
+    let Some(Live::Joystick { joystick, .. }) = got.first() else {
+        panic!("{got:?}");
+    };
+    assert_eq!(
+        [joystick.vx, joystick.vy, joystick.vz, joystick.vyaw],
+        [0.0, -100.0, -50.0, -100.0],
+        "left, up and counter-clockwise in ROS are port, up and anticlockwise yaw here"
+    );
+}
+
+#[test]
+fn garbage_cut_connections_and_stuck_clients_break_nothing() {
+    let (mut view, mut orders) = start(Role::Operator);
+    let dir = tempfile::tempdir().unwrap();
+    let (stream, _) = image_stream();
+    let hostile = dir.path().join("hostile.json");
+    let stuck = dir.path().join("stuck.json");
+    let garbage = client(
+        &view,
+        &hostile,
+        &["--topics", "/rov/pose", "--seconds", "3", "--garbage"],
+    );
+    let stalled = client(&view, &stuck, &["--seconds", "3", "--stall"]);
+    wait_for_clients(&view, 2);
+    let started = Instant::now();
+    let (mut slowest_pose, mut slowest_image) = (Duration::ZERO, Duration::ZERO);
+    let mut k: u32 = 0;
+    while started.elapsed() < Duration::from_millis(2500) {
+        let call = Instant::now();
+        view.pose(&pose(f64::from(k), [1.0, 2.0, 3.0], 0.0));
+        slowest_pose = slowest_pose.max(call.elapsed());
+        if k.is_multiple_of(20) {
+            let call = Instant::now();
+            view.image(f64::from(k), &stream);
+            slowest_image = slowest_image.max(call.elapsed());
+        }
+        k += 1;
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let hostile_seen = finish(garbage, &hostile, Duration::from_secs(15));
+    let stuck_seen = finish(stalled, &stuck, Duration::from_secs(15));
+    eprintln!(
+        "{k} poses, slowest {slowest_pose:?}; slowest image (decoded, PNG) {slowest_image:?}; \
+         stuck client: {stuck_seen:.300}"
+    );
+    // The hostile client was served all along, and told what was wrong.
+    assert!(count(&hostile_seen, "/rov/pose") > 0, "{hostile_seen}");
+    assert!(
+        !hostile_seen["statuses"].as_array().unwrap().is_empty(),
+        "{hostile_seen}"
+    );
+    // Publishing never waited for the stuck client (an image costs its decoding and PNG).
+    assert!(
+        slowest_pose < Duration::from_millis(100),
+        "{slowest_pose:?}"
+    );
+    assert!(
+        slowest_image < Duration::from_millis(500),
+        "{slowest_image:?}"
+    );
+    // Nothing the garbage said became an order; all of it was reported, in short lines.
+    assert!(orders.poll(SimTime::ZERO).is_empty());
+    let warnings = orders.take_warnings();
+    let has = |text: &str| warnings.iter().any(|w| w.contains(text));
+    assert!(has("refused: expected encoding json"), "{warnings:#?}");
+    assert!(has("refused: expected topic /orders"), "{warnings:#?}");
+    assert!(
+        has("message skipped: expected a JSON object"),
+        "{warnings:#?}"
+    );
+    assert!(
+        has("field linear.x: expected a number, found null"),
+        "{warnings:#?}"
+    );
+    assert!(
+        has("expected at most 65536 bytes, found 104"),
+        "{warnings:#?}"
+    );
+    assert!(has("field x_cm"), "{warnings:#?}");
+    assert!(
+        warnings.iter().all(|w| w.len() < 400 && !w.contains('\n')),
+        "{warnings:#?}"
+    );
+
+    // Everyone left; a new client is served as the first was.
+    let start = Instant::now();
+    while view.clients() > 0 && start.elapsed() < Duration::from_secs(10) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert_eq!(view.clients(), 0);
+    let out = dir.path().join("after.json");
+    let child = client(&view, &out, &["--topics", "/rov/pose", "--seconds", "1.5"]);
+    wait_for_clients(&view, 1);
+    for k in 0..20 {
+        view.pose(&pose(f64::from(k), [4.0, 5.0, 6.0], 0.0));
+        std::thread::sleep(Duration::from_millis(25));
+    }
+    let seen = finish(child, &out, Duration::from_secs(10));
+    assert!(count(&seen, "/rov/pose") > 0, "{seen}");
+}
+
+#[test]
+fn a_rov_end_offers_no_publishing() {
+    let (view, mut orders) = start(Role::Rov);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("rov.json");
+    let child = client(
+        &view,
+        &out,
+        &["--seconds", "1", "--publish-order", r#"{"type":"cancel"}"#],
+    );
+    let seen = finish(child, &out, Duration::from_secs(10));
+    assert_eq!(seen["server"]["name"], "tdma-run rov");
+    let capabilities = seen["server"]["capabilities"].as_array().unwrap();
+    assert!(
+        !capabilities.contains(&Value::from("clientPublish")),
+        "{seen}"
+    );
+    assert!(orders.poll(SimTime::ZERO).is_empty());
+}
+
+#[test]
+fn bad_and_busy_addresses_are_errors() {
+    let (view, _orders) = start(Role::Operator);
+    let busy = format!("127.0.0.1:{}", view.port());
+    let error = foxglove::start(&busy, Role::Operator)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        error.starts_with(&format!("--foxglove {busy}: cannot listen: ")),
+        "{error}"
+    );
+    for bad in ["nonsense", "127.0.0.1:http", ":8765", "::1:8765"] {
+        let error = foxglove::start(bad, Role::Operator)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            error.starts_with("--foxglove: expected HOST:PORT") && error.contains(bad),
+            "{bad}: {error}"
+        );
+    }
+    let error = foxglove::start("no-such-host.invalid:8765", Role::Operator)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(error.contains("cannot listen"), "{error}");
+    // Not an address of this machine.
+    let error = foxglove::start("192.0.2.1:8765", Role::Operator)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(error.contains("cannot listen"), "{error}");
+}
+
+#[test]
+fn stopping_is_prompt_and_tells_the_clients() {
+    let (view, _orders) = start(Role::Operator);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("c.json");
+    let child = client(&view, &out, &["--seconds", "20"]);
+    wait_for_clients(&view, 1);
+    let port = view.port();
+    let started = Instant::now();
+    view.stop();
+    let took = started.elapsed();
+    let seen = finish(child, &out, Duration::from_secs(10));
+    assert!(took < Duration::from_secs(2), "stop took {took:?}");
+    assert_eq!(seen["closed_by_server"], true, "{seen}");
+    // The port is free again.
+    let (again, _orders) = foxglove::start(&format!("127.0.0.1:{port}"), Role::Operator)
+        .expect("the port is free after stop");
+    drop(again);
+}
+
+/// A free port on 127.0.0.1 (bound and released: another process could take it first, which
+/// fails the test loudly rather than passing it wrongly).
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+#[test]
+fn an_operator_driven_from_foxglove_over_link_sim() {
+    const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
+    let dir = tempfile::tempdir().unwrap();
+    let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let (mut link, a, b) = common::link_sim_pty(&[
+        "--model",
+        "s100",
+        "--bitrate-bps",
+        "9600",
+        "--intrinsic-delay-ms",
+        "20",
+        "--jitter-ms",
+        "2",
+        "--half-duplex",
+        "false",
+    ]);
+    let mut rov = Command::new(TDMA_RUN)
+        .args(["--role", "rov", "--port", &b, "--duration", "14"])
+        .args(["--image-size", "400", "--metrics", &path("rov.json")])
+        .args(["--track", &path("track.csv")])
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let port = free_port().to_string();
+    let address = format!("127.0.0.1:{port}");
+    let mut operator = Command::new(TDMA_RUN)
+        .args(["--role", "operator", "--port", &a, "--ipg", "150"])
+        .args(["--duration", "10", "--image-size", "400"])
+        .args(["--foxglove", &address, "--metrics", &path("op.json")])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let out = dir.path().join("seen.json");
+    let goto = r#"{"type":"goto","x_cm":300,"y_cm":-20,"z_cm":50,"heading_deg":90}"#;
+    let seen_by = Command::new("python3")
+        .arg(CLIENT)
+        .args(["--url", &format!("ws://{address}"), "--connect-within", "5"])
+        .args(["--out", out.to_str().unwrap(), "--seconds", "8"])
+        .args(["--topics", "/rov/pose,/camera/image,/link/frames"])
+        .args(["--publish-order", goto])
+        .stdin(Stdio::null())
+        .spawn()
+        .unwrap();
+    let seen = finish(seen_by, &out, Duration::from_secs(20));
+    let operator_status = common::wait_for_exit(&mut operator, Duration::from_secs(20));
+    let rov_status = common::wait_for_exit(&mut rov, Duration::from_secs(20));
+    let _ = link.kill();
+    let _ = link.wait();
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut operator.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert!(operator_status.success(), "operator: {stderr}");
+    assert!(rov_status.success(), "ROV: {rov_status:?}");
+
+    // The operator's view: the pose of every status, completed images, the frames.
+    assert!(count(&seen, "/rov/pose") >= 5, "{seen}");
+    assert!(count(&seen, "/camera/image") >= 1, "{seen}");
+    assert!(count(&seen, "/link/frames") >= 10, "{seen}");
+    assert!(png_size(&seen["last"]["/camera/image"]).0 > 0);
+    eprintln!(
+        "Foxglove client saw: /rov/pose {}, /camera/image {}, /link/frames {}",
+        count(&seen, "/rov/pose"),
+        count(&seen, "/camera/image"),
+        count(&seen, "/link/frames")
+    );
+    // The client's GoTo went down the link once, was executed and acknowledged.
+    let json = |name: &str| -> Value {
+        serde_json::from_slice(&std::fs::read(dir.path().join(name)).unwrap()).unwrap()
+    };
+    let (op, r) = (json("op.json"), json("rov.json"));
+    assert_eq!(op["orders_sent"], 1, "{op}");
+    assert_eq!(op["orders_acknowledged"], 1, "{op}");
+    assert_eq!(r["orders_executed"], 1, "{r}");
+    assert_eq!(r["orders_executed_twice"], 0, "{r}");
+    let track = std::fs::read_to_string(dir.path().join("track.csv")).unwrap();
+    assert!(
+        track.lines().any(|l| l.contains(",3.0000,-0.2000,0.5000,")),
+        "the ROV's goal is the client's GoTo: {track:.500}"
+    );
+}
