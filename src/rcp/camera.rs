@@ -253,14 +253,39 @@ impl NewestInDir {
     }
 }
 
+/// A picture from a camera's bytes, `name` naming them: a JPEG must be whole (end with its EOI
+/// marker), since the JPEG decoder makes a picture of any prefix, grey where bytes are missing
+/// (a frame still being written, a command cut short). Other formats' decoders refuse a prefix.
+fn camera_picture(name: &str, bytes: &[u8]) -> Result<debt::Image, String> {
+    let jpeg = bytes.starts_with(&[0xFF, 0xD8]);
+    if jpeg && !bytes.trim_ascii_end().ends_with(&[0xFF, 0xD9]) {
+        return Err(format!(
+            "{name}: a JPEG without its end (EOI) marker: not whole yet"
+        ));
+    }
+    debt::picture::from_bytes_fit(name, bytes, CAMERA_OVERSIZE)
+        .map(|(image, _)| image)
+        .map_err(|e| e.to_string())
+}
+
+/// A picture file through [`camera_picture`].
+fn camera_file(path: &Path) -> Result<debt::Image, String> {
+    let name = path.display().to_string();
+    match super::read_at_most(path, debt::picture::MAX_INPUT_BYTES) {
+        Ok(Some(bytes)) => camera_picture(&name, &bytes),
+        Ok(None) => Err(PictureError::TooManyBytes { name }.to_string()),
+        Err(source) => Err(PictureError::Read { name, source }.to_string()),
+    }
+}
+
 impl Camera for NewestInDir {
     fn capture(&mut self) -> Result<debt::Image, String> {
         let mut first_error = None;
         for path in self.candidates()? {
-            match debt::picture::open_fit(&path, CAMERA_OVERSIZE) {
-                Ok(loaded) => return Ok(loaded.image),
+            match camera_file(&path) {
+                Ok(image) => return Ok(image),
                 Err(e) => {
-                    first_error.get_or_insert(e.to_string());
+                    first_error.get_or_insert(e);
                 }
             }
         }
@@ -287,65 +312,97 @@ type Shot = Result<debt::Image, String>;
 /// format the loader reads (PNG, JPEG, PNM, ...), from its standard output, e.g.
 /// `ffmpeg -loglevel error -f v4l2 -i /dev/video0 -frames:v 1 -f image2pipe -c:v png -`.
 ///
-/// Runs happen in a background thread, one at a time: the first starts when the camera is made;
-/// each [`Camera::capture`] returns the picture finished since the previous capture (or why the
-/// run failed: its exit status and the last line of its standard error), and starts the next
-/// run. While a run is under way a capture returns `Err(`[`WAITING`]`)` at once. A run that
-/// takes longer than its timeout is killed with its whole process group; so is a run in
-/// progress when the camera is dropped.
+/// In real time ([`command_camera`]) runs happen in a background thread, one at a time: the
+/// first starts when the camera is made; each [`Camera::capture`] returns the picture finished since the
+/// previous capture (or why the run failed: its exit status and the last line of its standard
+/// error), and starts the next run. While a run is under way a capture returns
+/// `Err(`[`WAITING`]`)` at once. In simulation ([`command_camera_waiting`]) a capture runs the
+/// command and waits for it:
+/// virtual time does not pass meanwhile, so the session is the same however long it takes. A
+/// run that takes longer than its timeout is killed with its whole process group; so is a run
+/// in progress when the camera is dropped.
 pub struct CommandCamera {
-    requests: Option<Sender<()>>,
-    shots: Receiver<Shot>,
-    running: bool,
+    cmd: String,
+    timeout: Duration,
+    /// The background runs, in real time.
+    worker: Option<Worker>,
     group: Arc<Mutex<Option<nix::unistd::Pid>>>,
 }
 
-/// A camera running `cmd` with the [`COMMAND_TIMEOUT_S`] timeout; its first run starts now.
-pub fn command_camera(cmd: &str) -> Result<CommandCamera, CameraError> {
-    command_camera_timed(cmd, Duration::from_secs_f64(COMMAND_TIMEOUT_S))
+struct Worker {
+    requests: Sender<()>,
+    shots: Receiver<Shot>,
+    running: bool,
 }
 
-/// [`command_camera`] with another timeout.
-pub fn command_camera_timed(cmd: &str, timeout: Duration) -> Result<CommandCamera, CameraError> {
+/// A camera running `cmd` in the background (real time), with the [`COMMAND_TIMEOUT_S`]
+/// timeout; its first run starts now.
+pub fn command_camera(cmd: &str) -> Result<CommandCamera, CameraError> {
+    command_camera_timed(cmd, true, Duration::from_secs_f64(COMMAND_TIMEOUT_S))
+}
+
+/// A camera running `cmd` at each capture and waiting for it (simulation: virtual time stands
+/// still meanwhile), with the [`COMMAND_TIMEOUT_S`] timeout.
+pub fn command_camera_waiting(cmd: &str) -> Result<CommandCamera, CameraError> {
+    command_camera_timed(cmd, false, Duration::from_secs_f64(COMMAND_TIMEOUT_S))
+}
+
+/// [`command_camera`] (`live`) or [`command_camera_waiting`] with another timeout.
+pub fn command_camera_timed(
+    cmd: &str,
+    live: bool,
+    timeout: Duration,
+) -> Result<CommandCamera, CameraError> {
     if cmd.trim().is_empty() {
         return Err(CameraError::EmptyCommand);
     }
-    let (requests, wanted) = channel::<()>();
-    let (done, shots) = channel();
     let group = Arc::new(Mutex::new(None));
-    let (cmd, worker_group) = (cmd.to_string(), Arc::clone(&group));
-    std::thread::Builder::new()
-        .name("camera-cmd".into())
-        .spawn(move || {
-            while wanted.recv().is_ok() {
-                if done.send(run_once(&cmd, timeout, &worker_group)).is_err() {
-                    return;
-                }
-            }
+    let worker = live
+        .then(|| {
+            let (requests, wanted) = channel::<()>();
+            let (done, shots) = channel();
+            let (cmd, group) = (cmd.to_string(), Arc::clone(&group));
+            std::thread::Builder::new()
+                .name("camera-cmd".into())
+                .spawn(move || {
+                    while wanted.recv().is_ok() {
+                        if done.send(run_once(&cmd, timeout, &group)).is_err() {
+                            return;
+                        }
+                    }
+                })
+                .map_err(CameraError::Thread)?;
+            let running = requests.send(()).is_ok();
+            Ok::<_, CameraError>(Worker {
+                requests,
+                shots,
+                running,
+            })
         })
-        .map_err(CameraError::Thread)?;
-    let running = requests.send(()).is_ok();
+        .transpose()?;
     Ok(CommandCamera {
-        requests: Some(requests),
-        shots,
-        running,
+        cmd: cmd.to_string(),
+        timeout,
+        worker,
         group,
     })
 }
 
 impl Camera for CommandCamera {
     fn capture(&mut self) -> Result<debt::Image, String> {
+        let Some(worker) = self.worker.as_mut() else {
+            return run_once(&self.cmd, self.timeout, &self.group);
+        };
         let mut shot = None;
-        while let Ok(finished) = self.shots.try_recv() {
+        while let Ok(finished) = worker.shots.try_recv() {
             shot = Some(finished);
-            self.running = false;
+            worker.running = false;
         }
-        if !self.running {
-            let asked = self.requests.as_ref().is_some_and(|r| r.send(()).is_ok());
-            if !asked {
+        if !worker.running {
+            if worker.requests.send(()).is_err() {
                 return Err("camera command: its thread has ended".into());
             }
-            self.running = true;
+            worker.running = true;
         }
         shot.unwrap_or_else(|| Err(WAITING.into()))
     }
@@ -354,7 +411,7 @@ impl Camera for CommandCamera {
 impl Drop for CommandCamera {
     fn drop(&mut self) {
         // The worker ends at its next request; a run in progress is killed now.
-        self.requests = None;
+        self.worker = None;
         let group = self.group.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(pid) = *group {
             let _ = nix::sys::signal::killpg(pid, nix::sys::signal::Signal::SIGKILL);
@@ -483,9 +540,7 @@ fn run_once(cmd: &str, timeout: Duration, group: &Mutex<Option<nix::unistd::Pid>
             said()
         ));
     }
-    debt::picture::from_bytes_fit("camera command output", &bytes, CAMERA_OVERSIZE)
-        .map(|(image, _)| image)
-        .map_err(|e| e.to_string())
+    camera_picture("camera command output", &bytes)
 }
 
 #[cfg(test)]
@@ -675,7 +730,7 @@ mod tests {
         // The child of the shell would write the marker if it survived.
         let cmd = format!("(sleep 1; touch '{}') & sleep 5", marker.display());
         let started = Instant::now();
-        let mut camera = command_camera_timed(&cmd, Duration::from_millis(300)).unwrap();
+        let mut camera = command_camera_timed(&cmd, true, Duration::from_millis(300)).unwrap();
         let error = shot(&mut camera).unwrap_err();
         assert_eq!(
             error,
@@ -688,5 +743,53 @@ mod tests {
         );
         std::thread::sleep(Duration::from_millis(1200));
         assert!(!marker.exists(), "a child of the command outlived the kill");
+    }
+
+    #[test]
+    fn a_jpeg_cut_short_is_not_taken() {
+        let image = debt::Image {
+            width: 64,
+            height: 48,
+            channels: 3,
+            data: (0..64 * 48 * 3).map(|k| (k % 251) as u8).collect(),
+        };
+        let jpeg = debt::picture::encode(&image, debt::picture::OutputFormat::Jpeg).unwrap();
+        // The decoder alone makes a picture of a prefix; the camera does not take it.
+        assert!(
+            debt::picture::from_bytes_fit("h", &jpeg[..jpeg.len() / 2], CAMERA_OVERSIZE).is_ok()
+        );
+        for cut in [jpeg.len() / 4, jpeg.len() / 2, jpeg.len() - 1] {
+            let error = camera_picture("half.jpg", &jpeg[..cut]).unwrap_err();
+            assert_eq!(
+                error,
+                "half.jpg: a JPEG without its end (EOI) marker: not whole yet"
+            );
+        }
+        assert_eq!(camera_picture("whole.jpg", &jpeg).unwrap().width, 64);
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("a.jpg"), &jpeg).unwrap();
+        set_mtime(&dir.path().join("a.jpg"), 10);
+        std::fs::write(dir.path().join("b.jpg"), &jpeg[..jpeg.len() / 2]).unwrap();
+        let mut camera = newest_in_dir(dir.path()).unwrap();
+        assert_eq!(camera.capture().unwrap().width, 64);
+    }
+
+    #[test]
+    fn in_simulation_the_command_camera_waits_for_its_picture() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("frame.png");
+        std::fs::write(&file, png(10, 4)).unwrap();
+        let mut camera =
+            command_camera_waiting(&format!("sleep 0.2; cat '{}'", file.display())).unwrap();
+        for _ in 0..2 {
+            let started = Instant::now();
+            assert_eq!(camera.capture().unwrap().width, 10);
+            assert!(started.elapsed() >= Duration::from_millis(200));
+        }
+        let mut camera = command_camera_waiting("exit 1").unwrap();
+        assert_eq!(
+            camera.capture().unwrap_err(),
+            "camera command: exit status 1"
+        );
     }
 }

@@ -13,8 +13,8 @@
 //!   ([`OrderSource::next_at`]);
 //! - real time (`live = true`): a reader thread hands lines over as they come, so a pipe, a
 //!   FIFO or a terminal is read while the session runs. A regular file is read to its end once;
-//!   standard input and pipes until they close; a FIFO is opened again each time its writer
-//!   closes it, so `echo '{...}' > fifo` can be repeated.
+//!   standard input and pipes until they close; a FIFO never ends (it is opened for reading
+//!   and writing, so writers come and go: `echo '{...}' > fifo` can be repeated).
 //!
 //! No-panic, no-hang contract: any bytes give orders or warnings, never a panic. A bad line
 //! (not UTF-8, longer than [`MAX_LINE_BYTES`], not an order) is skipped with a warning
@@ -232,8 +232,15 @@ pub fn open_orders(path: &Path, live: bool) -> Result<JsonOrders, ConsoleError> 
             });
         }
         if live && std::os::unix::fs::FileTypeExt::is_fifo(&meta.file_type()) {
-            check_fifo_readable(path).map_err(open_error)?;
-            Source::Fifo(path.to_path_buf())
+            // Read and write: the open does not wait for a writer, and with a writer of our
+            // own the FIFO never ends, so writers may come and go (Linux's fifo(7)) without
+            // a line written between one writer's close and a reopen being lost.
+            let file = std::fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .open(path)
+                .map_err(open_error)?;
+            Source::File(file)
         } else {
             Source::File(File::open(path).map_err(open_error)?)
         }
@@ -259,9 +266,6 @@ pub fn open_orders(path: &Path, live: bool) -> Result<JsonOrders, ConsoleError> 
         let read = match source {
             Source::Stdin => crate::io::read_bounded(io::stdin().lock(), MAX_ORDERS_BYTES),
             Source::File(file) => crate::io::read_bounded(file, MAX_ORDERS_BYTES),
-            Source::Fifo(path) => {
-                File::open(path).and_then(|f| crate::io::read_bounded(f, MAX_ORDERS_BYTES))
-            }
         };
         let text = read
             .map_err(|source| ConsoleError::Read {
@@ -279,23 +283,12 @@ pub fn open_orders(path: &Path, live: bool) -> Result<JsonOrders, ConsoleError> 
     })
 }
 
-/// Opens a FIFO without waiting for a writer, to see that it can be read at all.
-fn check_fifo_readable(path: &Path) -> io::Result<()> {
-    use std::os::unix::fs::OpenOptionsExt;
-    std::fs::OpenOptions::new()
-        .read(true)
-        .custom_flags(nix::fcntl::OFlag::O_NONBLOCK.bits())
-        .open(path)
-        .map(drop)
-}
-
 /// Where the reader thread reads.
 enum Source {
     Stdin,
-    /// A regular file, a pipe, a device: read until it ends.
+    /// A regular file, a pipe, a device, a FIFO: read until it ends (a FIFO opened for
+    /// reading and writing never does).
     File(File),
-    /// A FIFO: opened again each time its writer closes it.
-    Fifo(PathBuf),
 }
 
 /// The reader thread: lines to `tx` until the input ends or the receiver is gone.
@@ -311,16 +304,6 @@ fn read_lines(name: &str, source: Source, tx: &SyncSender<FromReader>) {
                 other => other,
             }
         }
-        Source::Fifo(path) => loop {
-            // Blocks until a writer opens the FIFO.
-            match File::open(&path) {
-                Ok(file) => match pump(&mut BufReader::new(file), &mut number, &mut line, tx) {
-                    Pumped::Ended => continue,
-                    other => break other,
-                },
-                Err(e) => break Pumped::Failed(e),
-            }
-        },
     };
     let said = match end {
         Pumped::Gone => return,
@@ -478,6 +461,7 @@ mod tests {
 
     use super::*;
     use crate::wire::operator::Order;
+    use proptest::strategy::Strategy;
 
     const GOTO: &str = r#"{"type":"goto","x_cm":300,"y_cm":0,"z_cm":50,"heading_deg":90"#;
 
@@ -613,7 +597,7 @@ mod tests {
     }
 
     #[test]
-    fn live_a_fifo_is_read_as_written_and_opened_again_for_each_writer() {
+    fn live_a_fifo_is_read_as_written_by_one_writer_after_another() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("orders.fifo");
         nix::unistd::mkfifo(&path, nix::sys::stat::Mode::S_IRWXU).unwrap();
@@ -622,23 +606,29 @@ mod tests {
         let mut orders = open_orders(&path, true).unwrap();
         assert!(started.elapsed() < Duration::from_secs(1));
         assert!(orders.poll(at(0.0)).is_empty());
-        for (writer, x_cm) in [(1, 100), (2, 200)] {
+        let mut fifo = std::fs::OpenOptions::new().write(true).open(&path).unwrap();
+        writeln!(fifo, "oops").unwrap();
+        writeln!(fifo, "{GOTO}}}").unwrap();
+        let got = poll_for(&mut orders, at(10.0), 1);
+        assert_eq!(goto_x(&got[0]), Some(300));
+        drop(fifo);
+        // Writers one after another, as `echo ... > fifo` in a loop: no line is lost between
+        // one writer's close and the next one's open.
+        for x_cm in 1..=40 {
             let mut fifo = std::fs::OpenOptions::new().write(true).open(&path).unwrap();
-            writeln!(fifo, "oops {writer}").unwrap();
             writeln!(
                 fifo,
                 r#"{{"type":"goto","x_cm":{x_cm},"y_cm":0,"z_cm":0,"heading_deg":0}}"#
             )
             .unwrap();
-            let got = poll_for(&mut orders, at(10.0), 1);
-            assert_eq!(goto_x(&got[0]), Some(x_cm));
-            drop(fifo);
         }
+        let got = poll_for(&mut orders, at(10.0), 40);
+        let xs: Vec<i16> = got.iter().filter_map(goto_x).collect();
+        assert_eq!(xs, (1..=40).collect::<Vec<_>>());
         let warnings = orders.take_warnings();
-        assert_eq!(warnings.len(), 2, "{warnings:?}");
-        // Lines are numbered across writers.
+        assert_eq!(warnings.len(), 1, "{warnings:?}");
         assert!(
-            warnings[1].contains(": line 3: not valid JSON"),
+            warnings[0].contains(": line 1: not valid JSON"),
             "{warnings:?}"
         );
     }
@@ -668,5 +658,28 @@ mod tests {
         );
         assert_eq!(line, b"last");
         assert_eq!(read_line_bounded(&mut reader, &mut line, 5).unwrap(), None);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn any_bytes_give_orders_in_time_order_or_numbered_warnings(
+            lines in proptest::collection::vec(
+                proptest::prop_oneof![
+                    proptest::collection::vec(proptest::num::u8::ANY, 0..40),
+                    (0.0f64..100.0).prop_map(|t| format!("{GOTO},\"t_s\":{t}}}").into_bytes()),
+                    proptest::strategy::Just(br#"{"type":"cancel"}"#.to_vec()),
+                ],
+                0..30,
+            )
+        ) {
+            let text = lines.join(&b'\n');
+            let (orders, warnings) = parse_orders("p", &text);
+            proptest::prop_assert!(orders.windows(2).all(|w| w[0].0 <= w[1].0));
+            let count = text.split(|&b| b == b'\n').count();
+            proptest::prop_assert!(orders.len() + warnings.len() <= count);
+            for warning in &warnings {
+                proptest::prop_assert!(warning.starts_with("p: line "), "{}", warning);
+            }
+        }
     }
 }

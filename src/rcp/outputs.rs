@@ -4,7 +4,11 @@
 //! - `--track`: one CSV row per vehicle step ([`TRACK_HEADER`]; distances from the buoy);
 //! - `--mcap`: the [`McapLog`];
 //! - `--images-out`: every completed image as `image-NNNN.png`, each file whole (written
-//!   aside and renamed), the directory created with the first.
+//!   aside and renamed), the directory created with the first; with `--preview`, the image in
+//!   progress is written there too, as the file it will be, each time more of it has arrived
+//!   (decoded from the trunks received without a gap), and the completed image replaces it;
+//! - `--telemetry`: JSON Lines as things happen ([`Telemetry`]; docs/tdma-console.md lists
+//!   every line), each line written and flushed at once so a reader of a pipe sees it live.
 //!
 //! Rows go through [`RowWriter`]: each one whole line in one write, so a run stopped by a
 //! signal or a full disk leaves whole rows. The first write error is kept; from then on
@@ -13,13 +17,21 @@
 
 use std::path::{Path, PathBuf};
 
-use super::PoseSample;
+use std::collections::BTreeMap;
+use std::sync::{Arc, Condvar, Mutex};
+
+use serde_json::{Map, Value};
+
+use super::drive::DriveEvent;
 use super::mcap_log::McapLog;
 use super::session::{FrameEvent, Metrics, Observer};
+use super::{Event, PoseSample, Role};
 use crate::cli::UsageError;
 use crate::cli::output::Dest;
 use crate::cli::rows::{RowFormat, RowWriter};
 use crate::io::{AtomicFile, Output};
+use crate::wire::operator::Order;
+use crate::wire::{Message, MessageRepr};
 
 /// The columns of `--events`.
 pub const EVENTS_HEADER: [&str; 6] = [
@@ -60,6 +72,10 @@ pub struct Destinations {
     pub mcap: Option<Dest>,
     /// `--images-out`: a directory, created at the first image.
     pub images_out: Option<PathBuf>,
+    /// `--telemetry`.
+    pub telemetry: Option<Dest>,
+    /// `--preview`: the image in progress written into `images_out` as it arrives.
+    pub preview: bool,
 }
 
 /// The observer writing every output of a session.
@@ -69,6 +85,10 @@ pub struct Recorder {
     mcap: Option<McapLog>,
     images_out: Option<PathBuf>,
     images: u64,
+    telemetry: Option<Telemetry>,
+    preview: Option<Previewer>,
+    /// The bytes of the image in progress last handed to the previewer.
+    previewed: Option<usize>,
     buoy_m: [f64; 3],
     progress: indicatif::ProgressBar,
     error: Option<anyhow::Error>,
@@ -88,6 +108,9 @@ impl Recorder {
             .as_ref()
             .map(|dest| McapLog::create(dest, base_ns))
             .transpose()?;
+        let preview = (dests.preview && dests.images_out.is_some())
+            .then(Previewer::start)
+            .transpose()?;
         Ok(Recorder {
             events: dests
                 .events
@@ -98,6 +121,9 @@ impl Recorder {
             mcap,
             images_out: dests.images_out,
             images: 0,
+            telemetry: dests.telemetry.map(Telemetry::new),
+            preview,
+            previewed: None,
             buoy_m,
             progress,
             error: None,
@@ -114,10 +140,13 @@ impl Recorder {
     /// section); the first error wins.
     pub fn finish(mut self) -> anyhow::Result<()> {
         self.progress.finish_and_clear();
+        let preview = self.preview.take().map(Previewer::finish);
         if let Some(error) = self.error.take() {
             return Err(error);
         }
-        for rows in [self.events.take(), self.track.take()]
+        preview.transpose()?;
+        let telemetry = self.telemetry.take().map(|t| t.rows);
+        for rows in [self.events.take(), self.track.take(), telemetry]
             .into_iter()
             .flatten()
         {
@@ -129,19 +158,156 @@ impl Recorder {
         Ok(())
     }
 
+    /// The file image number `n` is written to, with `--images-out`.
+    fn image_path(&self, n: u64) -> Option<PathBuf> {
+        let dir = self.images_out.as_ref()?;
+        Some(dir.join(format!("image-{n:04}.png")))
+    }
+
+    /// With `--preview`: hands the image in progress to the previewer when more of it has
+    /// arrived; the file its preview goes to.
+    fn write_preview(&mut self, prefix: &[u8]) -> Option<PathBuf> {
+        if prefix.is_empty() || self.error.is_some() {
+            return None;
+        }
+        let (number, previewer) = (self.images + 1, self.preview.as_ref()?);
+        let path = self.image_path(number)?;
+        if self.previewed != Some(prefix.len()) {
+            previewer.show(number, path.clone(), prefix);
+            self.previewed = Some(prefix.len());
+        }
+        Some(path)
+    }
+
     fn save_image(&self, path: &std::path::Path, stream: &[u8]) -> anyhow::Result<()> {
         let image = crate::debt::decode(stream)
             .map_err(|e| anyhow::anyhow!("image {}: {e}", self.images))?;
         let png = crate::debt::picture::to_png(&image)
             .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-        if let Some(dir) = path.parent() {
-            std::fs::create_dir_all(dir).map_err(|source| crate::io::IoError::Open {
-                path: dir.to_path_buf(),
-                source,
-            })?;
+        write_whole(path, &png)
+    }
+}
+
+/// Writes a file whole (aside, then renamed), creating its directory.
+fn write_whole(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).map_err(|source| crate::io::IoError::Open {
+            path: dir.to_path_buf(),
+            source,
+        })?;
+    }
+    AtomicFile::create(path)?.commit_with(bytes)?;
+    Ok(())
+}
+
+/// `--preview`'s writer: decodes and writes the image in progress in a thread of its own, so
+/// a large picture (a 1920x1080 one takes ~0.1 s to decode and compress) never holds up the
+/// session. Only the latest prefix waits: one the thread had no time for is replaced by the
+/// next. A preview of an image already completed is never written over its whole file.
+struct Previewer {
+    shared: Arc<(Mutex<PreviewState>, Condvar)>,
+    worker: Option<std::thread::JoinHandle<()>>,
+}
+
+#[derive(Default)]
+struct PreviewState {
+    /// The latest image in progress to write: its number, its file, its bytes so far.
+    pending: Option<(u64, PathBuf, Vec<u8>)>,
+    /// Images completed so far: their previews are not written any more.
+    completed: u64,
+    /// The first write error.
+    error: Option<anyhow::Error>,
+    /// No more previews: the thread writes what is pending and ends.
+    closing: bool,
+}
+
+impl Previewer {
+    fn start() -> anyhow::Result<Previewer> {
+        let shared = Arc::new((Mutex::new(PreviewState::default()), Condvar::new()));
+        let theirs = Arc::clone(&shared);
+        let worker = std::thread::Builder::new()
+            .name("preview".into())
+            .spawn(move || preview_worker(&theirs))
+            .map_err(|e| anyhow::anyhow!("--preview: cannot start its thread: {e}"))?;
+        Ok(Previewer {
+            shared,
+            worker: Some(worker),
+        })
+    }
+
+    fn state(&self) -> std::sync::MutexGuard<'_, PreviewState> {
+        self.shared.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Image `number` so far (`prefix`) is to be written to `path`.
+    fn show(&self, number: u64, path: PathBuf, prefix: &[u8]) {
+        self.state().pending = Some((number, path, prefix.to_vec()));
+        self.shared.1.notify_one();
+    }
+
+    /// Image `number` is complete (its whole file is written next): waits for a preview being
+    /// written, and writes none of it after.
+    fn completed(&self, number: u64) {
+        let mut state = self.state();
+        state.completed = state.completed.max(number);
+        if state.pending.as_ref().is_some_and(|(n, _, _)| *n <= number) {
+            state.pending = None;
         }
-        AtomicFile::create(path)?.commit_with(&png)?;
-        Ok(())
+    }
+
+    fn failed(&self) -> bool {
+        self.state().error.is_some()
+    }
+
+    /// Writes what is pending, ends the thread; the first write error.
+    fn finish(mut self) -> anyhow::Result<()> {
+        self.close();
+        if let Some(worker) = self.worker.take() {
+            let _ = worker.join();
+        }
+        self.state().error.take().map_or(Ok(()), Err)
+    }
+
+    fn close(&self) {
+        self.state().closing = true;
+        self.shared.1.notify_one();
+    }
+}
+
+impl Drop for Previewer {
+    fn drop(&mut self) {
+        self.close();
+    }
+}
+
+fn preview_worker(shared: &(Mutex<PreviewState>, Condvar)) {
+    let (lock, wake) = shared;
+    let state = || lock.lock().unwrap_or_else(|e| e.into_inner());
+    loop {
+        let (number, path, prefix) = {
+            let mut held = state();
+            while held.pending.is_none() && !held.closing {
+                held = wake.wait(held).unwrap_or_else(|e| e.into_inner());
+            }
+            match held.pending.take() {
+                Some(job) => job,
+                None => return,
+            }
+        };
+        // A prefix short of the stream's header is no picture yet.
+        let Some(png) = crate::debt::decode(&prefix)
+            .ok()
+            .and_then(|image| crate::debt::picture::to_png(&image).ok())
+        else {
+            continue;
+        };
+        let mut held = state();
+        if number > held.completed
+            && held.error.is_none()
+            && let Err(error) = write_whole(&path, &png)
+        {
+            held.error = Some(error);
+        }
     }
 }
 
@@ -181,15 +347,43 @@ impl Observer for Recorder {
 
     fn image(&mut self, t_s: f64, stream: &[u8]) {
         self.images += 1;
+        self.previewed = None;
+        if let Some(previewer) = &self.preview {
+            previewer.completed(self.images);
+        }
         if let Some(log) = self.mcap.as_mut() {
             log.image(t_s, stream);
         }
-        let (Some(dir), None) = (self.images_out.as_ref(), self.error.as_ref()) else {
-            return;
+        let mut file = None;
+        if let (Some(path), None) = (self.image_path(self.images), self.error.as_ref()) {
+            let saved = self.save_image(&path, stream);
+            file = saved.is_ok().then_some(path);
+            self.keep(saved);
+        }
+        if let (Some(telemetry), None) = (self.telemetry.as_mut(), self.error.as_ref()) {
+            let outcome = telemetry.image_complete(t_s, file.as_deref());
+            self.keep(outcome);
+        }
+    }
+
+    fn event(&mut self, end: Role, t_s: f64, event: &Event) {
+        let file = match event {
+            Event::ImageProgress { prefix, .. } => self.write_preview(prefix),
+            _ => None,
         };
-        let path = dir.join(format!("image-{:04}.png", self.images));
-        let saved = self.save_image(&path, stream);
-        self.keep(saved);
+        if let (Some(telemetry), None) = (self.telemetry.as_mut(), self.error.as_ref()) {
+            let outcome = telemetry.event(end, t_s, event, file.as_deref());
+            self.keep(outcome);
+        }
+    }
+
+    fn warning(&mut self, t_s: f64, text: &str) {
+        if let (Some(telemetry), None) = (self.telemetry.as_mut(), self.error.as_ref()) {
+            let mut line = telemetry.line("warning", t_s, Role::Operator);
+            line.insert("text".into(), text.into());
+            let outcome = telemetry.write(line);
+            self.keep(outcome);
+        }
     }
 
     fn pose(&mut self, pose: &PoseSample) {
@@ -225,7 +419,240 @@ impl Observer for Recorder {
     }
 
     fn failed(&self) -> bool {
-        self.error.is_some() || self.mcap.as_ref().is_some_and(Observer::failed)
+        self.error.is_some()
+            || self.mcap.as_ref().is_some_and(Observer::failed)
+            || self.preview.as_ref().is_some_and(Previewer::failed)
+    }
+}
+
+/// Seconds between two telemetry lines for the same camera failure.
+pub const CAMERA_REPEAT_S: f64 = 10.0;
+
+/// The most orders remembered between their sending and their acknowledgement (to show the
+/// order again when it is acknowledged).
+const REMEMBERED_ORDERS: usize = 64;
+
+/// `--telemetry`: one JSON object a line for each thing that happens, each with `type`,
+/// `t_s` (session seconds) and `end` (`operator` or `rov`); see docs/tdma-console.md.
+pub struct Telemetry {
+    rows: RowWriter,
+    /// Orders sent and not yet acknowledged, by number.
+    sent: BTreeMap<u64, Order>,
+    /// The last image progress: trunks received, trunks in all.
+    progress: (usize, Option<usize>),
+    /// The camera failure last written, when, and how many times it came again since.
+    camera: Option<(String, f64, u64)>,
+}
+
+/// Session seconds as written: to the microsecond.
+fn seconds(t_s: f64) -> Value {
+    Value::from((t_s * 1e6).round() / 1e6)
+}
+
+/// An order in wire.md's JSON form (the `order` object of an operator message).
+pub fn order_json(order: &Order) -> Value {
+    let repr = MessageRepr {
+        src: 0,
+        dst: 0,
+        message: Message::Operator(crate::wire::operator::Repr {
+            oid: false,
+            clo: false,
+            eisn: false,
+            ic: false,
+            rit: 0,
+            order: *order,
+        }),
+    };
+    let mut fields = Map::new();
+    crate::wire::json::write_fields(&repr, &mut fields);
+    fields.remove("order").unwrap_or(Value::Null)
+}
+
+fn path_json(path: Option<&Path>) -> Value {
+    path.map_or(Value::Null, |p| p.display().to_string().into())
+}
+
+impl Telemetry {
+    /// Telemetry lines to `dest`; nothing is created until the first line.
+    pub fn new(dest: Dest) -> Telemetry {
+        Telemetry {
+            rows: RowWriter::new(dest, RowFormat::Ndjson, &[]),
+            sent: BTreeMap::new(),
+            progress: (0, None),
+            camera: None,
+        }
+    }
+
+    /// A line's first fields.
+    fn line(&self, kind: &str, t_s: f64, end: Role) -> Map<String, Value> {
+        let mut line = Map::new();
+        line.insert("type".into(), kind.into());
+        line.insert("t_s".into(), seconds(t_s));
+        line.insert("end".into(), end.name().into());
+        line
+    }
+
+    fn write(&mut self, line: Map<String, Value>) -> Result<(), crate::io::IoError> {
+        self.rows.row(&Value::Object(line))
+    }
+
+    /// A line of `kind` with its `state` and further fields.
+    fn state(
+        &mut self,
+        kind: &str,
+        t_s: f64,
+        end: Role,
+        state: &str,
+        fields: impl IntoIterator<Item = (&'static str, Value)>,
+    ) -> Result<(), crate::io::IoError> {
+        let mut line = self.line(kind, t_s, end);
+        line.insert("state".into(), state.into());
+        for (key, value) in fields {
+            line.insert(key.into(), value);
+        }
+        self.write(line)
+    }
+
+    /// The image just completed, written to `file` (none without `--images-out`).
+    fn image_complete(&mut self, t_s: f64, file: Option<&Path>) -> Result<(), crate::io::IoError> {
+        let (trunks, of) = std::mem::take(&mut self.progress);
+        let of = of
+            .or((trunks > 0).then_some(trunks))
+            .map_or(Value::Null, Value::from);
+        let fields = [
+            ("trunks", of.clone()),
+            ("of", of),
+            ("file", path_json(file)),
+        ];
+        self.state("image", t_s, Role::Operator, "complete", fields)
+    }
+
+    /// The line for `event` of `end`, if it has one; `file` is the preview written for an
+    /// image in progress.
+    fn event(
+        &mut self,
+        end: Role,
+        t_s: f64,
+        event: &Event,
+        file: Option<&Path>,
+    ) -> Result<(), crate::io::IoError> {
+        match event {
+            Event::Status(repr) => {
+                let mut line = self.line("rov", t_s, end);
+                crate::wire::json::write_fields(repr, &mut line);
+                line.shift_remove("trunk");
+                self.write(line)
+            }
+            Event::OrderSent { index, order } => {
+                if self.sent.len() >= REMEMBERED_ORDERS {
+                    self.sent.pop_first();
+                }
+                self.sent.insert(*index, *order);
+                let fields = [("index", (*index).into()), ("order", order_json(order))];
+                self.state("order", t_s, end, "sent", fields)
+            }
+            Event::OrderAcknowledged(index) => {
+                let order = self.sent.remove(index);
+                let fields = [
+                    ("index", (*index).into()),
+                    ("order", order.as_ref().map_or(Value::Null, order_json)),
+                ];
+                self.state("order", t_s, end, "acknowledged", fields)
+            }
+            Event::OrderExecuted(order) => self.state(
+                "order",
+                t_s,
+                end,
+                "executed",
+                [("order", order_json(order))],
+            ),
+            Event::CancelConfirmed | Event::OrderCancelled => {
+                self.state("order", t_s, end, "cancelled", [])
+            }
+            Event::ImageProgress { trunks, of, .. } => {
+                self.progress = (*trunks, *of);
+                let fields = [
+                    ("trunks", (*trunks).into()),
+                    ("of", of.map_or(Value::Null, Value::from)),
+                    ("file", path_json(file)),
+                ];
+                self.state("image", t_s, end, "progress", fields)
+            }
+            Event::ImageStarted { trunks, bytes } => {
+                self.camera = None;
+                let fields = [("trunks", (*trunks).into()), ("bytes", (*bytes).into())];
+                self.state("image", t_s, end, "started", fields)
+            }
+            Event::ImageCancelled => self.state("image", t_s, end, "cancelled", []),
+            // Written by [`Observer::image`], which knows the file.
+            Event::ImageCompleted(_) => Ok(()),
+            Event::AnswersLost | Event::LinkLost => self.state("link", t_s, end, "lost", []),
+            Event::AnswersBack | Event::LinkRecovered => {
+                self.state("link", t_s, end, "recovered", [])
+            }
+            Event::Vehicle(drive) => self.vehicle(end, t_s, drive),
+            Event::CameraFailed(error) => self.camera_failed(end, t_s, error),
+        }
+    }
+
+    fn vehicle(
+        &mut self,
+        end: Role,
+        t_s: f64,
+        event: &DriveEvent,
+    ) -> Result<(), crate::io::IoError> {
+        match event {
+            DriveEvent::Silent { silent_s } => self.state(
+                "vehicle",
+                t_s,
+                end,
+                "silent",
+                [("silent_s", seconds(*silent_s))],
+            ),
+            DriveEvent::Heard => self.state("vehicle", t_s, end, "heard", []),
+            DriveEvent::CommandAck {
+                command,
+                result,
+                accepted,
+            } => {
+                let fields = [
+                    ("command", command.as_str().into()),
+                    ("result", result.as_str().into()),
+                    ("accepted", (*accepted).into()),
+                ];
+                self.state("vehicle", t_s, end, "command_ack", fields)
+            }
+            DriveEvent::Note(text) => self.state(
+                "vehicle",
+                t_s,
+                end,
+                "note",
+                [("text", text.as_str().into())],
+            ),
+        }
+    }
+
+    /// A camera failure: written when it is new, then at most every [`CAMERA_REPEAT_S`] with
+    /// how many times it came again meanwhile (a failing camera fails at every slot).
+    fn camera_failed(
+        &mut self,
+        end: Role,
+        t_s: f64,
+        error: &str,
+    ) -> Result<(), crate::io::IoError> {
+        let repeated = match &mut self.camera {
+            Some((last, at_s, count)) if last == error => {
+                *count += 1;
+                if t_s - *at_s < CAMERA_REPEAT_S {
+                    return Ok(());
+                }
+                *count
+            }
+            _ => 0,
+        };
+        self.camera = Some((error.to_string(), t_s, 0));
+        let fields = [("error", error.into()), ("repeated", repeated.into())];
+        self.state("camera", t_s, end, "failed", fields)
     }
 }
 
@@ -399,5 +826,249 @@ fn counters(metrics: &Metrics) -> String {
             metrics.link_losses,
             metrics.link_recoveries
         ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rcp::drive::DriveEvent;
+    use crate::rcp::{ImageSettings, test_image, trunks_of};
+
+    const STATUS: &str = r#"{"type":"rov","src":1,"dst":0,"ft":true,"lt":false,"st":0,"isn":1,"ci":false,"itsn":0,"rd":true,"eoid":1,"loc":false,"hh":true,"arm":true,"nav":"guided","x_cm":-250,"y_cm":1200,"z_cm":455,"roll_deg":359,"pitch_deg":1,"yaw_deg":180,"trunk":"00010203"}"#;
+
+    const GOTO: Order = Order::GoTo {
+        x_cm: 300,
+        y_cm: 0,
+        z_cm: 50,
+        heading_deg: 90,
+    };
+
+    fn recorder(dests: Destinations) -> Recorder {
+        Recorder::new(dests, [0.0; 3], 0, indicatif::ProgressBar::hidden()).unwrap()
+    }
+
+    fn lines(path: &Path) -> Vec<Value> {
+        std::fs::read_to_string(path)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect()
+    }
+
+    /// An image's DEBT stream, as the ROV cuts it into trunks.
+    fn trunks() -> Vec<Vec<u8>> {
+        trunks_of(&test_image(64, 48, 1), &ImageSettings::default())
+    }
+
+    #[test]
+    fn telemetry_has_a_line_for_each_thing_as_it_happens() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.jsonl");
+        let mut rec = recorder(Destinations {
+            telemetry: Some(Dest::File(path.clone())),
+            ..Destinations::default()
+        });
+        let (op, rov) = (Role::Operator, Role::Rov);
+        let status = crate::wire::json::parse_line(STATUS).unwrap();
+        rec.event(op, 1.5, &Event::Status(status));
+        // Each line is in the file as soon as it happened.
+        assert_eq!(lines(&path).len(), 1);
+        rec.event(
+            op,
+            2.0,
+            &Event::OrderSent {
+                index: 3,
+                order: GOTO,
+            },
+        );
+        rec.event(op, 2.5, &Event::OrderAcknowledged(3));
+        rec.event(op, 3.0, &Event::CancelConfirmed);
+        rec.event(rov, 3.0, &Event::OrderExecuted(GOTO));
+        let stream: Vec<u8> = trunks().concat();
+        let progress = Event::ImageProgress {
+            trunks: 2,
+            of: None,
+            prefix: stream[..78].to_vec(),
+        };
+        rec.event(op, 4.0, &progress);
+        rec.event(op, 5.0, &Event::ImageCompleted(stream.clone()));
+        rec.image(5.0, &stream);
+        rec.event(op, 6.0, &Event::AnswersLost);
+        rec.event(rov, 6.5, &Event::LinkLost);
+        rec.event(rov, 7.0, &Event::LinkRecovered);
+        rec.event(
+            rov,
+            7.0,
+            &Event::Vehicle(DriveEvent::Silent { silent_s: 3.0 }),
+        );
+        let ack = DriveEvent::CommandAck {
+            command: "MAV_CMD_COMPONENT_ARM_DISARM".into(),
+            result: "MAV_RESULT_DENIED".into(),
+            accepted: false,
+        };
+        rec.event(rov, 7.5, &Event::Vehicle(ack));
+        for k in 0..5 {
+            rec.event(
+                rov,
+                8.0 + f64::from(k),
+                &Event::CameraFailed("no picture".into()),
+            );
+        }
+        rec.event(rov, 18.5, &Event::CameraFailed("no picture".into()));
+        rec.warning(19.0, "o.jsonl: line 2: not valid JSON at column 1: x");
+        assert!(!rec.failed());
+        rec.finish().unwrap();
+
+        let got = lines(&path);
+        let expected = [
+            r#"{"type":"rov","t_s":1.5,"end":"operator","src":1,"dst":0,"ft":true,"lt":false,"st":0,"isn":1,"ci":false,"itsn":0,"rd":true,"eoid":1,"loc":false,"hh":true,"arm":true,"nav":"guided","x_cm":-250,"y_cm":1200,"z_cm":455,"roll_deg":359,"pitch_deg":1,"yaw_deg":180}"#,
+            r#"{"type":"order","t_s":2.0,"end":"operator","state":"sent","index":3,"order":{"type":"goto","x_cm":300,"y_cm":0,"z_cm":50,"heading_deg":90}}"#,
+            r#"{"type":"order","t_s":2.5,"end":"operator","state":"acknowledged","index":3,"order":{"type":"goto","x_cm":300,"y_cm":0,"z_cm":50,"heading_deg":90}}"#,
+            r#"{"type":"order","t_s":3.0,"end":"operator","state":"cancelled"}"#,
+            r#"{"type":"order","t_s":3.0,"end":"rov","state":"executed","order":{"type":"goto","x_cm":300,"y_cm":0,"z_cm":50,"heading_deg":90}}"#,
+            r#"{"type":"image","t_s":4.0,"end":"operator","state":"progress","trunks":2,"of":null,"file":null}"#,
+            r#"{"type":"image","t_s":5.0,"end":"operator","state":"complete","trunks":2,"of":2,"file":null}"#,
+            r#"{"type":"link","t_s":6.0,"end":"operator","state":"lost"}"#,
+            r#"{"type":"link","t_s":6.5,"end":"rov","state":"lost"}"#,
+            r#"{"type":"link","t_s":7.0,"end":"rov","state":"recovered"}"#,
+            r#"{"type":"vehicle","t_s":7.0,"end":"rov","state":"silent","silent_s":3.0}"#,
+            r#"{"type":"vehicle","t_s":7.5,"end":"rov","state":"command_ack","command":"MAV_CMD_COMPONENT_ARM_DISARM","result":"MAV_RESULT_DENIED","accepted":false}"#,
+            r#"{"type":"camera","t_s":8.0,"end":"rov","state":"failed","error":"no picture","repeated":0}"#,
+            r#"{"type":"camera","t_s":18.5,"end":"rov","state":"failed","error":"no picture","repeated":5}"#,
+            r#"{"type":"warning","t_s":19.0,"end":"operator","text":"o.jsonl: line 2: not valid JSON at column 1: x"}"#,
+        ];
+        let text = std::fs::read_to_string(&path).unwrap();
+        for (line, want) in text.lines().zip(expected) {
+            assert_eq!(line, want);
+        }
+        assert_eq!(got.len(), expected.len(), "{text}");
+    }
+
+    /// Waits until `path` holds `bytes` (the previewer writes in its own thread), or 10 s.
+    fn wait_for(path: &Path, bytes: &[u8]) -> bool {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        while std::time::Instant::now() < deadline {
+            if std::fs::read(path).is_ok_and(|b| b == bytes) {
+                return true;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+        false
+    }
+
+    fn png_of(stream: &[u8]) -> Vec<u8> {
+        crate::debt::picture::to_png(&crate::debt::decode(stream).unwrap()).unwrap()
+    }
+
+    #[test]
+    fn preview_writes_the_image_in_progress_as_the_file_it_will_be() {
+        let dir = tempfile::tempdir().unwrap();
+        let (out, telemetry) = (dir.path().join("rx"), dir.path().join("t.jsonl"));
+        let mut rec = recorder(Destinations {
+            images_out: Some(out.clone()),
+            preview: true,
+            telemetry: Some(Dest::File(telemetry.clone())),
+            ..Destinations::default()
+        });
+        let trunks = trunks();
+        let stream = trunks.concat();
+        let first = out.join("image-0001.png");
+        let mut prefix = Vec::new();
+        let mut previews = Vec::new();
+        for (k, trunk) in trunks.iter().enumerate() {
+            prefix.extend_from_slice(trunk);
+            let of = (k + 1 == trunks.len()).then_some(trunks.len());
+            let event = Event::ImageProgress {
+                trunks: k + 1,
+                of,
+                prefix: prefix.clone(),
+            };
+            rec.event(Role::Operator, k as f64, &event);
+            let expected = png_of(&prefix);
+            assert!(wait_for(&first, &expected), "preview {k} not written");
+            previews.push(expected);
+        }
+        // The picture changed as trunks arrived (it sharpened).
+        assert!(previews.windows(2).filter(|w| w[0] != w[1]).count() >= previews.len() / 2);
+        rec.image(21.0, &stream);
+        assert_eq!(std::fs::read(&first).unwrap(), png_of(&stream));
+        let gap = Event::ImageProgress {
+            trunks: 1,
+            of: None,
+            prefix: Vec::new(),
+        };
+        rec.event(Role::Operator, 22.0, &gap);
+        let next = Event::ImageProgress {
+            trunks: 1,
+            of: None,
+            prefix: trunks[0].clone(),
+        };
+        rec.event(Role::Operator, 23.0, &next);
+        rec.finish().unwrap();
+        // Finishing writes the preview still pending: the image in flight stays as it was.
+        assert_eq!(
+            std::fs::read(out.join("image-0002.png")).unwrap(),
+            png_of(&trunks[0])
+        );
+        let got = lines(&telemetry);
+        let file = |v: &Value| v["file"].as_str().map(str::to_string);
+        assert_eq!(file(&got[0]), Some(first.display().to_string()));
+        let complete = got.iter().find(|l| l["state"] == "complete").unwrap();
+        assert_eq!(file(complete), Some(first.display().to_string()));
+        assert_eq!(complete["of"], trunks.len());
+        assert_eq!(
+            got.last().unwrap()["file"],
+            out.join("image-0002.png").display().to_string()
+        );
+        assert_eq!(got[got.len() - 2]["file"], Value::Null);
+    }
+
+    #[test]
+    fn a_preview_never_overwrites_the_completed_image() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("rx");
+        let mut rec = recorder(Destinations {
+            images_out: Some(out.clone()),
+            preview: true,
+            ..Destinations::default()
+        });
+        // A picture large enough that its preview takes a while to decode and compress.
+        let trunks = trunks_of(&test_image(320, 240, 1), &ImageSettings::default());
+        let stream = trunks.concat();
+        for n in 1..=5u32 {
+            // The last trunks arrive and the image completes at once, while its preview may
+            // still be in the writer's hands.
+            for k in [trunks.len() - 2, trunks.len() - 1] {
+                let event = Event::ImageProgress {
+                    trunks: k,
+                    of: None,
+                    prefix: trunks[..k].concat(),
+                };
+                rec.event(Role::Operator, f64::from(n), &event);
+            }
+            // The writer has taken the last preview and is at work on it.
+            std::thread::sleep(std::time::Duration::from_millis(2));
+            rec.image(f64::from(n), &stream);
+        }
+        rec.finish().unwrap();
+        let whole = png_of(&stream);
+        for n in 1..=5 {
+            let file = out.join(format!("image-{n:04}.png"));
+            assert_eq!(std::fs::read(&file).unwrap(), whole, "{}", file.display());
+        }
+        assert_eq!(std::fs::read_dir(&out).unwrap().count(), 5);
+    }
+
+    #[test]
+    fn a_telemetry_write_error_is_kept_and_fails_the_run() {
+        let mut rec = recorder(Destinations {
+            telemetry: Some(Dest::File("/dev/full".into())),
+            ..Destinations::default()
+        });
+        rec.event(Role::Operator, 1.0, &Event::AnswersLost);
+        assert!(rec.failed());
+        let error = rec.finish().unwrap_err().to_string();
+        assert!(error.starts_with("/dev/full"), "{error}");
     }
 }

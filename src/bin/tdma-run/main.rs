@@ -45,6 +45,8 @@ fn run(args: &Args) -> Result<u8> {
         images_out: (args.images_out.as_deref())
             .map(|dir| outs.claim_dir("--images-out", dir))
             .transpose()?,
+        telemetry: outs.claim_opt("--telemetry", args.telemetry.as_deref(), Kind::Text)?,
+        preview: args.preview,
     };
     if let Some(dir) = &dests.images_out {
         check_images_out(dir, args.inputs())?;
@@ -243,11 +245,12 @@ fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
         parts.camera = Box::new(camera::newest_in_dir(dir)?);
     }
     if let Some(command) = &args.camera_cmd {
-        let command = camera::command_camera(command)?;
-        parts.camera = match args.role {
-            Some(_) => Box::new(command),
-            None => Box::new(Synchronous(command)),
-        };
+        // In virtual time a capture waits for the command's run (the session's time stands
+        // still meanwhile); in real time it never waits.
+        parts.camera = Box::new(match args.role {
+            Some(_) => camera::command_camera(command)?,
+            None => camera::command_camera_waiting(command)?,
+        });
     }
     if let Some(path) = &args.orders {
         let live = args.role.is_some();
@@ -255,38 +258,7 @@ fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
             .orders
             .push(Box::new(rovlink::rcp::console::open_orders(path, live)?));
     }
-    let pending = [
-        ("--telemetry", args.telemetry.is_some()),
-        ("--preview", args.preview),
-    ];
-    if let Some((flag, _)) = pending.iter().find(|(_, given)| *given) {
-        anyhow::bail!(rovlink::cli::UsageError(format!(
-            "{flag}: not wired into this build yet"
-        )));
-    }
     Ok(parts)
-}
-
-/// A camera command in virtual time: each capture waits for its run (the session's time
-/// stands still meanwhile), so the pictures are the command's, not "still running".
-struct Synchronous(camera::CommandCamera);
-
-impl camera::Camera for Synchronous {
-    fn capture(&mut self) -> std::result::Result<rovlink::debt::Image, String> {
-        let deadline = std::time::Instant::now()
-            + std::time::Duration::from_secs_f64(camera::COMMAND_TIMEOUT_S + 1.0);
-        loop {
-            match self.0.capture() {
-                Err(why) if why == camera::WAITING && std::time::Instant::now() < deadline => {
-                    if stop::flag().load(std::sync::atomic::Ordering::Relaxed) {
-                        return Err(why);
-                    }
-                    std::thread::sleep(std::time::Duration::from_millis(5));
-                }
-                shot => return shot,
-            }
-        }
-    }
 }
 
 /// The host part of HOST:PORT, for the URL said at start.
