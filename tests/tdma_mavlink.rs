@@ -544,6 +544,7 @@ fn tdma_run_drives_the_standin_through_link_sim_with_live_orders() {
         .args(["--role", "operator", "--port", &a, "--duration", "15"])
         .args(["--ipg", "200", "--image-size", "400"])
         .args(["--orders", &path("orders"), "--metrics", &path("op.json")])
+        .args(["--telemetry", &path("telemetry.jsonl")])
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
@@ -607,6 +608,35 @@ fn tdma_run_drives_the_standin_through_link_sim_with_live_orders() {
     assert!(
         (0..3).all(|k| (seen.position_m[k] - [1.5, 0.5, 0.5][k]).abs() < 0.3),
         "{seen:?}"
+    );
+    // The operator's telemetry: the last status is the autopilot's own position, and the goto
+    // was acknowledged.
+    let telemetry: Vec<serde_json::Value> = std::fs::read_to_string(path("telemetry.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let status = telemetry
+        .iter()
+        .rev()
+        .find(|t| t["type"] == "rov")
+        .expect("a status in the telemetry");
+    let reported = ["x_cm", "y_cm", "z_cm"].map(|k| status[k].as_f64().unwrap() / 100.0);
+    let error = (0..3)
+        .map(|k| (reported[k] - seen.position_m[k]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(
+        error < 0.3,
+        "telemetry {status}, autopilot {:?}",
+        seen.position_m
+    );
+    assert_eq!(status["arm"], true, "{status}");
+    assert!(
+        telemetry
+            .iter()
+            .any(|t| t["type"] == "order" && t["state"] == "acknowledged"),
+        "{telemetry:?}"
     );
 }
 
