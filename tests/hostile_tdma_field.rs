@@ -2,7 +2,6 @@
 //! promptly, and a signal is obeyed even while the run waits on an order FIFO or a camera
 //! command.
 
-use std::io::Read;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -13,13 +12,7 @@ fn wait_within(mut child: Child, limit: Duration) -> (i32, String) {
     let started = Instant::now();
     loop {
         if let Some(status) = child.try_wait().unwrap() {
-            let mut err = String::new();
-            child
-                .stderr
-                .take()
-                .unwrap()
-                .read_to_string(&mut err)
-                .unwrap();
+            let err = std::io::read_to_string(child.stderr.take().unwrap()).unwrap();
             let code = status
                 .code()
                 .unwrap_or_else(|| panic!("killed by a signal: {status}"));
