@@ -17,10 +17,14 @@
 //! No-panic, no-hang contract: a capture that finds no picture returns `Err` saying why (the ROV
 //! sends status only and tries again at the next slot). A camera command's output is bounded
 //! ([`MAX_COMMAND_BYTES`]), it is killed with its process group after [`COMMAND_TIMEOUT_S`], and
-//! [`Camera::capture`] never waits for it.
+//! [`Camera::capture`] never waits for it in real time. In simulation
+//! ([`command_camera_waiting`]) a capture waits for the command, at most the timeout once: a
+//! command that ran out of time is not run again (each capture would wait as long, stretching
+//! the session without end), and [`CommandCamera::stop_on`] ends a wait when a signal comes.
 
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::{Receiver, Sender, channel};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, channel};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime};
 
@@ -327,6 +331,11 @@ pub struct CommandCamera {
     /// The background runs, in real time.
     worker: Option<Worker>,
     group: Arc<Mutex<Option<nix::unistd::Pid>>>,
+    /// Set when the run is asked to stop: a waiting capture then kills its command at once.
+    stop: Option<&'static AtomicBool>,
+    /// Waiting captures: why the command is not run any more (one run took the whole timeout,
+    /// and each capture waiting as long would stretch a simulation without end).
+    gave_up: Option<String>,
 }
 
 struct Worker {
@@ -366,7 +375,7 @@ pub fn command_camera_timed(
                 .name("camera-cmd".into())
                 .spawn(move || {
                     while wanted.recv().is_ok() {
-                        if done.send(run_once(&cmd, timeout, &group)).is_err() {
+                        if done.send(run_once(&cmd, timeout, &group, None)).is_err() {
                             return;
                         }
                     }
@@ -385,13 +394,34 @@ pub fn command_camera_timed(
         timeout,
         worker,
         group,
+        stop: None,
+        gave_up: None,
     })
+}
+
+impl CommandCamera {
+    /// The same camera, a waiting capture of which ends (killing the command) as soon as
+    /// `stop` is set, rather than at the timeout: a SIGTERM ends a simulation promptly.
+    pub fn stop_on(mut self, stop: &'static AtomicBool) -> Self {
+        self.stop = Some(stop);
+        self
+    }
 }
 
 impl Camera for CommandCamera {
     fn capture(&mut self) -> Result<debt::Image, String> {
         let Some(worker) = self.worker.as_mut() else {
-            return run_once(&self.cmd, self.timeout, &self.group);
+            if let Some(reason) = &self.gave_up {
+                return Err(reason.clone());
+            }
+            let started = Instant::now();
+            let shot = run_once(&self.cmd, self.timeout, &self.group, self.stop);
+            if let Err(reason) = &shot
+                && started.elapsed() >= self.timeout
+            {
+                self.gave_up = Some(format!("{reason}; not run again"));
+            }
+            return shot;
         };
         let mut shot = None;
         while let Ok(finished) = worker.shots.try_recv() {
@@ -446,7 +476,12 @@ fn last_line(mut reader: impl std::io::Read) -> String {
 }
 
 /// Runs the command once: its picture, or why there is none.
-fn run_once(cmd: &str, timeout: Duration, group: &Mutex<Option<nix::unistd::Pid>>) -> Shot {
+fn run_once(
+    cmd: &str,
+    timeout: Duration,
+    group: &Mutex<Option<nix::unistd::Pid>>,
+    stop: Option<&AtomicBool>,
+) -> Shot {
     use std::os::unix::process::CommandExt;
     use std::process::{Command, Stdio};
     let deadline = Instant::now() + timeout;
@@ -479,7 +514,17 @@ fn run_once(cmd: &str, timeout: Duration, group: &Mutex<Option<nix::unistd::Pid>
             let _ = err_tx.send(last_line(stderr));
         });
     }
-    let output = out_rx.recv_timeout(deadline.saturating_duration_since(Instant::now()));
+    let stopped = || stop.is_some_and(|flag| flag.load(Ordering::SeqCst));
+    // Waited for in slices, so a stop asked for meanwhile is seen within one.
+    let output = loop {
+        let slice = deadline
+            .saturating_duration_since(Instant::now())
+            .min(Duration::from_millis(50));
+        match out_rx.recv_timeout(slice) {
+            Err(RecvTimeoutError::Timeout) if !stopped() && Instant::now() < deadline => {}
+            other => break other,
+        }
+    };
     // The command has closed its output (or overrun it, or run out of time): reap it, killing
     // its group if it is still there at the deadline.
     let status = loop {
@@ -489,13 +534,16 @@ fn run_once(cmd: &str, timeout: Duration, group: &Mutex<Option<nix::unistd::Pid>
                 *held = None;
                 break Ok(status);
             }
-            Ok(None) if Instant::now() < deadline && output.is_ok() => {}
+            Ok(None) if Instant::now() < deadline && output.is_ok() && !stopped() => {}
             Ok(None) | Err(_) => {
                 if let Some(pid) = *held {
                     let _ = nix::sys::signal::killpg(pid, nix::sys::signal::Signal::SIGKILL);
                 }
                 let _ = child.wait();
                 *held = None;
+                if stopped() {
+                    break Err("camera command: killed: the run was asked to stop".into());
+                }
                 break Err(format!(
                     "camera command: killed after {:.1} s without finishing",
                     timeout.as_secs_f64()
@@ -791,5 +839,31 @@ mod tests {
             camera.capture().unwrap_err(),
             "camera command: exit status 1"
         );
+    }
+
+    #[test]
+    fn a_waiting_command_that_runs_out_of_time_is_not_run_again_and_a_stop_ends_a_wait() {
+        let mut camera =
+            command_camera_timed("sleep 30", false, Duration::from_millis(300)).unwrap();
+        let first = camera.capture().unwrap_err();
+        assert!(first.contains("killed after 0.3 s"), "{first}");
+        let started = Instant::now();
+        let again = camera.capture().unwrap_err();
+        assert!(again.ends_with("not run again"), "{again}");
+        assert!(started.elapsed() < Duration::from_millis(100));
+
+        static STOP: AtomicBool = AtomicBool::new(false);
+        let mut camera = command_camera_timed("sleep 30", false, Duration::from_secs(20))
+            .unwrap()
+            .stop_on(&STOP);
+        let setter = std::thread::spawn(|| {
+            std::thread::sleep(Duration::from_millis(200));
+            STOP.store(true, Ordering::SeqCst);
+        });
+        let started = Instant::now();
+        let stopped = camera.capture().unwrap_err();
+        assert!(stopped.contains("asked to stop"), "{stopped}");
+        assert!(started.elapsed() < Duration::from_secs(2));
+        setter.join().unwrap();
     }
 }

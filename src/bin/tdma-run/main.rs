@@ -85,7 +85,13 @@ fn run(args: &Args) -> Result<u8> {
         images: pictures.images,
     };
     config.validate()?;
-    let mut parts = parts(args, &config)?;
+    let mut parts = match parts(args, &config) {
+        Err(e) if e.is::<Stopped>() => {
+            say!("{e}: nothing was run");
+            return Ok(stop::code_or(EXIT_OK));
+        }
+        other => other?,
+    };
     let mut live = match &args.foxglove {
         Some(addr) => {
             let end = role.unwrap_or(Role::Operator);
@@ -249,16 +255,49 @@ fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
         // still meanwhile); in real time it never waits.
         parts.camera = Box::new(match args.role {
             Some(_) => camera::command_camera(command)?,
-            None => camera::command_camera_waiting(command)?,
+            None => camera::command_camera_waiting(command)?.stop_on(stop::flag()),
         });
     }
     if let Some(path) = &args.orders {
         let live = args.role.is_some();
-        parts
-            .orders
-            .push(Box::new(rovlink::rcp::console::open_orders(path, live)?));
+        parts.orders.push(Box::new(open_orders(path, live)?));
     }
     Ok(parts)
+}
+
+/// A signal came while the run was still starting.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+struct Stopped(String);
+
+/// Opens `--orders`. In simulation the whole input is read at start, which waits for a
+/// FIFO's writer (or a terminal's end of input): that wait is done aside, so a signal
+/// meanwhile ends the run ([`Stopped`]) instead of being left for later.
+fn open_orders(path: &std::path::Path, live: bool) -> Result<rovlink::rcp::console::JsonOrders> {
+    use std::sync::mpsc::RecvTimeoutError;
+    if live {
+        return Ok(rovlink::rcp::console::open_orders(path, true)?);
+    }
+    let (tx, rx) = std::sync::mpsc::channel();
+    let owned = path.to_path_buf();
+    std::thread::Builder::new()
+        .name("orders-open".into())
+        .spawn(move || {
+            let _ = tx.send(rovlink::rcp::console::open_orders(&owned, false));
+        })?;
+    loop {
+        match rx.recv_timeout(std::time::Duration::from_millis(50)) {
+            Ok(opened) => return Ok(opened?),
+            Err(RecvTimeoutError::Timeout) if !stop::requested() => {}
+            Err(_) => {
+                let what = format!(
+                    "stopped while waiting for the orders of --orders {}",
+                    path.display()
+                );
+                return Err(Stopped(what).into());
+            }
+        }
+    }
 }
 
 /// The host part of HOST:PORT, for the URL said at start.
