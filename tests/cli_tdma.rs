@@ -136,19 +136,7 @@ fn the_two_ends_run_in_real_time_through_link_sim() {
     use std::process::{Command, Stdio};
     let dir = tempfile::tempdir().unwrap();
     let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
-    let (mut link, a, b) = common::link_sim_pty(&[
-        "--model",
-        "s100",
-        "--bitrate-bps",
-        "9600",
-        "--intrinsic-delay-ms",
-        "20",
-        "--jitter-ms",
-        "2",
-        // A debug build's ROV can answer late enough to collide with the next slot.
-        "--half-duplex",
-        "false",
-    ]);
+    let (mut link, a, b) = common::link_sim_pty(&common::TEST_S100);
     let waypoints = path("wp.csv");
     std::fs::write(
         &waypoints,

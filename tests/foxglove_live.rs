@@ -479,18 +479,7 @@ fn an_operator_driven_from_foxglove_over_link_sim() {
     const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
     let dir = tempfile::tempdir().unwrap();
     let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
-    let (mut link, a, b) = common::link_sim_pty(&[
-        "--model",
-        "s100",
-        "--bitrate-bps",
-        "9600",
-        "--intrinsic-delay-ms",
-        "20",
-        "--jitter-ms",
-        "2",
-        "--half-duplex",
-        "false",
-    ]);
+    let (mut link, a, b) = common::link_sim_pty(&common::TEST_S100);
     let mut rov = Command::new(TDMA_RUN)
         .args(["--role", "rov", "--port", &b, "--duration", "14"])
         .args(["--image-size", "400", "--metrics", &path("rov.json")])

@@ -383,18 +383,7 @@ fn real_time_orders_written_into_a_fifo_while_the_operator_runs_are_acknowledged
     nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).unwrap();
     let shot = dir.path().join("shot.png");
     std::fs::write(&shot, png(48, 36)).unwrap();
-    let (mut link, a, b) = common::link_sim_pty(&[
-        "--model",
-        "s100",
-        "--bitrate-bps",
-        "9600",
-        "--intrinsic-delay-ms",
-        "20",
-        "--jitter-ms",
-        "2",
-        "--half-duplex",
-        "false",
-    ]);
+    let (mut link, a, b) = common::link_sim_pty(&common::TEST_S100);
     let cmd = format!("cat '{}'", shot.display());
     let mut rov = Command::new(TDMA_RUN)
         .args(["--role", "rov", "--port", &b, "--duration", "14"])

@@ -131,6 +131,22 @@ pub fn wait_for_exit(
     }
 }
 
+/// The link the real-time tests run two `tdma-run` ends over: S100 at 9600 bit/s, 20 ms delay,
+/// 2 ms jitter, full duplex (a debug build's ROV can answer late enough to collide with the
+/// next slot).
+pub const TEST_S100: [&str; 10] = [
+    "--model",
+    "s100",
+    "--bitrate-bps",
+    "9600",
+    "--intrinsic-delay-ms",
+    "20",
+    "--jitter-ms",
+    "2",
+    "--half-duplex",
+    "false",
+];
+
 /// Starts `link-sim --pty` with `args`; returns it and the paths of its sides A and B.
 pub fn link_sim_pty(args: &[&str]) -> (std::process::Child, String, String) {
     use std::io::BufRead;
