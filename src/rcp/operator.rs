@@ -27,6 +27,16 @@ pub struct Joystick {
     pub vyaw: f64,
 }
 
+/// A Velocity order's axis (-127..=127) as percent of full thrust (-100..=100).
+pub fn thrust_percent(axis: i8) -> f64 {
+    f64::from(axis) * 100.0 / 127.0
+}
+
+/// Percent of full thrust as a Velocity order's axis, clamped to -100..=100 % first.
+pub fn thrust_axis(percent: f64) -> i8 {
+    (percent.clamp(-100.0, 100.0) * 127.0 / 100.0).round() as i8
+}
+
 /// What a slot's frame carries, for the caller's accounting.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SlotContent {
@@ -139,12 +149,11 @@ impl Operator {
                 (order, oid, SlotContent::Order(index))
             }
             None => {
-                let scale = |v: f64| (v.clamp(-100.0, 100.0) * 127.0 / 100.0).round() as i8;
                 let order = Order::Velocity {
-                    vx: scale(self.joystick.vx),
-                    vy: scale(self.joystick.vy),
-                    vz: scale(self.joystick.vz),
-                    vyaw: scale(self.joystick.vyaw),
+                    vx: thrust_axis(self.joystick.vx),
+                    vy: thrust_axis(self.joystick.vy),
+                    vz: thrust_axis(self.joystick.vz),
+                    vyaw: thrust_axis(self.joystick.vyaw),
                     arm: self.modes.0,
                     disarm: self.modes.1,
                     nav: self.modes.2,

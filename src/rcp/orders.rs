@@ -88,20 +88,17 @@ impl Live {
                 arm,
                 disarm,
                 nav,
-            } => {
-                let percent = |v: i8| f64::from(v) * 100.0 / 127.0;
-                Ok(Live::Joystick {
-                    joystick: Joystick {
-                        vx: percent(vx),
-                        vy: percent(vy),
-                        vz: percent(vz),
-                        vyaw: percent(vyaw),
-                    },
-                    arm,
-                    disarm,
-                    nav,
-                })
-            }
+            } => Ok(Live::Joystick {
+                joystick: Joystick {
+                    vx: super::operator::thrust_percent(vx),
+                    vy: super::operator::thrust_percent(vy),
+                    vz: super::operator::thrust_percent(vz),
+                    vyaw: super::operator::thrust_percent(vyaw),
+                },
+                arm,
+                disarm,
+                nav,
+            }),
             Order::Unknown { .. } => Err(LiveError::Kind("\"unknown\"".into())),
             order => Ok(Live::Order(order)),
         }

@@ -284,7 +284,7 @@ impl Rov {
                 disarm,
                 nav,
             } => {
-                self.joystick = [vx, vy, vz, vyaw].map(|v| f64::from(v) * 100.0 / 127.0);
+                self.joystick = [vx, vy, vz, vyaw].map(super::operator::thrust_percent);
                 if arm {
                     self.arm = true;
                 }
