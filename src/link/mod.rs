@@ -16,6 +16,7 @@
 pub mod channel;
 pub mod dialect;
 pub mod distance;
+pub mod medium;
 pub mod model;
 pub mod pipe;
 pub mod realtime;
@@ -25,6 +26,7 @@ pub mod stats;
 
 pub use channel::{Fate, Link, Report, Side};
 pub use distance::Distance;
+pub use medium::{Medium, MediumReport};
 pub use model::{Model, ModelError};
 pub use rng::Rng;
 pub use sched::{Scheduler, SimTime};

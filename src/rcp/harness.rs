@@ -128,6 +128,9 @@ pub struct OperatorEnd {
     /// True when each new status is shown as the pose (when the operator is the only end the
     /// observer sees: in simulation the ROV's own steps are the poses).
     pub status_poses: bool,
+    /// Silence after which the ROV's answers count as lost, s ([`ANSWERS_TIMEOUT_S`] unless a
+    /// long multi-vehicle cycle needs more).
+    pub answers_timeout_s: f64,
 }
 
 impl OperatorEnd {
@@ -141,7 +144,15 @@ impl OperatorEnd {
             answers_up: true,
             last_status: None,
             status_poses: false,
+            answers_timeout_s: ANSWERS_TIMEOUT_S,
         }
+    }
+
+    /// The same end with its first slot at `first` (its vehicle's place in a multi-vehicle
+    /// cycle; `ipg_s` is then the cycle's length).
+    pub fn first_slot_at(mut self, first: SimTime) -> OperatorEnd {
+        self.engine = self.engine.first_slot_at(first);
+        self
     }
 
     /// When the end wants to run next: its next slot, or the next scripted order.
@@ -164,7 +175,7 @@ impl OperatorEnd {
     pub fn poll(&mut self, now: SimTime, out: &mut Out<'_>) -> Option<(Vec<u8>, SlotContent)> {
         self.take_orders(now, out);
         if self.answers_up
-            && now.0.saturating_sub(self.last_answer.0) as f64 * 1e-9 > ANSWERS_TIMEOUT_S
+            && now.0.saturating_sub(self.last_answer.0) as f64 * 1e-9 > self.answers_timeout_s
         {
             self.answers_up = false;
             out.record(Role::Operator, now, &Event::AnswersLost, None);

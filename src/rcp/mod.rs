@@ -23,6 +23,8 @@ pub mod orders;
 pub mod outputs;
 pub mod realtime;
 pub mod rov;
+pub mod routing;
+pub mod scenario;
 pub mod script;
 pub mod session;
 

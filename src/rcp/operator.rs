@@ -94,6 +94,13 @@ impl Operator {
         }
     }
 
+    /// The same operator with its first slot at `first` (a vehicle's place in a multi-vehicle
+    /// cycle), then one every IPG.
+    pub fn first_slot_at(mut self, first: SimTime) -> Operator {
+        self.next_slot = first;
+        self
+    }
+
     /// Sets the joystick.
     pub fn set_joystick(&mut self, joystick: Joystick) {
         self.joystick = joystick;
