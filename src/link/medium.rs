@@ -22,9 +22,9 @@
 //! changes what the others draw from. Nothing here panics on any input: an out-of-range node
 //! index is ignored (offer returns its sequence number and reports nothing).
 
+use super::Fate;
 use super::model::{Model, ModelError};
 use super::sched::SimTime;
-use super::Fate;
 
 /// The fate of one frame at one receiver (or of a duplicate copy of it).
 #[derive(Debug, Clone, PartialEq, Eq)]

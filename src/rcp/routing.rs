@@ -61,7 +61,9 @@ pub enum RoutesError {
         path: Vec<u8>,
     },
     /// A next hop the node has no interface to.
-    #[error("routes: node {node} routes to {dst} through {hop}, but {node} and {hop} share no interface")]
+    #[error(
+        "routes: node {node} routes to {dst} through {hop}, but {node} and {hop} share no interface"
+    )]
     NoInterface {
         /// The node.
         node: u8,
