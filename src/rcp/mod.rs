@@ -18,6 +18,8 @@ pub mod foxglove;
 pub mod harness;
 pub mod mavlink;
 pub mod mcap_log;
+pub mod net_outputs;
+pub mod network;
 pub mod operator;
 pub mod orders;
 pub mod outputs;
