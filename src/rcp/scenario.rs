@@ -369,9 +369,7 @@ fn number_in(
 
 fn position(at: &str, value: &Value) -> Result<[f64; 3], ScenarioError> {
     let items = value.as_array().filter(|a| a.len() == 3);
-    let numbers: Option<Vec<f64>> = items
-        .map(|a| a.iter().map(Value::as_f64).collect())
-        .flatten();
+    let numbers: Option<Vec<f64>> = items.and_then(|a| a.iter().map(Value::as_f64).collect());
     match numbers {
         Some(v) if v.iter().all(|x| x.is_finite() && x.abs() <= MAX_POSITION_M) => {
             Ok([v[0], v[1], v[2]])
