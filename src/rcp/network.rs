@@ -660,3 +660,103 @@ fn deliver(
         net.originate(t, rx, reply, None);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    /// The issue's scenario.
+    pub(crate) const THREE: &str = r#"{"duration_s":600,"seed":1,
+      "nodes":[{"address":0,"role":"operator","position":[0,0,0]},
+               {"address":1,"role":"rov","start":[3,0,1]},
+               {"address":2,"role":"rov","start":[7,0,1],"waypoints":[[30,7.5,1,1,90]]}],
+      "media":[{"name":"rf","model":"s100","nodes":[0,1,2]}],
+      "routes":{"0":{"2":1},"2":{"0":1}}}"#;
+
+    fn scenario(text: &str) -> Scenario {
+        Scenario::parse(text, Path::new(".")).unwrap()
+    }
+
+    fn images() -> Vec<debt::Image> {
+        vec![super::super::test_image(160, 120, 1)]
+    }
+
+    fn run_quiet(s: &Scenario) -> NetworkMetrics {
+        run(s, &images(), &mut QuietNet, &AtomicBool::new(false)).unwrap()
+    }
+
+    #[test]
+    fn the_far_vehicle_is_reached_through_the_relay() {
+        let m = run_quiet(&scenario(THREE));
+        let (near, far) = (&m.vehicles["1"], &m.vehicles["2"]);
+        for v in [near, far] {
+            assert!(v.images_completed >= 3, "{m:#?}");
+            assert_eq!(v.orders_executed_twice, 0, "{m:#?}");
+            assert_eq!(v.orders_acknowledged_unexecuted, 0, "{m:#?}");
+        }
+        assert_eq!(far.orders_sent, 1, "{m:#?}");
+        assert_eq!(far.orders_executed, 1, "{m:#?}");
+        assert_eq!(far.orders_acknowledged, 1, "{m:#?}");
+        let delay = |v: &Metrics| v.operator_to_rov.delay_ms.unwrap();
+        assert!(delay(far) > 1.5 * delay(near), "{m:#?}");
+        let back = |v: &Metrics| v.rov_to_operator.delay_ms.unwrap();
+        assert!(back(far) > back(near), "{m:#?}");
+        let relay = &m.nodes["1"];
+        assert!(relay.frames_forwarded > 1000, "{m:#?}");
+        assert!(m.nodes.values().all(|n| n.forwarded_back == 0), "{m:#?}");
+        // The operator never hears the far vehicle itself: 7 m is out of the S100's 5 m.
+        assert_eq!(m.nodes["0"].frames_forwarded, 0);
+        assert!(m.media["rf"].receptions_out_of_range > 0);
+    }
+
+    #[test]
+    fn without_routes_the_far_vehicle_gets_nothing() {
+        let text = THREE.replace(r#""routes":{"0":{"2":1},"2":{"0":1}}"#, r#""routes":{}"#);
+        let m = run_quiet(&scenario(&text));
+        let far = &m.vehicles["2"];
+        assert_eq!(far.operator_to_rov.frames_delivered, 0, "{m:#?}");
+        assert_eq!(far.rov_to_operator.frames_delivered, 0, "{m:#?}");
+        assert_eq!(far.images_completed, 0);
+        assert_eq!(far.orders_executed, 0);
+        assert_eq!(m.nodes["1"].frames_forwarded, 0);
+        assert!(m.vehicles["1"].images_completed >= 3, "{m:#?}");
+    }
+
+    #[test]
+    fn a_seed_gives_the_same_run() {
+        let s = scenario(&THREE.replace(r#""duration_s":600"#, r#""duration_s":120"#));
+        let a = serde_json::to_string(&run_quiet(&s)).unwrap();
+        let b = serde_json::to_string(&run_quiet(&s)).unwrap();
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn acoustic_to_the_surface_and_rf_between_vehicles_both_deliver_images() {
+        let text = r#"{"duration_s":1800,"seed":3,
+          "nodes":[{"address":0,"role":"operator","position":[0,0,0]},
+                   {"address":1,"role":"rov","start":[0,0,200]},
+                   {"address":2,"role":"rov","start":[3,0,200]}],
+          "media":[{"name":"acoustic","model":"s2cr-burst","nodes":[0,1]},
+                   {"name":"rf","model":"s100","nodes":[1,2]}],
+          "routes":{"0":{"2":1},"2":{"0":1}}}"#;
+        let s = scenario(text);
+        // The relay's two interfaces: acoustic up, RF across.
+        assert_eq!(s.interfaces(1), [0, 1]);
+        let m = run_quiet(&s);
+        for v in m.vehicles.values() {
+            assert!(v.images_completed >= 1, "{m:#?}");
+            assert_eq!(v.orders_executed_twice, 0);
+        }
+        assert!(m.nodes["1"].frames_forwarded > 0);
+        assert!(m.media["rf"].transmissions > 0 && m.media["acoustic"].transmissions > 0);
+    }
+
+    #[test]
+    fn a_stop_ends_the_run_with_the_figures_so_far() {
+        let stop = AtomicBool::new(true);
+        let m = run(&scenario(THREE), &images(), &mut QuietNet, &stop).unwrap();
+        assert_eq!(m.interrupted.as_deref(), Some(STOPPED));
+        assert!(m.duration_s < 1.0);
+    }
+}
