@@ -5,7 +5,10 @@
 //! [`Live::parse`]; an optional `"t_s"` field (session seconds, finite, 0 ..= a week) says when
 //! it is due. An order never overtakes the line before it: a line is due at its `t_s` or at the
 //! previous line's time, whichever is later; a line without `t_s` is due with the previous one
-//! (in simulation: at 0 for the first) or, in real time, as soon as it is read.
+//! (in simulation: at 0 for the first) or, in real time, as soon as it is read. In a
+//! multi-vehicle network an optional `"vehicle"` field (an address 1..=14) names the vehicle
+//! it is for ([`OrderSource::poll_addressed`]; without it, the first vehicle); a single-vehicle
+//! session ignores it.
 //!
 //! Two ways of reading, chosen by the caller:
 //! - simulation (`live = false`): the whole input (at most [`MAX_ORDERS_BYTES`]) is read when it
@@ -89,7 +92,27 @@ pub enum ConsoleError {
 
 /// One console line read: the order and its `t_s`, if it has one.
 pub fn parse_line(line: &str) -> Result<(Option<f64>, Live), LiveError> {
+    parse_addressed_line(line).map(|(t_s, _, live)| (t_s, live))
+}
+
+/// One console line read: its `t_s` and its `vehicle` (an address 1..=14), each if it has
+/// one, and the order.
+pub fn parse_addressed_line(line: &str) -> Result<(Option<f64>, Option<u8>, Live), LiveError> {
     let map = object_of(line)?;
+    let vehicle = match map.get("vehicle") {
+        None => None,
+        Some(value) => match value.as_u64() {
+            Some(v @ 1..=14) => u8::try_from(v).ok(),
+            _ => {
+                return Err(JsonError::BadValue {
+                    field: "vehicle".into(),
+                    expected: "a vehicle address 1..=14".into(),
+                    found: crate::wire::json::show(value),
+                }
+                .into());
+            }
+        },
+    };
     let t_s = match map.get("t_s") {
         None => None,
         Some(value) => match value.as_f64() {
@@ -104,11 +127,14 @@ pub fn parse_line(line: &str) -> Result<(Option<f64>, Live), LiveError> {
             }
         },
     };
-    Ok((t_s, Live::from_object(&map)?))
+    Ok((t_s, vehicle, Live::from_object(&map)?))
 }
 
+/// A console line's order: when it is due (if it says), the vehicle it names, the order.
+type Parsed = (Option<f64>, Option<u8>, Live);
+
 /// A line's bytes as an order, or the warning's text (without the `PATH: line N: ` prefix).
-fn read_order(bytes: &[u8], too_long: bool) -> Option<Result<(Option<f64>, Live), String>> {
+fn read_order(bytes: &[u8], too_long: bool) -> Option<Result<Parsed, String>> {
     if too_long {
         return Some(Err(format!(
             "longer than {MAX_LINE_BYTES} bytes: not an order"
@@ -121,7 +147,7 @@ fn read_order(bytes: &[u8], too_long: bool) -> Option<Result<(Option<f64>, Live)
     if text.trim().is_empty() {
         return None;
     }
-    Some(parse_line(text).map_err(|e| e.to_string()))
+    Some(parse_addressed_line(text).map_err(|e| e.to_string()))
 }
 
 /// Warnings, at most [`MAX_WARNINGS`] kept; the rest counted.
@@ -156,19 +182,26 @@ impl Warnings {
 /// lines skipped. `name` starts each warning.
 pub fn parse_orders(name: &str, text: &[u8]) -> (Vec<(SimTime, Live)>, Vec<String>) {
     let mut warnings = Warnings::default();
-    let orders = parse_text(name, text, &mut warnings);
+    let orders = parse_text(name, text, &mut warnings)
+        .into_iter()
+        .map(|(t, _, live)| (t, live))
+        .collect();
     (orders, warnings.take(name))
 }
 
-fn parse_text(name: &str, text: &[u8], warnings: &mut Warnings) -> Vec<(SimTime, Live)> {
+fn parse_text(
+    name: &str,
+    text: &[u8],
+    warnings: &mut Warnings,
+) -> Vec<(SimTime, Option<u8>, Live)> {
     let mut orders = Vec::new();
     let mut due_s = 0.0f64;
     for (k, line) in text.split(|&b| b == b'\n').enumerate() {
         match read_order(line, line.len() > MAX_LINE_BYTES) {
             None => {}
-            Some(Ok((t_s, live))) => {
+            Some(Ok((t_s, vehicle, live))) => {
                 due_s = due_s.max(t_s.unwrap_or(due_s));
-                orders.push((SimTime::from_secs_f64(due_s), live));
+                orders.push((SimTime::from_secs_f64(due_s), vehicle, live));
             }
             Some(Err(error)) => warnings.push(format!("{name}: line {}: {error}", k + 1)),
         }
@@ -196,7 +229,7 @@ enum FromReader {
     /// A line that is an order, or a warning for one that is not.
     Line {
         number: u64,
-        parsed: Result<(Option<f64>, Live), String>,
+        parsed: Result<Parsed, String>,
     },
     /// Nothing more: why, if it is worth saying.
     End(Option<String>),
@@ -204,8 +237,8 @@ enum FromReader {
 
 struct LiveLines {
     lines: Receiver<FromReader>,
-    /// Orders read, not yet due: (due time, order) in the order read.
-    pending: VecDeque<(Option<SimTime>, Live)>,
+    /// Orders read, not yet due: (due time, vehicle named, order) in the order read.
+    pending: VecDeque<(Option<SimTime>, Option<u8>, Live)>,
     /// The latest due time given so far (an order never overtakes the one before).
     last_due: SimTime,
     ended: bool,
@@ -274,7 +307,7 @@ pub fn open_orders(path: &Path, live: bool) -> Result<JsonOrders, ConsoleError> 
             })?
             .ok_or_else(|| ConsoleError::TooBig { name: name.clone() })?;
         let orders = parse_text(&name, &text, &mut warnings);
-        Mode::Timed(Script::timed(orders))
+        Mode::Timed(Script::addressed(orders))
     };
     Ok(JsonOrders {
         name,
@@ -397,18 +430,25 @@ impl JsonOrders {
 
 impl OrderSource for JsonOrders {
     fn poll(&mut self, now: SimTime) -> Vec<Live> {
+        self.poll_addressed(now)
+            .into_iter()
+            .map(|(_, live)| live)
+            .collect()
+    }
+
+    fn poll_addressed(&mut self, now: SimTime) -> Vec<(Option<u8>, Live)> {
         let live = match &mut self.mode {
-            Mode::Timed(script) => return script.poll(now),
+            Mode::Timed(script) => return script.poll_addressed(now),
             Mode::Live(live) => live,
         };
         while !live.ended && live.pending.len() < MAX_PENDING {
             match live.lines.try_recv() {
                 Ok(FromReader::Line {
-                    parsed: Ok((t_s, order)),
+                    parsed: Ok((t_s, vehicle, order)),
                     ..
                 }) => {
                     let due = t_s.map(SimTime::from_secs_f64);
-                    live.pending.push_back((due, order));
+                    live.pending.push_back((due, vehicle, order));
                 }
                 Ok(FromReader::Line {
                     number,
@@ -425,14 +465,14 @@ impl OrderSource for JsonOrders {
             }
         }
         let mut due = Vec::new();
-        while let Some((t, _)) = live.pending.front() {
+        while let Some((t, _, _)) = live.pending.front() {
             let at = t.unwrap_or(now).max(live.last_due);
             if at > now {
                 break;
             }
             live.last_due = at;
-            if let Some((_, order)) = live.pending.pop_front() {
-                due.push(order);
+            if let Some((_, vehicle, order)) = live.pending.pop_front() {
+                due.push((vehicle, order));
             }
         }
         due
@@ -444,7 +484,7 @@ impl OrderSource for JsonOrders {
             Mode::Live(live) => live
                 .pending
                 .front()
-                .and_then(|(t, _)| *t)
+                .and_then(|(t, _, _)| *t)
                 .map(|t| t.max(live.last_due)),
         }
     }
@@ -474,6 +514,41 @@ mod tests {
             Live::Order(Order::GoTo { x_cm, .. }) => Some(*x_cm),
             _ => None,
         }
+    }
+
+    #[test]
+    fn a_line_may_name_its_vehicle() {
+        let line = format!("{GOTO},\"vehicle\":2,\"t_s\":1}}");
+        let (t_s, vehicle, live) = parse_addressed_line(&line).unwrap();
+        assert_eq!(
+            (t_s, vehicle, goto_x(&live)),
+            (Some(1.0), Some(2), Some(300))
+        );
+        assert_eq!(parse_line(&line).unwrap().1, live);
+        for bad in ["0", "15", "2.5", "\"2\"", "-1"] {
+            let error = parse_addressed_line(&format!("{GOTO},\"vehicle\":{bad}}}")).unwrap_err();
+            assert_eq!(
+                error.to_string(),
+                format!("field vehicle: expected a vehicle address 1..=14, found {bad}")
+            );
+        }
+        let (mut orders, _) = (
+            open_orders_text(&format!("{GOTO},\"vehicle\":3}}\n{GOTO}}}")),
+            (),
+        );
+        let got = orders.poll_addressed(at(0.0));
+        assert_eq!(
+            got.iter().map(|(v, _)| *v).collect::<Vec<_>>(),
+            [Some(3), None]
+        );
+    }
+
+    /// A simulation's `--orders` source over `text`.
+    fn open_orders_text(text: &str) -> JsonOrders {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("orders.jsonl");
+        std::fs::write(&path, text).unwrap();
+        open_orders(&path, false).unwrap()
     }
 
     #[test]

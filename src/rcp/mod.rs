@@ -23,6 +23,7 @@ pub mod network;
 pub mod operator;
 pub mod orders;
 pub mod outputs;
+pub mod realnet;
 pub mod realtime;
 pub mod routing;
 pub mod rov;

@@ -153,9 +153,9 @@ pub struct QuietNet;
 impl NetObserver for QuietNet {}
 
 /// One vehicle's session as a single-vehicle [`Observer`] sees it.
-struct Tagged<'a> {
-    vehicle: u8,
-    inner: &'a mut dyn NetObserver,
+pub(crate) struct Tagged<'a> {
+    pub(crate) vehicle: u8,
+    pub(crate) inner: &'a mut dyn NetObserver,
 }
 
 impl Observer for Tagged<'_> {

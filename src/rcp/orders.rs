@@ -137,20 +137,29 @@ pub trait OrderSource: Send {
     fn take_warnings(&mut self) -> Vec<String> {
         Vec::new()
     }
+    /// [`OrderSource::poll`], each order with the vehicle it names (a console line's
+    /// `"vehicle": N`); `None` for the default vehicle. A source that names no vehicle keeps
+    /// this default.
+    fn poll_addressed(&mut self, now: SimTime) -> Vec<(Option<u8>, Live)> {
+        self.poll(now)
+            .into_iter()
+            .map(|live| (None, live))
+            .collect()
+    }
 }
 
 /// A script: joystick changes and GoTo waypoints at their times.
 pub struct Script {
-    /// (time, order), sorted by time (stable: a joystick change before a waypoint at the same
-    /// instant, as the sessions always played them).
-    items: Vec<(SimTime, Live)>,
+    /// (time, vehicle named, order), sorted by time (stable: a joystick change before a
+    /// waypoint at the same instant, as the sessions always played them).
+    items: Vec<(SimTime, Option<u8>, Live)>,
     next: usize,
 }
 
 impl Script {
     /// The joystick changes and waypoints of a session, each at its time.
     pub fn new(script: &[JoystickChange], waypoints: &[Waypoint]) -> Script {
-        let mut items: Vec<(SimTime, Live)> = script
+        let items: Vec<(SimTime, Live)> = script
             .iter()
             .map(|c| {
                 (
@@ -165,32 +174,151 @@ impl Script {
                 )
             }))
             .collect();
-        items.sort_by_key(|(t, _)| *t);
-        Script { items, next: 0 }
+        Script::timed(items)
     }
 
     /// Orders at given times (a test's, or a file's lines with their `t_s`).
-    pub fn timed(mut items: Vec<(SimTime, Live)>) -> Script {
-        items.sort_by_key(|(t, _)| *t);
+    pub fn timed(items: Vec<(SimTime, Live)>) -> Script {
+        Script::addressed(items.into_iter().map(|(t, live)| (t, None, live)).collect())
+    }
+
+    /// Orders at given times, each with the vehicle it names (`None`: the default one).
+    pub fn addressed(mut items: Vec<(SimTime, Option<u8>, Live)>) -> Script {
+        items.sort_by_key(|(t, _, _)| *t);
         Script { items, next: 0 }
     }
 }
 
 impl OrderSource for Script {
     fn poll(&mut self, now: SimTime) -> Vec<Live> {
-        let start = self.next;
-        while self.items.get(self.next).is_some_and(|(t, _)| *t <= now) {
-            self.next += 1;
-        }
-        self.items[start..self.next]
-            .iter()
-            .map(|(_, live)| *live)
+        self.poll_addressed(now)
+            .into_iter()
+            .map(|(_, live)| live)
             .collect()
     }
 
     fn next_at(&self) -> Option<SimTime> {
-        self.items.get(self.next).map(|(t, _)| *t)
+        self.items.get(self.next).map(|(t, _, _)| *t)
     }
+
+    fn poll_addressed(&mut self, now: SimTime) -> Vec<(Option<u8>, Live)> {
+        let start = self.next;
+        while self.items.get(self.next).is_some_and(|(t, _, _)| *t <= now) {
+            self.next += 1;
+        }
+        self.items[start..self.next]
+            .iter()
+            .map(|(_, vehicle, live)| (*vehicle, *live))
+            .collect()
+    }
+}
+
+/// The operator's sources shared by several vehicles: [`split_by_vehicle`]'s state.
+struct Shared {
+    sources: Vec<Box<dyn OrderSource>>,
+    vehicles: Vec<u8>,
+    /// Orders taken from the sources, not yet polled by their vehicle's tap, per vehicle.
+    queues: Vec<Vec<Live>>,
+    warnings: Vec<String>,
+}
+
+impl Shared {
+    /// Drains every source due by `now` into the vehicles' queues.
+    fn drain(&mut self, now: SimTime) {
+        for source in &mut self.sources {
+            self.warnings.extend(source.take_warnings());
+            for (vehicle, live) in source.poll_addressed(now) {
+                let target = match vehicle {
+                    None => Some(0),
+                    Some(v) => self.vehicles.iter().position(|&w| w == v),
+                };
+                match target.and_then(|k| self.queues.get_mut(k)) {
+                    Some(queue) => queue.push(live),
+                    None if self.warnings.len() < MAX_SPLIT_WARNINGS => {
+                        self.warnings.push(format!(
+                            "an order for vehicle {}: expected one of {:?}, dropped",
+                            vehicle.unwrap_or(0),
+                            self.vehicles
+                        ));
+                    }
+                    None => {}
+                }
+            }
+        }
+    }
+}
+
+/// The most warnings [`split_by_vehicle`] keeps between two takes of its own (orders for a
+/// vehicle not in the network).
+const MAX_SPLIT_WARNINGS: usize = 1000;
+
+/// One vehicle's view of the shared sources.
+struct Tap {
+    shared: std::sync::Arc<std::sync::Mutex<Shared>>,
+    index: usize,
+}
+
+impl Tap {
+    fn shared(&self) -> std::sync::MutexGuard<'_, Shared> {
+        self.shared
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+}
+
+impl OrderSource for Tap {
+    fn poll(&mut self, now: SimTime) -> Vec<Live> {
+        let index = self.index;
+        let mut shared = self.shared();
+        shared.drain(now);
+        shared
+            .queues
+            .get_mut(index)
+            .map(std::mem::take)
+            .unwrap_or_default()
+    }
+
+    fn next_at(&self) -> Option<SimTime> {
+        self.shared()
+            .sources
+            .iter()
+            .filter_map(|s| s.next_at())
+            .min()
+    }
+
+    fn take_warnings(&mut self) -> Vec<String> {
+        // The first vehicle's end says them, once.
+        if self.index == 0 {
+            std::mem::take(&mut self.shared().warnings)
+        } else {
+            Vec::new()
+        }
+    }
+}
+
+/// The operator's order sources shared among `vehicles` (one source each, in the order of
+/// `vehicles`): an order naming a vehicle (`"vehicle": N`) goes to that vehicle's source, one
+/// naming none to the first vehicle's; one naming a vehicle not in `vehicles` is dropped with
+/// a warning. Every source is drained whenever any vehicle's source is polled, so the orders
+/// keep their order per vehicle.
+pub fn split_by_vehicle(
+    sources: Vec<Box<dyn OrderSource>>,
+    vehicles: &[u8],
+) -> Vec<Box<dyn OrderSource>> {
+    let shared = std::sync::Arc::new(std::sync::Mutex::new(Shared {
+        sources,
+        vehicles: vehicles.to_vec(),
+        queues: vec![Vec::new(); vehicles.len()],
+        warnings: Vec::new(),
+    }));
+    (0..vehicles.len())
+        .map(|index| {
+            Box::new(Tap {
+                shared: shared.clone(),
+                index,
+            }) as Box<dyn OrderSource>
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -251,5 +379,40 @@ mod tests {
         assert_eq!(script.poll(SimTime::from_secs_f64(5.0)).len(), 2);
         assert!(script.poll(SimTime::from_secs_f64(6.0)).is_empty());
         assert_eq!(script.next_at(), None);
+    }
+
+    #[test]
+    fn split_sources_give_each_vehicle_its_orders_in_order_and_drop_unknown_ones() {
+        let hold = |heading_deg| {
+            Live::Order(Order::HoldHeading {
+                heading_deg,
+                enable: true,
+            })
+        };
+        let at = SimTime::from_secs_f64;
+        let script = Script::addressed(vec![
+            (at(1.0), None, hold(1)),
+            (at(1.0), Some(2), hold(2)),
+            (at(2.0), Some(2), hold(3)),
+            (at(2.0), Some(7), hold(4)),
+            (at(3.0), Some(1), Live::Cancel),
+        ]);
+        let mut taps = split_by_vehicle(vec![Box::new(script)], &[1, 2]);
+        let [first, second] = &mut taps[..] else {
+            panic!("two taps");
+        };
+        assert_eq!(first.next_at(), Some(at(1.0)));
+        // Vehicle 2's tap drains the source: vehicle 1's order waits in its queue.
+        assert_eq!(second.poll(at(2.0)), [hold(2), hold(3)]);
+        assert_eq!(first.poll(at(2.0)), [hold(1)]);
+        let warnings = first.take_warnings();
+        assert_eq!(
+            warnings,
+            ["an order for vehicle 7: expected one of [1, 2], dropped"]
+        );
+        assert!(second.take_warnings().is_empty());
+        assert!(second.poll(at(9.0)).is_empty());
+        assert_eq!(first.poll(at(9.0)), [Live::Cancel]);
+        assert_eq!(first.next_at(), None);
     }
 }

@@ -320,6 +320,19 @@ fn point(p: Option<[f64; 3]>) -> [String; 3] {
     p.map_or_else(Default::default, |p| p.map(|v| format!("{v:.4}")))
 }
 
+/// A frame's `--events` fields ([`EVENTS_HEADER`]).
+pub(crate) fn event_fields(e: &FrameEvent) -> [String; 6] {
+    let time = |t: Option<f64>| t.map_or(String::new(), |t| format!("{t:.6}"));
+    [
+        e.direction.to_string(),
+        e.kind.to_string(),
+        e.bytes.to_string(),
+        time(e.t_sent_s),
+        time(e.t_received_s),
+        e.fate.to_string(),
+    ]
+}
+
 impl Observer for Recorder {
     fn frame(&mut self, e: &FrameEvent) {
         let t = e.t_received_s.or(e.t_sent_s).unwrap_or(0.0);
@@ -331,16 +344,7 @@ impl Observer for Recorder {
             return;
         }
         if let Some(out) = self.events.as_mut() {
-            let time = |t: Option<f64>| t.map_or(String::new(), |t| format!("{t:.6}"));
-            let row = [
-                e.direction.to_string(),
-                e.kind.to_string(),
-                e.bytes.to_string(),
-                time(e.t_sent_s),
-                time(e.t_received_s),
-                e.fate.to_string(),
-            ];
-            let outcome = out.row(&row);
+            let outcome = out.row(&event_fields(e));
             self.keep(outcome);
         }
     }

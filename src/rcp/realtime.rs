@@ -39,23 +39,30 @@ pub enum Ended {
 }
 
 /// The clock: time since the start, as the engines count it.
-struct Clock {
+pub(super) struct Clock {
     start: Instant,
 }
 
 impl Clock {
-    fn at(&self, instant: Instant) -> SimTime {
+    /// A clock whose time zero is now.
+    pub(super) fn start() -> Clock {
+        Clock {
+            start: Instant::now(),
+        }
+    }
+
+    pub(super) fn at(&self, instant: Instant) -> SimTime {
         SimTime(
             u64::try_from(instant.saturating_duration_since(self.start).as_nanos())
                 .unwrap_or(u64::MAX),
         )
     }
 
-    fn now(&self) -> SimTime {
+    pub(super) fn now(&self) -> SimTime {
         self.at(Instant::now())
     }
 
-    fn instant(&self, t: SimTime) -> Instant {
+    pub(super) fn instant(&self, t: SimTime) -> Instant {
         self.start + Duration::from_nanos(t.0)
     }
 }
@@ -72,9 +79,7 @@ pub fn run(
     stop: &AtomicBool,
     observer: &mut dyn Observer,
 ) -> (Metrics, Ended) {
-    let clock = Clock {
-        start: Instant::now(),
-    };
+    let clock = Clock::start();
     let end = SimTime::from_secs_f64(config.duration_s);
     let (mut operator, rov) = parts.ends(config);
     operator.status_poses = true;
@@ -116,7 +121,7 @@ pub fn run(
 }
 
 /// The event row of a frame this end sent at `t`.
-fn sent_event(direction: &'static str, frame: &[u8], t: SimTime) -> FrameEvent {
+pub(super) fn sent_event(direction: &'static str, frame: &[u8], t: SimTime) -> FrameEvent {
     FrameEvent {
         direction,
         kind: kind_of(frame),

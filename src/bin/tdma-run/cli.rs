@@ -132,6 +132,26 @@ pub struct Args {
     )]
     pub port: Option<String>,
 
+    /// A network (docs/tdma-network.md): a scenario file whose nodes, media and routes are
+    /// used (the rest ignored), the same file for every process. --address is then this
+    /// node's own address (a ROV's; default 1), --port its first medium's modem.
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "role",
+        help_heading = "Real time"
+    )]
+    pub routes: Option<PathBuf>,
+
+    /// With --routes: the modem of the node's second medium (a relay between two media).
+    #[arg(
+        long,
+        value_name = "DEV",
+        requires = "routes",
+        help_heading = "Real time"
+    )]
+    pub port2: Option<String>,
+
     #[command(flatten)]
     pub port_args: PortArgs,
 
@@ -293,6 +313,7 @@ impl Args {
             &self.orders,
             &self.model.model_file,
             &self.scenario,
+            &self.routes,
         ]
         .into_iter()
         .flatten()

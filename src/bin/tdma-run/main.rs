@@ -7,6 +7,7 @@
 
 mod cli;
 mod network;
+mod realnet;
 
 use std::process::ExitCode;
 
@@ -37,6 +38,9 @@ fn run(args: &Args) -> Result<u8> {
     stop::install()?;
     if let Some(path) = &args.scenario {
         return network::run(args, path);
+    }
+    if let Some(path) = &args.routes {
+        return realnet::run(args, path);
     }
     // Every output is claimed before any work, so bad usage leaves no file.
     let mut outs = Outputs::new();
@@ -142,20 +146,7 @@ fn run(args: &Args) -> Result<u8> {
                 stop::flag(),
                 &mut observer,
             );
-            let code = match ended {
-                Ended::Done => EXIT_OK,
-                Ended::Stopped => {
-                    say!("stopped after {:.1} s", metrics.duration_s);
-                    EXIT_OK
-                }
-                Ended::Failed(error) => {
-                    say!(
-                        "{error} after {:.1} s; outputs so far kept",
-                        metrics.duration_s
-                    );
-                    EXIT_CHECK_FAILED
-                }
-            };
+            let code = ended_code(ended, metrics.duration_s);
             (metrics, code)
         }
         _ => {
@@ -195,6 +186,21 @@ fn run(args: &Args) -> Result<u8> {
         say!("{line}");
     }
     Ok(code)
+}
+
+/// The exit code of a real-time run that ended so after `duration_s`, said on stderr.
+fn ended_code(ended: Ended, duration_s: f64) -> u8 {
+    match ended {
+        Ended::Done => EXIT_OK,
+        Ended::Stopped => {
+            say!("stopped after {duration_s:.1} s");
+            EXIT_OK
+        }
+        Ended::Failed(error) => {
+            say!("{error} after {duration_s:.1} s; outputs so far kept");
+            EXIT_CHECK_FAILED
+        }
+    }
 }
 
 /// Warnings of the session (a bad order line) on standard error, as they come.

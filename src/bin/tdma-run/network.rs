@@ -77,12 +77,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
         let mut observer = Both(&mut recorder);
         network::run(&scenario, &pictures.images, &mut observer, stop::flag())?
     };
-    if let Some(name) = stop::signal_name() {
-        metrics.interrupted = Some(name.to_string());
-        for m in metrics.vehicles.values_mut() {
-            m.interrupted = Some(name.to_string());
-        }
-    }
+    mark_interrupted(&mut metrics);
     if let Some(out) = metrics_out.as_mut() {
         write_metrics(out, &metrics)?;
     }
@@ -105,8 +100,18 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     Ok(stop::code_or(EXIT_OK))
 }
 
+/// Marks the figures (the network's and each vehicle's) with the signal that ended the run.
+pub(crate) fn mark_interrupted(metrics: &mut NetworkMetrics) {
+    if let Some(name) = stop::signal_name() {
+        metrics.interrupted = Some(name.to_string());
+        for m in metrics.vehicles.values_mut() {
+            m.interrupted = Some(name.to_string());
+        }
+    }
+}
+
 /// Each vehicle's summary, then each relay's forwarding.
-fn network_summary(metrics: &NetworkMetrics) -> Vec<String> {
+pub(crate) fn network_summary(metrics: &NetworkMetrics) -> Vec<String> {
     let mut lines = Vec::new();
     for (address, m) in &metrics.vehicles {
         lines.push(format!("vehicle {address}:"));
@@ -124,7 +129,7 @@ fn network_summary(metrics: &NetworkMetrics) -> Vec<String> {
 }
 
 /// The recorder, with warnings also on standard error.
-struct Both<'a>(&'a mut NetRecorder);
+pub(crate) struct Both<'a>(pub(crate) &'a mut NetRecorder);
 
 impl NetObserver for Both<'_> {
     fn hop(&mut self, event: &network::HopEvent) {
