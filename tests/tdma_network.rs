@@ -25,10 +25,11 @@ fn metrics(args: &[&str]) -> serde_json::Value {
 #[test]
 fn the_relay_scenario_reaches_the_far_vehicle_and_writes_per_vehicle_outputs() {
     let dir = tempfile::tempdir().unwrap();
-    let (events, track, images) = (
+    let (events, track, images, log) = (
         dir.path().join("e.csv"),
         dir.path().join("t.csv"),
         dir.path().join("rx"),
+        dir.path().join("s.mcap"),
     );
     let file = scenario("relay-rf.json");
     let m = metrics(&[
@@ -44,6 +45,8 @@ fn the_relay_scenario_reaches_the_far_vehicle_and_writes_per_vehicle_outputs() {
         track.to_str().unwrap(),
         "--images-out",
         images.to_str().unwrap(),
+        "--mcap",
+        log.to_str().unwrap(),
     ]);
     assert_eq!(m["duration_s"], 200.0);
     for v in ["1", "2"] {
@@ -86,6 +89,41 @@ fn the_relay_scenario_reaches_the_far_vehicle_and_writes_per_vehicle_outputs() {
     let track = std::fs::read_to_string(&track).unwrap();
     assert!(track.starts_with("vehicle,t_s,x_m,y_m,z_m,heading_deg,link_up\n"));
     assert!(track.lines().any(|l| l.starts_with("2,")));
+    // The official MCAP reader sees each vehicle's channels and every hop.
+    let topics = mcap_topics(&log);
+    for v in [1, 2] {
+        assert!(
+            topics[&format!("/vehicle/{v}/rov/pose")] > 1000,
+            "{topics:?}"
+        );
+        assert!(
+            topics[&format!("/vehicle/{v}/camera/image")] >= 1,
+            "{topics:?}"
+        );
+    }
+    assert_eq!(topics["/network/frames"], rows.len(), "{topics:?}");
+}
+
+/// Topic names and message counts of an MCAP file, read with Python's `mcap` package.
+fn mcap_topics(path: &Path) -> std::collections::BTreeMap<String, usize> {
+    let script = "import json, sys, collections\n\
+from mcap.reader import make_reader\n\
+counts = collections.Counter()\n\
+with open(sys.argv[1], 'rb') as f:\n\
+    for schema, channel, message in make_reader(f).iter_messages():\n\
+        json.loads(message.data)\n\
+        counts[channel.topic] += 1\n\
+print(json.dumps(counts))\n";
+    let out = std::process::Command::new("python3")
+        .args(["-c", script, path.to_str().unwrap()])
+        .output()
+        .expect("python3 runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
 }
 
 #[test]
