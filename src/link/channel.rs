@@ -800,24 +800,52 @@ pub const DROP_CAUSES: [&str; 5] = ["ber", "collision", "overflow", "range", "lo
 impl DirectionStats {
     /// Counts a report.
     pub fn record(&mut self, report: &Report) {
-        if report.duplicate {
+        self.count(
+            report.duplicate,
+            report.len,
+            report.fate,
+            report.t_offered,
+            report.t_rx,
+        );
+    }
+
+    /// Counts a shared medium's report (the direction is its (from, to) pair).
+    pub fn record_medium(&mut self, report: &super::MediumReport) {
+        self.count(
+            report.duplicate,
+            report.len,
+            report.fate,
+            report.t_offered,
+            report.t_rx,
+        );
+    }
+
+    fn count(
+        &mut self,
+        duplicate: bool,
+        len: usize,
+        fate: Fate,
+        t_offered: SimTime,
+        t_rx: Option<SimTime>,
+    ) {
+        if duplicate {
             self.frames_duplicated += 1;
             return;
         }
         self.frames_offered += 1;
-        self.bytes_offered += report.len as u64;
-        if let Some(index) = drop_index(report.fate) {
+        self.bytes_offered += len as u64;
+        if let Some(index) = drop_index(fate) {
             self.dropped[index] += 1;
             return;
         }
         self.frames_delivered += 1;
-        self.bytes_delivered += report.len as u64;
-        if report.fate == Fate::Corrupted {
+        self.bytes_delivered += len as u64;
+        if fate == Fate::Corrupted {
             self.frames_corrupted += 1;
         }
-        if let Some(t_rx) = report.t_rx {
+        if let Some(t_rx) = t_rx {
             self.delay_ms
-                .push((t_rx.0.saturating_sub(report.t_offered.0)) as f64 * 1e-6);
+                .push((t_rx.0.saturating_sub(t_offered.0)) as f64 * 1e-6);
             self.last_rx = Some(self.last_rx.map_or(t_rx, |last| last.max(t_rx)));
         }
     }
