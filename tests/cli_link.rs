@@ -306,6 +306,21 @@ fn read_exactly(file: &mut std::fs::File, n: usize, limit: Duration) -> Vec<u8> 
     rx.recv_timeout(limit).unwrap_or_default()
 }
 
+/// Ends a real-time link-sim with SIGTERM: it must exit 0; returns what it said on stderr.
+fn terminate(mut child: std::process::Child) -> String {
+    kill(Pid::from_raw(child.id() as i32), Signal::SIGTERM).unwrap();
+    let status = child.wait().unwrap();
+    let mut stderr = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut stderr)
+        .unwrap();
+    assert_eq!(status.code(), Some(0), "{stderr}");
+    stderr
+}
+
 /// Starts link-sim in --pty mode with `args` and opens both sides raw: (child, A, B).
 fn start_pty(args: &[&str]) -> (std::process::Child, std::fs::File, std::fs::File) {
     let (child, a_path, b_path) = common::link_sim_pty(args);
@@ -317,7 +332,7 @@ fn pty_mode_forwards_frames_in_real_time_both_ways() {
     let dir = tempfile::tempdir().unwrap();
     let stats = dir.path().join("stats.json");
     let stats_path = stats.to_str().unwrap();
-    let (mut child, mut a, mut b) = start_pty(&[
+    let (child, mut a, mut b) = start_pty(&[
         "--model",
         "s100",
         "--jitter-distribution",
@@ -341,16 +356,7 @@ fn pty_mode_forwards_frames_in_real_time_both_ways() {
     b.write_all(&frame_b).unwrap();
     assert_eq!(read_exactly(&mut a, 16, Duration::from_secs(3)), frame_b);
 
-    kill(Pid::from_raw(child.id() as i32), Signal::SIGTERM).unwrap();
-    let status = child.wait().unwrap();
-    let mut stderr = String::new();
-    child
-        .stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut stderr)
-        .unwrap();
-    assert_eq!(status.code(), Some(0), "{stderr}");
+    let stderr = terminate(child);
     assert!(
         stderr.contains("A->B: 1 frames offered, 1 delivered"),
         "{stderr}"
@@ -503,4 +509,124 @@ fn raw_mode_cuts_packets_at_silence() {
         .map(|l| l.split(',').nth(1).unwrap())
         .collect();
     assert_eq!(sizes, ["5", "6"], "{trace}");
+}
+
+/// Starts `link-sim --pty N` with `args`; returns it and its N ports, opened raw.
+fn start_medium(ports: usize, args: &[&str]) -> (std::process::Child, Vec<std::fs::File>) {
+    let mut child = Command::new(LINK_SIM)
+        .args(["--pty", &ports.to_string()])
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("link-sim starts");
+    let mut stdout = BufReader::new(child.stdout.take().expect("stdout"));
+    let files = (0..ports)
+        .map(|_| {
+            let mut path = String::new();
+            stdout.read_line(&mut path).expect("a port's path");
+            open_rw(path.trim())
+        })
+        .collect();
+    (child, files)
+}
+
+#[test]
+fn pty_3_is_one_medium_the_middle_hears_both_ends_and_the_ends_never_each_other() {
+    let dir = tempfile::tempdir().unwrap();
+    let stats = dir.path().join("stats.json");
+    let (child, mut ports) = start_medium(
+        3,
+        &[
+            "--model",
+            "s100",
+            "--jitter-distribution",
+            "none",
+            "--position",
+            "0,0,0",
+            "--position",
+            "3,0,1",
+            "--position",
+            "7,0,1",
+            "--stats",
+            stats.to_str().unwrap(),
+        ],
+    );
+    let from_middle = frame::build(2, 15, &[0x22; 52]).unwrap();
+    let sent = Instant::now();
+    ports[1].write_all(&from_middle).unwrap();
+    let at_1 = read_exactly(&mut ports[0], 57, Duration::from_secs(3));
+    let delay = sent.elapsed();
+    let at_3 = read_exactly(&mut ports[2], 57, Duration::from_secs(3));
+    assert_eq!(at_1, from_middle);
+    assert_eq!(at_3, from_middle);
+    assert!(delay >= Duration::from_millis(324), "{delay:?}");
+
+    // Port 1's frame reaches the middle, never port 3 (7.07 m away, range 5 m).
+    let from_end = frame::build(0, 2, &[0x11; 11]).unwrap();
+    ports[0].write_all(&from_end).unwrap();
+    assert_eq!(
+        read_exactly(&mut ports[1], 16, Duration::from_secs(3)),
+        from_end
+    );
+    assert!(read_exactly(&mut ports[2], 1, Duration::from_millis(700)).is_empty());
+
+    let stderr = terminate(child);
+    for line in [
+        "2->1: 1 frames offered, 1 delivered",
+        "2->3: 1 frames offered, 1 delivered",
+        "1->2: 1 frames offered, 1 delivered",
+        "1->3: 1 frames offered, 0 delivered (0.0 %); dropped: 1 range",
+    ] {
+        assert!(stderr.contains(line), "{line} in {stderr}");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    assert_eq!(json["ports"], 3);
+    assert_eq!(json["pairs"]["2->3"]["delay_ms_mean"], 325.0);
+    assert_eq!(json["pairs"]["1->3"]["dropped"]["range"], 1);
+    assert_eq!(json["pairs"]["3->1"]["frames_offered"], 0);
+    assert_eq!(json["positions_m"][2], serde_json::json!([7.0, 0.0, 1.0]));
+}
+
+#[test]
+fn pty_n_and_positions_are_checked_in_one_line() {
+    let three = "--pty 3 --position 0,0,0 --position 1,0,0 --position";
+    for (args, expected) in [
+        ("--pty 1", "--pty: expected 2 ..= 16 ports, found 1"),
+        ("--pty 17", "--pty: expected 2 ..= 16 ports, found 17"),
+        (
+            "--pty 3 --position 0,0,0",
+            "--position: expected one per port (3), found 1",
+        ),
+        (
+            &format!("{three} nan,0,0"),
+            "--position: number 1: expected",
+        ),
+        (
+            &format!("{three} inf,0,0"),
+            "--position: number 1: expected",
+        ),
+        (
+            "--pty 3 --distance 2",
+            "--distance applies to two ports, not to --pty 3",
+        ),
+        ("--pty 4 --trace t.csv", "--trace applies to two ports"),
+        (
+            "--pty 3 --reverse-model s100",
+            "--reverse-model applies to two ports",
+        ),
+        ("--position 0,0,0", "--pty"),
+    ] {
+        let args: Vec<&str> = ["--model", "s100"]
+            .into_iter()
+            .chain(args.split(' '))
+            .collect();
+        let out = run(LINK_SIM, &args, b"");
+        assert_eq!(out.code, 2, "{args:?}: {}", out.stderr);
+        assert!(out.stdout.is_empty(), "{args:?}");
+        let line = out.stderr.trim();
+        assert_eq!(line.lines().count(), 1, "{args:?}: {line}");
+        assert!(line.contains(expected), "{args:?}: {line}");
+    }
 }

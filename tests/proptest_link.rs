@@ -1,13 +1,14 @@
 //! Property tests of the link state machine: for any valid model and any pattern of frames
 //! offered from both sides, the link never panics, decides exactly one fate per frame, delivers
 //! intact frames byte for byte, keeps time's order, never reorders unless asked, and ends with
-//! nothing in flight.
+//! nothing in flight. The same holds for a shared medium of N nodes, which reports every
+//! frame once to each of the N - 1 other nodes.
 
 use std::collections::HashMap;
 
 use proptest::prelude::*;
 use rovlink::link::model::{ErrorMode, GilbertElliott, JitterDistribution};
-use rovlink::link::{Distance, Fate, Link, Model, Side, SimTime};
+use rovlink::link::{Distance, Fate, Link, Medium, Model, Side, SimTime};
 
 fn jitter() -> impl Strategy<Value = JitterDistribution> {
     prop_oneof![
@@ -130,5 +131,85 @@ proptest! {
             }
         }
         prop_assert_eq!(decided.len(), sent.len());
+    }
+}
+
+/// A position within 20 m of the origin (most pairs in S100's 5 m range, some not).
+fn position() -> impl Strategy<Value = [f64; 3]> {
+    [-10.0..10.0f64, -10.0..10.0f64, -3.0..3.0f64]
+}
+
+/// Gap before the offer in ms, sending node (some unknown), frame length, a node moved first.
+type MediumOffer = (u32, usize, usize, Option<(usize, [f64; 3])>);
+
+fn medium_offers() -> impl Strategy<Value = Vec<MediumOffer>> {
+    let moved = prop::option::of((0usize..8, position()));
+    prop::collection::vec((0u32..800, 0usize..8, 0usize..300, moved), 0..60)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    #[test]
+    fn a_medium_reports_every_frame_once_to_every_other_node(
+        model in model(),
+        seed in any::<u64>(),
+        positions in prop::collection::vec(position(), 1..7),
+        offers in medium_offers(),
+    ) {
+        let nodes = positions.len();
+        let mut medium = Medium::new(model, seed, positions).unwrap();
+        let mut sent: HashMap<(usize, u64), (Vec<u8>, SimTime)> = HashMap::new();
+        let mut t = SimTime::ZERO;
+        let mut reports = Vec::new();
+        for (k, (gap_ms, from, len, moved)) in offers.into_iter().enumerate() {
+            t = SimTime(t.0 + u64::from(gap_ms) * 1_000_000);
+            medium.advance(t);
+            if let Some((node, position)) = moved {
+                medium.set_position(node, position);
+            }
+            let bytes: Vec<u8> = (0..len).map(|j| (k * 31 + j) as u8).collect();
+            let seq = medium.offer(from, bytes.clone());
+            if from < nodes {
+                prop_assert!(sent.insert((from, seq), (bytes, medium.now())).is_none());
+            }
+            reports.extend(std::iter::from_fn(|| medium.pop_report()));
+        }
+        while medium.step() {}
+        reports.extend(std::iter::from_fn(|| medium.pop_report()));
+        prop_assert_eq!(medium.in_flight(), 0);
+
+        let mut decided: HashMap<(usize, u64, usize), Fate> = HashMap::new();
+        let mut last_arrival: HashMap<(usize, usize), (SimTime, u64)> = HashMap::new();
+        for report in &reports {
+            prop_assert!(report.to < nodes && report.to != report.from);
+            let (bytes, t_offered) = &sent[&(report.from, report.seq)];
+            let key = (report.from, report.seq, report.to);
+            prop_assert_eq!(report.t_offered, *t_offered);
+            prop_assert_eq!(report.len, bytes.len());
+            if report.duplicate {
+                prop_assert!(report.fate.arrived());
+                prop_assert_eq!(decided.get(&key), Some(&report.fate));
+                continue;
+            }
+            prop_assert!(decided.insert(key, report.fate).is_none(), "two fates for {:?}", key);
+            match report.fate {
+                Fate::Delivered => prop_assert_eq!(&report.bytes, bytes),
+                Fate::Corrupted => prop_assert_ne!(&report.bytes, bytes),
+                _ => prop_assert!(report.bytes.is_empty() && report.t_rx.is_none()),
+            }
+            if let Some(t_rx) = report.t_rx {
+                prop_assert!(t_rx >= report.t_tx_start.unwrap());
+                if !medium.model().reorder {
+                    let pair = (report.from, report.to);
+                    if let Some(&(last_t, last_seq)) = last_arrival.get(&pair) {
+                        prop_assert!(t_rx >= last_t && report.seq > last_seq, "reordered");
+                    }
+                    last_arrival.insert(pair, (t_rx, report.seq));
+                }
+            }
+        }
+        // Exactly N - 1 reports (not counting duplicates) per frame offered by a known node.
+        prop_assert_eq!(decided.len(), sent.len() * (nodes - 1));
     }
 }

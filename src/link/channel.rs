@@ -146,13 +146,16 @@ pub struct Report {
 }
 
 /// A frame waiting in a transmit FIFO.
-struct Waiting {
+pub(super) struct Waiting {
     /// Ordering key: the ready time with `reorder`, otherwise 0 (so the sequence decides).
     key: SimTime,
-    seq: u64,
-    t_offered: SimTime,
+    /// Its number among the frames offered on its side.
+    pub(super) seq: u64,
+    /// When it was offered.
+    pub(super) t_offered: SimTime,
     t_ready: SimTime,
-    bytes: Vec<u8>,
+    /// Its bytes.
+    pub(super) bytes: Vec<u8>,
 }
 
 impl PartialEq for Waiting {
@@ -187,7 +190,7 @@ struct Reception {
 }
 
 /// The random streams of one side's sending modem, one per random process.
-struct Streams {
+pub(super) struct Streams {
     jitter: Rng,
     ber: Rng,
     loss: Rng,
@@ -197,8 +200,9 @@ struct Streams {
 }
 
 impl Streams {
-    fn new(seed: u64, side: Side) -> Streams {
-        let base = 16 * side.index() as u64;
+    /// The streams of side (or node) `index`: streams 16 `index` + n of `seed`.
+    fn new(seed: u64, index: usize) -> Streams {
+        let base = 16 * index as u64;
         Streams {
             jitter: Rng::new(seed, base),
             ber: Rng::new(seed, base + 1),
@@ -210,17 +214,126 @@ impl Streams {
     }
 }
 
-/// One modem: its transmit side, and the receptions it is hearing.
-struct End {
-    model: Model,
-    streams: Streams,
+/// A modem's transmit side: its random streams, its FIFO and its air (a [`Link`]'s end and a
+/// [`super::Medium`]'s node both send through one).
+pub(super) struct Transmitter {
+    /// The sending modem's random streams.
+    pub(super) streams: Streams,
     fifo: BinaryHeap<Reverse<Waiting>>,
     fifo_bytes: u64,
     next_seq: u64,
     /// End of the current (or last) transmission.
-    air_busy_until: SimTime,
+    pub(super) air_busy_until: SimTime,
     /// The pending wake-up to put the FIFO's head on air, if any.
     kick_at: Option<SimTime>,
+}
+
+/// What a transmitter does next ([`Transmitter::next_on_air`]).
+pub(super) enum OnAir {
+    /// Nothing now: it is on air (its end will ask again), its FIFO is empty, or a wake-up is
+    /// already pending.
+    Nothing,
+    /// The FIFO's head is not ready yet: wake the transmitter at this time.
+    WakeAt(SimTime),
+    /// This frame goes on air now; its air time ends at the time given.
+    Frame(Waiting, SimTime),
+}
+
+impl Transmitter {
+    /// An idle transmitter with the streams of side (or node) `index`.
+    pub(super) fn new(seed: u64, index: usize) -> Transmitter {
+        Transmitter {
+            streams: Streams::new(seed, index),
+            fifo: BinaryHeap::new(),
+            fifo_bytes: 0,
+            next_seq: 0,
+            air_busy_until: SimTime::ZERO,
+            kick_at: None,
+        }
+    }
+
+    /// Queues a frame offered at `now`: its sequence number, or the number as an error when
+    /// it does not fit in the FIFO (the frame is then gone).
+    pub(super) fn enqueue(
+        &mut self,
+        model: &Model,
+        now: SimTime,
+        bytes: Vec<u8>,
+    ) -> Result<u64, u64> {
+        let seq = self.next_seq;
+        self.next_seq += 1;
+        let len = bytes.len() as u64;
+        if self.fifo_bytes + len > model.fifo_bytes {
+            return Err(seq);
+        }
+        let delay_s = intrinsic_delay_s(model, &mut self.streams.jitter);
+        let t_ready = now.after_secs(delay_s);
+        let key = if model.reorder {
+            t_ready
+        } else {
+            SimTime::ZERO
+        };
+        self.fifo_bytes += len;
+        self.fifo.push(Reverse(Waiting {
+            key,
+            seq,
+            t_offered: now,
+            t_ready,
+            bytes,
+        }));
+        Ok(seq)
+    }
+
+    /// A wake-up due at `now` arrived: true when it is the pending one (a stale one is ignored).
+    pub(super) fn woken(&mut self, now: SimTime) -> bool {
+        if self.kick_at == Some(now) {
+            self.kick_at = None;
+            return true;
+        }
+        false
+    }
+
+    /// Takes the FIFO's head for the air if the transmitter is free and the head is ready;
+    /// otherwise says when to wake it (once per wake-up time).
+    pub(super) fn next_on_air(&mut self, model: &Model, now: SimTime) -> OnAir {
+        if self.air_busy_until > now {
+            return OnAir::Nothing;
+        }
+        let Some(Reverse(head)) = self.fifo.peek() else {
+            return OnAir::Nothing;
+        };
+        if head.t_ready > now {
+            let due = head.t_ready;
+            if self.kick_at.is_none_or(|pending| due < pending) {
+                self.kick_at = Some(due);
+                return OnAir::WakeAt(due);
+            }
+            return OnAir::Nothing;
+        }
+        let Some(Reverse(frame)) = self.fifo.pop() else {
+            return OnAir::Nothing;
+        };
+        self.fifo_bytes -= frame.bytes.len() as u64;
+        let air_end = now.after_secs(model.air_time_s(frame.bytes.len()));
+        self.air_busy_until = air_end;
+        OnAir::Frame(frame, air_end)
+    }
+
+    /// True when nothing waits and nothing is on air at `now`.
+    pub(super) fn idle(&self, now: SimTime) -> bool {
+        self.fifo.is_empty() && self.air_busy_until <= now
+    }
+
+    /// Frames in the FIFO.
+    pub(super) fn queued(&self) -> usize {
+        self.fifo.len()
+    }
+}
+
+/// One modem: its transmit side, and the receptions it is hearing.
+struct End {
+    model: Model,
+    tx: Transmitter,
     /// Receptions arriving at this end now (indices into the reception slab).
     hearing: Vec<usize>,
     /// Latest reception end of frames arriving at this end (deliveries never overtake).
@@ -265,12 +378,7 @@ impl Link {
         b_to_a.validate()?;
         let end = |model: Model, side: Side| End {
             model,
-            streams: Streams::new(seed, side),
-            fifo: BinaryHeap::new(),
-            fifo_bytes: 0,
-            next_seq: 0,
-            air_busy_until: SimTime::ZERO,
-            kick_at: None,
+            tx: Transmitter::new(seed, side.index()),
             hearing: Vec::new(),
             last_rx_end: SimTime::ZERO,
             burst_bad: false,
@@ -313,15 +421,14 @@ impl Link {
 
     /// Frames offered but not yet reported.
     pub fn in_flight(&self) -> usize {
-        self.ends.iter().map(|end| end.fifo.len()).sum::<usize>() + self.receptions.len()
+        self.ends.iter().map(|end| end.tx.queued()).sum::<usize>() + self.receptions.len()
             - self.free_slots.len()
     }
 
     /// True when `side` has nothing waiting and is not transmitting: a frame offered now goes
     /// straight to its intrinsic delay.
     pub fn tx_idle(&self, side: Side) -> bool {
-        let end = &self.ends[side.index()];
-        end.fifo.is_empty() && end.air_busy_until <= self.now()
+        self.ends[side.index()].tx.idle(self.now())
     }
 
     /// Sets the distance from now on (a vehicle simulation drives this).
@@ -345,38 +452,24 @@ impl Link {
     pub fn offer(&mut self, side: Side, bytes: Vec<u8>) -> u64 {
         let now = self.now();
         let end = &mut self.ends[side.index()];
-        let seq = end.next_seq;
-        end.next_seq += 1;
-        let len = bytes.len() as u64;
-        if end.fifo_bytes + len > end.model.fifo_bytes {
-            self.reports.push_back(Report {
-                from: side,
-                seq,
-                len: bytes.len(),
-                t_offered: now,
-                t_tx_start: None,
-                t_rx: None,
-                fate: Fate::Overflow,
-                duplicate: false,
-                bytes: Vec::new(),
-            });
-            return seq;
-        }
-        let delay_s = intrinsic_delay_s(&end.model, &mut end.streams.jitter);
-        let t_ready = now.after_secs(delay_s);
-        let key = if end.model.reorder {
-            t_ready
-        } else {
-            SimTime::ZERO
+        let len = bytes.len();
+        let seq = match end.tx.enqueue(&end.model, now, bytes) {
+            Ok(seq) => seq,
+            Err(seq) => {
+                self.reports.push_back(Report {
+                    from: side,
+                    seq,
+                    len,
+                    t_offered: now,
+                    t_tx_start: None,
+                    t_rx: None,
+                    fate: Fate::Overflow,
+                    duplicate: false,
+                    bytes: Vec::new(),
+                });
+                return seq;
+            }
         };
-        end.fifo_bytes += len;
-        end.fifo.push(Reverse(Waiting {
-            key,
-            seq,
-            t_offered: now,
-            t_ready,
-            bytes,
-        }));
         self.try_transmit(side);
         seq
     }
@@ -404,9 +497,7 @@ impl Link {
         match event {
             Event::Kick(side) => {
                 let now = self.now();
-                let end = &mut self.ends[side.index()];
-                if end.kick_at == Some(now) {
-                    end.kick_at = None;
+                if self.ends[side.index()].tx.woken(now) {
                     self.try_transmit(side);
                 }
             }
@@ -421,26 +512,14 @@ impl Link {
     fn try_transmit(&mut self, side: Side) {
         let now = self.now();
         let end = &mut self.ends[side.index()];
-        if end.air_busy_until > now {
-            return; // TxEnd will come back here.
-        }
-        let Some(Reverse(head)) = end.fifo.peek() else {
-            return;
-        };
-        if head.t_ready > now {
-            let due = head.t_ready;
-            if end.kick_at.is_none_or(|pending| due < pending) {
-                end.kick_at = Some(due);
+        let (frame, air_end) = match end.tx.next_on_air(&end.model, now) {
+            OnAir::Nothing => return,
+            OnAir::WakeAt(due) => {
                 self.sched.schedule(due, Event::Kick(side));
+                return;
             }
-            return;
-        }
-        let Some(Reverse(frame)) = end.fifo.pop() else {
-            return;
+            OnAir::Frame(frame, air_end) => (frame, air_end),
         };
-        end.fifo_bytes -= frame.bytes.len() as u64;
-        let air_end = now.after_secs(end.model.air_time_s(frame.bytes.len()));
-        end.air_busy_until = air_end;
         self.sched.schedule(air_end, Event::TxEnd(side));
 
         // Half duplex (a property of this side's modem, kept in the model of what it sends):
@@ -517,7 +596,7 @@ impl Link {
         };
         let to = reception.from.other();
         let receiver = &self.ends[to.index()];
-        let deaf = receiver.model.half_duplex && receiver.air_busy_until > now;
+        let deaf = receiver.model.half_duplex && receiver.tx.air_busy_until > now;
         let overlapping: Vec<usize> = receiver
             .hearing
             .iter()
@@ -549,34 +628,14 @@ impl Link {
         self.ends[to.index()].hearing.retain(|&s| s != slot);
 
         let end = &mut self.ends[from.index()];
-        let model = &end.model;
-        let streams = &mut end.streams;
-        let fate = if reception.collided {
-            Fate::Collision
-        } else if lost(model, streams, &mut end.burst_bad) {
-            Fate::Loss
-        } else {
-            let hit = flip_bit_errors(model.ber, &mut reception.bytes, &mut streams.ber);
-            if hit {
-                match model.errors {
-                    ErrorMode::Drop => Fate::Ber,
-                    ErrorMode::Corrupt => Fate::Corrupted,
-                }
-            } else if model.corrupt_percent > 0.0
-                && streams.corrupt.bernoulli(model.corrupt_percent / 100.0)
-                && !reception.bytes.is_empty()
-            {
-                let bit = (streams.corrupt.uniform() * (reception.bytes.len() * 8) as f64) as usize;
-                reception.bytes[bit / 8] ^= 0x80 >> (bit % 8);
-                Fate::Corrupted
-            } else {
-                Fate::Delivered
-            }
-        };
+        let (fate, duplicate) = arrival(
+            &end.model,
+            &mut end.tx.streams,
+            &mut end.burst_bad,
+            reception.collided,
+            &mut reception.bytes,
+        );
         let arrived = fate.arrived();
-        let duplicate = arrived
-            && model.duplicate_percent > 0.0
-            && streams.duplicate.bernoulli(model.duplicate_percent / 100.0);
         let report = Report {
             from,
             seq: reception.seq,
@@ -599,6 +658,44 @@ impl Link {
             self.reports.push_back(report);
         }
     }
+}
+
+/// What became of a reception at its end, and whether it is duplicated: a collision, else
+/// the sender's losses, bit errors (flipped in `bytes`), corruption and duplication, drawn from
+/// the sender's `streams` (`burst_bad`: the Gilbert-Elliott state of this sender's channel into
+/// this receiver).
+pub(super) fn arrival(
+    model: &Model,
+    streams: &mut Streams,
+    burst_bad: &mut bool,
+    collided: bool,
+    bytes: &mut [u8],
+) -> (Fate, bool) {
+    let fate = if collided {
+        Fate::Collision
+    } else if lost(model, streams, burst_bad) {
+        Fate::Loss
+    } else if flip_bit_errors(model.ber, bytes, &mut streams.ber) {
+        match model.errors {
+            ErrorMode::Drop => Fate::Ber,
+            ErrorMode::Corrupt => Fate::Corrupted,
+        }
+    } else if model.corrupt_percent > 0.0
+        && streams.corrupt.bernoulli(model.corrupt_percent / 100.0)
+        && !bytes.is_empty()
+    {
+        let bit = (streams.corrupt.uniform() * (bytes.len() * 8) as f64) as usize;
+        if let Some(byte) = bytes.get_mut(bit / 8) {
+            *byte ^= 0x80 >> (bit % 8);
+        }
+        Fate::Corrupted
+    } else {
+        Fate::Delivered
+    };
+    let duplicate = fate.arrived()
+        && model.duplicate_percent > 0.0
+        && streams.duplicate.bernoulli(model.duplicate_percent / 100.0);
+    (fate, duplicate)
 }
 
 /// The intrinsic delay of one frame, with its jitter, never negative, seconds.
@@ -703,24 +800,52 @@ pub const DROP_CAUSES: [&str; 5] = ["ber", "collision", "overflow", "range", "lo
 impl DirectionStats {
     /// Counts a report.
     pub fn record(&mut self, report: &Report) {
-        if report.duplicate {
+        self.count(
+            report.duplicate,
+            report.len,
+            report.fate,
+            report.t_offered,
+            report.t_rx,
+        );
+    }
+
+    /// Counts a shared medium's report (the direction is its (from, to) pair).
+    pub fn record_medium(&mut self, report: &super::MediumReport) {
+        self.count(
+            report.duplicate,
+            report.len,
+            report.fate,
+            report.t_offered,
+            report.t_rx,
+        );
+    }
+
+    fn count(
+        &mut self,
+        duplicate: bool,
+        len: usize,
+        fate: Fate,
+        t_offered: SimTime,
+        t_rx: Option<SimTime>,
+    ) {
+        if duplicate {
             self.frames_duplicated += 1;
             return;
         }
         self.frames_offered += 1;
-        self.bytes_offered += report.len as u64;
-        if let Some(index) = drop_index(report.fate) {
+        self.bytes_offered += len as u64;
+        if let Some(index) = drop_index(fate) {
             self.dropped[index] += 1;
             return;
         }
         self.frames_delivered += 1;
-        self.bytes_delivered += report.len as u64;
-        if report.fate == Fate::Corrupted {
+        self.bytes_delivered += len as u64;
+        if fate == Fate::Corrupted {
             self.frames_corrupted += 1;
         }
-        if let Some(t_rx) = report.t_rx {
+        if let Some(t_rx) = t_rx {
             self.delay_ms
-                .push((t_rx.0.saturating_sub(report.t_offered.0)) as f64 * 1e-6);
+                .push((t_rx.0.saturating_sub(t_offered.0)) as f64 * 1e-6);
             self.last_rx = Some(self.last_rx.map_or(t_rx, |last| last.max(t_rx)));
         }
     }

@@ -1,4 +1,5 @@
-//! The real-time driver: a [`Link`] between two real transports, on the monotonic clock.
+//! The real-time driver: a [`Link`] between two real transports ([`Endpoints`]), or a
+//! [`Medium`] among N of them ([`Ports`]), on the monotonic clock.
 //!
 //! Each side is a pseudo-terminal this process creates, an existing serial port (or someone
 //! else's pseudo-terminal), or a UDP socket. One thread per side reads bytes and stamps them
@@ -7,7 +8,8 @@
 //! link: it cuts the bytes into packets (wire.md frames found by the deframer, or, with raw
 //! framing, bytes separated by a quiet gap), offers them at their arrival time, sleeps until the
 //! link's next event or the next input, and hands every delivered frame to the writer of the
-//! other side at the time the model scheduled.
+//! other side at the time the model scheduled (on a medium: to the writer of the port each
+//! report is about).
 //!
 //! The run ends when a side closes or fails (which side, and why, is in [`Ended`]) or when
 //! the stop flag given to [`Endpoints::run`] is set (by a signal handler, say): it is checked at
@@ -29,6 +31,7 @@ use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
 
 use super::channel::{Link, Report, Side};
 use super::dialect::EvoLogicsEmulator;
+use super::medium::{Medium, MediumReport};
 use super::sched::SimTime;
 use crate::stats::Quantiles;
 use crate::wire::{DeframeEvent, Deframer};
@@ -77,11 +80,19 @@ pub enum Framing {
     },
 }
 
+/// The most ports one [`Ports`] opens (a 4-bit address space).
+pub const MAX_PORTS: usize = 16;
+
+/// The names of ports in messages: A and B for a link's two sides, 1 ..= 16 for a medium's.
+const PORT_LABELS: [&str; MAX_PORTS] = [
+    "1", "2", "3", "4", "5", "6", "7", "8", "9", "10", "11", "12", "13", "14", "15", "16",
+];
+
 /// Why a side could not be opened.
 #[derive(Debug, thiserror::Error)]
 #[error("side {side} ({name}): cannot open: {reason}")]
 pub struct OpenError {
-    /// "A" or "B".
+    /// "A" or "B", or a medium's port number from 1.
     pub side: &'static str,
     /// The device or address.
     pub name: String,
@@ -126,16 +137,84 @@ impl RunInfo {
     }
 }
 
+/// How a real-time run on a medium ended.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum PortEnded {
+    /// The stop flag was set (or every reader is gone).
+    Stopped,
+    /// A port closed or failed.
+    Closed {
+        /// Which port (its index, from 0).
+        port: usize,
+        /// Its device or address.
+        name: String,
+        /// What happened.
+        reason: String,
+    },
+}
+
+/// Counters of a real-time run beyond the model's own reports, per port (in port order).
+#[derive(Debug, Clone, Default)]
+pub struct PortsInfo {
+    /// Deliveries a port's writer could not take (its program was not reading).
+    pub not_taken: Vec<u64>,
+    /// Bytes read.
+    pub bytes_read: Vec<u64>,
+    /// Bytes that were not part of any frame (frame framing only).
+    pub bytes_skipped: Vec<u64>,
+    /// How late each delivery was handed to its writer after the model's time.
+    pub lateness: Quantiles,
+}
+
+impl PortsInfo {
+    fn new(ports: usize) -> PortsInfo {
+        PortsInfo {
+            not_taken: vec![0; ports],
+            bytes_read: vec![0; ports],
+            bytes_skipped: vec![0; ports],
+            lateness: Quantiles::default(),
+        }
+    }
+
+    /// The `q` quantile (0..=1) of the delivery lateness in milliseconds (none without deliveries).
+    pub fn lateness_quantile_ms(&self, q: f64) -> Option<f64> {
+        self.lateness.quantile_ms(q)
+    }
+
+    /// Counts a port's figure (an unknown port is ignored).
+    fn add(counts: &mut [u64], port: usize, n: u64) {
+        if let Some(count) = counts.get_mut(port) {
+            *count += n;
+        }
+    }
+}
+
+/// Two ports' counters as a link's.
+fn two(counts: &[u64]) -> [u64; 2] {
+    [0, 1].map(|k| counts.get(k).copied().unwrap_or(0))
+}
+
+impl From<PortsInfo> for RunInfo {
+    fn from(info: PortsInfo) -> RunInfo {
+        RunInfo {
+            not_taken: two(&info.not_taken),
+            bytes_read: two(&info.bytes_read),
+            bytes_skipped: two(&info.bytes_skipped),
+            lateness: info.lateness,
+        }
+    }
+}
+
 enum Message {
     Data {
-        side: Side,
+        port: usize,
         at: Instant,
         bytes: Vec<u8>,
         /// A datagram: one packet as it is, not bytes of a stream.
         datagram: bool,
     },
     Closed {
-        side: Side,
+        port: usize,
         reason: String,
     },
 }
@@ -145,15 +224,68 @@ struct Writer {
     queue: SyncSender<Vec<u8>>,
 }
 
-/// The two open sides of a real-time link.
-pub struct Endpoints {
-    names: [String; 2],
-    writers: [Writer; 2],
+/// Open ports (pseudo-terminals, serial ports, UDP sockets) with their reader and writer
+/// threads, for a [`Medium`] among them.
+pub struct Ports {
+    names: Vec<String>,
+    writers: Vec<Writer>,
     inbox: Receiver<Message>,
-    /// Pseudo-terminal slaves kept open so the pair lives while programs come and go.
+    /// Pseudo-terminal slaves kept open so the pairs live while programs come and go.
     _slaves: Vec<File>,
     /// Run the threads under real-time scheduling.
     realtime_priority: bool,
+}
+
+/// The two open sides of a real-time link.
+pub struct Endpoints {
+    ports: Ports,
+    names: [String; 2],
+}
+
+/// What the real-time loop drives: a link between two ports or a medium among N.
+trait Air {
+    type Report;
+    fn advance(&mut self, t: SimTime);
+    fn next_event_time(&self) -> Option<SimTime>;
+    fn offer(&mut self, port: usize, bytes: Vec<u8>) -> u64;
+    fn pop_report(&mut self) -> Option<Self::Report>;
+}
+
+impl Air for Link {
+    type Report = Report;
+    fn advance(&mut self, t: SimTime) {
+        Link::advance(self, t)
+    }
+    fn next_event_time(&self) -> Option<SimTime> {
+        Link::next_event_time(self)
+    }
+    fn offer(&mut self, port: usize, bytes: Vec<u8>) -> u64 {
+        Link::offer(self, side_of(port), bytes)
+    }
+    fn pop_report(&mut self) -> Option<Report> {
+        Link::pop_report(self)
+    }
+}
+
+impl Air for Medium {
+    type Report = MediumReport;
+    fn advance(&mut self, t: SimTime) {
+        Medium::advance(self, t)
+    }
+    fn next_event_time(&self) -> Option<SimTime> {
+        Medium::next_event_time(self)
+    }
+    fn offer(&mut self, port: usize, bytes: Vec<u8>) -> u64 {
+        Medium::offer(self, port, bytes)
+    }
+    fn pop_report(&mut self) -> Option<MediumReport> {
+        Medium::pop_report(self)
+    }
+}
+
+/// A link's side by port index (A is 0).
+fn side_of(port: usize) -> Side {
+    if port == 0 { Side::A } else { Side::B }
 }
 
 /// Puts the calling thread under SCHED_FIFO at the lowest real-time priority: above every
@@ -182,19 +314,36 @@ pub fn priority_allowed() -> Result<(), String> {
     }
 }
 
-impl Endpoints {
-    /// Opens both sides and starts their reader and writer threads; with `realtime_priority`
-    /// every thread of the link asks for real-time scheduling ([`raise_priority`]).
-    pub fn open(specs: [PortSpec; 2], realtime_priority: bool) -> Result<Endpoints, OpenError> {
+impl Ports {
+    /// Opens every port (at most [`MAX_PORTS`]) and starts their reader and writer threads;
+    /// with `realtime_priority` every thread asks for real-time scheduling
+    /// ([`raise_priority`]).
+    pub fn open(specs: Vec<PortSpec>, realtime_priority: bool) -> Result<Ports, OpenError> {
+        Ports::open_labelled(specs, &PORT_LABELS, realtime_priority)
+    }
+
+    fn open_labelled(
+        specs: Vec<PortSpec>,
+        labels: &[&'static str],
+        realtime_priority: bool,
+    ) -> Result<Ports, OpenError> {
+        if specs.len() > labels.len() {
+            return Err(OpenError {
+                side: "all",
+                name: format!("{} ports", specs.len()),
+                reason: format!("expected at most {} ports", labels.len()),
+            });
+        }
         let (sender, inbox) = mpsc::channel();
-        let [spec_a, spec_b] = specs;
-        let rt = realtime_priority;
-        let (name_a, writer_a, slave_a) = open_side(Side::A, spec_a, sender.clone(), rt)?;
-        let (name_b, writer_b, slave_b) = open_side(Side::B, spec_b, sender, rt)?;
-        let names = [name_a, name_b];
-        let writers = [writer_a, writer_b];
-        let slaves = slave_a.into_iter().chain(slave_b).collect();
-        Ok(Endpoints {
+        let (mut names, mut writers, mut slaves) = (Vec::new(), Vec::new(), Vec::new());
+        for (port, (spec, label)) in specs.into_iter().zip(labels).enumerate() {
+            let (name, writer, slave) =
+                open_side(port, label, spec, sender.clone(), realtime_priority)?;
+            names.push(name);
+            writers.push(writer);
+            slaves.extend(slave);
+        }
+        Ok(Ports {
             names,
             writers,
             inbox,
@@ -203,77 +352,88 @@ impl Endpoints {
         })
     }
 
-    /// The device path or address of each side (A, then B): for a pseudo-terminal, the path
+    /// The device path or address of each port, in order: for a pseudo-terminal, the path
     /// programs open.
-    pub fn names(&self) -> &[String; 2] {
+    pub fn names(&self) -> &[String] {
         &self.names
     }
 
-    /// Hands bytes to a side's writer; counts them as not taken when its queue is full.
-    fn write(&self, side: Side, bytes: Vec<u8>, info: &mut RunInfo) {
-        if bytes.is_empty() {
+    /// Hands bytes to a port's writer; counts them as not taken when its queue is full.
+    fn write(&self, port: usize, bytes: Vec<u8>, info: &mut PortsInfo) {
+        let Some(writer) = self.writers.get(port).filter(|_| !bytes.is_empty()) else {
             return;
-        }
-        match self.writers[side.index()].queue.try_send(bytes) {
+        };
+        match writer.queue.try_send(bytes) {
             Ok(()) => {}
             Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {
-                info.not_taken[side.index()] += 1
+                PortsInfo::add(&mut info.not_taken, port, 1)
             }
         }
     }
 
-    /// Runs `link` between the two sides until one closes or the run is stopped. `on_report`
-    /// sees every report when the model decides it (delivered frames are then written), with
-    /// the link's clock anchored at the start of the call. With a `dialect`, the sides speak
-    /// the EvoLogics AT commands instead of sending bare packets (`framing` is then unused).
-    /// The run ends ([`Ended::Stopped`]) within 200 ms of `stop` being set.
+    /// Runs `medium` (node k on port k) among the ports until one closes or the run is
+    /// stopped. `on_report` sees every report when the model decides it (the bytes of a frame
+    /// that arrived are then written to the port the report is about), with the medium's
+    /// clock anchored at the start of the call. The run ends ([`PortEnded::Stopped`]) within
+    /// 200 ms of `stop` being set.
     pub fn run(
         &self,
-        link: &mut Link,
+        medium: &mut Medium,
         framing: Framing,
-        mut dialect: Option<&mut EvoLogicsEmulator>,
         stop: &AtomicBool,
-        mut on_report: impl FnMut(&Report),
-    ) -> (Ended, RunInfo) {
+        mut on_report: impl FnMut(&MediumReport),
+    ) -> (PortEnded, PortsInfo) {
+        self.drive(
+            medium,
+            framing,
+            stop,
+            |_, report, info| {
+                if report.fate.arrived() {
+                    self.write(report.to, report.bytes.clone(), info);
+                }
+                on_report(&report);
+                report.t_rx.filter(|_| report.fate.arrived())
+            },
+            |_, _, bytes, _| Some(bytes),
+        )
+    }
+
+    /// The loop both drivers share. `deliver` handles a report (and returns its arrival time,
+    /// for the lateness); `receive` may take bytes a port read before framing (returning none)
+    /// or hand them on.
+    fn drive<A: Air>(
+        &self,
+        air: &mut A,
+        framing: Framing,
+        stop: &AtomicBool,
+        mut deliver: impl FnMut(&mut A, A::Report, &mut PortsInfo) -> Option<SimTime>,
+        mut receive: impl FnMut(&mut A, usize, Vec<u8>, &mut PortsInfo) -> Option<Vec<u8>>,
+    ) -> (PortEnded, PortsInfo) {
         if self.realtime_priority {
             let _ = raise_priority();
         }
         let start = Instant::now();
         let clock = |at: Instant| SimTime(at.saturating_duration_since(start).as_nanos() as u64);
-        let mut info = RunInfo::default();
-        let mut framers = [Framer::new(framing), Framer::new(framing)];
+        let mut info = PortsInfo::new(self.names.len());
+        let mut framers: Vec<Framer> = self.names.iter().map(|_| Framer::new(framing)).collect();
         loop {
             if stop.load(Ordering::Relaxed) {
-                return (Ended::Stopped, info);
+                return (PortEnded::Stopped, info);
             }
             let now = clock(Instant::now());
-            link.advance(now);
-            while let Some(report) = link.pop_report() {
-                if let (Some(t_rx), true) = (report.t_rx, report.fate.arrived()) {
+            air.advance(now);
+            while let Some(report) = air.pop_report() {
+                if let Some(t_rx) = deliver(air, report, &mut info) {
                     let late_us = now.0.saturating_sub(t_rx.0) / 1000;
                     info.lateness.push_us(late_us);
                 }
-                let to = report.from.other();
-                match dialect.as_deref_mut() {
-                    Some(emulator) => {
-                        let (to_receiver, to_sender) =
-                            emulator.on_report(&report, link.model(report.from));
-                        self.write(to, to_receiver, &mut info);
-                        self.write(report.from, to_sender, &mut info);
-                    }
-                    None if report.fate.arrived() => {
-                        self.write(to, report.bytes.clone(), &mut info)
-                    }
-                    None => {}
-                }
-                on_report(&report);
             }
-            for side in [Side::A, Side::B] {
-                for packet in framers[side.index()].due(now) {
-                    link.offer(side, packet);
+            for (port, framer) in framers.iter_mut().enumerate() {
+                for packet in framer.due(now) {
+                    air.offer(port, packet);
                 }
             }
-            let mut wake = link.next_event_time();
+            let mut wake = air.next_event_time();
             for framer in &framers {
                 if let Some(due) = framer.deadline() {
                     wake = Some(wake.map_or(due, |w| w.min(due)));
@@ -287,43 +447,119 @@ impl Endpoints {
             let timeout = deadline.saturating_duration_since(Instant::now());
             match self.inbox.recv_timeout(timeout) {
                 Ok(Message::Data {
-                    side,
+                    port,
                     at,
                     bytes,
                     datagram,
                 }) => {
                     let t = clock(at);
-                    link.advance(t);
-                    info.bytes_read[side.index()] += bytes.len() as u64;
-                    if let Some(emulator) = dialect.as_deref_mut() {
-                        let (packets, replies) = emulator.from_host(side, &bytes);
-                        self.write(side, replies, &mut info);
-                        for (data, kind) in packets {
-                            let seq = link.offer(side, data);
-                            emulator.sent(side, seq, kind);
-                        }
+                    air.advance(t);
+                    PortsInfo::add(&mut info.bytes_read, port, bytes.len() as u64);
+                    let Some(bytes) = receive(air, port, bytes, &mut info) else {
                         continue;
-                    }
+                    };
                     if datagram {
-                        link.offer(side, bytes);
+                        air.offer(port, bytes);
                         continue;
                     }
-                    let framer = &mut framers[side.index()];
+                    let Some(framer) = framers.get_mut(port) else {
+                        continue;
+                    };
                     for packet in framer.push(t, &bytes) {
-                        link.offer(side, packet);
+                        air.offer(port, packet);
                     }
-                    info.bytes_skipped[side.index()] = framer.skipped;
+                    if let Some(skipped) = info.bytes_skipped.get_mut(port) {
+                        *skipped = framer.skipped;
+                    }
                 }
-                Ok(Message::Closed { side, reason }) => {
-                    let name = self.names[side.index()].clone();
-                    return (Ended::Closed { side, name, reason }, info);
+                Ok(Message::Closed { port, reason }) => {
+                    let name = self.names.get(port).cloned().unwrap_or_default();
+                    return (PortEnded::Closed { port, name, reason }, info);
                 }
                 Err(RecvTimeoutError::Disconnected) => {
-                    return (Ended::Stopped, info);
+                    return (PortEnded::Stopped, info);
                 }
                 Err(RecvTimeoutError::Timeout) => {}
             }
         }
+    }
+}
+
+impl Endpoints {
+    /// Opens both sides and starts their reader and writer threads; with `realtime_priority`
+    /// every thread of the link asks for real-time scheduling ([`raise_priority`]).
+    pub fn open(specs: [PortSpec; 2], realtime_priority: bool) -> Result<Endpoints, OpenError> {
+        let ports = Ports::open_labelled(specs.into(), &["A", "B"], realtime_priority)?;
+        let names = [0, 1].map(|k| ports.names.get(k).cloned().unwrap_or_default());
+        Ok(Endpoints { ports, names })
+    }
+
+    /// The device path or address of each side (A, then B): for a pseudo-terminal, the path
+    /// programs open.
+    pub fn names(&self) -> &[String; 2] {
+        &self.names
+    }
+
+    /// Runs `link` between the two sides until one closes or the run is stopped. `on_report`
+    /// sees every report when the model decides it (delivered frames are then written), with
+    /// the link's clock anchored at the start of the call. With a `dialect`, the sides speak
+    /// the EvoLogics AT commands instead of sending bare packets (`framing` is then unused).
+    /// The run ends ([`Ended::Stopped`]) within 200 ms of `stop` being set.
+    pub fn run(
+        &self,
+        link: &mut Link,
+        framing: Framing,
+        dialect: Option<&mut EvoLogicsEmulator>,
+        stop: &AtomicBool,
+        mut on_report: impl FnMut(&Report),
+    ) -> (Ended, RunInfo) {
+        let ports = &self.ports;
+        let dialect = std::cell::RefCell::new(dialect);
+        let (ended, info) = ports.drive(
+            link,
+            framing,
+            stop,
+            |link, report, info| {
+                let to = report.from.other();
+                match dialect.borrow_mut().as_deref_mut() {
+                    Some(emulator) => {
+                        let (to_receiver, to_sender) =
+                            emulator.on_report(&report, link.model(report.from));
+                        ports.write(to.index(), to_receiver, info);
+                        ports.write(report.from.index(), to_sender, info);
+                    }
+                    None if report.fate.arrived() => {
+                        ports.write(to.index(), report.bytes.clone(), info)
+                    }
+                    None => {}
+                }
+                on_report(&report);
+                report.t_rx.filter(|_| report.fate.arrived())
+            },
+            |link, port, bytes, info| {
+                let mut dialect = dialect.borrow_mut();
+                let Some(emulator) = dialect.as_deref_mut() else {
+                    return Some(bytes);
+                };
+                let side = side_of(port);
+                let (packets, replies) = emulator.from_host(side, &bytes);
+                ports.write(port, replies, info);
+                for (data, kind) in packets {
+                    let seq = link.offer(side, data);
+                    emulator.sent(side, seq, kind);
+                }
+                None
+            },
+        );
+        let ended = match ended {
+            PortEnded::Stopped => Ended::Stopped,
+            PortEnded::Closed { port, name, reason } => Ended::Closed {
+                side: side_of(port),
+                name,
+                reason,
+            },
+        };
+        (ended, info.into())
     }
 }
 
@@ -405,13 +641,14 @@ impl Framer {
 }
 
 fn open_side(
-    side: Side,
+    side: usize,
+    label: &'static str,
     spec: PortSpec,
     inbox: Sender<Message>,
     rt: bool,
 ) -> Result<(String, Writer, Option<File>), OpenError> {
     let fail = |name: &str, reason: String| OpenError {
-        side: side.name(),
+        side: label,
         name: name.to_string(),
         reason,
     };
@@ -495,7 +732,7 @@ fn open_pty() -> nix::Result<(PtyMaster, File, String)> {
 }
 
 fn spawn_reader(
-    side: Side,
+    port: usize,
     rt: bool,
     datagram: bool,
     inbox: Sender<Message>,
@@ -510,14 +747,14 @@ fn spawn_reader(
             match read(&mut buf) {
                 Ok(0) => {
                     let _ = inbox.send(Message::Closed {
-                        side,
+                        port,
                         reason: "end of file (the other end closed)".into(),
                     });
                     return;
                 }
                 Ok(n) => {
                     let message = Message::Data {
-                        side,
+                        port,
                         at: Instant::now(),
                         bytes: buf[..n].to_vec(),
                         datagram,
@@ -535,7 +772,7 @@ fn spawn_reader(
                     ) => {}
                 Err(e) => {
                     let _ = inbox.send(Message::Closed {
-                        side,
+                        port,
                         reason: format!("read failed: {e}"),
                     });
                     return;
@@ -546,7 +783,7 @@ fn spawn_reader(
 }
 
 fn spawn_writer(
-    side: Side,
+    port: usize,
     rt: bool,
     inbox: Sender<Message>,
     outbox: Receiver<Vec<u8>>,
@@ -559,7 +796,7 @@ fn spawn_writer(
         for bytes in outbox {
             if let Err(e) = write(&bytes) {
                 let _ = inbox.send(Message::Closed {
-                    side,
+                    port,
                     reason: format!("write failed: {e}"),
                 });
                 return;

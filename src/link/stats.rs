@@ -17,6 +17,7 @@ use super::channel::{DirectionStats, Link, Report, Side};
 use super::model::Model;
 use super::realtime::RunInfo;
 use super::sched::SimTime;
+use crate::stats::Quantiles;
 
 /// The trace's columns in real time (both directions: the sending side is the last column).
 pub const TRACE_COLUMNS_SIDES: [&str; 7] = [
@@ -202,21 +203,22 @@ impl Counters {
 /// What a real-time run's summary adds: the delivery lateness and the deliveries a side did
 /// not take, one line each.
 pub fn real_time_lines(info: &RunInfo) -> Vec<String> {
+    port_lines(&info.lateness, &info.not_taken, &["A", "B"])
+}
+
+/// [`real_time_lines`] for any number of ports: the delivery lateness, then each port (named
+/// by `labels`, in order) whose program did not take deliveries.
+pub fn port_lines(lateness: &Quantiles, not_taken: &[u64], labels: &[&str]) -> Vec<String> {
     let mut lines = Vec::new();
-    if let (Some(p50), Some(p99)) = (
-        info.lateness_quantile_ms(0.5),
-        info.lateness_quantile_ms(0.99),
-    ) {
+    if let (Some(p50), Some(p99)) = (lateness.quantile_ms(0.5), lateness.quantile_ms(0.99)) {
         lines.push(format!(
             "deliveries handed to the port {p50:.3} ms (median), {p99:.3} ms (p99) after their model time"
         ));
     }
-    for side in [Side::A, Side::B] {
-        if info.not_taken[side.index()] > 0 {
+    for (label, &count) in labels.iter().zip(not_taken) {
+        if count > 0 {
             lines.push(format!(
-                "side {}: {} deliveries not taken (its program was not reading)",
-                side.name(),
-                info.not_taken[side.index()]
+                "side {label}: {count} deliveries not taken (its program was not reading)"
             ));
         }
     }

@@ -18,6 +18,7 @@ pub mod foxglove;
 pub mod harness;
 pub mod mavlink;
 pub mod mcap_log;
+pub mod net_mcap;
 pub mod net_outputs;
 pub mod network;
 pub mod operator;

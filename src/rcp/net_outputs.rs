@@ -8,13 +8,15 @@
 //! - `--track`: one CSV row per vehicle step, with the vehicle's address first;
 //! - `--images-out DIR`: every completed image as `DIR/vehicle-N/image-NNNN.png`, each file
 //!   whole;
-//! - `--telemetry`: the single-vehicle JSON Lines, each with `"vehicle": N`.
+//! - `--telemetry`: the single-vehicle JSON Lines, each with `"vehicle": N`;
+//! - `--mcap`: the [`NetMcapLog`] (each vehicle's channels, every frame at every receiver).
 //!
 //! Rows are whole lines, flushed as they go; the first write error is kept, from then on
 //! [`NetObserver::failed`] is true and [`NetRecorder::finish`] returns it.
 
 use std::path::PathBuf;
 
+use super::net_mcap::NetMcapLog;
 use super::network::{HopEvent, NetObserver};
 use super::outputs::{Telemetry, write_whole};
 use super::{Event, PoseSample, Role};
@@ -58,6 +60,8 @@ pub struct NetDestinations {
     pub images_out: Option<PathBuf>,
     /// `--telemetry`.
     pub telemetry: Option<Dest>,
+    /// `--mcap`.
+    pub mcap: Option<Dest>,
 }
 
 /// The observer writing every output of a scenario.
@@ -68,14 +72,25 @@ pub struct NetRecorder {
     /// Images completed per vehicle.
     images: std::collections::BTreeMap<u8, u64>,
     telemetry: Option<Telemetry>,
+    mcap: Option<NetMcapLog>,
     progress: indicatif::ProgressBar,
     error: Option<anyhow::Error>,
 }
 
 impl NetRecorder {
-    /// The outputs; files appear with their first row. `progress` counts session seconds.
-    pub fn new(dests: NetDestinations, progress: indicatif::ProgressBar) -> NetRecorder {
-        NetRecorder {
+    /// The outputs of a scenario with `vehicles`; the MCAP log starts at once, CSV files
+    /// appear with their first row. `progress` counts session seconds.
+    pub fn new(
+        dests: NetDestinations,
+        vehicles: &[u8],
+        progress: indicatif::ProgressBar,
+    ) -> anyhow::Result<NetRecorder> {
+        let mcap = dests
+            .mcap
+            .as_ref()
+            .map(|dest| NetMcapLog::create(dest, vehicles))
+            .transpose()?;
+        Ok(NetRecorder {
             events: dests
                 .events
                 .map(|dest| RowWriter::new(dest, RowFormat::Csv, &NET_EVENTS_HEADER)),
@@ -85,9 +100,10 @@ impl NetRecorder {
             images_out: dests.images_out,
             images: Default::default(),
             telemetry: dests.telemetry.map(Telemetry::new),
+            mcap,
             progress,
             error: None,
-        }
+        })
     }
 
     fn keep(&mut self, outcome: Result<(), impl Into<anyhow::Error>>) {
@@ -111,6 +127,9 @@ impl NetRecorder {
         if let Some(telemetry) = self.telemetry.take() {
             telemetry.finish()?;
         }
+        if let Some(log) = self.mcap.take() {
+            log.finish()?;
+        }
         Ok(())
     }
 }
@@ -123,6 +142,9 @@ impl NetObserver for NetRecorder {
     fn hop(&mut self, e: &HopEvent) {
         let t = e.t_received_s.unwrap_or(e.t_sent_s);
         self.progress.set_position(t as u64);
+        if let Some(log) = self.mcap.as_mut() {
+            log.hop(e);
+        }
         let (Some(out), None) = (self.events.as_mut(), self.error.as_ref()) else {
             return;
         };
@@ -147,6 +169,9 @@ impl NetObserver for NetRecorder {
         let count = self.images.entry(vehicle).or_insert(0);
         *count += 1;
         let number = *count;
+        if let Some(log) = self.mcap.as_mut() {
+            log.image(vehicle, t_s, stream);
+        }
         let mut file = None;
         if let (Some(dir), None) = (self.images_out.as_ref(), self.error.as_ref()) {
             let path = dir
@@ -170,6 +195,9 @@ impl NetObserver for NetRecorder {
     }
 
     fn pose(&mut self, vehicle: u8, pose: &PoseSample) {
+        if let Some(log) = self.mcap.as_mut() {
+            log.pose(vehicle, pose);
+        }
         let (Some(out), None) = (self.track.as_mut(), self.error.as_ref()) else {
             return;
         };
@@ -188,6 +216,9 @@ impl NetObserver for NetRecorder {
     }
 
     fn event(&mut self, vehicle: u8, end: Role, t_s: f64, event: &Event) {
+        if let Some(log) = self.mcap.as_mut() {
+            log.event(vehicle, end, t_s, event);
+        }
         if let (Some(telemetry), None) = (self.telemetry.as_mut(), self.error.as_ref()) {
             telemetry.set_vehicle(vehicle);
             let outcome = telemetry.event(end, t_s, event, None);
@@ -205,6 +236,6 @@ impl NetObserver for NetRecorder {
     }
 
     fn failed(&self) -> bool {
-        self.error.is_some()
+        self.error.is_some() || self.mcap.as_ref().is_some_and(NetMcapLog::failed)
     }
 }

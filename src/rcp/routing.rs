@@ -506,6 +506,27 @@ impl Router {
             .unwrap_or(0)
     }
 
+    /// Every interface a frame this node originates for `dst` goes out on: for broadcast each
+    /// interface that reaches a node (a relay's broadcast reaches both its media); otherwise
+    /// [`Router::interface_to`] alone. Empty when the node has no interface.
+    pub fn originate_on(&self, dst: u8) -> Vec<usize> {
+        if dst == BROADCAST {
+            return (0..self.interfaces.len())
+                .filter(|&k| {
+                    self.interfaces
+                        .get(k)
+                        .is_some_and(|reach| !reach.is_empty())
+                })
+                .collect();
+        }
+        let interface = self.interface_to(dst);
+        if interface < self.interfaces.len() {
+            vec![interface]
+        } else {
+            Vec::new()
+        }
+    }
+
     fn interface_reaching(&self, hop: u8) -> Option<usize> {
         self.interfaces
             .iter()
@@ -1114,9 +1135,13 @@ mod tests {
         let t = at(7.0);
         let mut delivered = [0; 4];
         let mut transmissions = 0;
-        let origin = routers[from].interface_to(Frame::new_checked(bytes).unwrap().dst());
+        let dst = Frame::new_checked(bytes).unwrap().dst();
         routers[from].sent(t, bytes);
-        let mut on_air = vec![(from, origin)];
+        let mut on_air: Vec<(usize, usize)> = routers[from]
+            .originate_on(dst)
+            .into_iter()
+            .map(|k| (from, k))
+            .collect();
         while let Some((sender, interface)) = on_air.pop() {
             transmissions += 1;
             let address = routers[sender].address();
@@ -1174,6 +1199,19 @@ mod tests {
         assert_eq!((delivered, transmissions), ([0; 4], 1));
         let (delivered, _) = flood(&mut bare, 0, &op_frame(BROADCAST, 92));
         assert_eq!(delivered, [0, 1, 0, 0]);
+    }
+
+    #[test]
+    fn a_relay_originates_a_broadcast_on_every_interface_it_has() {
+        let (_, routers) = chain();
+        assert_eq!(routers[1].originate_on(BROADCAST), vec![0, 1]);
+        assert_eq!(routers[1].originate_on(3), vec![1]);
+        assert_eq!(routers[1].originate_on(0), vec![0]);
+        let silent = Router::new(1, Routes::direct(), vec![Vec::new(), vec![2]], 0.5);
+        assert_eq!(silent.originate_on(BROADCAST), vec![1]);
+        let lonely = Router::new(1, Routes::direct(), Vec::new(), 0.5);
+        assert_eq!(lonely.originate_on(BROADCAST), Vec::<usize>::new());
+        assert_eq!(lonely.originate_on(0), Vec::<usize>::new());
     }
 
     #[test]

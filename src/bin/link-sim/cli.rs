@@ -15,9 +15,9 @@ use rovlink::gll::Dialect;
 use rovlink::io::Output;
 use rovlink::link::model::MAX_RANGE_M;
 use rovlink::link::pipe::Pace;
-use rovlink::link::realtime::{Framing, PortSpec};
+use rovlink::link::realtime::{Framing, MAX_PORTS, PortSpec};
 use rovlink::link::stats::Mode;
-use rovlink::link::{Distance, Link};
+use rovlink::link::{Distance, Link, Medium};
 
 const EXAMPLES: &str = "\
 Examples:
@@ -30,11 +30,22 @@ Examples:
   link-sim --model satellite-up --reverse-model satellite-down --udp-a 127.0.0.1:9001 --udp-b 127.0.0.1:9002
   link-sim --model s100 --pty --raw --idle-ms 20 --distance-file dive.csv
   link-sim --model s2cr-burst --pty --dialect evologics  programs speak AT*SEND / RECV to it
+  link-sim --model s100 --pty 3 --position 0,0,0 --position 3,0,1 --position 7,0,1
+                          three nodes on one S100 medium (paths on stdout, ports 1, 2, 3): the
+                          middle one hears both ends, the ends (7.07 m apart) never hear each other
 
 Modes: with no port option, frames (wire.md) from INPUT or stdin go from side A to side B in
 virtual time and the frames that arrive go to stdout (or -o), in arrival order. With --pty,
 --a/--b or --udp-a/--udp-b, the link runs in real time between the two sides until a side
 closes (exit 1), or SIGINT/SIGTERM/SIGHUP (exit 0).
+
+Shared medium: --pty N (3 ..= 16) creates N pseudo-terminals on one medium with one model:
+a frame written to a port reaches every other port in range (from the distance between their
+--position, given once per port in port order; default: all at the origin), each after its
+own propagation delay, and collides at each receiver separately. The summary and --stats
+count each (from, to) pair of ports (numbered from 1); --trace, --reverse-model, --distance,
+--distance-file and --dialect evologics apply to two ports only. --pty 2 with --position is
+the two-port link at the distance between the two positions.
 
 Trace (--trace): one row per frame, in the order fates are decided:
   seq,bytes,t_offered_s,t_tx_start_s,t_rx_s,fate      (real time adds a last column: side)
@@ -89,10 +100,10 @@ pub struct Args {
     #[arg(long, default_value_t = 1, value_parser = value::count(0, u64::MAX))]
     pub seed: u64,
 
-    /// Distance between the two sides, m (0 ..= 1e9).
-    #[arg(long, value_name = "M", default_value_t = 1.0, conflicts_with = "distance_file",
+    /// Distance between the two sides, m (0 ..= 1e9) [default: 1].
+    #[arg(long, value_name = "M", conflicts_with = "distance_file",
           value_parser = value::real(0.0, MAX_RANGE_M, "m"))]
-    pub distance: f64,
+    pub distance: Option<f64>,
 
     /// Distance over time: CSV with columns t_s,distance_m (linear between rows).
     #[arg(long, value_name = "FILE")]
@@ -110,9 +121,19 @@ pub struct Args {
     #[arg(long, value_name = "FILE")]
     pub stats: Option<PathBuf>,
 
-    /// Real time: create a pseudo-terminal pair and print its two paths (A, then B).
-    #[arg(long, help_heading = "Real time", conflicts_with_all = ["a", "udp_a"])]
-    pub pty: bool,
+    /// Real time: create N pseudo-terminals (2 ..= 16; none given: 2, sides A and B) and
+    /// print their paths, one per line in port order; more than 2 share one medium.
+    #[arg(long, value_name = "N", num_args = 0..=1, default_missing_value = "2",
+          help_heading = "Real time", conflicts_with_all = ["a", "udp_a"],
+          value_parser = CountParser { min: 2, max: MAX_PORTS as u64, unit: "ports" })]
+    pub pty: Option<u64>,
+
+    /// Real time, with --pty: a port's position, NED m (each within 100 km), once per port in
+    /// port order.
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true, requires = "pty",
+          conflicts_with_all = ["distance", "distance_file"], help_heading = "Real time",
+          value_parser = value::point3())]
+    pub position: Vec<[f64; 3]>,
 
     /// Real time: side A's serial port (or pseudo-terminal).
     #[arg(long, value_name = "DEV", requires = "b", help_heading = "Real time")]
@@ -247,7 +268,8 @@ impl Args {
             &self.distance_file,
         ];
         outs.inputs(inputs.into_iter().flatten().map(PathBuf::as_path));
-        if self.pty {
+        self.check_ports()?;
+        if self.pty.is_some() {
             outs.claim_stdout("--pty", Kind::Text)?;
         }
         let trace = outs.claim_opt("--trace", self.trace.as_deref(), Kind::Text)?;
@@ -273,16 +295,64 @@ impl Args {
             Some(reverse) => reverse.resolve()?,
             None => forward.clone(),
         };
-        let distance = match &self.distance_file {
-            Some(path) => Distance::from_csv_file(path)?,
-            None => Distance::Fixed(self.distance),
+        let distance = match (&self.distance_file, &self.position[..]) {
+            (Some(path), _) => Distance::from_csv_file(path)?,
+            (None, [a, b]) => {
+                Distance::Fixed((0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt())
+            }
+            (None, _) => Distance::Fixed(self.distance.unwrap_or(1.0)),
         };
         Ok(Link::new(forward, reverse, self.seed, distance)?)
     }
 
+    /// The number of ports of a shared medium (`--pty N`, N > 2); none for a two-sided link.
+    pub fn medium_ports(&self) -> Option<usize> {
+        self.pty.map(|n| n as usize).filter(|&n| n > 2)
+    }
+
+    /// The shared medium of `--pty N`: the model, the seed, the ports' positions.
+    pub fn medium(&self, ports: usize) -> anyhow::Result<Medium> {
+        let positions = match self.position.is_empty() {
+            true => vec![[0.0; 3]; ports],
+            false => self.position.clone(),
+        };
+        Ok(Medium::new(self.model.resolve()?, self.seed, positions)?)
+    }
+
+    /// Checks the flags of `--pty N` and `--position`: one position per port; with more than
+    /// two ports, only the flags a medium has.
+    fn check_ports(&self) -> Result<(), UsageError> {
+        let Some(ports) = self.pty else {
+            return Ok(());
+        };
+        if !self.position.is_empty() && self.position.len() as u64 != ports {
+            return Err(UsageError(format!(
+                "--position: expected one per port ({ports}), found {}",
+                self.position.len()
+            )));
+        }
+        if ports == 2 {
+            return Ok(());
+        }
+        let two_only = [
+            ("--trace", self.trace.is_some()),
+            ("--reverse-model", self.reverse_model.is_some()),
+            ("--reverse-model-file", self.reverse_model_file.is_some()),
+            ("--distance", self.distance.is_some()),
+            ("--distance-file", self.distance_file.is_some()),
+            ("--dialect evologics", self.dialect == Dialect::Evologics),
+        ];
+        match two_only.iter().find(|(_, given)| *given) {
+            Some((flag, _)) => Err(UsageError(format!(
+                "{flag} applies to two ports, not to --pty {ports} (a shared medium)"
+            ))),
+            None => Ok(()),
+        }
+    }
+
     /// The two sides of a real-time run; none for the pipe.
     pub fn port_specs(&self) -> Option<[PortSpec; 2]> {
-        if self.pty {
+        if self.pty.is_some() {
             return Some([PortSpec::Pty, PortSpec::Pty]);
         }
         if let (Some(a), Some(b)) = (&self.a, &self.b) {

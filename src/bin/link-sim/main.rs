@@ -1,4 +1,5 @@
-//! link-sim: a statistical modem link between two ports, or on a pipe in virtual time.
+//! link-sim: a statistical modem link between two ports, a shared medium among N
+//! pseudo-terminals, or a link on a pipe in virtual time.
 #![forbid(unsafe_code)]
 
 mod cli;
@@ -12,11 +13,16 @@ use rovlink::cli::stop;
 use rovlink::gll::Dialect;
 use rovlink::io::Output;
 use rovlink::io::{EXIT_CHECK_FAILED, EXIT_OK};
-use rovlink::link::Link;
+use rovlink::link::channel::DirectionStats;
 use rovlink::link::dialect::EvoLogicsEmulator;
 use rovlink::link::pipe::{self, FrameReader};
-use rovlink::link::realtime::{Ended, Endpoints, PortSpec, RunInfo, priority_allowed};
-use rovlink::link::stats::{Counters, Mode, RunFacts, TraceRow, real_time_lines};
+use rovlink::link::realtime::{
+    Ended, Endpoints, PortEnded, PortSpec, Ports, PortsInfo, RunInfo, priority_allowed,
+};
+use rovlink::link::stats::{
+    Counters, Mode, RunFacts, TraceRow, model_name, port_lines, real_time_lines,
+};
+use rovlink::link::{Link, Medium};
 use rovlink::say;
 
 use cli::{Args, Claimed};
@@ -39,6 +45,11 @@ fn run(args: &Args) -> Result<u8> {
     let specs = args.port_specs();
     let mode = specs.as_ref().map_or(Mode::Pipe, |_| Mode::RealTime);
     let claimed = args.claim(mode)?;
+    if let Some(ports) = args.medium_ports() {
+        let medium = args.medium(ports)?;
+        stop::install()?;
+        return run_medium(args, medium, claimed);
+    }
     let link = args.link()?;
     stop::install()?;
     match specs {
@@ -79,14 +90,19 @@ fn run_pipe(args: &Args, mut link: Link, mut out: Claimed) -> Result<u8> {
     Ok(stop::code_or(EXIT_OK))
 }
 
-fn run_realtime(args: &Args, mut link: Link, specs: [PortSpec; 2], mut out: Claimed) -> Result<u8> {
-    let priority = args.rt_priority
+/// Whether `--rt-priority` is given and allowed (said when it is not).
+fn rt_priority(args: &Args) -> bool {
+    args.rt_priority
         && priority_allowed()
             .map_err(|why| say!("--rt-priority: not allowed ({why}); running without it"))
-            .is_ok();
+            .is_ok()
+}
+
+fn run_realtime(args: &Args, mut link: Link, specs: [PortSpec; 2], mut out: Claimed) -> Result<u8> {
+    let priority = rt_priority(args);
     let endpoints = Endpoints::open(specs, priority)?;
     let names = endpoints.names();
-    if args.pty {
+    if args.pty.is_some() {
         let mut stdout = Dest::Stdout.open()?;
         stdout.write_bytes(format!("{}\n{}\n", names[0], names[1]).as_bytes())?;
         stdout.finish()?;
@@ -159,4 +175,105 @@ fn finish(
     let lines = counters.summary_lines(&facts, link);
     lines.iter().chain(&extra).for_each(|line| say!("{line}"));
     Ok(())
+}
+
+/// `--pty N`: N pseudo-terminals on one shared medium until a port closes or a signal.
+fn run_medium(args: &Args, mut medium: Medium, mut out: Claimed) -> Result<u8> {
+    let ports = medium.nodes();
+    let open = Ports::open(vec![PortSpec::Pty; ports], rt_priority(args))?;
+    let mut stdout = Dest::Stdout.open()?;
+    let paths: String = open
+        .names()
+        .iter()
+        .map(|name| format!("{name}\n"))
+        .collect();
+    stdout.write_bytes(paths.as_bytes())?;
+    stdout.finish()?;
+    say!(
+        "forwarding among {ports} ports on one medium ({}) until a port closes or SIGINT/SIGTERM",
+        model_name(medium.model())
+    );
+    // Counters per (from, to) pair of ports, row-major.
+    let mut pairs = vec![DirectionStats::default(); ports * ports];
+    let (ended, info) = open.run(&mut medium, args.framing(), stop::flag(), |report| {
+        if let Some(stats) = pairs.get_mut(report.from * ports + report.to) {
+            stats.record_medium(report);
+        }
+    });
+    let note = stop::note();
+    let facts = RunFacts {
+        mode: Mode::RealTime,
+        seed: args.seed,
+        duration_s: medium.now().as_secs_f64(),
+        interrupted: note.as_deref(),
+    };
+    let pair_name = |k: usize| format!("{}->{}", k / ports + 1, k % ports + 1);
+    let used = || (0..ports * ports).filter(|k| k / ports != k % ports);
+    if let Some(file) = out.stats.as_mut() {
+        let json = medium_stats_json(&facts, &medium, &info, &pairs, pair_name, used());
+        file.write_bytes(format!("{json:#}\n").as_bytes())?;
+        file.flush_named()?;
+    }
+    if let Some(file) = out.stats {
+        file.finish()?;
+    }
+    say!(
+        "real time: model {}, seed {}, {:.3} s of medium time, {ports} ports",
+        model_name(medium.model()),
+        facts.seed,
+        facts.duration_s
+    );
+    for k in used().filter(|&k| pairs[k].frames_offered > 0) {
+        say!("{}", pairs[k].summary_line(&pair_name(k)));
+    }
+    let labels: Vec<String> = (1..=ports).map(|p| p.to_string()).collect();
+    let labels: Vec<&str> = labels.iter().map(String::as_str).collect();
+    for line in port_lines(&info.lateness, &info.not_taken, &labels) {
+        say!("{line}");
+    }
+    if let Some(note) = facts.interrupted {
+        say!("{note}: the figures cover the run until then");
+    }
+    match ended {
+        PortEnded::Stopped => Ok(EXIT_OK),
+        PortEnded::Closed { port, name, reason } => {
+            say!("port {} ({name}) closed: {reason}", port + 1);
+            Ok(EXIT_CHECK_FAILED)
+        }
+    }
+}
+
+/// The `--stats` document of a shared medium: mode, seed, duration, the ports' positions,
+/// each (from, to) pair's counters, frames in flight, the model and the ports' figures.
+fn medium_stats_json(
+    facts: &RunFacts<'_>,
+    medium: &Medium,
+    info: &PortsInfo,
+    pairs: &[DirectionStats],
+    pair_name: impl Fn(usize) -> String,
+    used: impl Iterator<Item = usize>,
+) -> serde_json::Value {
+    let pairs: serde_json::Map<String, serde_json::Value> = used
+        .filter_map(|k| Some((pair_name(k), pairs.get(k)?.to_json())))
+        .collect();
+    let positions: Vec<[f64; 3]> = (0..medium.nodes()).map(|n| medium.position_m(n)).collect();
+    serde_json::json!({
+        "mode": facts.mode.name(),
+        "seed": facts.seed,
+        "duration_s": facts.duration_s,
+        "interrupted": facts.interrupted,
+        "ports": medium.nodes(),
+        "positions_m": positions,
+        "pairs": pairs,
+        "in_flight_at_end": medium.in_flight(),
+        "model": medium.model(),
+        "real_time": {
+            "bytes_read": info.bytes_read,
+            "bytes_skipped": info.bytes_skipped,
+            "deliveries_not_taken": info.not_taken,
+            "delivery_lateness_ms_p50": info.lateness_quantile_ms(0.5),
+            "delivery_lateness_ms_p99": info.lateness_quantile_ms(0.99),
+            "delivery_lateness_ms_max": info.lateness_quantile_ms(1.0),
+        },
+    })
 }

@@ -174,7 +174,7 @@ pub struct Args {
     /// JSON file (docs/tdma-network.md); --duration and --seed override the file's.
     #[arg(long, value_name = "FILE", help_heading = "Network",
           conflicts_with_all = ["sim", "role", "port", "script", "waypoints", "buoy", "start",
-                                "ipg", "image_size", "trunk", "roi", "mcap", "orders", "camera",
+                                "ipg", "image_size", "trunk", "roi", "orders", "camera",
                                 "camera_cmd", "preview", "foxglove", "vehicle"])]
     pub scenario: Option<PathBuf>,
 

@@ -29,6 +29,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
             .map(|dir| outs.claim_dir("--images-out", dir))
             .transpose()?,
         telemetry: outs.claim_opt("--telemetry", args.telemetry.as_deref(), Kind::Text)?,
+        mcap: outs.claim_opt("--mcap", args.mcap.as_deref(), Kind::Binary)?,
     };
     if args.model.model.is_some() || args.model.model_file.is_some() {
         return Err(UsageError(
@@ -60,7 +61,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     let mut metrics_out = metrics_dest.map(|dest| dest.open()).transpose()?;
     let template = "{spinner} {pos}/{len} s [{bar:30}] {msg}";
     let bar = progress::bar(true, scenario.duration_s.ceil() as u64, template);
-    let mut recorder = NetRecorder::new(dests, bar);
+    let mut recorder = NetRecorder::new(dests, &scenario.vehicles(), bar)?;
     let cycle = scenario.cycle();
     let slots: Vec<String> = cycle
         .iter()
