@@ -22,6 +22,114 @@ const MIXED: &str = r#"{
            {"name":"rf","model":"s100","nodes":[1,2]}],
   "routes":{"0":{"2":1},"2":{"0":1}}}"#;
 
+/// The issue's three-node network: S100 (range 5 m), the far vehicle 7 m from the operator
+/// and 4 m from the relay, its GoTo at 3 s; slots automatic.
+const THREE: &str = r#"{"duration_s":600,"seed":1,
+  "nodes":[{"address":0,"role":"operator","position":[0,0,0]},
+           {"address":1,"role":"rov","start":[3,0,1]},
+           {"address":2,"role":"rov","start":[7,0,1],"waypoints":[[3,7.5,1,1,90]]}],
+  "media":[{"name":"rf","model":"s100","nodes":[0,1,2]}],
+  "routes":{"0":{"2":1},"2":{"0":1}}}"#;
+
+/// Starts `link-sim --pty 3` with the three nodes' positions; its three ports.
+fn shared_medium() -> (Child, Vec<String>) {
+    use std::io::BufRead;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_link-sim"))
+        .args(["--model", "s100", "--pty", "3"])
+        .args(["--position", "0,0,0", "--position", "3,0,1"])
+        .args(["--position", "7,0,1"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("link-sim starts");
+    let mut stdout = std::io::BufReader::new(child.stdout.take().expect("stdout"));
+    let ports = (0..3)
+        .map(|_| {
+            let mut line = String::new();
+            stdout.read_line(&mut line).expect("a port's path");
+            line.trim().to_string()
+        })
+        .collect();
+    (child, ports)
+}
+
+/// Runs the three nodes of `text` over one shared medium: the operator for `duration_s`;
+/// each node's metrics and events.
+fn three_nodes(text: &str, duration_s: f64) -> Vec<(serde_json::Value, String)> {
+    let dir = tempfile::tempdir().unwrap();
+    let routes = dir.path().join("three.json");
+    std::fs::write(&routes, text).unwrap();
+    let (link, ports) = shared_medium();
+    let vehicles_s = duration_s + 2.0;
+    let far = node(dir.path(), &routes, "rov", 2, &[&ports[2]], vehicles_s);
+    let relay = node(dir.path(), &routes, "rov", 1, &[&ports[1]], vehicles_s);
+    std::thread::sleep(Duration::from_millis(300));
+    let operator = node(dir.path(), &routes, "operator", 0, &[&ports[0]], duration_s);
+    let limit = Duration::from_secs_f64(duration_s + 10.0);
+    let runs = vec![
+        operator.finish(limit),
+        relay.finish(limit),
+        far.finish(limit),
+    ];
+    end(link);
+    runs
+}
+
+#[test]
+fn three_nodes_on_one_medium_reach_the_far_vehicle_only_through_the_relay() {
+    let direct = THREE.replace(r#""routes":{"0":{"2":1},"2":{"0":1}}"#, r#""routes":{}"#);
+    let m = three_nodes(&direct, 4.0);
+    let (o, r, f) = (&m[0].0, &m[1].0, &m[2].0);
+    assert_eq!(
+        count(&f["vehicles"]["2"]["operator_to_rov"]["frames_delivered"]),
+        0,
+        "{f:#}"
+    );
+    assert_eq!(
+        count(&o["vehicles"]["2"]["rov_to_operator"]["frames_delivered"]),
+        0,
+        "{o:#}"
+    );
+    assert_eq!(count(&r["nodes"]["1"]["frames_forwarded"]), 0, "{r:#}");
+    assert!(count(&r["nodes"]["1"]["off_path_dropped"]) > 0, "{r:#}");
+    assert!(
+        count(&o["vehicles"]["1"]["rov_to_operator"]["frames_delivered"]) > 0,
+        "{o:#}"
+    );
+
+    let m = three_nodes(THREE, 16.0);
+    let ((o, o_events), (r, _), (f, f_events)) = (&m[0], &m[1], &m[2]);
+    for v in ["1", "2"] {
+        let heard = count(&o["vehicles"][v]["rov_to_operator"]["frames_delivered"]);
+        assert!(heard >= 5, "vehicle {v}: {heard} answers: {o:#}");
+        let trunks = o_events
+            .lines()
+            .filter(|l| {
+                l.starts_with("rov_to_operator,image_trunk,")
+                    && l.contains(&format!(",received,{v},0,"))
+            })
+            .count();
+        assert!(trunks >= 5, "vehicle {v}: {trunks} trunks");
+    }
+    // The relay forwarded both ways; the far vehicle heard the operator only through it
+    // (7 m is out of range) and ran its GoTo once.
+    assert!(count(&r["nodes"]["1"]["frames_forwarded"]) >= 10, "{r:#}");
+    assert!(
+        count(&f["vehicles"]["2"]["operator_to_rov"]["frames_delivered"]) >= 5,
+        "{f:#}"
+    );
+    assert_eq!(f["vehicles"]["2"]["orders_executed"], 1, "{f:#}");
+    assert_eq!(f["vehicles"]["2"]["orders_executed_twice"], 0, "{f:#}");
+    // Copies the far vehicle overhears of its own answers, relayed, are dropped as its own.
+    assert!(count(&f["nodes"]["2"]["own_dropped"]) >= 5, "{f:#}");
+    assert!(
+        f_events.lines().any(|l| l.ends_with(",received,0,2,rf")),
+        "{f_events}"
+    );
+    let rtt = |v: &str| o["vehicles"][v]["round_trip_ms"].as_f64().unwrap();
+    assert!(rtt("2") > rtt("1") + 100.0, "{} vs {}", rtt("2"), rtt("1"));
+}
+
 /// One node's process: `tdma-run --role ROLE --routes FILE ...`, its outputs in `dir`.
 struct NodeRun {
     child: Child,
@@ -43,7 +151,7 @@ fn node(
     command
         .args(["--role", role, "--routes"])
         .arg(routes)
-        .args(["--duration", &duration_s.to_string(), "--image-size", "400"])
+        .args(["--duration", &duration_s.to_string(), "--image-size", "200"])
         .arg("--metrics")
         .arg(&metrics)
         .arg("--events")

@@ -39,6 +39,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
             .map(|dir| outs.claim_dir("--images-out", dir))
             .transpose()?,
         telemetry: outs.claim_opt("--telemetry", args.telemetry.as_deref(), Kind::Text)?,
+        mcap: outs.claim_opt("--mcap", args.mcap.as_deref(), Kind::Binary)?,
     };
     let role = args.role.map_or(Role::Operator, RoleArg::role);
     usage(args)?;
@@ -76,7 +77,11 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     let mut metrics_out = metrics_dest.map(|dest| dest.open()).transpose()?;
     let template = "{spinner} {pos}/{len} s [{bar:30}] {msg}";
     let bar = progress::bar(false, config.duration_s.ceil() as u64, template);
-    let mut recorder = NetRecorder::new(dests, bar);
+    let shown = match role {
+        Role::Operator => network.scenario.vehicles(),
+        Role::Rov => vec![network.address],
+    };
+    let mut recorder = NetRecorder::new(dests, &shown, bar)?;
     let mut frames = events_dest.map(FrameRows::new);
     say!("{}", start_line(&network, role, &ports, config.duration_s));
     let (mut metrics, ended) = {
@@ -113,14 +118,13 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
 fn usage(args: &Args) -> Result<(), UsageError> {
     let refused = [
         ("--ipg", matches!(args.ipg, Ipg::Millis(_))),
-        ("--mcap", args.mcap.is_some()),
         ("--foxglove", args.foxglove.is_some()),
         ("--preview", args.preview),
     ];
     match refused.iter().find(|(_, given)| *given) {
         Some((flag, _)) => Err(UsageError(format!(
             "{flag} does not apply with --routes (the cycle is the file's slots; outputs are \
-             --metrics, --events, --track, --images-out and --telemetry)"
+             --metrics, --events, --track, --images-out, --telemetry and --mcap)"
         ))),
         None => Ok(()),
     }
