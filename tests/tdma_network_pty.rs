@@ -265,3 +265,54 @@ fn a_relay_on_two_media_carries_the_far_vehicle_both_ways() {
         assert!(images.join(v).join("image-0001.png").is_file(), "{v}");
     }
 }
+
+#[test]
+fn bad_networks_are_one_line_usage_errors_that_leave_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let three = dir.path().join("three.json");
+    std::fs::write(&three, THREE).unwrap();
+    let bad = dir.path().join("bad.json");
+    std::fs::write(&bad, "{\"nodes\":[").unwrap();
+    let mixed = dir.path().join("mixed.json");
+    std::fs::write(&mixed, MIXED).unwrap();
+    let text = |p: &Path| p.to_str().unwrap().to_string();
+    let missing = text(&dir.path().join("none.json"));
+    let metrics = text(&dir.path().join("m.json"));
+    let cases: [(&[&str], &str); 7] = [
+        (&["--routes", &missing], "--routes "),
+        (&["--routes", &text(&bad)], "not JSON"),
+        (&["--routes", &text(&three), "--address", "15"], "found 15"),
+        (
+            &["--routes", &text(&three), "--address", "3"],
+            "a vehicle address (1, 2)",
+        ),
+        (
+            &["--routes", &text(&three), "--port2", "/dev/null"],
+            "no second interface",
+        ),
+        (
+            &["--routes", &text(&mixed), "--address", "1"],
+            "give --port2 for rf",
+        ),
+        (
+            &["--routes", &text(&three), "--ipg", "500"],
+            "--ipg does not apply",
+        ),
+    ];
+    for (args, says) in cases {
+        let mut all = vec![
+            "--role",
+            "rov",
+            "--port",
+            "/dev/null",
+            "--metrics",
+            &metrics,
+        ];
+        all.extend_from_slice(args);
+        let out = common::run(TDMA_RUN, &all, b"");
+        assert_eq!(out.code, 2, "{args:?}: {}", out.stderr);
+        assert_eq!(out.stderr.lines().count(), 1, "{args:?}: {}", out.stderr);
+        assert!(out.stderr.contains(says), "{args:?}: {}", out.stderr);
+        assert!(!Path::new(&metrics).exists(), "{args:?} left the metrics");
+    }
+}
