@@ -817,7 +817,18 @@ mod tests {
                         settings: network.scenario.settings,
                         images: vec![crate::rcp::test_image(64, 48, 1)],
                     };
-                    let parts = Parts::from_config(&config);
+                    let mut parts = Parts::from_config(&config);
+                    // A console line naming vehicle 1: a HoldHeading order for it alone.
+                    let hold = crate::wire::operator::Order::HoldHeading {
+                        heading_deg: 90,
+                        enable: true,
+                    };
+                    let console = Script::addressed(vec![(
+                        SimTime::from_secs_f64(0.2),
+                        Some(1),
+                        crate::rcp::orders::Live::Order(hold),
+                    )]);
+                    parts.orders.push(Box::new(console));
                     let mut endpoints: Vec<Box<dyn Endpoint>> = vec![Box::new(Bus { rx, peers })];
                     let mut outputs = NodeOutputs {
                         observer: &mut QuietNet,
@@ -856,6 +867,10 @@ mod tests {
         // The far vehicle's GoTo (due at 0.5 s) was executed, once.
         assert_eq!(far.vehicles["2"].orders_executed, 1, "{far:#?}");
         assert_eq!(operator.vehicles["2"].orders_acknowledged, 1);
+        // The order naming vehicle 1 went to vehicle 1 only.
+        assert_eq!(relay.vehicles["1"].orders_executed, 1, "{relay:#?}");
+        assert_eq!(operator.vehicles["1"].orders_sent, 1);
+        assert_eq!(operator.vehicles["2"].orders_sent, 1);
         let node1 = &relay.nodes["1"];
         assert!(node1.frames_forwarded >= 6, "{node1:?}");
         // Nobody relays the relay's own answers back to it.
