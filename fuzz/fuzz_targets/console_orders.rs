@@ -3,7 +3,7 @@
 //!
 //! Checks: no panic; the orders come in file order with times that never go back and stay
 //! within a week; every warning names the input and a line; a line `parse_orders` takes alone
-//! is what `parse_line` takes.
+//! is what `parse_line` takes, and `parse_addressed_line` too, with a vehicle in 1..=14.
 
 #![no_main]
 
@@ -33,6 +33,13 @@ fuzz_target!(|data: &[u8]| {
         assert_eq!(alone.is_ok(), orders.len() == 1, "{line:?}");
         if let Ok((_, live)) = alone {
             assert_eq!(orders[0].1, live);
+        }
+        // The network form reads the same line, with the vehicle it names (1..=14, if any).
+        let addressed = console::parse_addressed_line(line.strip_suffix('\r').unwrap_or(line));
+        assert_eq!(addressed.is_ok(), orders.len() == 1, "{line:?}");
+        if let Ok((_, vehicle, live)) = addressed {
+            assert_eq!(orders[0].1, live);
+            assert!(vehicle.is_none_or(|v| (1..=14).contains(&v)), "{line:?}");
         }
     }
 });
