@@ -731,37 +731,48 @@ mod tests {
         assert!(medium.sched.is_empty());
     }
 
-    /// The benchmark of the brief: an hour of three S100 nodes, each offering a 57-byte frame
-    /// every 0.64 s (`cargo test --release --lib link::medium -- --ignored --nocapture`).
-    #[test]
-    #[ignore]
-    fn an_hour_of_three_s100_nodes() {
+    /// An hour of three S100 nodes (the positions) offering 57-byte frames, `senders`
+    /// of them in each 0.64 s slot (in turn); the fates counted, and the wall time.
+    fn an_hour(senders: usize) -> (std::collections::BTreeMap<&'static str, u64>, f64) {
         let start = std::time::Instant::now();
-        let mut medium =
-            Medium::new(s100(), 1, vec![[0.0; 3], [3.0, 0.0, 1.0], [7.0, 0.0, 1.0]]).unwrap();
+        let positions = vec![[0.0; 3], [3.0, 0.0, 1.0], [7.0, 0.0, 1.0]];
+        let mut medium = Medium::new(s100(), 1, positions).unwrap();
         let mut counts = std::collections::BTreeMap::new();
         let period_ns = 640_000_000u64;
         let mut k = 0u64;
         while k * period_ns < 3_600_000_000_000 {
-            for node in 0..3 {
-                medium.advance(SimTime(k * period_ns + node as u64 * 213_333_333));
-                medium.offer(node, vec![node as u8; 57]);
+            for j in 0..senders as u64 {
+                medium.advance(SimTime(k * period_ns + j * period_ns / senders as u64));
+                medium.offer(((k + j) % 3) as usize, vec![k as u8; 57]);
             }
-            while let Some(r) = medium.pop_report() {
+            for r in std::iter::from_fn(|| medium.pop_report()) {
                 *counts.entry(r.fate.as_str()).or_insert(0u64) += 1;
             }
             k += 1;
         }
-        while let Some(r) = drain(&mut medium).pop() {
+        for r in drain(&mut medium) {
             *counts.entry(r.fate.as_str()).or_insert(0u64) += 1;
         }
-        let elapsed = start.elapsed();
-        println!(
-            "one simulated hour of 3 S100 nodes, {} frames each: {:.1} ms ({} events) {counts:?}",
-            k,
-            elapsed.as_secs_f64() * 1e3,
-            medium.events_scheduled()
-        );
-        assert!(elapsed.as_secs_f64() < 1.0);
+        (counts, start.elapsed().as_secs_f64())
+    }
+
+    /// The benchmark of the brief: an hour of three S100 nodes exchanging frames every 0.64 s,
+    /// one node per slot in turn, and all three in every slot (saturated: they collide)
+    /// (`cargo test --release --lib link::medium -- --ignored --nocapture`).
+    #[test]
+    #[ignore]
+    fn an_hour_of_three_s100_nodes() {
+        for senders in [1, 3] {
+            let (counts, wall_s) = an_hour(senders);
+            println!(
+                "one simulated hour, 3 S100 nodes, {senders} frame(s) per 0.64 s: {:.1} ms {counts:?}",
+                wall_s * 1e3
+            );
+            assert!(wall_s < 1.0);
+        }
+        // In turn: every frame reaches the relay and the relay's reach both ends.
+        let (counts, _) = an_hour(1);
+        assert_eq!(counts.get("delivered"), Some(&(5625 / 3 * 4)));
+        assert_eq!(counts.get("range"), Some(&(5625 / 3 * 2)));
     }
 }
