@@ -189,7 +189,7 @@ impl Recorder {
 }
 
 /// Writes a file whole (aside, then renamed), creating its directory.
-fn write_whole(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+pub(crate) fn write_whole(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).map_err(|source| crate::io::IoError::Open {
             path: dir.to_path_buf(),
@@ -442,6 +442,18 @@ pub struct Telemetry {
     progress: (usize, Option<usize>),
     /// The camera failure last written, when, and how many times it came again since.
     camera: Option<(String, f64, u64)>,
+    /// In a multi-vehicle scenario: the vehicle the next lines are about.
+    vehicle: Option<u8>,
+    /// The other vehicles' `sent`, `progress` and `camera`, while one is current.
+    others: BTreeMap<u8, VehicleLines>,
+}
+
+/// What [`Telemetry`] remembers of one vehicle's session between lines.
+#[derive(Default)]
+pub(crate) struct VehicleLines {
+    sent: BTreeMap<u64, Order>,
+    progress: (usize, Option<usize>),
+    camera: Option<(String, f64, u64)>,
 }
 
 /// Session seconds as written: to the microsecond.
@@ -480,19 +492,48 @@ impl Telemetry {
             sent: BTreeMap::new(),
             progress: (0, None),
             camera: None,
+            vehicle: None,
+            others: BTreeMap::new(),
         }
     }
 
+    /// In a multi-vehicle scenario: every line from now on carries `"vehicle": address`, and
+    /// is about that vehicle's orders and image.
+    pub(crate) fn set_vehicle(&mut self, address: u8) {
+        if self.vehicle == Some(address) {
+            return;
+        }
+        let current = VehicleLines {
+            sent: std::mem::take(&mut self.sent),
+            progress: std::mem::take(&mut self.progress),
+            camera: self.camera.take(),
+        };
+        if let Some(old) = self.vehicle {
+            self.others.insert(old, current);
+        }
+        let next = self.others.remove(&address).unwrap_or_default();
+        (self.sent, self.progress, self.camera) = (next.sent, next.progress, next.camera);
+        self.vehicle = Some(address);
+    }
+
+    /// Completes the output (see [`RowWriter::finish`]).
+    pub(crate) fn finish(self) -> Result<(), crate::io::IoError> {
+        self.rows.finish()
+    }
+
     /// A line's first fields.
-    fn line(&self, kind: &str, t_s: f64, end: Role) -> Map<String, Value> {
+    pub(crate) fn line(&self, kind: &str, t_s: f64, end: Role) -> Map<String, Value> {
         let mut line = Map::new();
         line.insert("type".into(), kind.into());
         line.insert("t_s".into(), seconds(t_s));
         line.insert("end".into(), end.name().into());
+        if let Some(vehicle) = self.vehicle {
+            line.insert("vehicle".into(), vehicle.into());
+        }
         line
     }
 
-    fn write(&mut self, line: Map<String, Value>) -> Result<(), crate::io::IoError> {
+    pub(crate) fn write(&mut self, line: Map<String, Value>) -> Result<(), crate::io::IoError> {
         self.rows.row(&Value::Object(line))
     }
 
@@ -514,7 +555,11 @@ impl Telemetry {
     }
 
     /// The image just completed, written to `file` (none without `--images-out`).
-    fn image_complete(&mut self, t_s: f64, file: Option<&Path>) -> Result<(), crate::io::IoError> {
+    pub(crate) fn image_complete(
+        &mut self,
+        t_s: f64,
+        file: Option<&Path>,
+    ) -> Result<(), crate::io::IoError> {
         let (trunks, of) = std::mem::take(&mut self.progress);
         let of = of
             .or((trunks > 0).then_some(trunks))
@@ -529,7 +574,7 @@ impl Telemetry {
 
     /// The line for `event` of `end`, if it has one; `file` is the preview written for an
     /// image in progress.
-    fn event(
+    pub(crate) fn event(
         &mut self,
         end: Role,
         t_s: f64,
@@ -660,7 +705,10 @@ impl Telemetry {
 /// ([`Output::finish`]) once every other output is complete. `out` is opened before the run
 /// (a file aside, renamed on commit), so an output that cannot be created fails before any
 /// work and a failed run leaves no metrics file.
-pub fn write_metrics(out: &mut Output, metrics: &Metrics) -> Result<(), crate::io::IoError> {
+pub fn write_metrics(
+    out: &mut Output,
+    metrics: &impl serde::Serialize,
+) -> Result<(), crate::io::IoError> {
     let mut text =
         serde_json::to_string_pretty(metrics).map_err(|e| crate::io::IoError::Write {
             name: out.name(),

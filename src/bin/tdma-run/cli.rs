@@ -142,13 +142,21 @@ pub struct Args {
     #[arg(long, value_name = "MS|auto", default_value = "auto", value_parser = ipg)]
     pub ipg: Ipg,
 
-    /// Session length, s (at most a week).
-    #[arg(long, value_name = "S", default_value_t = 600.0, value_parser = duration())]
-    pub duration: f64,
+    /// Session length, s (at most a week) [default: 600, or the scenario's].
+    #[arg(long, value_name = "S", value_parser = duration())]
+    pub duration: Option<f64>,
 
-    /// Seed of the link's random streams.
-    #[arg(long, default_value_t = 1, value_parser = value::count(0, u64::MAX))]
-    pub seed: u64,
+    /// Seed of the link's random streams [default: 1, or the scenario's].
+    #[arg(long, value_parser = value::count(0, u64::MAX))]
+    pub seed: Option<u64>,
+
+    /// A multi-vehicle session in virtual time: nodes, media, routes and waypoints from this
+    /// JSON file (docs/tdma-network.md); --duration and --seed override the file's.
+    #[arg(long, value_name = "FILE", help_heading = "Network",
+          conflicts_with_all = ["sim", "role", "port", "script", "waypoints", "buoy", "start",
+                                "ipg", "image_size", "trunk", "roi", "orders", "camera",
+                                "camera_cmd", "preview", "foxglove", "vehicle"])]
+    pub scenario: Option<PathBuf>,
 
     /// The operator modem's position, NED m (each within 100 km): its distance to the ROV
     /// drives the range model.
@@ -284,10 +292,21 @@ impl Args {
             &self.images,
             &self.orders,
             &self.model.model_file,
+            &self.scenario,
         ]
         .into_iter()
         .flatten()
         .map(PathBuf::as_path)
+    }
+
+    /// The session length, s: given, or 600.
+    pub fn duration_s(&self) -> f64 {
+        self.duration.unwrap_or(600.0)
+    }
+
+    /// The seed: given, or 1.
+    pub fn seed(&self) -> u64 {
+        self.seed.unwrap_or(1)
     }
 
     /// The image settings the flags give (the parsers bound each to its type).

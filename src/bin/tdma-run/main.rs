@@ -6,6 +6,7 @@
 #![forbid(unsafe_code)]
 
 mod cli;
+mod network;
 
 use std::process::ExitCode;
 
@@ -34,6 +35,9 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> Result<u8> {
     stop::install()?;
+    if let Some(path) = &args.scenario {
+        return network::run(args, path);
+    }
     // Every output is claimed before any work, so bad usage leaves no file.
     let mut outs = Outputs::new();
     outs.inputs(args.inputs());
@@ -74,9 +78,9 @@ fn run(args: &Args) -> Result<u8> {
     let ipg_s = args.ipg_s(&model, &settings);
     let config = SessionConfig {
         model: model.clone(),
-        seed: args.seed,
+        seed: args.seed(),
         ipg_s,
-        duration_s: args.duration,
+        duration_s: args.duration_s(),
         buoy_m: args.buoy,
         start_m: args.start,
         script,
@@ -111,7 +115,7 @@ fn run(args: &Args) -> Result<u8> {
     let mut metrics_out = metrics_dest.map(|dest| dest.open()).transpose()?;
     let base_ns = if role.is_some() { wall_clock_ns() } else { 0 };
     let template = "{spinner} {pos}/{len} s [{bar:30}] {msg}";
-    let bar = progress::bar(role.is_none(), args.duration.ceil() as u64, template);
+    let bar = progress::bar(role.is_none(), args.duration_s().ceil() as u64, template);
     let mut recorder = Recorder::new(dests, args.buoy, base_ns, bar)?;
     let mut stderr = Stderr;
     let mut observer = Tee(vec![&mut recorder, &mut stderr]);
@@ -128,7 +132,7 @@ fn run(args: &Args) -> Result<u8> {
             };
             say!(
                 "{what} on {device}, {:.0} s (Ctrl-C stops and keeps the outputs)",
-                args.duration
+                args.duration_s()
             );
             let (metrics, ended) = realtime::run(
                 role,
@@ -163,7 +167,7 @@ fn run(args: &Args) -> Result<u8> {
             done = Some(format!(
                 "{:.0} s over {model_name} (seed {}), IPG {:.1} ms, {:.3} s of wall time",
                 metrics.duration_s,
-                args.seed,
+                args.seed(),
                 ipg_s * 1e3,
                 wall.elapsed().as_secs_f64()
             ));

@@ -1,0 +1,155 @@
+//! tdma-run `--scenario`: a multi-vehicle session in virtual time ([`rovlink::rcp::network`]).
+
+use std::path::Path;
+
+use anyhow::Result;
+use rovlink::cli::UsageError;
+use rovlink::cli::output::{Kind, Outputs};
+use rovlink::cli::{progress, stop};
+use rovlink::io::EXIT_OK;
+use rovlink::rcp::net_outputs::{NetDestinations, NetRecorder};
+use rovlink::rcp::network::{self, NetObserver, NetworkMetrics};
+use rovlink::rcp::outputs::{summary, write_metrics};
+use rovlink::rcp::scenario::Scenario;
+use rovlink::rcp::{Event, PoseSample, Role, camera};
+use rovlink::say;
+
+use crate::TOOL;
+use crate::cli::Args;
+
+/// Runs the scenario at `path` with the flags that apply to it.
+pub fn run(args: &Args, path: &Path) -> Result<u8> {
+    let mut outs = Outputs::new();
+    outs.inputs(args.inputs());
+    let metrics_dest = outs.claim_opt("--metrics", args.metrics.as_deref(), Kind::Text)?;
+    let dests = NetDestinations {
+        events: outs.claim_opt("--events", args.events.as_deref(), Kind::Text)?,
+        track: outs.claim_opt("--track", args.track.as_deref(), Kind::Text)?,
+        images_out: (args.images_out.as_deref())
+            .map(|dir| outs.claim_dir("--images-out", dir))
+            .transpose()?,
+        telemetry: outs.claim_opt("--telemetry", args.telemetry.as_deref(), Kind::Text)?,
+        mcap: outs.claim_opt("--mcap", args.mcap.as_deref(), Kind::Binary)?,
+    };
+    if args.model.model.is_some() || args.model.model_file.is_some() {
+        return Err(UsageError(
+            "--model/--model-file: a scenario names each medium's model; the other link flags \
+             (e.g. --loss-percent) change every medium's"
+                .into(),
+        )
+        .into());
+    }
+    let mut scenario =
+        Scenario::from_file(path).map_err(|e| UsageError(format!("--scenario {e}")))?;
+    if let Some(duration_s) = args.duration {
+        scenario.duration_s = duration_s;
+    }
+    if let Some(seed) = args.seed {
+        scenario.seed = seed;
+    }
+    for medium in &mut scenario.media {
+        args.model.apply(&mut medium.model);
+        medium
+            .model
+            .validate()
+            .map_err(|e| UsageError(format!("medium {}: {e}", medium.name)))?;
+    }
+    let pictures = camera::load_or_builtin(args.images.as_deref())?;
+    if let Some(note) = pictures.note() {
+        say!("{note}");
+    }
+    let mut metrics_out = metrics_dest.map(|dest| dest.open()).transpose()?;
+    let template = "{spinner} {pos}/{len} s [{bar:30}] {msg}";
+    let bar = progress::bar(true, scenario.duration_s.ceil() as u64, template);
+    let mut recorder = NetRecorder::new(dests, &scenario.vehicles(), bar)?;
+    let cycle = scenario.cycle();
+    let slots: Vec<String> = cycle
+        .iter()
+        .map(|s| format!("{} {:.1} ms", s.address, s.length_s * 1e3))
+        .collect();
+    say!(
+        "{} vehicles, cycle {:.1} ms (slots: {})",
+        cycle.len(),
+        scenario.cycle_s() * 1e3,
+        slots.join(", ")
+    );
+    let wall = std::time::Instant::now();
+    let mut metrics = {
+        let mut observer = Both(&mut recorder);
+        network::run(&scenario, &pictures.images, &mut observer, stop::flag())?
+    };
+    if let Some(name) = stop::signal_name() {
+        metrics.interrupted = Some(name.to_string());
+        for m in metrics.vehicles.values_mut() {
+            m.interrupted = Some(name.to_string());
+        }
+    }
+    if let Some(out) = metrics_out.as_mut() {
+        write_metrics(out, &metrics)?;
+    }
+    recorder.finish()?;
+    metrics_out.map(|out| out.finish()).transpose()?;
+    say!(
+        "{:.0} s of {} nodes (seed {}), {:.3} s of wall time",
+        metrics.duration_s,
+        scenario.nodes.len(),
+        scenario.seed,
+        wall.elapsed().as_secs_f64()
+    );
+    if let Some(note) = stop::note() {
+        let at_s = metrics.duration_s;
+        say!("{note} at {at_s:.1} s: the outputs hold what was done");
+    }
+    for line in network_summary(&metrics) {
+        say!("{line}");
+    }
+    Ok(stop::code_or(EXIT_OK))
+}
+
+/// Each vehicle's summary, then each relay's forwarding.
+fn network_summary(metrics: &NetworkMetrics) -> Vec<String> {
+    let mut lines = Vec::new();
+    for (address, m) in &metrics.vehicles {
+        lines.push(format!("vehicle {address}:"));
+        lines.extend(summary(m).into_iter().map(|l| format!("  {l}")));
+    }
+    for (address, n) in &metrics.nodes {
+        if n.frames_forwarded > 0 {
+            lines.push(format!(
+                "node {address} forwarded {} frames, dropped {} duplicates",
+                n.frames_forwarded, n.duplicates_dropped
+            ));
+        }
+    }
+    lines
+}
+
+/// The recorder, with warnings also on standard error.
+struct Both<'a>(&'a mut NetRecorder);
+
+impl NetObserver for Both<'_> {
+    fn hop(&mut self, event: &network::HopEvent) {
+        self.0.hop(event);
+    }
+
+    fn image(&mut self, vehicle: u8, t_s: f64, stream: &[u8]) {
+        self.0.image(vehicle, t_s, stream);
+    }
+
+    fn pose(&mut self, vehicle: u8, pose: &PoseSample) {
+        self.0.pose(vehicle, pose);
+    }
+
+    fn event(&mut self, vehicle: u8, end: Role, t_s: f64, event: &Event) {
+        self.0.event(vehicle, end, t_s, event);
+    }
+
+    fn warning(&mut self, t_s: f64, text: &str) {
+        say!("{text}");
+        self.0.warning(t_s, text);
+    }
+
+    fn failed(&self) -> bool {
+        self.0.failed()
+    }
+}

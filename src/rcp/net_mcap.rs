@@ -1,0 +1,188 @@
+//! A multi-vehicle scenario's MCAP log (`tdma-run --scenario --mcap`): the single-vehicle
+//! session's channels once per vehicle, and one channel of every frame at every receiver.
+//!
+//! | topic | schema | what |
+//! |---|---|---|
+//! | `/vehicle/N/rov/pose`, `/rov/goal`, `/rov/velocity/actual`, `/rov/velocity/commanded` | as in [`super::mcap_log`] | vehicle N's pose, goal, velocities |
+//! | `/vehicle/N/link/log` | `foxglove.Log` | vehicle N's link lost and recovered |
+//! | `/vehicle/N/camera/image` | `foxglove.CompressedImage` | vehicle N's completed images |
+//! | `/network/frames` | `rovlink.HopFrame` | one message per frame and receiver: medium, SRC, DST, transmitter, receiver, kind, bytes, fate, the receiver's action, delay |
+//!
+//! Each vehicle has its own [`View`], so its link state is its own. Log times are the session's
+//! (the same seed gives the same file). The file is written aside and committed by
+//! [`NetMcapLog::finish`]; the first write error is kept and reported there.
+
+use std::collections::BTreeMap;
+
+use mcap::write::NoSeek;
+use serde_json::json;
+
+use super::mcap_log::{Clock, McapLogError, Topic, View, ViewMessage};
+use super::network::HopEvent;
+use super::{PoseSample, Role};
+use crate::cli::output::Dest;
+use crate::io::Output;
+
+const HOP_FRAME: &str = r#"{"title":"rovlink.HopFrame","type":"object","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"medium":{"type":"string"},"src":{"type":["integer","null"]},"dst":{"type":["integer","null"]},"tx":{"type":"integer"},"rx":{"type":"integer"},"kind":{"type":"string"},"bytes":{"type":"integer"},"fate":{"type":"string"},"action":{"type":"string"},"t_sent_s":{"type":"number"},"t_received_s":{"type":["number","null"]},"delay_ms":{"type":["number","null"]}}}"#;
+
+/// The per-vehicle channels: the log's own, except the single link's frames.
+fn vehicle_topics() -> impl Iterator<Item = Topic> {
+    Topic::ALL
+        .into_iter()
+        .filter(|t| t.in_log() && *t != Topic::Frames)
+}
+
+/// The topic of `topic` for `vehicle`: `/vehicle/2/rov/pose`.
+pub fn vehicle_topic(vehicle: u8, topic: Topic) -> String {
+    format!("/vehicle/{vehicle}{}", topic.name())
+}
+
+/// The MCAP log of a scenario.
+pub struct NetMcapLog {
+    path: String,
+    writer: Option<mcap::Writer<NoSeek<Output>>>,
+    /// Channel ids by (vehicle, topic index).
+    channels: BTreeMap<(u8, usize), u16>,
+    frames: u16,
+    views: BTreeMap<u8, View>,
+    sequence: u32,
+    error: Option<McapLogError>,
+}
+
+impl NetMcapLog {
+    /// Creates the log at `dest` with the channels of `vehicles`.
+    pub fn create(dest: &Dest, vehicles: &[u8]) -> Result<NetMcapLog, McapLogError> {
+        let name = dest.name();
+        let wrap = |source| McapLogError::Mcap {
+            path: name.clone(),
+            source,
+        };
+        let mut writer = crate::io::json_mcap_writer(dest.open()?).map_err(wrap)?;
+        let none = BTreeMap::new();
+        let mut channels = BTreeMap::new();
+        for &vehicle in vehicles {
+            for topic in vehicle_topics() {
+                let id = crate::io::json_mcap_channel(
+                    &mut writer,
+                    topic.schema_name(),
+                    topic.schema(),
+                    &vehicle_topic(vehicle, topic),
+                    &none,
+                )
+                .map_err(wrap)?;
+                channels.insert((vehicle, topic.index()), id);
+            }
+        }
+        let frames = crate::io::json_mcap_channel(
+            &mut writer,
+            "rovlink.HopFrame",
+            HOP_FRAME,
+            "/network/frames",
+            &none,
+        )
+        .map_err(wrap)?;
+        let views = vehicles
+            .iter()
+            .map(|&v| (v, View::new(Clock::Session { base_ns: 0 })))
+            .collect();
+        Ok(NetMcapLog {
+            path: name,
+            writer: Some(writer),
+            channels,
+            frames,
+            views,
+            sequence: 0,
+            error: None,
+        })
+    }
+
+    /// True once a write failed.
+    pub fn failed(&self) -> bool {
+        self.error.is_some()
+    }
+
+    /// Closes the file and puts it in place; reports the first error.
+    pub fn finish(mut self) -> Result<(), McapLogError> {
+        if let Some(error) = self.error.take() {
+            return Err(error);
+        }
+        let Some(mut writer) = self.writer.take() else {
+            return Ok(());
+        };
+        writer.finish().map_err(|source| McapLogError::Mcap {
+            path: self.path.clone(),
+            source,
+        })?;
+        writer.into_inner().into_inner().finish()?;
+        Ok(())
+    }
+
+    fn write(&mut self, channel_id: u16, log_time_ns: u64, json: &str) {
+        let (Some(writer), None) = (self.writer.as_mut(), self.error.as_ref()) else {
+            return;
+        };
+        let header = mcap::records::MessageHeader {
+            channel_id,
+            sequence: self.sequence,
+            log_time: log_time_ns,
+            publish_time: log_time_ns,
+        };
+        self.sequence = self.sequence.wrapping_add(1);
+        if let Err(source) = writer.write_to_known_channel(&header, json.as_bytes()) {
+            self.error = Some(McapLogError::Mcap {
+                path: self.path.clone(),
+                source,
+            });
+        }
+    }
+
+    fn write_vehicle(&mut self, vehicle: u8, messages: &[ViewMessage]) {
+        for m in messages {
+            if let Some(&id) = self.channels.get(&(vehicle, m.topic.index())) {
+                self.write(id, m.log_time_ns, &m.json);
+            }
+        }
+    }
+
+    /// A frame's fate at one receiver.
+    pub fn hop(&mut self, e: &HopEvent) {
+        let t_s = e.t_received_s.unwrap_or(e.t_sent_s);
+        let ns = (t_s.max(0.0) * 1e9).round() as u64;
+        let delay_ms = e.t_received_s.map(|r| (r - e.t_sent_s) * 1e3);
+        let json = json!({
+            "timestamp": {"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000},
+            "medium": e.medium, "src": e.src, "dst": e.dst, "tx": e.tx, "rx": e.rx,
+            "kind": e.kind, "bytes": e.bytes, "fate": e.fate, "action": e.action,
+            "t_sent_s": e.t_sent_s, "t_received_s": e.t_received_s, "delay_ms": delay_ms,
+        });
+        self.write(self.frames, ns, &json.to_string());
+    }
+
+    /// A completed image of `vehicle`.
+    pub fn image(&mut self, vehicle: u8, t_s: f64, stream: &[u8]) {
+        let message = self.views.get(&vehicle).and_then(|v| v.image(t_s, stream));
+        if let Some(message) = message {
+            self.write_vehicle(vehicle, &[message]);
+        }
+    }
+
+    /// `vehicle` after a step.
+    pub fn pose(&mut self, vehicle: u8, pose: &PoseSample) {
+        let messages = self
+            .views
+            .get_mut(&vehicle)
+            .map(|v| v.pose(pose))
+            .unwrap_or_default();
+        self.write_vehicle(vehicle, &messages);
+    }
+
+    /// An event of `vehicle`'s session that the log shows (the operator's answers lost).
+    pub fn event(&mut self, vehicle: u8, end: Role, t_s: f64, event: &super::Event) {
+        let messages = self
+            .views
+            .get(&vehicle)
+            .map(|v| v.event(end, t_s, event))
+            .unwrap_or_default();
+        self.write_vehicle(vehicle, &messages);
+    }
+}
