@@ -36,7 +36,7 @@ fn the_relay_scenario_reaches_the_far_vehicle_and_writes_per_vehicle_outputs() {
         "--scenario",
         file.to_str().unwrap(),
         "--duration",
-        "200",
+        "120",
         "--metrics",
         "-",
         "--events",
@@ -48,7 +48,7 @@ fn the_relay_scenario_reaches_the_far_vehicle_and_writes_per_vehicle_outputs() {
         "--mcap",
         log.to_str().unwrap(),
     ]);
-    assert_eq!(m["duration_s"], 200.0);
+    assert_eq!(m["duration_s"], 120.0);
     for v in ["1", "2"] {
         assert!(
             m["vehicles"][v]["images_completed"].as_u64().unwrap() >= 1,
@@ -106,14 +106,16 @@ fn the_relay_scenario_reaches_the_far_vehicle_and_writes_per_vehicle_outputs() {
 
 /// Topic names and message counts of an MCAP file, read with Python's `mcap` package.
 fn mcap_topics(path: &Path) -> std::collections::BTreeMap<String, usize> {
-    let script = "import json, sys, collections\n\
-from mcap.reader import make_reader\n\
-counts = collections.Counter()\n\
-with open(sys.argv[1], 'rb') as f:\n\
-    for schema, channel, message in make_reader(f).iter_messages():\n\
-        json.loads(message.data)\n\
-        counts[channel.topic] += 1\n\
-print(json.dumps(counts))\n";
+    let script = r#"
+import json, sys, collections
+from mcap.reader import make_reader
+counts = collections.Counter()
+with open(sys.argv[1], 'rb') as f:
+    for schema, channel, message in make_reader(f).iter_messages():
+        json.loads(message.data)
+        counts[channel.topic] += 1
+print(json.dumps(counts))
+"#;
     let out = std::process::Command::new("python3")
         .args(["-c", script, path.to_str().unwrap()])
         .output()
