@@ -32,6 +32,7 @@ use std::collections::{BinaryHeap, VecDeque};
 use serde::Serialize;
 
 use super::distance::Distance;
+use super::medium::MediumReport;
 use super::model::{ErrorMode, JitterDistribution, Model, ModelError};
 use super::rng::Rng;
 use super::sched::{Scheduler, SimTime};
@@ -178,15 +179,218 @@ impl Ord for Waiting {
     }
 }
 
-/// A frame on its way to (or arriving at) a receiver.
-struct Reception {
-    from: Side,
-    seq: u64,
-    t_offered: SimTime,
-    t_tx_start: SimTime,
-    rx_end: SimTime,
-    collided: bool,
-    bytes: Vec<u8>,
+/// A frame on its way to (or arriving at) a receiver (sender and receiver: a [`Link`]'s side
+/// indices, or a [`super::Medium`]'s nodes).
+pub(super) struct Reception {
+    /// The sender.
+    pub(super) from: usize,
+    /// The receiver.
+    pub(super) to: usize,
+    /// The frame's number among its sender's.
+    pub(super) seq: u64,
+    /// When it was offered.
+    pub(super) t_offered: SimTime,
+    /// When it went on air.
+    pub(super) t_tx_start: SimTime,
+    /// When its last bit arrives.
+    pub(super) rx_end: SimTime,
+    /// Lost in a collision at the receiver.
+    pub(super) collided: bool,
+    /// Its bytes.
+    pub(super) bytes: Vec<u8>,
+}
+
+impl Reception {
+    /// The reception of `frame`, on air from `now` to `air_end`, at `to` after `propagation_s`
+    /// (pushed back, unless `reorder`, so that it ends no earlier than `last_rx_end`, the
+    /// latest end of the same sender's frames there, which it moves on); and when it starts.
+    pub(super) fn of(
+        frame: &Waiting,
+        (from, to): (usize, usize),
+        (now, air_end): (SimTime, SimTime),
+        propagation_s: f64,
+        reorder: bool,
+        last_rx_end: &mut SimTime,
+    ) -> (Reception, SimTime) {
+        let mut rx_start = now.after_secs(propagation_s);
+        let mut rx_end = air_end.after_secs(propagation_s);
+        if !reorder && rx_end < *last_rx_end {
+            let shift = last_rx_end.0 - rx_end.0;
+            rx_start = SimTime(rx_start.0.saturating_add(shift));
+            rx_end = *last_rx_end;
+        }
+        *last_rx_end = (*last_rx_end).max(rx_end);
+        let reception = Reception {
+            from,
+            to,
+            seq: frame.seq,
+            t_offered: frame.t_offered,
+            t_tx_start: now,
+            rx_end,
+            collided: false,
+            bytes: frame.bytes.clone(),
+        };
+        (reception, rx_start)
+    }
+
+    /// Its fate at its end, `now` (drawn as [`arrival`] says), as one report, two when
+    /// duplicated, pushed to `reports`.
+    pub(super) fn end(
+        mut self,
+        model: &Model,
+        streams: &mut Streams,
+        burst_bad: &mut bool,
+        now: SimTime,
+        reports: &mut VecDeque<MediumReport>,
+    ) {
+        let (fate, duplicate) = arrival(model, streams, burst_bad, self.collided, &mut self.bytes);
+        let arrived = fate.arrived();
+        let report = MediumReport {
+            from: self.from,
+            to: self.to,
+            seq: self.seq,
+            len: self.bytes.len(),
+            t_offered: self.t_offered,
+            t_tx_start: Some(self.t_tx_start),
+            t_rx: arrived.then_some(now),
+            fate,
+            duplicate: false,
+            bytes: if arrived { self.bytes } else { Vec::new() },
+        };
+        if duplicate {
+            let copy = MediumReport {
+                duplicate: true,
+                ..report.clone()
+            };
+            reports.push_back(report);
+            reports.push_back(copy);
+        } else {
+            reports.push_back(report);
+        }
+    }
+}
+
+/// A two-node medium's report as a link's (node 0 is side A).
+pub(super) fn link_report(report: MediumReport) -> Report {
+    Report {
+        from: if report.from == 0 { Side::A } else { Side::B },
+        seq: report.seq,
+        len: report.len,
+        t_offered: report.t_offered,
+        t_tx_start: report.t_tx_start,
+        t_rx: report.t_rx,
+        fate: report.fate,
+        duplicate: report.duplicate,
+        bytes: report.bytes,
+    }
+}
+
+/// The report of a frame that never reached `to`: out of range (on air at `t_tx_start`) or,
+/// without an air time, dropped from a full FIFO.
+pub(super) fn lost_report(
+    (from, to): (usize, usize),
+    (seq, len, t_offered): (u64, usize, SimTime),
+    t_tx_start: Option<SimTime>,
+) -> MediumReport {
+    MediumReport {
+        from,
+        to,
+        seq,
+        len,
+        t_offered,
+        t_tx_start,
+        t_rx: None,
+        fate: if t_tx_start.is_some() {
+            Fate::Range
+        } else {
+            Fate::Overflow
+        },
+        duplicate: false,
+        bytes: Vec::new(),
+    }
+}
+
+/// Receptions under way, in slots reused as they end: memory holds only frames in flight.
+#[derive(Default)]
+pub(super) struct Receptions {
+    slots: Vec<Option<Reception>>,
+    free: Vec<usize>,
+}
+
+impl Receptions {
+    /// Stores a reception; returns its slot.
+    pub(super) fn insert(&mut self, reception: Reception) -> usize {
+        match self.free.pop() {
+            Some(slot) => {
+                if let Some(place) = self.slots.get_mut(slot) {
+                    *place = Some(reception);
+                }
+                slot
+            }
+            None => {
+                self.slots.push(Some(reception));
+                self.slots.len() - 1
+            }
+        }
+    }
+
+    /// Takes the reception out of `slot`, freeing it.
+    pub(super) fn take(&mut self, slot: usize) -> Option<Reception> {
+        let reception = self.slots.get_mut(slot)?.take()?;
+        self.free.push(slot);
+        Some(reception)
+    }
+
+    /// The receiver of the reception in `slot`.
+    pub(super) fn receiver(&self, slot: usize) -> Option<usize> {
+        Some(self.slots.get(slot)?.as_ref()?.to)
+    }
+
+    /// Receptions under way.
+    pub(super) fn in_flight(&self) -> usize {
+        self.slots.len() - self.free.len()
+    }
+
+    /// The most receptions ever under way at once (the slots' high-water mark).
+    #[cfg(test)]
+    pub(super) fn high_water(&self) -> usize {
+        self.slots.len()
+    }
+
+    /// Marks every reception of `hearing` still arriving at `now` as collided (its receiver
+    /// started to transmit, half duplex).
+    pub(super) fn collide(&mut self, hearing: &[usize], now: SimTime) {
+        for &slot in hearing {
+            if let Some(Some(reception)) = self.slots.get_mut(slot)
+                && reception.rx_end > now
+            {
+                reception.collided = true;
+            }
+        }
+    }
+
+    /// The reception in `slot` starts at `now` at a receiver already hearing `hearing`: when
+    /// one of those is still arriving, or the receiver is `deaf` (on air, half duplex), it
+    /// collides, and so does every reception it overlaps.
+    pub(super) fn start(&mut self, slot: usize, hearing: &[usize], deaf: bool, now: SimTime) {
+        let arriving = |slots: &[Option<Reception>], other: usize| {
+            slots
+                .get(other)
+                .is_some_and(|r| r.as_ref().is_some_and(|r| r.rx_end > now))
+        };
+        let overlapping: Vec<usize> = hearing
+            .iter()
+            .copied()
+            .filter(|&other| arriving(&self.slots, other))
+            .collect();
+        if deaf || !overlapping.is_empty() {
+            for other in overlapping.into_iter().chain([slot]) {
+                if let Some(Some(r)) = self.slots.get_mut(other) {
+                    r.collided = true;
+                }
+            }
+        }
+    }
 }
 
 /// The random streams of one side's sending modem, one per random process.
@@ -358,11 +562,11 @@ enum Event {
 pub struct Link {
     ends: [End; 2],
     sched: Scheduler<Event>,
-    receptions: Vec<Option<Reception>>,
-    free_slots: Vec<usize>,
+    receptions: Receptions,
     distance: Distance,
     distance_cursor: usize,
-    reports: VecDeque<Report>,
+    /// Reports as a two-node medium's (sides by index), made [`Report`]s as they leave.
+    reports: VecDeque<MediumReport>,
 }
 
 impl Link {
@@ -386,8 +590,7 @@ impl Link {
         Ok(Link {
             ends: [end(a_to_b, Side::A), end(b_to_a, Side::B)],
             sched: Scheduler::new(),
-            receptions: Vec::new(),
-            free_slots: Vec::new(),
+            receptions: Receptions::default(),
             distance,
             distance_cursor: 0,
             reports: VecDeque::new(),
@@ -421,8 +624,7 @@ impl Link {
 
     /// Frames offered but not yet reported.
     pub fn in_flight(&self) -> usize {
-        self.ends.iter().map(|end| end.tx.queued()).sum::<usize>() + self.receptions.len()
-            - self.free_slots.len()
+        self.ends.iter().map(|end| end.tx.queued()).sum::<usize>() + self.receptions.in_flight()
     }
 
     /// True when `side` has nothing waiting and is not transmitting: a frame offered now goes
@@ -444,7 +646,7 @@ impl Link {
 
     /// The next report, in the order fates were decided.
     pub fn pop_report(&mut self) -> Option<Report> {
-        self.reports.pop_front()
+        self.reports.pop_front().map(link_report)
     }
 
     /// Offers a frame from `side` at the current time; returns its sequence number. A frame
@@ -456,17 +658,9 @@ impl Link {
         let seq = match end.tx.enqueue(&end.model, now, bytes) {
             Ok(seq) => seq,
             Err(seq) => {
-                self.reports.push_back(Report {
-                    from: side,
-                    seq,
-                    len,
-                    t_offered: now,
-                    t_tx_start: None,
-                    t_rx: None,
-                    fate: Fate::Overflow,
-                    duplicate: false,
-                    bytes: Vec::new(),
-                });
+                let pair = (side.index(), side.other().index());
+                self.reports
+                    .push_back(lost_report(pair, (seq, len, now), None));
                 return seq;
             }
         };
@@ -525,138 +719,51 @@ impl Link {
         // Half duplex (a property of this side's modem, kept in the model of what it sends):
         // what this side is hearing now is lost.
         if self.ends[side.index()].model.half_duplex {
-            self.collide_hearing(side, now);
+            self.receptions
+                .collide(&self.ends[side.index()].hearing, now);
         }
 
         let distance = self.distance_m();
+        let pair = (side.index(), side.other().index());
         let model = &self.ends[side.index()].model;
         if !model.in_range(distance) {
-            self.reports.push_back(Report {
-                from: side,
-                seq: frame.seq,
-                len: frame.bytes.len(),
-                t_offered: frame.t_offered,
-                t_tx_start: Some(now),
-                t_rx: None,
-                fate: Fate::Range,
-                duplicate: false,
-                bytes: Vec::new(),
-            });
+            let lost = (frame.seq, frame.bytes.len(), frame.t_offered);
+            self.reports.push_back(lost_report(pair, lost, Some(now)));
             return;
         }
         let propagation_s = model.propagation_s(distance);
         let reorder = model.reorder;
-        let mut rx_start = now.after_secs(propagation_s);
-        let mut rx_end = air_end.after_secs(propagation_s);
         let receiver = &mut self.ends[side.other().index()];
-        if !reorder && rx_end < receiver.last_rx_end {
-            let shift = receiver.last_rx_end.0 - rx_end.0;
-            rx_start = SimTime(rx_start.0.saturating_add(shift));
-            rx_end = receiver.last_rx_end;
-        }
-        receiver.last_rx_end = receiver.last_rx_end.max(rx_end);
-        let reception = Reception {
-            from: side,
-            seq: frame.seq,
-            t_offered: frame.t_offered,
-            t_tx_start: now,
-            rx_end,
-            collided: false,
-            bytes: frame.bytes,
-        };
-        let slot = match self.free_slots.pop() {
-            Some(slot) => {
-                self.receptions[slot] = Some(reception);
-                slot
-            }
-            None => {
-                self.receptions.push(Some(reception));
-                self.receptions.len() - 1
-            }
-        };
+        let times = (now, air_end);
+        let last_rx_end = &mut receiver.last_rx_end;
+        let (reception, rx_start) =
+            Reception::of(&frame, pair, times, propagation_s, reorder, last_rx_end);
+        let rx_end = reception.rx_end;
+        let slot = self.receptions.insert(reception);
         self.sched.schedule(rx_start, Event::RxStart(slot));
         self.sched.schedule(rx_end, Event::RxEnd(slot));
     }
 
-    /// Marks every reception `side` is hearing at `now` as collided.
-    fn collide_hearing(&mut self, side: Side, now: SimTime) {
-        for &slot in &self.ends[side.index()].hearing {
-            if let Some(reception) = self.receptions[slot].as_mut()
-                && reception.rx_end > now
-            {
-                reception.collided = true;
-            }
-        }
-    }
-
     fn reception_starts(&mut self, slot: usize) {
         let now = self.now();
-        let Some(reception) = self.receptions[slot].as_ref() else {
+        let Some(to) = self.receptions.receiver(slot) else {
             return;
         };
-        let to = reception.from.other();
-        let receiver = &self.ends[to.index()];
+        let receiver = &mut self.ends[to & 1];
         let deaf = receiver.model.half_duplex && receiver.tx.air_busy_until > now;
-        let overlapping: Vec<usize> = receiver
-            .hearing
-            .iter()
-            .copied()
-            .filter(|&other| {
-                self.receptions[other]
-                    .as_ref()
-                    .is_some_and(|r| r.rx_end > now)
-            })
-            .collect();
-        if deaf || !overlapping.is_empty() {
-            for other in overlapping.iter().copied().chain([slot]) {
-                if let Some(r) = self.receptions[other].as_mut() {
-                    r.collided = true;
-                }
-            }
-        }
-        self.ends[to.index()].hearing.push(slot);
+        self.receptions.start(slot, &receiver.hearing, deaf, now);
+        receiver.hearing.push(slot);
     }
 
     fn reception_ends(&mut self, slot: usize) {
         let now = self.now();
-        let Some(mut reception) = self.receptions[slot].take() else {
+        let Some(reception) = self.receptions.take(slot) else {
             return;
         };
-        self.free_slots.push(slot);
-        let from = reception.from;
-        let to = from.other();
-        self.ends[to.index()].hearing.retain(|&s| s != slot);
-
-        let end = &mut self.ends[from.index()];
-        let (fate, duplicate) = arrival(
-            &end.model,
-            &mut end.tx.streams,
-            &mut end.burst_bad,
-            reception.collided,
-            &mut reception.bytes,
-        );
-        let arrived = fate.arrived();
-        let report = Report {
-            from,
-            seq: reception.seq,
-            len: reception.bytes.len(),
-            t_offered: reception.t_offered,
-            t_tx_start: Some(reception.t_tx_start),
-            t_rx: arrived.then_some(now),
-            fate,
-            duplicate: false,
-            bytes: if arrived { reception.bytes } else { Vec::new() },
-        };
-        if duplicate {
-            let copy = Report {
-                duplicate: true,
-                ..report.clone()
-            };
-            self.reports.push_back(report);
-            self.reports.push_back(copy);
-        } else {
-            self.reports.push_back(report);
-        }
+        self.ends[reception.to & 1].hearing.retain(|&s| s != slot);
+        let end = &mut self.ends[reception.from & 1];
+        let (streams, burst_bad) = (&mut end.tx.streams, &mut end.burst_bad);
+        reception.end(&end.model, streams, burst_bad, now, &mut self.reports);
     }
 }
 
@@ -925,15 +1032,17 @@ impl Serialize for Fate {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::link::pipe::{self, Pace};
 
-    fn s100() -> Model {
+    /// The S100 preset.
+    pub(in crate::link) fn s100() -> Model {
         Model::preset("s100").unwrap()
     }
 
-    fn quiet(mut model: Model) -> Model {
+    /// `model` without jitter.
+    pub(in crate::link) fn quiet(mut model: Model) -> Model {
         model.jitter_distribution = JitterDistribution::None;
         model
     }
@@ -1261,9 +1370,9 @@ mod tests {
         // bounds the backlog, and the reception slab's high-water mark stays tiny.
         assert_eq!(link.in_flight(), 0);
         assert!(
-            link.receptions.len() <= 4,
+            link.receptions.high_water() <= 4,
             "slab grew to {}",
-            link.receptions.len()
+            link.receptions.high_water()
         );
         assert!(link.sched.is_empty());
     }
