@@ -719,6 +719,34 @@ mod tests {
     }
 
     #[test]
+    fn a_chain_of_relays_suppresses_the_copies_it_overhears() {
+        // 0 - 1 - 2 - 3 along x, 3 m apart, on one S100 medium (range 5 m): each node hears only
+        // its neighbours, so relay 1 hears relay 2 forward what 1 itself forwarded.
+        let text = r#"{"duration_s":400,"seed":2,
+          "nodes":[{"address":0,"role":"operator","position":[0,0,0]},
+                   {"address":1,"role":"rov","start":[3,0,0]},
+                   {"address":2,"role":"rov","start":[6,0,0]},
+                   {"address":3,"role":"rov","start":[9,0,0],"waypoints":[[20,9.5,0,0,0]]}],
+          "media":[{"name":"rf","model":"s100","nodes":[0,1,2,3]}],
+          "routes":{"0":{"2":1,"3":1},"1":{"3":2},"2":{"0":1},"3":{"0":2,"1":2}}}"#;
+        let m = run_quiet(&scenario(text));
+        let far = &m.vehicles["3"];
+        assert!(far.images_completed >= 1, "{m:#?}");
+        assert_eq!(
+            (far.orders_executed, far.orders_executed_twice),
+            (1, 0),
+            "{m:#?}"
+        );
+        assert!(m.nodes["1"].duplicates_dropped > 100, "{m:#?}");
+        assert!(m.nodes["2"].duplicates_dropped > 100, "{m:#?}");
+        assert!(m.nodes.values().all(|n| n.forwarded_back == 0), "{m:#?}");
+        // Three hops out and three back: the far vehicle's delay is about three times the
+        // near one's.
+        let delay = |v: &str| m.vehicles[v].operator_to_rov.delay_ms.unwrap();
+        assert!(delay("3") > 2.5 * delay("1"), "{m:#?}");
+    }
+
+    #[test]
     fn without_routes_the_far_vehicle_gets_nothing() {
         let text = THREE.replace(r#""routes":{"0":{"2":1},"2":{"0":1}}"#, r#""routes":{}"#);
         let m = run_quiet(&scenario(&text));
