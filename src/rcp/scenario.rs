@@ -758,6 +758,21 @@ mod tests {
     }
 
     #[test]
+    fn a_model_file_that_is_not_a_regular_file_and_odd_medium_names_are_refused() {
+        let dir = std::env::temp_dir();
+        let text = THREE.replace(r#""model":"s100""#, r#""model":".""#);
+        let error = Scenario::parse(&text, &dir).unwrap_err().to_string();
+        assert!(error.contains("media[0].model") && error.contains("not a regular file"));
+        for name in [r#""a\nb""#, &format!("{:?}", "é".repeat(65))] {
+            let text = THREE.replace(r#""name":"rf""#, &format!(r#""name":{name}"#));
+            let error = parse(&text).unwrap_err().to_string();
+            assert!(error.starts_with("media[0].name: "), "{error}");
+        }
+        let text = THREE.replace(r#""name":"rf""#, &format!("\"name\":{:?}", "é".repeat(64)));
+        assert_eq!(parse(&text).unwrap().media[0].name.chars().count(), 64);
+    }
+
+    #[test]
     fn the_issue_scenario_parses_and_its_cycle_follows_the_paths() {
         let s = parse(THREE).unwrap();
         assert_eq!(s.vehicles(), [1, 2]);
