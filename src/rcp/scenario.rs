@@ -184,6 +184,7 @@ impl Scenario {
     /// Reads, parses and checks the scenario file at `path`.
     pub fn from_file(path: &Path) -> Result<Scenario, ScenarioError> {
         let name = path.display();
+        regular_file(path).map_err(|what| field(name.to_string(), what))?;
         let bytes = super::read_at_most(path, MAX_SCENARIO_FILE_BYTES)
             .map_err(|e| field(name.to_string(), format!("cannot read: {e}")))?
             .ok_or_else(|| {
@@ -308,6 +309,17 @@ impl Scenario {
     /// The cycle's length, s.
     pub fn cycle_s(&self) -> f64 {
         self.cycle().iter().map(|s| s.length_s).sum()
+    }
+}
+
+/// Refuses what is not a regular file (after symbolic links) before it is opened: opening a
+/// FIFO with no writer would block the session forever, and a directory or a device is no
+/// scenario or model.
+fn regular_file(path: &Path) -> Result<(), String> {
+    match std::fs::metadata(path) {
+        Ok(meta) if meta.is_file() => Ok(()),
+        Ok(_) => Err("cannot read: not a regular file".into()),
+        Err(e) => Err(format!("cannot read: {e}")),
     }
 }
 
@@ -610,11 +622,18 @@ fn media(
         only_keys(&at, object, &["name", "model", "nodes"])?;
         let name = match object.get("name") {
             None => format!("medium {k}"),
-            Some(Value::String(s)) if !s.is_empty() && s.len() <= 64 => s.clone(),
+            Some(Value::String(s))
+                if (1..=64).contains(&s.chars().count()) && !s.chars().any(char::is_control) =>
+            {
+                s.clone()
+            }
             Some(v) => {
                 return Err(field(
                     format!("{at}.name"),
-                    format!("expected a name of 1 ..= 64 characters, found {}", kind(v)),
+                    format!(
+                        "expected a name of 1 ..= 64 characters, none a control character, found {}",
+                        kind(v)
+                    ),
                 ));
             }
         };
@@ -630,7 +649,9 @@ fn media(
                 if crate::link::model::PRESETS.contains(&s.as_str()) {
                     Model::preset(s)
                 } else {
-                    Model::from_file(&base_dir.join(s))
+                    let file = base_dir.join(s);
+                    regular_file(&file).map_err(|what| field(&model_at, format!("{s}: {what}")))?;
+                    Model::from_file(&file)
                 }
             }
             Some(v @ Value::Object(_)) => Model::from_json(&v.to_string()),
@@ -734,6 +755,21 @@ mod tests {
 
     fn parse(text: &str) -> Result<Scenario, ScenarioError> {
         Scenario::parse(text, Path::new("."))
+    }
+
+    #[test]
+    fn a_model_file_that_is_not_a_regular_file_and_odd_medium_names_are_refused() {
+        let dir = std::env::temp_dir();
+        let text = THREE.replace(r#""model":"s100""#, r#""model":".""#);
+        let error = Scenario::parse(&text, &dir).unwrap_err().to_string();
+        assert!(error.contains("media[0].model") && error.contains("not a regular file"));
+        for name in [r#""a\nb""#, &format!("{:?}", "é".repeat(65))] {
+            let text = THREE.replace(r#""name":"rf""#, &format!(r#""name":{name}"#));
+            let error = parse(&text).unwrap_err().to_string();
+            assert!(error.starts_with("media[0].name: "), "{error}");
+        }
+        let text = THREE.replace(r#""name":"rf""#, &format!("\"name\":{:?}", "é".repeat(64)));
+        assert_eq!(parse(&text).unwrap().media[0].name.chars().count(), 64);
     }
 
     #[test]
