@@ -222,7 +222,7 @@ fn sweep_writes_one_row_per_image_and_budget_and_keeps_rows_on_failure() {
     let rows: Vec<Vec<&str>> = text.lines().map(|l| l.split(',').collect()).collect();
     assert_eq!(
         rows[0].join(","),
-        "image,width,height,budget_bytes,bytes,psnr_rgb_db,psnr_y_db,ssim,encode_ms,decode_ms"
+        "image,width,height,budget_bytes,bytes,psnr_rgb_db,psnr_y_db,ssim,ms_ssim,encode_ms,decode_ms"
     );
     assert_eq!(rows.len(), 1 + 6);
     for image_rows in rows[1..].chunks(3) {
@@ -232,6 +232,8 @@ fn sweep_writes_one_row_per_image_and_budget_and_keeps_rows_on_failure() {
             assert_eq!(r[3], r[4], "bytes equal the budget");
             let ssim: f64 = r[7].parse().unwrap();
             assert!(ssim > 0.0 && ssim <= 1.0);
+            let ms_ssim: f64 = r[8].parse().unwrap();
+            assert!(ms_ssim > 0.0 && ms_ssim <= 1.0);
         }
     }
     // A bad image after a good one: exit 2, found from its header before any trial, so the

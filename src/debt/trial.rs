@@ -6,7 +6,7 @@ use std::time::Instant;
 use super::{EncodeOptions, Error, Image, decode, encode, metrics, picture};
 
 /// The columns of a trials CSV, in [`Trial`]'s field order.
-pub const COLUMNS: [&str; 10] = [
+pub const COLUMNS: [&str; 11] = [
     "image",
     "width",
     "height",
@@ -15,6 +15,7 @@ pub const COLUMNS: [&str; 10] = [
     "psnr_rgb_db",
     "psnr_y_db",
     "ssim",
+    "ms_ssim",
     "encode_ms",
     "decode_ms",
 ];
@@ -38,6 +39,8 @@ pub struct Trial {
     pub psnr_y_db: String,
     /// SSIM of luma, five decimals.
     pub ssim: String,
+    /// MS-SSIM of luma, five decimals.
+    pub ms_ssim: String,
     /// Encoding time, ms.
     pub encode_ms: String,
     /// Decoding time, ms.
@@ -66,6 +69,7 @@ pub fn run(name: &str, img: &Image, options: &EncodeOptions) -> Result<Trial, Er
         psnr_rgb_db: format!("{:.3}", metrics::psnr(&reference, &decoded)),
         psnr_y_db: format!("{:.3}", metrics::psnr_y(&reference, &decoded)),
         ssim: format!("{:.5}", metrics::ssim(&reference, &decoded)),
+        ms_ssim: format!("{:.5}", metrics::ms_ssim(&reference, &decoded)),
         encode_ms: format!("{encode_ms:.2}"),
         decode_ms: format!("{decode_ms:.2}"),
     })

@@ -49,7 +49,8 @@ pub struct Args {
     pub bytes: Option<u64>,
 
     /// Compression trials instead of one stream: encode and decode every input at each of
-    /// these byte budgets and write one CSV row per image and budget (flushed as it goes).
+    /// these byte budgets and write one CSV row per image and budget (flushed as it goes):
+    /// image,width,height,budget_bytes,bytes,psnr_rgb_db,psnr_y_db,ssim,ms_ssim,encode_ms,decode_ms.
     #[arg(long, value_name = "BYTES,...", conflicts_with_all = ["bytes", "output"],
           value_parser = value::count_list(value::bytes(1, u64::MAX), MAX_SWEEP_BUDGETS))]
     pub sweep: Option<Budgets>,
