@@ -3,10 +3,12 @@
 
 For every image and byte budget, each codec's quality knob is searched for the largest file
 that fits the budget (DEBT hits it exactly), the file is decoded, and PSNR is measured against
-the original (RGB, or grey for grey images). AVIF is also tried on the image shrunk by 2 and 4
+the original (RGB, or grey for grey images), with SSIM and MS-SSIM of luma beside it (the
+definitions of debt-encode --sweep: BT.601 luma, 11-tap Gaussian window sigma 1.5, borders
+clamped; MS-SSIM over five scales by 2x2 means, Wang et al.'s weights). AVIF is also tried on the image shrunk by 2 and 4
 and scaled back up (bilinear), keeping the best: at a few hundred bytes its container and
 headers alone nearly fill the budget. Prints a table of mean PSNR per set and budget, writes one
-CSV row per image, budget and codec, and a PNG plot of PSNR against bytes.
+CSV row per image, budget and codec, and PNG plots of PSNR, SSIM and MS-SSIM against bytes.
 
 Usage: scripts/rd-compare.sh [--budgets 300,500,...] [--out DIR] [--quick]
 (the .sh wrapper installs the codecs and Python packages when missing).
@@ -33,11 +35,72 @@ def run(cmd):
     return subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode == 0
 
 
+def decoded(ref, path, resample=Image.BICUBIC):
+    """The decoded file at `path` as `ref`'s mode and size (loaded now: the file is reused)."""
+    img = Image.open(path)
+    img.load()
+    img = img.convert(ref.mode)
+    return img if img.size == ref.size else img.resize(ref.size, resample)
+
+
 def psnr(ref, img):
     a = np.asarray(ref, dtype=np.float64)
-    b = np.asarray(img.convert(ref.mode).resize(ref.size), dtype=np.float64)
+    b = np.asarray(img, dtype=np.float64)
     mse = ((a - b) ** 2).mean()
     return float("inf") if mse == 0 else 10 * math.log10(255 * 255 / mse)
+
+
+def luma(img):
+    a = np.asarray(img, dtype=np.float64)
+    return a if a.ndim == 2 else 0.299 * a[..., 0] + 0.587 * a[..., 1] + 0.114 * a[..., 2]
+
+
+_K = np.exp(-np.arange(-5, 6) ** 2 / (2 * 1.5 * 1.5))
+_K /= _K.sum()
+
+
+def blur(v):
+    """Separable 11-tap Gaussian, borders clamped (as src/debt/metrics.rs)."""
+    p = np.pad(v, ((0, 0), (5, 5)), mode="edge")
+    rows = sum(_K[k] * p[:, k:k + v.shape[1]] for k in range(11))
+    p = np.pad(rows, ((5, 5), (0, 0)), mode="edge")
+    return sum(_K[k] * p[k:k + v.shape[0], :] for k in range(11))
+
+
+def ssim_terms(x, y):
+    c1, c2 = (0.01 * 255) ** 2, (0.03 * 255) ** 2
+    mx, my = blur(x), blur(y)
+    vx, vy, cxy = blur(x * x) - mx * mx, blur(y * y) - my * my, blur(x * y) - mx * my
+    lum = (2 * mx * my + c1) / (mx * mx + my * my + c1)
+    cs = (2 * cxy + c2) / (vx + vy + c2)
+    return float((lum * cs).mean()), float(lum.mean()), float(cs.mean())
+
+
+def ssim(ref, img):
+    return ssim_terms(luma(ref), luma(img))[0]
+
+
+MS_SSIM_WEIGHTS = [0.0448, 0.2856, 0.3001, 0.2363, 0.1333]
+
+
+def ms_ssim(ref, img):
+    x, y = luma(ref), luma(img)
+    terms = []
+    for scale in range(5):
+        _, lum, cs = ssim_terms(x, y)
+        terms.append((max(cs, 0.0), max(lum, 0.0)))
+        h, w = x.shape
+        if scale == 4 or w // 2 < 11 or h // 2 < 11:
+            break
+        half = lambda a: (a[0:h // 2 * 2:2, 0:w // 2 * 2:2] + a[1:h // 2 * 2:2, 0:w // 2 * 2:2]
+                          + a[0:h // 2 * 2:2, 1:w // 2 * 2:2] + a[1:h // 2 * 2:2, 1:w // 2 * 2:2]) / 4
+        x, y = half(x), half(y)
+    weights = MS_SSIM_WEIGHTS[:len(terms)]
+    total = sum(weights)
+    out = 1.0
+    for k, ((cs, lum), wt) in enumerate(zip(terms, weights)):
+        out *= (cs * lum if k == len(terms) - 1 else cs) ** (wt / total)
+    return out
 
 
 def search(encode, lo, hi, budget, bigger_is_larger=True, integer=True, steps=14):
@@ -78,7 +141,7 @@ def debt(src, ref, budget, tmp):
     out, dec = os.path.join(tmp, "o.debt"), os.path.join(tmp, "o.png")
     if not (run([DEBT_ENCODE, src, "--bytes", str(budget), "-o", out]) and run([DEBT_DECODE, out, "-o", dec])):
         return None
-    return os.path.getsize(out), psnr(ref, Image.open(dec))
+    return os.path.getsize(out), decoded(ref, dec)
 
 
 def j2k(src, ref, budget, tmp):
@@ -97,7 +160,7 @@ def j2k(src, ref, budget, tmp):
     dec = os.path.join(tmp, "j.png")
     if not run(["opj_decompress", "-i", best[1], "-o", dec]):
         return None
-    return best[0], psnr(ref, Image.open(dec))
+    return best[0], decoded(ref, dec)
 
 
 def webp(src, ref, budget, tmp):
@@ -112,7 +175,7 @@ def webp(src, ref, budget, tmp):
     dec = os.path.join(tmp, "w.png")
     if not run(["dwebp", "-quiet", best[1], "-o", dec]):
         return None
-    return best[0], psnr(ref, Image.open(dec))
+    return best[0], decoded(ref, dec)
 
 
 def avif(src, ref, budget, tmp):
@@ -132,8 +195,8 @@ def avif(src, ref, budget, tmp):
             continue
         dec = os.path.join(tmp, "a.png")
         if run(["avifdec", best[1], dec]):
-            results.append((best[0], psnr(ref, Image.open(dec).resize(ref.size, Image.BILINEAR))))
-    return max(results, key=lambda r: r[1]) if results else None
+            results.append((best[0], decoded(ref, dec, Image.BILINEAR)))
+    return max(results, key=lambda r: psnr(ref, r[1])) if results else None
 
 
 def prepare(tmp, quick):
@@ -160,8 +223,11 @@ def prepare(tmp, quick):
     return sets
 
 
-def plot(rows, path):
-    """PSNR against bytes, one panel per set, one line per codec (log-scaled bytes)."""
+METRICS = {"psnr_db": "mean PSNR (dB)", "ssim": "mean SSIM", "ms_ssim": "mean MS-SSIM"}
+
+
+def plot(rows, path, key="psnr_db"):
+    """`key` against bytes, one panel per set, one line per codec (log-scaled bytes)."""
     codecs = ["debt", "j2k", "webp", "avif"]
     colours = {"debt": (200, 30, 30), "j2k": (30, 90, 200), "webp": (30, 150, 60), "avif": (150, 60, 170)}
     sets = sorted({r["set"] for r in rows})
@@ -170,16 +236,19 @@ def plot(rows, path):
     draw = ImageDraw.Draw(canvas)
     for k, name in enumerate(sets):
         ox = k * width
-        pts = [r for r in rows if r["set"] == name and r["psnr_db"] not in ("", None)]
+        pts = [r for r in rows if r["set"] == name and r[key] not in ("", None)]
         if not pts:
             continue
         xs = [math.log10(float(r["budget_bytes"])) for r in pts]
-        ys = [float(r["psnr_db"]) for r in pts if math.isfinite(float(r["psnr_db"]))]
+        ys = [float(r[key]) for r in pts if math.isfinite(float(r[key]))]
+        scale = 1.0 if key == "psnr_db" else 100.0
+        ys = [v * scale for v in ys]
         x0, x1, y0, y1 = min(xs), max(xs), math.floor(min(ys)), math.ceil(max(ys))
         sx = lambda v: ox + pad + (v - x0) / max(x1 - x0, 1e-9) * (width - 2 * pad)
         sy = lambda v: height - pad - (v - y0) / max(y1 - y0, 1e-9) * (height - 2 * pad)
         draw.rectangle([ox + pad, pad, ox + width - pad, height - pad], outline="black")
-        draw.text((ox + pad, 10), f"{name}: mean PSNR (dB) vs bytes", fill="black")
+        label = METRICS[key] + ("" if scale == 1.0 else " x 100")
+        draw.text((ox + pad, 10), f"{name}: {label} vs bytes", fill="black")
         for b in sorted({int(r["budget_bytes"]) for r in pts}):
             draw.text((sx(math.log10(b)) - 12, height - pad + 5), str(b), fill="black")
         for v in range(y0, y1 + 1, max(1, (y1 - y0) // 6)):
@@ -187,7 +256,7 @@ def plot(rows, path):
         for i, codec in enumerate(codecs):
             line = []
             for b in sorted({int(r["budget_bytes"]) for r in pts}):
-                vals = [float(r["psnr_db"]) for r in pts if r["codec"] == codec and int(r["budget_bytes"]) == b]
+                vals = [float(r[key]) * scale for r in pts if r["codec"] == codec and int(r["budget_bytes"]) == b]
                 if vals and len(vals) == len({r["image"] for r in pts}):
                     line.append((sx(math.log10(b)), sy(sum(vals) / len(vals))))
             if len(line) > 1:
@@ -209,7 +278,8 @@ def main():
     csv_path = os.path.join(args.out, "rd-compare.csv")
     rows = []
     with tempfile.TemporaryDirectory() as tmp, open(csv_path, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=["set", "image", "budget_bytes", "codec", "bytes", "psnr_db"])
+        writer = csv.DictWriter(f, fieldnames=["set", "image", "budget_bytes", "codec", "bytes", "psnr_db",
+                                               "ssim", "ms_ssim"])
         writer.writeheader()
         for set_name, images in prepare(tmp, args.quick).items():
             for src in images:
@@ -218,7 +288,9 @@ def main():
                     for codec, fn in (("debt", debt), ("j2k", j2k), ("webp", webp), ("avif", avif)):
                         r = fn(src, ref, budget, tmp)
                         row = {"set": set_name, "image": os.path.basename(src), "budget_bytes": budget, "codec": codec,
-                               "bytes": r[0] if r else "", "psnr_db": f"{r[1]:.3f}" if r else ""}
+                               "bytes": r[0] if r else "", "psnr_db": f"{psnr(ref, r[1]):.3f}" if r else "",
+                               "ssim": f"{ssim(ref, r[1]):.5f}" if r else "",
+                               "ms_ssim": f"{ms_ssim(ref, r[1]):.5f}" if r else ""}
                         writer.writerow(row)
                         f.flush()
                         rows.append(row)
@@ -238,8 +310,23 @@ def main():
             diff = lambda a, b: f"{means[a] - means[b]:+.2f}" if means[a] is not None and means[b] is not None else "n/a"
             print(f"{set_name:<16} {budget:>6} {fmt(means['debt'])} {fmt(means['j2k'])} {fmt(means['webp'])} "
                   f"{fmt(means['avif'])} {diff('debt', 'j2k'):>9} {diff('debt', 'avif'):>10}")
-    plot(rows, os.path.join(args.out, "rd-compare.png"))
-    print(f"wrote {csv_path} and {os.path.join(args.out, 'rd-compare.png')}", file=sys.stderr)
+    # Perception: mean SSIM and MS-SSIM per set and budget.
+    print(f"{'set':<16} {'bytes':>6} " + " ".join(f"{c + ' SSIM':>10} {c + ' MS':>8}" for c in ("debt", "j2k", "webp", "avif")))
+    for set_name in sorted({r["set"] for r in rows}):
+        n_images = len({r["image"] for r in rows if r["set"] == set_name})
+        for budget in budgets:
+            cells = []
+            for codec in ("debt", "j2k", "webp", "avif"):
+                for key in ("ssim", "ms_ssim"):
+                    vals = [float(r[key]) for r in rows if r["set"] == set_name and r["budget_bytes"] == budget
+                            and r["codec"] == codec and r[key]]
+                    width = 10 if key == "ssim" else 8
+                    cells.append(f"{sum(vals) / len(vals):>{width}.4f}" if len(vals) == n_images else f"{'n/a':>{width}}")
+            print(f"{set_name:<16} {budget:>6} " + " ".join(cells))
+    plots = {"psnr_db": "rd-compare.png", "ssim": "rd-compare-ssim.png", "ms_ssim": "rd-compare-ms-ssim.png"}
+    for key, name in plots.items():
+        plot(rows, os.path.join(args.out, name), key)
+    print(f"wrote {csv_path} and " + ", ".join(os.path.join(args.out, n) for n in plots.values()), file=sys.stderr)
 
 
 if __name__ == "__main__":
