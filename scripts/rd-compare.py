@@ -10,7 +10,11 @@ and scaled back up (bilinear), keeping the best: at a few hundred bytes its cont
 headers alone nearly fill the budget. Prints a table of mean PSNR per set and budget, writes one
 CSV row per image, budget and codec, and PNG plots of PSNR, SSIM and MS-SSIM against bytes.
 
-Usage: scripts/rd-compare.sh [--budgets 300,500,...] [--out DIR] [--quick]
+The last column checks issue 18's bars: DEBT at least AVIF up to 4000 B (where AVIF reaches the
+budget), within 0.3 dB of AVIF above, and at least OpenJPEG + 0.5 dB everywhere.
+
+Usage: scripts/rd-compare.sh [--budgets 300,500,...] [--out DIR] [--quick] [--sets A,B]
+       [--codecs debt] [--reference OLD/rd-compare.csv]
 (the .sh wrapper installs the codecs and Python packages when missing).
 """
 import argparse
@@ -199,10 +203,11 @@ def avif(src, ref, budget, tmp):
     return max(results, key=lambda r: psnr(ref, r[1])) if results else None
 
 
-def prepare(tmp, quick):
-    """The two sets: underwater images resized to 640 wide (read from ../shared, never copied
-    into the repository), and the grey 512 x 512 images."""
-    sets = {"underwater-640": [], "grey-512": []}
+def prepare(tmp, quick, wanted):
+    """The sets: underwater images resized to 640 wide (read from ../shared, never copied into
+    the repository), the grey 512 x 512 images, and the Kodak photographs (768 x 512 colour) we
+    keep for checking that DEBT is tuned for photographs in general, not for the first two."""
+    sets = {"underwater-640": [], "grey-512": [], "kodak-768": []}
     names = ["uieb-616", "uieb-866", "uieb-880"][: 1 if quick else 3]
     for name in names:
         path = os.path.join(SHARED, name + ".png")
@@ -220,7 +225,13 @@ def prepare(tmp, quick):
             dest = os.path.join(tmp, f"{name}.pgm")
             Image.open(path).convert("L").save(dest)
             sets["grey-512"].append(dest)
-    return sets
+    for name in ["kodim03", "kodim05", "kodim13", "kodim19", "kodim23"][: 1 if quick else 5]:
+        path = os.path.join(SHARED, name + ".png")
+        if os.path.exists(path):
+            dest = os.path.join(tmp, f"{name}.ppm")
+            Image.open(path).convert("RGB").save(dest)
+            sets["kodak-768"].append(dest)
+    return {k: v for k, v in sets.items() if k in wanted}
 
 
 METRICS = {"psnr_db": "mean PSNR (dB)", "ssim": "mean SSIM", "ms_ssim": "mean MS-SSIM"}
@@ -272,7 +283,21 @@ def main():
     ap.add_argument("--budgets", default="300,500,1000,2000,4000,8000,16000")
     ap.add_argument("--out", default="rd-compare")
     ap.add_argument("--quick", action="store_true", help="one image per set")
+    ap.add_argument("--sets", default="underwater-640,grey-512,kodak-768",
+                    help="comma list of sets: underwater-640, grey-512, kodak-768")
+    ap.add_argument("--codecs", default="debt,j2k,webp,avif", help="codecs to run now")
+    ap.add_argument("--reference", metavar="CSV",
+                    help="an earlier run's rd-compare.csv: rows of the codecs not run now are taken "
+                         "from it (same sets, images and budgets), so a DEBT experiment reruns in seconds")
     args = ap.parse_args()
+    run_now = set(args.codecs.split(","))
+    if not run_now <= {"debt", "j2k", "webp", "avif"}:
+        sys.exit("rd-compare: --codecs: expected names among debt,j2k,webp,avif, found " + args.codecs)
+    reference = {}
+    if args.reference:
+        with open(args.reference, newline="") as rf:
+            for r in csv.DictReader(rf):
+                reference[(r["set"], r["image"], int(r["budget_bytes"]), r["codec"])] = r
     budgets = [int(b) for b in args.budgets.split(",")]
     os.makedirs(args.out, exist_ok=True)
     csv_path = os.path.join(args.out, "rd-compare.csv")
@@ -281,11 +306,18 @@ def main():
         writer = csv.DictWriter(f, fieldnames=["set", "image", "budget_bytes", "codec", "bytes", "psnr_db",
                                                "ssim", "ms_ssim"])
         writer.writeheader()
-        for set_name, images in prepare(tmp, args.quick).items():
+        for set_name, images in prepare(tmp, args.quick, set(args.sets.split(","))).items():
             for src in images:
                 ref = Image.open(src)
                 for budget in budgets:
                     for codec, fn in (("debt", debt), ("j2k", j2k), ("webp", webp), ("avif", avif)):
+                        if codec not in run_now:
+                            old = reference.get((set_name, os.path.basename(src), budget, codec))
+                            if old is not None:
+                                old = dict(old, budget_bytes=budget)
+                                writer.writerow(old)
+                                rows.append(old)
+                            continue
                         r = fn(src, ref, budget, tmp)
                         row = {"set": set_name, "image": os.path.basename(src), "budget_bytes": budget, "codec": codec,
                                "bytes": r[0] if r else "", "psnr_db": f"{psnr(ref, r[1]):.3f}" if r else "",
@@ -297,7 +329,7 @@ def main():
                     print(f"\r{set_name} {os.path.basename(src)} {budget} B done   ", end="", file=sys.stderr)
         print(file=sys.stderr)
     # The table: mean PSNR per set and budget; n/a where a codec cannot go that small on some image.
-    print(f"{'set':<16} {'bytes':>6} {'DEBT':>7} {'J2K':>7} {'WebP':>7} {'AVIF':>7} {'DEBT-J2K':>9} {'DEBT-AVIF':>10}")
+    print(f"{'set':<16} {'bytes':>6} {'DEBT':>7} {'J2K':>7} {'WebP':>7} {'AVIF':>7} {'DEBT-J2K':>9} {'DEBT-AVIF':>10} {'bar':>5}")
     for set_name in sorted({r["set"] for r in rows}):
         n_images = len({r["image"] for r in rows if r["set"] == set_name})
         for budget in budgets:
@@ -308,8 +340,14 @@ def main():
                 means[codec] = sum(vals) / len(vals) if len(vals) == n_images else None
             fmt = lambda v: f"{v:7.2f}" if v is not None else "    n/a"
             diff = lambda a, b: f"{means[a] - means[b]:+.2f}" if means[a] is not None and means[b] is not None else "n/a"
+            bar = "n/a"
+            if means["debt"] is not None and means["j2k"] is not None:
+                ok = means["debt"] - means["j2k"] >= 0.5
+                if means["avif"] is not None:
+                    ok &= means["debt"] - means["avif"] >= (0.0 if budget <= 4000 else -0.3)
+                bar = "ok" if ok else "FAIL"
             print(f"{set_name:<16} {budget:>6} {fmt(means['debt'])} {fmt(means['j2k'])} {fmt(means['webp'])} "
-                  f"{fmt(means['avif'])} {diff('debt', 'j2k'):>9} {diff('debt', 'avif'):>10}")
+                  f"{fmt(means['avif'])} {diff('debt', 'j2k'):>9} {diff('debt', 'avif'):>10} {bar:>5}")
     # Perception: mean SSIM and MS-SSIM per set and budget.
     print(f"{'set':<16} {'bytes':>6} " + " ".join(f"{c + ' SSIM':>10} {c + ' MS':>8}" for c in ("debt", "j2k", "webp", "avif")))
     for set_name in sorted({r["set"] for r in rows}):
