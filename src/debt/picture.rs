@@ -11,6 +11,7 @@
 //! - Grey conversion ([`to_gray`]): BT.601 luma with one rounding (to nearest, halves up),
 //!   shared by every caller.
 
+use std::borrow::Cow;
 use std::io::{Cursor, Read};
 use std::path::{Path, PathBuf};
 
@@ -471,27 +472,38 @@ pub fn to_png(img: &Image) -> Result<Vec<u8>, PictureError> {
 /// Encodes an image in a format: `Ppm` always RGB, `Pgm` always grey ([`to_gray`]), the
 /// others as the image is.
 pub fn encode(img: &Image, format: OutputFormat) -> Result<Vec<u8>, PictureError> {
-    let converted;
-    let img = match format {
-        OutputFormat::Ppm if img.channels == 1 => {
-            converted = to_rgb(img);
-            &converted
-        }
-        OutputFormat::Pgm if img.channels == 3 => {
-            converted = to_gray(img);
-            &converted
-        }
-        _ => img,
-    };
-    if matches!(
+    let (mut bytes, samples) = encode_parts(img, format)?;
+    bytes.extend_from_slice(&samples);
+    Ok(bytes)
+}
+
+/// [`encode`] in two parts, to be written one after the other: a PNM of the image's own
+/// channels is its header and, borrowed rather than copied, the image's samples; any other
+/// file is whole in the first part and the second is empty.
+pub fn encode_parts(
+    img: &Image,
+    format: OutputFormat,
+) -> Result<(Vec<u8>, Cow<'_, [u8]>), PictureError> {
+    let pnm = matches!(
         format,
         OutputFormat::Ppm | OutputFormat::Pgm | OutputFormat::Pnm
-    ) {
-        let magic = if img.channels == 1 { "P5" } else { "P6" };
-        let mut bytes = format!("{magic}\n{} {}\n255\n", img.width, img.height).into_bytes();
-        bytes.extend_from_slice(&img.data);
-        return Ok(bytes);
+    );
+    let converted = match format {
+        OutputFormat::Ppm if img.channels == 1 => Some(to_rgb(img)),
+        OutputFormat::Pgm if img.channels == 3 => Some(to_gray(img)),
+        _ => None,
+    };
+    if pnm {
+        let shown = converted.as_ref().unwrap_or(img);
+        let magic = if shown.channels == 1 { "P5" } else { "P6" };
+        let head = format!("{magic}\n{} {}\n255\n", shown.width, shown.height).into_bytes();
+        let samples = match converted {
+            Some(other) => Cow::Owned(other.data),
+            None => Cow::Borrowed(img.data.as_slice()),
+        };
+        return Ok((head, samples));
     }
+    let img = converted.as_ref().unwrap_or(img);
     let color = if img.channels == 1 {
         image::ExtendedColorType::L8
     } else {
@@ -519,7 +531,7 @@ pub fn encode(img: &Image, format: OutputFormat) -> Result<Vec<u8>, PictureError
         format,
         reason: e.to_string(),
     })?;
-    Ok(bytes)
+    Ok((bytes, Cow::Borrowed(&[])))
 }
 
 #[cfg(test)]
