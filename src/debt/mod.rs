@@ -29,6 +29,7 @@ pub mod trial;
 pub mod wavelet;
 
 use coder::{Band, BitCoder, Decoder, Encoder};
+use std::borrow::Cow;
 use std::ops::Range;
 use wavelet::Orientation;
 
@@ -536,10 +537,10 @@ fn subband_weights(header: &Header, bands: &[wavelet::Subband]) -> Vec<f32> {
         .collect()
 }
 
-/// Box-filter downscale by 2^scale.
-fn downscale(img: &Image, scale: u32) -> Image {
+/// Box-filter downscale by 2^scale (scale 0: the image itself, not a copy).
+fn downscale(img: &Image, scale: u32) -> Cow<'_, Image> {
     if scale == 0 {
-        return img.clone();
+        return Cow::Borrowed(img);
     }
     let f = 1usize << scale;
     let (w, h) = (img.width.div_ceil(f), img.height.div_ceil(f));
@@ -559,12 +560,12 @@ fn downscale(img: &Image, scale: u32) -> Image {
             }
         }
     }
-    Image {
+    Cow::Owned(Image {
         width: w,
         height: h,
         channels: c,
         data,
-    }
+    })
 }
 
 /// Bilinear upscale to `width` x `height` (an image of that size is returned as it is).
@@ -732,9 +733,11 @@ fn transform(
     }
 }
 
-/// Transforms every component plane: the first on a thread of its own, the others one after
-/// the other on this one (two cores: luma beside the two chroma planes). The planes are
-/// independent, so the result is the same as one after the other.
+/// Transforms every component plane. Forward, the first goes on a thread of its own and the
+/// others one after the other on this one (two cores: luma beside the two chroma planes); the
+/// planes are independent, so the result is the same as one after the other. Inverse, one
+/// thread was measured faster (the second thread's scratch and arena cost more page faults
+/// than the lifting it takes over).
 fn transform_planes(
     planes: &mut [Vec<f32>],
     width: usize,
@@ -749,7 +752,9 @@ fn transform_planes(
         }
     };
     match planes.split_first_mut() {
-        Some((first, rest)) if !rest.is_empty() && width * height >= PARALLEL_MIN_PIXELS => {
+        Some((first, rest))
+            if forward && !rest.is_empty() && width * height >= PARALLEL_MIN_PIXELS =>
+        {
             std::thread::scope(|scope| {
                 scope.spawn(|| run(std::slice::from_mut(first)));
                 run(rest);

@@ -303,6 +303,51 @@ pub fn read(name: &str, reader: impl Read) -> Result<Image, PictureError> {
     from_bytes(name, &bytes)
 }
 
+/// A binary PGM or PPM of 8-bit samples that fits ([`MAX_PICTURE_SIDE`]), has no comment and
+/// is exactly as long as its header says, as an image of the file's samples, copied once
+/// (the `image` crate's reader copies twice); `None` for anything else (the `image` crate
+/// reads it, and names what is wrong).
+fn plain_pnm(bytes: &[u8]) -> Option<Image> {
+    let channels = match bytes.get(..2)? {
+        b"P5" => 1,
+        b"P6" => 3,
+        _ => return None,
+    };
+    let mut at = 2;
+    let mut fields = [0usize; 3];
+    for field in &mut fields {
+        let start = at;
+        while bytes.get(at)?.is_ascii_whitespace() {
+            at += 1;
+        }
+        if at == start {
+            return None;
+        }
+        let digits = bytes[at..].iter().take_while(|b| b.is_ascii_digit()).count();
+        if digits == 0 || digits > 5 {
+            return None;
+        }
+        *field = std::str::from_utf8(&bytes[at..at + digits]).ok()?.parse().ok()?;
+        at += digits;
+    }
+    let [width, height, maxval] = fields;
+    // One whitespace byte ends the header.
+    if maxval != 255 || !bytes.get(at)?.is_ascii_whitespace() {
+        return None;
+    }
+    let fits = (1..=MAX_PICTURE_SIDE).contains(&width) && (1..=MAX_PICTURE_SIDE).contains(&height);
+    let samples = &bytes[at + 1..];
+    if !fits || samples.len() != width * height * channels {
+        return None;
+    }
+    Some(Image {
+        width,
+        height,
+        channels,
+        data: samples.to_vec(),
+    })
+}
+
 /// Reads a picture file.
 pub fn open(path: &Path) -> Result<Image, PictureError> {
     open_fit(path, Oversize::Refuse).map(|loaded| loaded.image)
@@ -317,6 +362,13 @@ pub fn open_fit(path: &Path, oversize: Oversize) -> Result<Loaded, PictureError>
         Ok(None) => return Err(PictureError::TooManyBytes { name }),
         Err(source) => return Err(PictureError::Read { name, source }),
     };
+    if let Some(image) = plain_pnm(&bytes) {
+        return Ok(Loaded {
+            path: path.to_path_buf(),
+            image,
+            scaled_from: None,
+        });
+    }
     let (image, scaled_from) = from_bytes_fit(&name, &bytes, oversize)?;
     Ok(Loaded {
         path: path.to_path_buf(),
@@ -578,6 +630,28 @@ mod tests {
             from_bytes("junk", b"not an image"),
             Err(PictureError::Format { .. })
         ));
+    }
+
+    #[test]
+    fn plain_pnm_reads_as_the_image_crate_does() {
+        for channels in [1, 3] {
+            let img = picture(5, 3, channels);
+            let format = if channels == 1 {
+                OutputFormat::Pgm
+            } else {
+                OutputFormat::Ppm
+            };
+            let bytes = encode(&img, format).unwrap();
+            assert_eq!(plain_pnm(&bytes).unwrap(), from_bytes("x", &bytes).unwrap());
+            // A comment, a short or long file, another maxval: left to the image crate.
+            let mut commented = b"P6 # a comment\n".to_vec();
+            commented.extend_from_slice(&bytes[3..]);
+            assert_eq!(plain_pnm(&commented), None);
+            assert_eq!(plain_pnm(&bytes[..bytes.len() - 1]), None);
+            assert_eq!(plain_pnm(&[&bytes[..], &[0]].concat()), None);
+            let deep = String::from_utf8_lossy(&bytes[..12]).replace("255", "65535");
+            assert_eq!(plain_pnm(deep.as_bytes()), None);
+        }
     }
 
     #[test]
