@@ -718,18 +718,20 @@ fn transform(
         let ints = &mut scratch.ints;
         ints.clear();
         ints.extend(plane.iter().map(|&v| v.round() as i32));
-        if forward {
-            wavelet::forward_53_with(ints, width, height, header.levels, &mut scratch.int_lines);
-        } else {
-            wavelet::inverse_53_with(ints, width, height, header.levels, &mut scratch.int_lines);
-        }
+        let levels = header.levels;
+        wavelet::run_53(ints, width, height, levels, forward, &mut scratch.int_lines);
         for (p, &i) in plane.iter_mut().zip(ints.iter()) {
             *p = i as f32;
         }
-    } else if forward {
-        wavelet::forward_97_with(plane, width, height, header.levels, &mut scratch.floats);
     } else {
-        wavelet::inverse_97_with(plane, width, height, header.levels, &mut scratch.floats);
+        wavelet::run_97(
+            plane,
+            width,
+            height,
+            header.levels,
+            forward,
+            &mut scratch.floats,
+        );
     }
 }
 

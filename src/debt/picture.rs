@@ -323,11 +323,17 @@ fn plain_pnm(bytes: &[u8]) -> Option<Image> {
         if at == start {
             return None;
         }
-        let digits = bytes[at..].iter().take_while(|b| b.is_ascii_digit()).count();
+        let digits = bytes[at..]
+            .iter()
+            .take_while(|b| b.is_ascii_digit())
+            .count();
         if digits == 0 || digits > 5 {
             return None;
         }
-        *field = std::str::from_utf8(&bytes[at..at + digits]).ok()?.parse().ok()?;
+        *field = std::str::from_utf8(&bytes[at..at + digits])
+            .ok()?
+            .parse()
+            .ok()?;
         at += digits;
     }
     let [width, height, maxval] = fields;

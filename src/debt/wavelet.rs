@@ -285,67 +285,47 @@ fn transform<T: Copy + Default, K: Kernel<T>>(
 
 /// Forward 9/7 transform, `levels` levels, in place.
 pub fn forward_97(buf: &mut [f32], width: usize, height: usize, levels: u32) {
-    forward_97_with(buf, width, height, levels, &mut Vec::new());
-}
-
-/// [`forward_97`] with a scratch buffer the caller keeps for the next plane (it grows to the
-/// plane's size; its contents do not matter).
-pub fn forward_97_with(
-    buf: &mut [f32],
-    width: usize,
-    height: usize,
-    levels: u32,
-    scratch: &mut Vec<f32>,
-) {
-    transform::<f32, Cdf97>(buf, width, height, levels, true, scratch);
+    run_97(buf, width, height, levels, true, &mut Vec::new());
 }
 
 /// Inverse 9/7 transform.
 pub fn inverse_97(buf: &mut [f32], width: usize, height: usize, levels: u32) {
-    inverse_97_with(buf, width, height, levels, &mut Vec::new());
+    run_97(buf, width, height, levels, false, &mut Vec::new());
 }
 
-/// [`inverse_97`] with a reusable scratch buffer (see [`forward_97_with`]).
-pub fn inverse_97_with(
+/// The 9/7 transform, forward or inverse, with a scratch buffer the caller keeps for the next
+/// plane (it grows to the plane's size; its contents do not matter).
+pub fn run_97(
     buf: &mut [f32],
     width: usize,
     height: usize,
     levels: u32,
+    forward: bool,
     scratch: &mut Vec<f32>,
 ) {
-    transform::<f32, Cdf97>(buf, width, height, levels, false, scratch);
+    transform::<f32, Cdf97>(buf, width, height, levels, forward, scratch);
 }
 
 /// Forward 5/3 integer transform, in place.
 pub fn forward_53(buf: &mut [i32], width: usize, height: usize, levels: u32) {
-    forward_53_with(buf, width, height, levels, &mut Vec::new());
-}
-
-/// [`forward_53`] with a reusable scratch buffer (see [`forward_97_with`]).
-pub fn forward_53_with(
-    buf: &mut [i32],
-    width: usize,
-    height: usize,
-    levels: u32,
-    scratch: &mut Vec<i32>,
-) {
-    transform::<i32, Legall53>(buf, width, height, levels, true, scratch);
+    run_53(buf, width, height, levels, true, &mut Vec::new());
 }
 
 /// Inverse 5/3 integer transform.
 pub fn inverse_53(buf: &mut [i32], width: usize, height: usize, levels: u32) {
-    inverse_53_with(buf, width, height, levels, &mut Vec::new());
+    run_53(buf, width, height, levels, false, &mut Vec::new());
 }
 
-/// [`inverse_53`] with a reusable scratch buffer (see [`forward_97_with`]).
-pub fn inverse_53_with(
+/// The 5/3 transform, forward or inverse, with a reusable scratch buffer (see [`run_97`]).
+pub fn run_53(
     buf: &mut [i32],
     width: usize,
     height: usize,
     levels: u32,
+    forward: bool,
     scratch: &mut Vec<i32>,
 ) {
-    transform::<i32, Legall53>(buf, width, height, levels, false, scratch);
+    transform::<i32, Legall53>(buf, width, height, levels, forward, scratch);
 }
 
 /// Subband orientation.
