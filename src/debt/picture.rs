@@ -11,6 +11,7 @@
 //! - Grey conversion ([`to_gray`]): BT.601 luma with one rounding (to nearest, halves up),
 //!   shared by every caller.
 
+use std::borrow::Cow;
 use std::io::{Cursor, Read};
 use std::path::{Path, PathBuf};
 
@@ -302,6 +303,57 @@ pub fn read(name: &str, reader: impl Read) -> Result<Image, PictureError> {
     from_bytes(name, &bytes)
 }
 
+/// A binary PGM or PPM of 8-bit samples that fits ([`MAX_PICTURE_SIDE`]), has no comment and
+/// is exactly as long as its header says, as an image of the file's samples, copied once
+/// (the `image` crate's reader copies twice); `None` for anything else (the `image` crate
+/// reads it, and names what is wrong).
+fn plain_pnm(bytes: &[u8]) -> Option<Image> {
+    let channels = match bytes.get(..2)? {
+        b"P5" => 1,
+        b"P6" => 3,
+        _ => return None,
+    };
+    let mut at = 2;
+    let mut fields = [0usize; 3];
+    for field in &mut fields {
+        let start = at;
+        while bytes.get(at)?.is_ascii_whitespace() {
+            at += 1;
+        }
+        if at == start {
+            return None;
+        }
+        let digits = bytes[at..]
+            .iter()
+            .take_while(|b| b.is_ascii_digit())
+            .count();
+        if digits == 0 || digits > 5 {
+            return None;
+        }
+        *field = std::str::from_utf8(&bytes[at..at + digits])
+            .ok()?
+            .parse()
+            .ok()?;
+        at += digits;
+    }
+    let [width, height, maxval] = fields;
+    // One whitespace byte ends the header.
+    if maxval != 255 || !bytes.get(at)?.is_ascii_whitespace() {
+        return None;
+    }
+    let fits = (1..=MAX_PICTURE_SIDE).contains(&width) && (1..=MAX_PICTURE_SIDE).contains(&height);
+    let samples = &bytes[at + 1..];
+    if !fits || samples.len() != width * height * channels {
+        return None;
+    }
+    Some(Image {
+        width,
+        height,
+        channels,
+        data: samples.to_vec(),
+    })
+}
+
 /// Reads a picture file.
 pub fn open(path: &Path) -> Result<Image, PictureError> {
     open_fit(path, Oversize::Refuse).map(|loaded| loaded.image)
@@ -316,6 +368,13 @@ pub fn open_fit(path: &Path, oversize: Oversize) -> Result<Loaded, PictureError>
         Ok(None) => return Err(PictureError::TooManyBytes { name }),
         Err(source) => return Err(PictureError::Read { name, source }),
     };
+    if let Some(image) = plain_pnm(&bytes) {
+        return Ok(Loaded {
+            path: path.to_path_buf(),
+            image,
+            scaled_from: None,
+        });
+    }
     let (image, scaled_from) = from_bytes_fit(&name, &bytes, oversize)?;
     Ok(Loaded {
         path: path.to_path_buf(),
@@ -471,27 +530,38 @@ pub fn to_png(img: &Image) -> Result<Vec<u8>, PictureError> {
 /// Encodes an image in a format: `Ppm` always RGB, `Pgm` always grey ([`to_gray`]), the
 /// others as the image is.
 pub fn encode(img: &Image, format: OutputFormat) -> Result<Vec<u8>, PictureError> {
-    let converted;
-    let img = match format {
-        OutputFormat::Ppm if img.channels == 1 => {
-            converted = to_rgb(img);
-            &converted
-        }
-        OutputFormat::Pgm if img.channels == 3 => {
-            converted = to_gray(img);
-            &converted
-        }
-        _ => img,
-    };
-    if matches!(
+    let (mut bytes, samples) = encode_parts(img, format)?;
+    bytes.extend_from_slice(&samples);
+    Ok(bytes)
+}
+
+/// [`encode`] in two parts, to be written one after the other: a PNM of the image's own
+/// channels is its header and, borrowed rather than copied, the image's samples; any other
+/// file is whole in the first part and the second is empty.
+pub fn encode_parts(
+    img: &Image,
+    format: OutputFormat,
+) -> Result<(Vec<u8>, Cow<'_, [u8]>), PictureError> {
+    let pnm = matches!(
         format,
         OutputFormat::Ppm | OutputFormat::Pgm | OutputFormat::Pnm
-    ) {
-        let magic = if img.channels == 1 { "P5" } else { "P6" };
-        let mut bytes = format!("{magic}\n{} {}\n255\n", img.width, img.height).into_bytes();
-        bytes.extend_from_slice(&img.data);
-        return Ok(bytes);
+    );
+    let converted = match format {
+        OutputFormat::Ppm if img.channels == 1 => Some(to_rgb(img)),
+        OutputFormat::Pgm if img.channels == 3 => Some(to_gray(img)),
+        _ => None,
+    };
+    if pnm {
+        let shown = converted.as_ref().unwrap_or(img);
+        let magic = if shown.channels == 1 { "P5" } else { "P6" };
+        let head = format!("{magic}\n{} {}\n255\n", shown.width, shown.height).into_bytes();
+        let samples = match converted {
+            Some(other) => Cow::Owned(other.data),
+            None => Cow::Borrowed(img.data.as_slice()),
+        };
+        return Ok((head, samples));
     }
+    let img = converted.as_ref().unwrap_or(img);
     let color = if img.channels == 1 {
         image::ExtendedColorType::L8
     } else {
@@ -519,7 +589,7 @@ pub fn encode(img: &Image, format: OutputFormat) -> Result<Vec<u8>, PictureError
         format,
         reason: e.to_string(),
     })?;
-    Ok(bytes)
+    Ok((bytes, Cow::Borrowed(&[])))
 }
 
 #[cfg(test)]
@@ -566,6 +636,28 @@ mod tests {
             from_bytes("junk", b"not an image"),
             Err(PictureError::Format { .. })
         ));
+    }
+
+    #[test]
+    fn plain_pnm_reads_as_the_image_crate_does() {
+        for channels in [1, 3] {
+            let img = picture(5, 3, channels);
+            let format = if channels == 1 {
+                OutputFormat::Pgm
+            } else {
+                OutputFormat::Ppm
+            };
+            let bytes = encode(&img, format).unwrap();
+            assert_eq!(plain_pnm(&bytes).unwrap(), from_bytes("x", &bytes).unwrap());
+            // A comment, a short or long file, another maxval: left to the image crate.
+            let mut commented = b"P6 # a comment\n".to_vec();
+            commented.extend_from_slice(&bytes[3..]);
+            assert_eq!(plain_pnm(&commented), None);
+            assert_eq!(plain_pnm(&bytes[..bytes.len() - 1]), None);
+            assert_eq!(plain_pnm(&[&bytes[..], &[0]].concat()), None);
+            let deep = String::from_utf8_lossy(&bytes[..12]).replace("255", "65535");
+            assert_eq!(plain_pnm(deep.as_bytes()), None);
+        }
     }
 
     #[test]

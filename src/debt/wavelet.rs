@@ -180,15 +180,15 @@ fn level<T: Copy + Default, K: Kernel<T>>(
     forward: bool,
     tmp: &mut Vec<T>,
 ) {
-    // Every sample of the scratch is written before it is read: grow it, never clear it.
-    if tmp.len() < cw * ch {
-        tmp.resize(cw * ch, T::default());
-    }
     let rows = |buf: &mut [T], tmp: &mut Vec<T>, fwd: bool| {
         if cw < 2 {
             return;
         }
         let ns = cw.div_ceil(2);
+        // The line is overwritten before it is read: grown once, never cleared.
+        if tmp.len() < cw {
+            tmp.resize(cw, T::default());
+        }
         for r in 0..ch {
             let row = &mut buf[r * stride..r * stride + cw];
             let line = &mut tmp[..cw];
@@ -220,15 +220,21 @@ fn level<T: Copy + Default, K: Kernel<T>>(
             return;
         }
         let ns = ch.div_ceil(2);
-        let block = &mut tmp[..cw * ch];
-        for r in 0..ch {
-            let at = if fwd {
-                if r % 2 == 0 { r / 2 } else { ns + r / 2 }
-            } else {
-                r
-            };
-            block[at * cw..(at + 1) * cw].copy_from_slice(&buf[r * stride..r * stride + cw]);
+        // The block is built by appending rows (even rows first when forward, so that the low
+        // half comes first): the scratch's capacity is reused, nothing is zeroed.
+        tmp.clear();
+        tmp.reserve(cw * ch);
+        let row = |r: usize| &buf[r * stride..r * stride + cw];
+        if fwd {
+            for r in (0..ch).step_by(2).chain((1..ch).step_by(2)) {
+                tmp.extend_from_slice(row(r));
+            }
+        } else {
+            for r in 0..ch {
+                tmp.extend_from_slice(row(r));
+            }
         }
+        let block = &mut tmp[..cw * ch];
         let (s, d) = block.split_at_mut(ns * cw);
         if fwd {
             K::forward(s, d, cw);
@@ -261,39 +267,65 @@ fn transform<T: Copy + Default, K: Kernel<T>>(
     height: usize,
     levels: u32,
     forward: bool,
+    tmp: &mut Vec<T>,
 ) {
     assert_eq!(buf.len(), width * height, "buffer is not width x height");
-    let mut tmp = Vec::new();
-    let sizes: Vec<(usize, usize)> = (0..levels).map(|l| low_size(width, height, l)).collect();
     if forward {
-        for &(cw, ch) in &sizes {
-            level::<T, K>(buf, width, cw, ch, true, &mut tmp);
+        for l in 0..levels {
+            let (cw, ch) = low_size(width, height, l);
+            level::<T, K>(buf, width, cw, ch, true, tmp);
         }
     } else {
-        for &(cw, ch) in sizes.iter().rev() {
-            level::<T, K>(buf, width, cw, ch, false, &mut tmp);
+        for l in (0..levels).rev() {
+            let (cw, ch) = low_size(width, height, l);
+            level::<T, K>(buf, width, cw, ch, false, tmp);
         }
     }
 }
 
 /// Forward 9/7 transform, `levels` levels, in place.
 pub fn forward_97(buf: &mut [f32], width: usize, height: usize, levels: u32) {
-    transform::<f32, Cdf97>(buf, width, height, levels, true);
+    run_97(buf, width, height, levels, true, &mut Vec::new());
 }
 
 /// Inverse 9/7 transform.
 pub fn inverse_97(buf: &mut [f32], width: usize, height: usize, levels: u32) {
-    transform::<f32, Cdf97>(buf, width, height, levels, false);
+    run_97(buf, width, height, levels, false, &mut Vec::new());
+}
+
+/// The 9/7 transform, forward or inverse, with a scratch buffer the caller keeps for the next
+/// plane (it grows to the plane's size; its contents do not matter).
+pub fn run_97(
+    buf: &mut [f32],
+    width: usize,
+    height: usize,
+    levels: u32,
+    forward: bool,
+    scratch: &mut Vec<f32>,
+) {
+    transform::<f32, Cdf97>(buf, width, height, levels, forward, scratch);
 }
 
 /// Forward 5/3 integer transform, in place.
 pub fn forward_53(buf: &mut [i32], width: usize, height: usize, levels: u32) {
-    transform::<i32, Legall53>(buf, width, height, levels, true);
+    run_53(buf, width, height, levels, true, &mut Vec::new());
 }
 
 /// Inverse 5/3 integer transform.
 pub fn inverse_53(buf: &mut [i32], width: usize, height: usize, levels: u32) {
-    transform::<i32, Legall53>(buf, width, height, levels, false);
+    run_53(buf, width, height, levels, false, &mut Vec::new());
+}
+
+/// The 5/3 transform, forward or inverse, with a reusable scratch buffer (see [`run_97`]).
+pub fn run_53(
+    buf: &mut [i32],
+    width: usize,
+    height: usize,
+    levels: u32,
+    forward: bool,
+    scratch: &mut Vec<i32>,
+) {
+    transform::<i32, Legall53>(buf, width, height, levels, forward, scratch);
 }
 
 /// Subband orientation.

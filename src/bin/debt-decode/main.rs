@@ -65,7 +65,10 @@ fn run(args: &Args) -> Result<u8> {
         .map_err(|e| anyhow::anyhow!("{}: {e}", input.name))?;
     // Opened only now: a signal while a pipe is read leaves no temporary file behind.
     let mut out = dest.open()?;
-    out.write_bytes(&debt::picture::encode(&img, format)?)?;
+    // A PNM's samples are written from the image itself, not copied after its header.
+    let (head, samples) = debt::picture::encode_parts(&img, format)?;
+    out.write_bytes(&head)?;
+    out.write_bytes(&samples)?;
     out.finish()?;
     Ok(EXIT_OK)
 }
