@@ -5,7 +5,7 @@
 
 use rovlink::debt::metrics::psnr;
 use rovlink::debt::resilient::{Layout, decode_groups, encode_groups};
-use rovlink::debt::{self, EncodeOptions, Image};
+use rovlink::debt::{self, EncodeOptions, Image, rangecoder};
 use rovlink::link::Rng;
 use std::path::Path;
 
@@ -124,6 +124,11 @@ fn main() {
             let mut rows = vec![("plain".to_string(), default_levels, 1, anchor, anchor_lost)];
             let (p, pl) = plain(img, bytes, trunk, Some(base.levels));
             rows.push((format!("plain, L={}", base.levels), base.levels, 1, p, pl));
+            // What the groups' fixed costs would take from the plain stream: per group the
+            // range coder's 3-byte termination margin and the 5-bit plane count.
+            let fixed = base.groups * (rangecoder::MARGIN_BITS as usize + 5) / 8;
+            let (p, pl) = plain(img, bytes - fixed, trunk, None);
+            rows.push((format!("plain, {fixed} B less"), default_levels, 1, p, pl));
             let mut layouts = vec![("resilient".to_string(), base)];
             for dl in [-1i32, 1] {
                 let levels = base.levels as i32 + dl;
@@ -137,15 +142,27 @@ fn main() {
                     ));
                 }
             }
-            for k in [2, 4] {
+            for k in [2, 4, base.groups] {
+                let label = if k == base.groups {
+                    "resilient G=1".to_string()
+                } else {
+                    format!("resilient G=N/{k}")
+                };
                 layouts.push((
-                    format!("resilient G=N/{k}"),
+                    label,
                     Layout {
                         groups: base.groups.div_ceil(k),
                         ..base
                     },
                 ));
             }
+            layouts.push((
+                "contiguous (not dispersed)".to_string(),
+                Layout {
+                    dispersed: false,
+                    ..base
+                },
+            ));
             for (label, layout) in layouts {
                 let (q, ql) = resilient(img, &layout);
                 rows.push((label, layout.levels, layout.groups, q, ql));

@@ -48,6 +48,9 @@ pub struct Layout {
     pub trunk_bytes: usize,
     /// Number of groups (at most the number of trunks).
     pub groups: usize,
+    /// Dispersed groups (the design) or, for measuring what false neighbours cost,
+    /// contiguous runs of roots in raster order laid out as in the image.
+    pub dispersed: bool,
 }
 
 impl Layout {
@@ -76,6 +79,7 @@ impl Layout {
             bytes,
             trunk_bytes: trunk_bytes.max(1),
             groups: trunks,
+            dispersed: true,
         }
     }
 
@@ -142,10 +146,18 @@ pub fn lattice_step(groups: usize) -> usize {
 }
 
 /// Group of each LL position (`lw` x `lh`, row-major).
-fn assign(lw: usize, lh: usize, groups: usize) -> Vec<usize> {
+fn assign(layout: &Layout, lw: usize, lh: usize) -> Vec<usize> {
+    let groups = layout.groups();
     let b = lattice_step(groups);
-    (0..lw * lh)
-        .map(|i| (i % lw + b * (i / lw)) % groups)
+    let n = lw * lh;
+    (0..n)
+        .map(|i| {
+            if layout.dispersed {
+                (i % lw + b * (i / lw)) % groups
+            } else {
+                i * groups / n
+            }
+        })
         .collect()
 }
 
@@ -155,18 +167,26 @@ struct Gathered {
     roots: Vec<(usize, usize)>,
     /// Roots per row of the gathered grid.
     cols: usize,
+    /// Empty slots before the first root.
+    offset: usize,
     /// Rows of the gathered grid.
     rows: usize,
 }
 
 impl Gathered {
-    fn new(roots: Vec<(usize, usize)>) -> Gathered {
+    /// A square grid, or when `row` is given, rows of that many roots with the first one at
+    /// its column in the LL band (contiguous groups: neighbours stay neighbours).
+    fn new(roots: Vec<(usize, usize)>, row: Option<usize>) -> Gathered {
         let n = roots.len().max(1);
-        let cols = (n as f64).sqrt().ceil() as usize;
+        let (cols, offset) = match row {
+            Some(lw) => (lw, roots.first().map_or(0, |r| r.0)),
+            None => ((n as f64).sqrt().ceil() as usize, 0),
+        };
         Gathered {
             roots,
             cols,
-            rows: n.div_ceil(cols),
+            offset,
+            rows: (n + offset).div_ceil(cols),
         }
     }
 
@@ -177,7 +197,7 @@ impl Gathered {
         (0..gw * gh)
             .map(|i| {
                 let (gx, gy) = (i % gw, i / gw);
-                let k = (gy / side) * self.cols + gx / side;
+                let k = ((gy / side) * self.cols + gx / side).checked_sub(self.offset)?;
                 let &(rx, ry) = self.roots.get(k)?;
                 let (x, y) = (rx * side + gx % side, ry * side + gy % side);
                 (x < sb.width && y < sb.height).then_some((x, y))
@@ -228,12 +248,13 @@ fn band_of(
 fn groups_of(layout: &Layout) -> Vec<Gathered> {
     let (lw, lh) = wavelet::low_size(layout.width, layout.height, layout.levels);
     let g = layout.groups();
-    let owner = assign(lw, lh, g);
+    let owner = assign(layout, lw, lh);
     let mut roots = vec![Vec::new(); g];
     for (i, &o) in owner.iter().enumerate() {
         roots[o].push((i % lw, i / lw));
     }
-    roots.into_iter().map(Gathered::new).collect()
+    let row = (!layout.dispersed).then_some(lw);
+    roots.into_iter().map(|r| Gathered::new(r, row)).collect()
 }
 
 /// Encodes `img` (lossy, 9/7) in the resilient layout: exactly `layout.bytes` bytes, the
@@ -350,7 +371,7 @@ fn conceal(layout: &Layout, planes: &mut [Vec<f32>], decoded: &[bool]) {
         return;
     }
     let (lw, lh) = wavelet::low_size(layout.width, layout.height, layout.levels);
-    let owner = assign(lw, lh, decoded.len());
+    let owner = assign(layout, lw, lh);
     let w = layout.width;
     for plane in planes.iter_mut() {
         let ll: Vec<f32> = (0..lw * lh).map(|i| plane[(i / lw) * w + i % lw]).collect();
