@@ -25,6 +25,7 @@ pub mod coder;
 pub mod metrics;
 pub mod picture;
 pub mod rangecoder;
+pub mod resilient;
 pub mod trial;
 pub mod wavelet;
 
