@@ -23,7 +23,7 @@
 use super::coder::{self, Band, BitCoder, Decoder};
 use super::wavelet::{self, Subband};
 use super::{
-    COMPONENT_MSE_WEIGHTS, FRACTION_BITS, Header, Image, RECONSTRUCTION_OFFSET, class_of,
+    COMPONENT_MSE_WEIGHTS, FRACTION_BITS, Header, Image, RECONSTRUCTION_OFFSET, Scratch, class_of,
     encode_bands, from_components, orientation_code, subband_weights, to_components, transform,
 };
 
@@ -263,8 +263,9 @@ pub fn encode_groups(img: &Image, layout: &Layout) -> Vec<u8> {
     let header = layout.header();
     let (w, h) = (layout.width, layout.height);
     let mut planes = to_components(img, layout.gray, false);
+    let mut scratch = Scratch::default();
     for plane in &mut planes {
-        transform(plane, w, h, &header, true);
+        transform(plane, w, h, &header, true, &mut scratch);
     }
     let groups = groups_of(layout);
     let g = groups.len();
@@ -359,8 +360,9 @@ pub fn decode_groups(data: &[u8], layout: &Layout, lost: &[usize]) -> Image {
         }
     }
     conceal(layout, &mut planes, &decoded);
+    let mut scratch = Scratch::default();
     for plane in &mut planes {
-        transform(plane, w, h, &header, false);
+        transform(plane, w, h, &header, false, &mut scratch);
     }
     from_components(&planes, w, h, false)
 }
