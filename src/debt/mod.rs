@@ -1159,6 +1159,17 @@ pub fn decode_with_loss(data: &[u8], lost: &[Range<usize>]) -> Result<Image, Err
     Ok(upscale(img, header.width, header.height))
 }
 
+/// The magnitude a significant coefficient is rebuilt at from its known bits `mag`, `known`
+/// low bits being unknown: the middle of the last interval when every plane is known (exactly
+/// `mag` when lossless), else `RECONSTRUCTION_OFFSET` of the way into it.
+fn reconstructed(mag: u32, known: u8, lossless: bool) -> f32 {
+    if known == 0 {
+        mag as f32 + if lossless { 0.0 } else { 0.5 }
+    } else {
+        mag as f32 + RECONSTRUCTION_OFFSET * (1u64 << known) as f32
+    }
+}
+
 /// Decodes segment `part` of `parts` from its bytes and puts its coefficients in `planes`.
 fn decode_part(
     header: &Header,
@@ -1185,11 +1196,7 @@ fn decode_part(
             let (x, y) = (i % sb.width, row0 + i / sb.width);
             let known = band.known[i];
             let mag = band.mag[i];
-            let mut value = if known == 0 {
-                mag as f32 + if header.lossless { 0.0 } else { 0.5 }
-            } else {
-                mag as f32 + RECONSTRUCTION_OFFSET * (1u64 << known) as f32
-            };
+            let mut value = reconstructed(mag, known, header.lossless);
             if let Some((rect, shift)) = roi
                 && in_roi(&rect, sb.level, x, y)
             {

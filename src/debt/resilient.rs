@@ -23,8 +23,8 @@
 use super::coder::{self, Band, BitCoder, Decoder};
 use super::wavelet::{self, Subband};
 use super::{
-    COMPONENT_MSE_WEIGHTS, FRACTION_BITS, Header, Image, RECONSTRUCTION_OFFSET, Scratch, class_of,
-    encode_bands, from_components, orientation_code, subband_weights, to_components, transform,
+    COMPONENT_MSE_WEIGHTS, FRACTION_BITS, Header, Image, Scratch, class_of, encode_bands,
+    from_components, orientation_code, reconstructed, subband_weights, to_components, transform,
 };
 
 /// Bytes of the header that a version-3 stream would carry, reserved at the start of trunk 0
@@ -348,12 +348,7 @@ pub fn decode_groups(data: &[u8], layout: &Layout, lost: &[usize]) -> Image {
             for &i in band.significant() {
                 let i = i as usize;
                 let Some((x, y)) = pos[i] else { continue };
-                let (known, mag) = (band.known[i], band.mag[i] as f32);
-                let value = if known == 0 {
-                    mag + 0.5
-                } else {
-                    mag + RECONSTRUCTION_OFFSET * (1u64 << known) as f32
-                } / scale;
+                let value = reconstructed(band.mag[i], band.known[i], false) / scale;
                 planes[*comp][(sb.y0 + y) * stride + sb.x0 + x] =
                     if band.neg[i] { -value } else { value };
             }
