@@ -669,9 +669,16 @@ fn from_components(planes: &[Vec<f32>], width: usize, height: usize, lossless: b
             data,
         };
     }
-    let mut data = vec![0u8; n * 3];
-    for i in 0..n {
-        let (y, cb, cr) = (planes[0][i] + 128.0, planes[1][i], planes[2][i]);
+    // Zeroed by writing (see `decode_with_loss`), then every sample overwritten; iterating the
+    // planes and the pixels together lets the compiler drop the bounds checks.
+    let mut data = Vec::with_capacity(n * 3);
+    data.resize(n * 3, 0u8);
+    let pixels = planes[0][..n]
+        .iter()
+        .zip(&planes[1][..n])
+        .zip(&planes[2][..n]);
+    for (px, ((&y, &cb), &cr)) in data.chunks_exact_mut(3).zip(pixels) {
+        let y = y + 128.0;
         let (r, g, b) = if lossless {
             let g = y - ((cb + cr) / 4.0).floor();
             (cr + g, g, cb + g)
@@ -682,9 +689,7 @@ fn from_components(planes: &[Vec<f32>], width: usize, height: usize, lossless: b
                 y + 1.772 * cb,
             )
         };
-        data[i * 3] = clamp(r);
-        data[i * 3 + 1] = clamp(g);
-        data[i * 3 + 2] = clamp(b);
+        px.copy_from_slice(&[clamp(r), clamp(g), clamp(b)]);
     }
     Image {
         width,
