@@ -214,18 +214,20 @@ impl Band {
                     let (pw, ph) = dims[l - 1];
                     let (w, h) = dims[l];
                     let below = if l == 1 { &mag } else { &max[l - 1] };
-                    let mut level = vec![0u32; w * h];
-                    // Each row of nodes takes the maximum over a pair of rows below it, two
-                    // columns at a time.
-                    for (y, out) in level.chunks_exact_mut(w).enumerate() {
-                        for row in
-                            below[2 * y * pw..]
-                                .chunks(pw)
-                                .take(if 2 * y + 1 < ph { 2 } else { 1 })
-                        {
-                            for (o, pair) in out.iter_mut().zip(row.chunks(2)) {
-                                *o = (*o).max(pair.iter().copied().max().unwrap_or(0));
-                            }
+                    let mut level = Vec::with_capacity(w * h);
+                    // Each node is the maximum of the 2 x 2 (or fewer, at an odd edge) nodes
+                    // below it: a pair of rows, two columns at a time.
+                    for y in 0..h {
+                        let top = &below[2 * y * pw..][..pw];
+                        let bottom = if 2 * y + 1 < ph {
+                            &below[(2 * y + 1) * pw..][..pw]
+                        } else {
+                            top
+                        };
+                        let pairs = top.chunks_exact(2).zip(bottom.chunks_exact(2));
+                        level.extend(pairs.map(|(t, b)| t[0].max(t[1]).max(b[0].max(b[1]))));
+                        if pw % 2 == 1 {
+                            level.push(top[pw - 1].max(bottom[pw - 1]));
                         }
                     }
                     max.push(level);

@@ -633,27 +633,34 @@ fn to_components(img: &Image, gray: bool, lossless: bool) -> Vec<Vec<f32>> {
             .collect();
         return vec![y];
     }
-    let (mut ys, mut cbs, mut crs) = (
-        Vec::with_capacity(n),
-        Vec::with_capacity(n),
-        Vec::with_capacity(n),
-    );
-    for i in 0..n {
-        let (r, g, b) = px(i);
-        let (y, cb, cr) = if lossless {
-            (((r + 2.0 * g + b) / 4.0).floor() - 128.0, b - g, r - g)
+    // One pass over the pixels per plane, as chunks collected (exact length, no bounds checks
+    // or capacity checks in the loop).
+    let plane = |f: fn(f32, f32, f32) -> f32| -> Vec<f32> {
+        if img.channels == 1 {
+            img.data[..n]
+                .iter()
+                .map(|&v| f(f32::from(v), f32::from(v), f32::from(v)))
+                .collect()
         } else {
-            (
-                0.299 * r + 0.587 * g + 0.114 * b - 128.0,
-                -0.168_736 * r - 0.331_264 * g + 0.5 * b,
-                0.5 * r - 0.418_688 * g - 0.081_312 * b,
-            )
-        };
-        ys.push(y);
-        cbs.push(cb);
-        crs.push(cr);
+            img.data[..n * 3]
+                .chunks_exact(3)
+                .map(|p| f(f32::from(p[0]), f32::from(p[1]), f32::from(p[2])))
+                .collect()
+        }
+    };
+    if lossless {
+        vec![
+            plane(|r, g, b| ((r + 2.0 * g + b) / 4.0).floor() - 128.0),
+            plane(|_, g, b| b - g),
+            plane(|r, g, _| r - g),
+        ]
+    } else {
+        vec![
+            plane(|r, g, b| 0.299 * r + 0.587 * g + 0.114 * b - 128.0),
+            plane(|r, g, b| -0.168_736 * r - 0.331_264 * g + 0.5 * b),
+            plane(|r, g, b| 0.5 * r - 0.418_688 * g - 0.081_312 * b),
+        ]
     }
-    vec![ys, cbs, crs]
 }
 
 fn from_components(planes: &[Vec<f32>], width: usize, height: usize, lossless: bool) -> Image {
@@ -669,15 +676,14 @@ fn from_components(planes: &[Vec<f32>], width: usize, height: usize, lossless: b
             data,
         };
     }
-    // Zeroed by writing (see `decode_with_loss`), then every sample overwritten; iterating the
-    // planes and the pixels together lets the compiler drop the bounds checks.
+    // Appended into the exact capacity (never zeroed, never regrown); iterating the planes
+    // together lets the compiler drop the bounds checks.
     let mut data = Vec::with_capacity(n * 3);
-    data.resize(n * 3, 0u8);
     let pixels = planes[0][..n]
         .iter()
         .zip(&planes[1][..n])
         .zip(&planes[2][..n]);
-    for (px, ((&y, &cb), &cr)) in data.chunks_exact_mut(3).zip(pixels) {
+    for ((&y, &cb), &cr) in pixels {
         let y = y + 128.0;
         let (r, g, b) = if lossless {
             let g = y - ((cb + cr) / 4.0).floor();
@@ -689,7 +695,7 @@ fn from_components(planes: &[Vec<f32>], width: usize, height: usize, lossless: b
                 y + 1.772 * cb,
             )
         };
-        px.copy_from_slice(&[clamp(r), clamp(g), clamp(b)]);
+        data.extend_from_slice(&[clamp(r), clamp(g), clamp(b)]);
     }
     Image {
         width,

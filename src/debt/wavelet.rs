@@ -226,7 +226,9 @@ fn level<T: Copy + Default, K: Kernel<T>>(
             let block = &mut buf[..cw * ch];
             tmp.clear();
             if fwd {
-                tmp.extend(block.chunks_exact(cw).skip(1).step_by(2).flatten());
+                for row in block.chunks_exact(cw).skip(1).step_by(2) {
+                    tmp.extend_from_slice(row);
+                }
                 for i in 1..ns {
                     block.copy_within(2 * i * cw..(2 * i + 1) * cw, i * cw);
                 }
