@@ -8,6 +8,7 @@
 //! - [`output`]: `-` for standard output (one output at most), binary refused on a terminal,
 //!   an output that is an input refused, outputs claimed before any work is done;
 //! - [`rows`]: CSV and JSON Lines rows, one write per whole line, flushed;
+//! - [`metrics`]: `--metrics`, a run's figures with every parameter and its seed, one line;
 //! - [`stop`]: SIGINT/SIGTERM/SIGHUP as a flag library loops poll, and the exit codes 130/143;
 //! - [`progress`]: a progress bar only on a terminal;
 //! - [`model`] and [`port`]: the flag groups of link models and real modems;
@@ -16,6 +17,7 @@
 //! Errors from here are [`UsageError`]s (exit code 2); [`finish`] maps any error to the
 //! exit-code table of [`crate::io::exit_code`].
 
+pub mod metrics;
 pub mod model;
 pub mod output;
 pub mod port;
@@ -50,7 +52,8 @@ pub fn parse<A: clap::Parser>(tool: &str) -> A {
     }
 }
 
-/// [`parse`] without exiting, from any argument list (tests use it).
+/// [`parse`] without exiting, from any argument list (tests use it). The first successful parse
+/// of a process records its parameters for [`metrics`].
 pub fn try_parse_from<A, I, T>(args: I) -> Result<A, clap::Error>
 where
     A: clap::Parser,
@@ -68,7 +71,9 @@ where
         }
         cmd
     }
-    let mut matches = negatives(A::command()).try_get_matches_from(args)?;
+    let cmd = negatives(A::command());
+    let mut matches = cmd.clone().try_get_matches_from(args)?;
+    metrics::record(&cmd, &matches);
     A::from_arg_matches_mut(&mut matches)
 }
 

@@ -52,8 +52,20 @@ pub fn run(name: &str, img: &Image, options: &EncodeOptions) -> Result<Trial, Er
     let started = Instant::now();
     let stream = encode(img, options)?;
     let encode_ms = started.elapsed().as_secs_f64() * 1e3;
+    measure(name, img, options, &stream, encode_ms)
+}
+
+/// Decodes `stream`, the encoding of `img` with `options` that took `encode_ms`, and measures
+/// the result.
+pub fn measure(
+    name: &str,
+    img: &Image,
+    options: &EncodeOptions,
+    stream: &[u8],
+    encode_ms: f64,
+) -> Result<Trial, Error> {
     let started = Instant::now();
-    let decoded = decode(&stream)?;
+    let decoded = decode(stream)?;
     let decode_ms = started.elapsed().as_secs_f64() * 1e3;
     let reference = if decoded.channels == 1 {
         picture::to_gray(img)
@@ -72,6 +84,65 @@ pub fn run(name: &str, img: &Image, options: &EncodeOptions) -> Result<Trial, Er
         ms_ssim: format!("{:.5}", metrics::ms_ssim(&reference, &decoded)),
         encode_ms: format!("{encode_ms:.2}"),
         decode_ms: format!("{decode_ms:.2}"),
+    })
+}
+
+impl Trial {
+    /// The trial as JSON with its measured columns as numbers (`debt-encode --metrics`).
+    pub fn figures(&self) -> serde_json::Value {
+        serde_json::json!({
+            "image": self.image,
+            "width": self.width,
+            "height": self.height,
+            "budget_bytes": self.budget_bytes,
+            "bytes": self.bytes,
+            "psnr_rgb_db": number(&self.psnr_rgb_db),
+            "psnr_y_db": number(&self.psnr_y_db),
+            "ssim": number(&self.ssim),
+            "ms_ssim": number(&self.ms_ssim),
+            "encode_ms": number(&self.encode_ms),
+            "decode_ms": number(&self.decode_ms),
+        })
+    }
+}
+
+/// A measured column's text as a number (NaN if it were not one).
+fn number(text: &str) -> f64 {
+    text.parse().unwrap_or(f64::NAN)
+}
+
+/// The figures of many trials as JSON (`debt-encode --metrics`): the number of trials and
+/// images, and per budget the mean of every measured column over the images.
+pub fn summary(trials: &[Trial]) -> serde_json::Value {
+    let mut budgets: Vec<u64> = trials.iter().map(|t| t.budget_bytes).collect();
+    budgets.sort_unstable();
+    budgets.dedup();
+    let mut images: Vec<&str> = trials.iter().map(|t| t.image.as_str()).collect();
+    images.sort_unstable();
+    images.dedup();
+    let mut per_budget = serde_json::Map::new();
+    for budget in budgets {
+        let at: Vec<&Trial> = trials.iter().filter(|t| t.budget_bytes == budget).collect();
+        let mean =
+            |field: fn(&Trial) -> f64| at.iter().map(|&t| field(t)).sum::<f64>() / at.len() as f64;
+        per_budget.insert(
+            budget.to_string(),
+            serde_json::json!({
+                "images": at.len(),
+                "bytes": mean(|t| t.bytes as f64),
+                "psnr_rgb_db": mean(|t| number(&t.psnr_rgb_db)),
+                "psnr_y_db": mean(|t| number(&t.psnr_y_db)),
+                "ssim": mean(|t| number(&t.ssim)),
+                "ms_ssim": mean(|t| number(&t.ms_ssim)),
+                "encode_ms": mean(|t| number(&t.encode_ms)),
+                "decode_ms": mean(|t| number(&t.decode_ms)),
+            }),
+        );
+    }
+    serde_json::json!({
+        "trials": trials.len(),
+        "images": images.len(),
+        "budgets": per_budget,
     })
 }
 
@@ -102,5 +173,31 @@ mod tests {
         let row = serde_json::to_value(&trial).unwrap();
         let keys: Vec<&String> = row.as_object().unwrap().keys().collect();
         assert_eq!(keys, COLUMNS);
+    }
+
+    #[test]
+    fn the_summary_averages_each_budget_over_the_images() {
+        let trial = |image: &str, budget: u64, psnr: &str| Trial {
+            image: image.into(),
+            width: 4,
+            height: 4,
+            budget_bytes: budget,
+            bytes: budget as usize,
+            psnr_rgb_db: psnr.into(),
+            psnr_y_db: psnr.into(),
+            ssim: "0.5".into(),
+            ms_ssim: "0.5".into(),
+            encode_ms: "1".into(),
+            decode_ms: "2".into(),
+        };
+        let s = summary(&[
+            trial("a", 100, "20"),
+            trial("b", 100, "22"),
+            trial("a", 300, "30"),
+        ]);
+        assert_eq!((&s["trials"], &s["images"]), (&3.into(), &2.into()));
+        assert_eq!(s["budgets"]["100"]["psnr_rgb_db"], 21.0);
+        assert_eq!(s["budgets"]["300"]["images"], 1);
+        assert_eq!(s["budgets"]["300"]["bytes"], 300.0);
     }
 }

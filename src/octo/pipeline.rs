@@ -516,6 +516,27 @@ pub struct Built {
 }
 
 impl Built {
+    /// The build's figures as JSON (`octo-delta build --metrics`): scans, points, times, the
+    /// map's nodes and .ot size, the stream's and the largest message's bytes.
+    pub fn figures(&self) -> serde_json::Value {
+        let r = &self.report;
+        let message_bytes = r.messages.iter().map(|&(_, bytes)| bytes);
+        serde_json::json!({
+            "scans": r.scans,
+            "points": r.points,
+            "points_skipped": r.points_skipped,
+            "points_beyond_range": r.points_beyond_range,
+            "elapsed_s": r.elapsed_s,
+            "insert_s": r.insert_s,
+            "map_nodes": self.tree.num_nodes(),
+            "ot_bytes": files::ot_size(&self.tree),
+            "stream_bytes": r.stream_bytes,
+            "message_bytes_max": message_bytes.clone().max().unwrap_or(0),
+            "message_bytes_total": message_bytes.sum::<usize>(),
+            "interrupted": r.interrupted,
+        })
+    }
+
     /// The one-line summary: scans, points, times, map and stream sizes; `interrupted` says by
     /// what when the build was stopped.
     pub fn summary(&self, interrupted: &str) -> String {

@@ -74,22 +74,41 @@ pub struct TransferReport {
 }
 
 impl TransferReport {
-    /// Summary lines for people.
-    pub fn lines(&self) -> Vec<String> {
-        let lat: Vec<f64> = self
+    /// Scan ready -> shown latencies, s: (median, p90, max), zero without messages.
+    fn latency_quantiles_s(&self) -> (f64, f64, f64) {
+        let mut sorted: Vec<f64> = self
             .arrivals
             .iter()
             .map(|a| a.t_applied_s - a.t_ready_s)
             .collect();
-        let mut sorted = lat.clone();
         sorted.sort_by(f64::total_cmp);
-        let q = |p: f64| {
-            if sorted.is_empty() {
-                0.0
-            } else {
-                sorted[((sorted.len() - 1) as f64 * p).round() as usize]
-            }
+        let q = |p: f64| match sorted.len() {
+            0 => 0.0,
+            n => sorted[((n - 1) as f64 * p).round() as usize],
         };
+        (q(0.5), q(0.9), q(1.0))
+    }
+
+    /// The figures of the transfer as JSON (`octo-delta build --metrics`).
+    pub fn figures(&self) -> serde_json::Value {
+        let (median, p90, max) = self.latency_quantiles_s();
+        serde_json::json!({
+            "model": self.model,
+            "messages": self.arrivals.len(),
+            "segments": self.segments,
+            "resends": self.resends,
+            "link_bytes": self.link_bytes,
+            "undelivered": self.undelivered,
+            "latency_median_s": median,
+            "latency_p90_s": p90,
+            "latency_max_s": max,
+            "last_shown_s": self.arrivals.last().map_or(0.0, |a| a.t_applied_s),
+        })
+    }
+
+    /// Summary lines for people.
+    pub fn lines(&self) -> Vec<String> {
+        let (median, p90, max) = self.latency_quantiles_s();
         let end = self.arrivals.last().map_or(0.0, |a| a.t_applied_s);
         vec![
             format!(
@@ -102,9 +121,9 @@ impl TransferReport {
             ),
             format!(
                 "scan ready -> shown at the operator: median {:.3} s, p90 {:.3} s, max {:.3} s; last shown at {:.3} s{}",
-                q(0.5),
-                q(0.9),
-                q(1.0),
+                median,
+                p90,
+                max,
                 end,
                 if self.undelivered > 0 {
                     format!("; {} messages never completed", self.undelivered)

@@ -705,22 +705,17 @@ impl Telemetry {
     }
 }
 
-/// Writes `metrics` as pretty JSON to `out` and flushes it; the caller commits it
+/// Writes `metrics` as one line of JSON to `out` with the run's parameters and `seed`
+/// ([`crate::cli::metrics`]) and flushes it; the caller commits it
 /// ([`Output::finish`]) once every other output is complete. `out` is opened before the run
 /// (a file aside, renamed on commit), so an output that cannot be created fails before any
 /// work and a failed run leaves no metrics file.
 pub fn write_metrics(
     out: &mut Output,
+    seed: u64,
     metrics: &impl serde::Serialize,
 ) -> Result<(), crate::io::IoError> {
-    let mut text =
-        serde_json::to_string_pretty(metrics).map_err(|e| crate::io::IoError::Write {
-            name: out.name(),
-            source: std::io::Error::other(e),
-        })?;
-    text.push('\n');
-    out.write_bytes(text.as_bytes())?;
-    out.flush_named()
+    crate::cli::metrics::write(out, "tdma-run", Some(seed), metrics)
 }
 
 /// Checks that the pictures `--images-out` would write into `dir` (`image-NNNN.png`) are none

@@ -55,6 +55,13 @@ pub struct Args {
           value_parser = value::count_list(value::bytes(1, u64::MAX), MAX_SWEEP_BUDGETS))]
     pub sweep: Option<Budgets>,
 
+    /// Write the figures as one line of JSON that also carries every parameter of the run:
+    /// with --sweep the number of trials and, per budget, the mean of every CSV column over
+    /// the images; else the one stream's bytes, PSNR, SSIM and times (it is decoded to measure
+    /// it). `-`: standard output (then give -o or --csv a file).
+    #[arg(long, value_name = "FILE")]
+    pub metrics: Option<PathBuf>,
+
     /// Where --sweep writes its CSV; `-` or nothing writes stdout.
     #[arg(long, value_name = "FILE", requires = "sweep")]
     pub csv: Option<PathBuf>,

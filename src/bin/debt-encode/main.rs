@@ -8,6 +8,7 @@ use std::process::ExitCode;
 
 use anyhow::{Result, bail};
 use cli::Args;
+use rovlink::cli::metrics;
 use rovlink::cli::output::{Kind, Outputs};
 use rovlink::cli::rows::{RowFormat, RowWriter};
 use rovlink::cli::{progress, stop};
@@ -69,6 +70,9 @@ fn sweep(args: &Args, budgets: &[u64], outs: &mut Outputs) -> Result<u8> {
         RowFormat::Csv,
         &trial::COLUMNS,
     );
+    let metrics_dest = outs.claim_opt("--metrics", args.metrics.as_deref(), Kind::Text)?;
+    let mut metrics_out = metrics_dest.map(|d| d.open()).transpose()?;
+    let mut trials = Vec::new();
     stop::install()?;
     let bar = progress::bar(false, (pictures.len() * budgets.len()) as u64, PROGRESS);
     let outcome = (|| -> Result<()> {
@@ -80,7 +84,9 @@ fn sweep(args: &Args, budgets: &[u64], outs: &mut Outputs) -> Result<u8> {
                     return Ok(());
                 }
                 let trial = trial::run(&name, &img, &args.options(budget));
-                rows.row(&trial.map_err(|e| anyhow::anyhow!("{name}: {e}"))?)?;
+                let trial = trial.map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+                rows.row(&trial)?;
+                trials.push(trial);
                 bar.inc(1);
             }
         }
@@ -97,6 +103,14 @@ fn sweep(args: &Args, budgets: &[u64], outs: &mut Outputs) -> Result<u8> {
     outcome?;
     let done = rows.rows();
     rows.finish()?;
+    if let Some(out) = metrics_out.as_mut() {
+        let mut figures = trial::summary(&trials);
+        if let Some(signal) = stop::signal_name() {
+            figures["interrupted"] = signal.into();
+        }
+        metrics::write(out, TOOL, None, &figures)?;
+    }
+    metrics_out.map(|out| out.finish()).transpose()?;
     if let Some(note) = stop::note() {
         say!("{done} trials written ({note})");
     }
@@ -122,14 +136,25 @@ fn run(args: &Args) -> Result<u8> {
     }
     let output = args.output.as_deref().unwrap_or(Path::new("-"));
     let dest = outs.claim("-o", output, Kind::Binary)?;
+    let metrics_dest = outs.claim_opt("--metrics", args.metrics.as_deref(), Kind::Text)?;
     let (img, name) = load(args, args.inputs.first().map(PathBuf::as_path))?;
-    let bytes = args.bytes.unwrap_or_default();
-    let stream =
-        debt::encode(&img, &args.options(bytes)).map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+    let options = args.options(args.bytes.unwrap_or_default());
+    let started = std::time::Instant::now();
+    let stream = debt::encode(&img, &options).map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+    let encode_ms = started.elapsed().as_secs_f64() * 1e3;
+    let figures = (metrics_dest.as_ref())
+        .map(|_| trial::measure(&name, &img, &options, &stream, encode_ms).map(|t| t.figures()))
+        .transpose()
+        .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
     // Opened only now: a signal while a pipe is read leaves no temporary file behind.
     let mut out = dest.open()?;
     out.write_bytes(&stream)?;
+    let mut metrics_out = metrics_dest.map(|d| d.open()).transpose()?;
+    if let (Some(file), Some(figures)) = (metrics_out.as_mut(), figures) {
+        metrics::write(file, TOOL, None, &figures)?;
+    }
     out.finish()?;
+    metrics_out.map(|out| out.finish()).transpose()?;
     Ok(EXIT_OK)
 }
 

@@ -117,8 +117,10 @@ pub struct Args {
     #[arg(long, value_name = "FILE")]
     pub trace: Option<PathBuf>,
 
-    /// Write the counters of both directions as JSON here (`-`: standard output) when the run ends.
-    #[arg(long, value_name = "FILE")]
+    /// Write the counters of both directions as JSON here (`-`: standard output) when the run
+    /// ends: one line that also carries every parameter of the run and its seed (--metrics is
+    /// the same flag, the name every tool's figures share).
+    #[arg(long, value_name = "FILE", visible_alias = "metrics")]
     pub stats: Option<PathBuf>,
 
     /// Real time: create N pseudo-terminals (2 ..= 16; none given: 2, sides A and B) and

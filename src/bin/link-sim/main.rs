@@ -8,6 +8,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::Result;
+use rovlink::cli::metrics;
 use rovlink::cli::output::Dest;
 use rovlink::cli::stop;
 use rovlink::gll::Dialect;
@@ -166,8 +167,7 @@ fn finish(
     // The files first, so that a file that cannot be written is the one line said.
     if let Some(file) = out.stats.as_mut() {
         let json = counters.stats_json(&facts, link, info);
-        file.write_bytes(format!("{json:#}\n").as_bytes())?;
-        file.flush_named()?;
+        metrics::write(file, TOOL, Some(args.seed), &json)?;
     }
     for file in [output, out.stats].into_iter().flatten() {
         file.finish()?;
@@ -211,8 +211,7 @@ fn run_medium(args: &Args, mut medium: Medium, mut out: Claimed) -> Result<u8> {
     let used = || (0..ports * ports).filter(|k| k / ports != k % ports);
     if let Some(file) = out.stats.as_mut() {
         let json = medium_stats_json(&facts, &medium, &info, &pairs, pair_name, used());
-        file.write_bytes(format!("{json:#}\n").as_bytes())?;
-        file.flush_named()?;
+        metrics::write(file, TOOL, Some(args.seed), &json)?;
     }
     if let Some(file) = out.stats {
         file.finish()?;

@@ -136,8 +136,10 @@ pub struct Args {
     #[arg(short, long, value_name = "FILE")]
     pub output: Option<PathBuf>,
 
-    /// Write the summary as JSON here (`-`: standard output).
-    #[arg(long, value_name = "FILE")]
+    /// Write the summary as JSON here (`-`: standard output): one line that also carries every
+    /// parameter of the run and its seed (--metrics is the same flag, the name every tool's
+    /// figures share).
+    #[arg(long, value_name = "FILE", visible_alias = "metrics")]
     pub summary: Option<PathBuf>,
 
     /// Write a model file fitted to the measurement here (`-`: standard output).

@@ -7,6 +7,7 @@ use std::process::ExitCode;
 
 use anyhow::{Result, bail};
 use indicatif::ProgressBar;
+use rovlink::cli::metrics;
 use rovlink::cli::rows::{RowFormat, RowWriter};
 use rovlink::cli::{progress, stop};
 use rovlink::io::{CheckFailed, EXIT_CHECK_FAILED, EXIT_OK, IoError, Output};
@@ -53,7 +54,7 @@ fn run(args: &Args) -> Result<u8> {
     // committed before all are written.
     let mut summary_file = out.summary;
     if let Some(file) = summary_file.as_mut() {
-        write_text(file, format!("{:#}\n", serde_json::to_value(&summary)?))?;
+        metrics::write(file, TOOL, (!args.real()).then_some(args.seed), &summary)?;
     }
     let mut fitted = (out.fit).map(|file| (summary.to_model(&out.fit_name, assumed_rate), file));
     if let Some((Some(model), file)) = fitted.as_mut() {

@@ -147,6 +147,12 @@ pub struct BuildArgs {
     #[arg(long, value_name = "FILE")]
     pub stats: Option<PathBuf>,
 
+    /// Write the build's figures (scans, points, times, map and stream sizes; with --link the
+    /// transfer's latencies under `link`) as one line of JSON that also carries every parameter
+    /// of the run and its seed (`-`: standard output, then give -o a file).
+    #[arg(long, value_name = "FILE")]
+    pub metrics: Option<PathBuf>,
+
     /// Write the final map as OctoMap's maximum-likelihood .bt.
     #[arg(long, value_name = "FILE")]
     pub bt: Option<PathBuf>,

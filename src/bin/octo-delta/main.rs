@@ -10,6 +10,7 @@ use std::process::ExitCode;
 
 use anyhow::Result;
 use cli::{ApplyArgs, BuildArgs, Cli, Command, DumpArgs, FullArgs, SynthArgs};
+use rovlink::cli::metrics;
 use rovlink::cli::output::{Dest, Kind, Outputs};
 use rovlink::cli::rows::{RowFormat, RowWriter};
 use rovlink::cli::{UsageError, progress, stop};
@@ -70,6 +71,8 @@ fn build(a: &BuildArgs) -> Result<u8> {
     let ot = outs.claim_opt("--ot", a.ot.as_deref(), Kind::Binary)?;
     let stats = outs.claim_opt("--stats", a.stats.as_deref(), Kind::Text)?;
     let arrivals = outs.claim_opt("--arrivals", a.arrivals.as_deref(), Kind::Text)?;
+    let metrics_dest = outs.claim_opt("--metrics", a.metrics.as_deref(), Kind::Text)?;
+    let mut metrics_out = metrics_dest.map(|d| d.open()).transpose()?;
     stop::install()?;
     let mut out = stream.open()?;
     let mut rows = stats.map(|d| RowWriter::new(d, RowFormat::Csv, &pipeline::STATS_COLUMNS));
@@ -116,8 +119,10 @@ fn build(a: &BuildArgs) -> Result<u8> {
         let note = stop::note().unwrap_or_else(|| "interrupted".into());
         say!("{}", built.summary(&note));
     }
+    let mut figures = built.figures();
     if let Some(model) = link {
         let report = transfer::send_over(&model, &built.report.messages, a.scan_period, a.seed);
+        figures["link"] = report.figures();
         if let Some(d) = arrivals {
             let mut w = RowWriter::new(d, RowFormat::Csv, &pipeline::ARRIVAL_COLUMNS);
             pipeline::arrival_rows(&report)
@@ -128,6 +133,11 @@ fn build(a: &BuildArgs) -> Result<u8> {
         if !a.quiet {
             report.lines().iter().for_each(|line| say!("{line}"));
         }
+    }
+    if let Some(mut out) = metrics_out.take() {
+        let seed = a.link.is_some().then_some(a.seed);
+        metrics::write(&mut out, TOOL, seed, &figures)?;
+        out.finish()?;
     }
     Ok(stop::code_or(EXIT_OK))
 }

@@ -71,8 +71,9 @@ pub struct Args {
     pub output: Option<PathBuf>,
 
     /// Also write the run's counters (frames, CRC failures, bytes skipped, ...) as JSON here
-    /// (`-`: standard output).
-    #[arg(long, value_name = "FILE")]
+    /// (`-`: standard output): one line that also carries every parameter of the run
+    /// (--metrics is the same flag, the name every tool's figures share).
+    #[arg(long, value_name = "FILE", visible_alias = "metrics")]
     pub summary: Option<PathBuf>,
 
     /// Exit 1 unless every byte of the stream was part of a valid message.

@@ -9,6 +9,7 @@ use std::time::Duration;
 
 use anyhow::Result;
 use cli::{Args, Format};
+use rovlink::cli::metrics;
 use rovlink::cli::output::{Dest, Kind, Outputs};
 use rovlink::cli::rows::{RowFormat, RowWriter};
 use rovlink::cli::{only_with, stop};
@@ -137,7 +138,7 @@ fn run(args: &Args) -> Result<u8> {
         if note.is_some() {
             json["interrupted"] = stop::signal_name().unwrap_or("a signal").into();
         }
-        file.write_bytes(format!("{json:#}\n").as_bytes())?;
+        metrics::write(&mut file, TOOL, None, &json)?;
         file.finish()?;
     }
     if let Some(CaptureEnd::Closed(reason)) = end {

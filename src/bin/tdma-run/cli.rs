@@ -44,8 +44,9 @@ In the field (docs/tdma-mavlink.md, docs/tdma-console.md, docs/tdma-foxglove.md)
 --track: CSV t_s,x_m,y_m,z_m,heading_deg,distance_m,goal_x_m,goal_y_m,goal_z_m,
   goal_distance_m,backtrack_x_m,backtrack_y_m,backtrack_z_m,link_up (one row per 0.1 s vehicle
   step; distances from the buoy; the data of the paper's Figs. 12-14).
-The summary on stderr has Table 4's rows for both directions; --metrics writes them as JSON
-with the image, order and link-recovery counters. In real time each end knows only its half:
+The summary on stderr has Table 4's rows for both directions; --metrics writes them as one
+line of JSON with the image, order and link-recovery counters, every parameter of the run
+(\"params\") and its seed, so that many runs' files concatenate (scripts/sweep runs grids). In real time each end knows only its half:
 frames it sent, and frames it received with their arrival times (no one-way delay: that needs
 both clocks); the operator adds the round trip from each slot's frame to the ROV's answer.
 
@@ -215,7 +216,8 @@ pub struct Args {
     #[arg(long, value_name = "DIR|FILE")]
     pub images: Option<PathBuf>,
 
-    /// Write the session's figures as JSON here (- for standard output).
+    /// Write the session's figures, every parameter and the seed as one line of JSON here
+    /// (- for standard output).
     #[arg(long, value_name = "FILE")]
     pub metrics: Option<PathBuf>,
 

@@ -171,7 +171,7 @@ fn run(args: &Args) -> Result<u8> {
     }
     // Every output complete (metrics written aside) before any is committed or said done.
     if let Some(out) = metrics_out.as_mut() {
-        write_metrics(out, &metrics)?;
+        write_metrics(out, args.seed(), &metrics)?;
     }
     recorder.finish()?;
     metrics_out.map(|out| out.finish()).transpose()?;

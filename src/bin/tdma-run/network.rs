@@ -80,7 +80,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     };
     mark_interrupted(&mut metrics);
     if let Some(out) = metrics_out.as_mut() {
-        write_metrics(out, &metrics)?;
+        write_metrics(out, scenario.seed, &metrics)?;
     }
     recorder.finish()?;
     metrics_out.map(|out| out.finish()).transpose()?;

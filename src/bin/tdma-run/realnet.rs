@@ -103,7 +103,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     let code = crate::ended_code(ended, metrics.duration_s);
     mark_interrupted(&mut metrics);
     if let Some(out) = metrics_out.as_mut() {
-        write_metrics(out, &metrics)?;
+        write_metrics(out, network.scenario.seed, &metrics)?;
     }
     recorder.finish()?;
     frames.map(FrameRows::finish).transpose()?;
