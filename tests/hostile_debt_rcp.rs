@@ -389,7 +389,8 @@ fn a_live_capture_ends_0_on_sigterm_and_1_when_the_port_closes() {
         LIMIT,
     );
     assert_contract(&run, &[0], "rcp-dump --port, SIGTERM");
-    assert!(String::from_utf8_lossy(&run.stdout).contains("\"frames\": 0"));
+    let summary: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    assert_eq!(summary["frames"], 0, "{summary}");
     assert_eq!(
         std::fs::read_to_string(s.path("cap.csv"))
             .unwrap()
