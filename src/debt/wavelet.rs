@@ -171,6 +171,10 @@ pub fn low_size(width: usize, height: usize, levels: u32) -> (usize, usize) {
     (w, h)
 }
 
+/// Widest strip of columns a column pass lifts at once: 64 `f32` lanes are four 512-bit
+/// vectors per row, and a strip of a 720-row plane (184 KB) stays in a core's L2 cache.
+const STRIP_COLUMNS: usize = 64;
+
 /// One level, forward or inverse, on the top-left `cw` x `ch` region of a `stride`-wide buffer.
 fn level<T: Copy + Default, K: Kernel<T>>(
     buf: &mut [T],
@@ -220,65 +224,38 @@ fn level<T: Copy + Default, K: Kernel<T>>(
             return;
         }
         let ns = ch.div_ceil(2);
-        if cw == stride {
-            // The region is whole rows (the first level): lifted where it lies, with only the
-            // high rows going through the scratch to be (de)interleaved.
-            let block = &mut buf[..cw * ch];
+        // Strips of at most STRIP_COLUMNS columns, each gathered into the scratch (low rows
+        // first), lifted there with the strip's columns as lanes, and put back: the strip stays
+        // in cache through the lifting steps, the scratch holds one strip only, and every
+        // column sees the same arithmetic as in one block.
+        for x0 in (0..cw).step_by(STRIP_COLUMNS) {
+            let sw = STRIP_COLUMNS.min(cw - x0);
+            let row = |r: usize| &buf[r * stride + x0..r * stride + x0 + sw];
             tmp.clear();
             if fwd {
-                for row in block.chunks_exact(cw).skip(1).step_by(2) {
-                    tmp.extend_from_slice(row);
+                for r in (0..ch).step_by(2).chain((1..ch).step_by(2)) {
+                    tmp.extend_from_slice(row(r));
                 }
-                for i in 1..ns {
-                    block.copy_within(2 * i * cw..(2 * i + 1) * cw, i * cw);
-                }
-                block[ns * cw..].copy_from_slice(tmp);
-                let (s, d) = block.split_at_mut(ns * cw);
-                K::forward(s, d, cw);
             } else {
-                let (s, d) = block.split_at_mut(ns * cw);
-                K::inverse(s, d, cw);
-                tmp.extend_from_slice(d);
-                // Low row i goes to row 2i, from the last: no row is overwritten unread.
-                for i in (1..ns).rev() {
-                    block.copy_within(i * cw..(i + 1) * cw, 2 * i * cw);
-                }
-                for (i, row) in tmp.chunks_exact(cw).enumerate() {
-                    block[(2 * i + 1) * cw..(2 * i + 2) * cw].copy_from_slice(row);
+                for r in 0..ch {
+                    tmp.extend_from_slice(row(r));
                 }
             }
-            return;
-        }
-        // The block is built by appending rows (even rows first when forward, so that the low
-        // half comes first): the scratch's capacity is reused, nothing is zeroed.
-        tmp.clear();
-        tmp.reserve(cw * ch);
-        let row = |r: usize| &buf[r * stride..r * stride + cw];
-        if fwd {
-            for r in (0..ch).step_by(2).chain((1..ch).step_by(2)) {
-                tmp.extend_from_slice(row(r));
+            let (s, d) = tmp.split_at_mut(ns * sw);
+            if fwd {
+                K::forward(s, d, sw);
+            } else {
+                K::inverse(s, d, sw);
             }
-        } else {
             for r in 0..ch {
-                tmp.extend_from_slice(row(r));
+                let from = match (fwd, r % 2) {
+                    (true, _) => r,
+                    (false, 0) => r / 2,
+                    (false, _) => ns + r / 2,
+                };
+                buf[r * stride + x0..r * stride + x0 + sw]
+                    .copy_from_slice(&tmp[from * sw..(from + 1) * sw]);
             }
-        }
-        let block = &mut tmp[..cw * ch];
-        let (s, d) = block.split_at_mut(ns * cw);
-        if fwd {
-            K::forward(s, d, cw);
-        } else {
-            K::inverse(s, d, cw);
-        }
-        for r in 0..ch {
-            let from = if fwd {
-                r
-            } else if r % 2 == 0 {
-                r / 2
-            } else {
-                ns + r / 2
-            };
-            buf[r * stride..r * stride + cw].copy_from_slice(&block[from * cw..(from + 1) * cw]);
         }
     };
     if forward {
