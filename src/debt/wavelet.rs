@@ -175,6 +175,68 @@ pub fn low_size(width: usize, height: usize, levels: u32) -> (usize, usize) {
 /// vectors per row, and a strip of a 720-row plane (184 KB) stays in a core's L2 cache.
 const STRIP_COLUMNS: usize = 64;
 
+/// Lifts `line` (its low half, `ns` samples, then its high half) back into the samples of one
+/// row, interleaved into `out`.
+fn inverse_row<T: Copy, K: Kernel<T>>(line: &mut [T], ns: usize, out: &mut [T]) {
+    let (s, d) = line.split_at_mut(ns);
+    K::inverse(s, d, 1);
+    for (x, &v) in out.iter_mut().step_by(2).zip(s.iter()) {
+        *x = v;
+    }
+    for (x, &v) in out.iter_mut().skip(1).step_by(2).zip(d.iter()) {
+        *x = v;
+    }
+}
+
+/// The column lifting of one level, forward or inverse, on the top-left `cw` x `ch` region of
+/// a `stride`-wide buffer.
+fn columns<T: Copy + Default, K: Kernel<T>>(
+    buf: &mut [T],
+    stride: usize,
+    cw: usize,
+    ch: usize,
+    fwd: bool,
+    tmp: &mut Vec<T>,
+) {
+    if ch < 2 {
+        return;
+    }
+    let ns = ch.div_ceil(2);
+    // Strips of at most STRIP_COLUMNS columns, each gathered into the scratch (low rows
+    // first), lifted there with the strip's columns as lanes, and put back: the strip stays
+    // in cache through the lifting steps, the scratch holds one strip only, and every
+    // column sees the same arithmetic as in one block.
+    for x0 in (0..cw).step_by(STRIP_COLUMNS) {
+        let sw = STRIP_COLUMNS.min(cw - x0);
+        let row = |r: usize| &buf[r * stride + x0..r * stride + x0 + sw];
+        tmp.clear();
+        if fwd {
+            for r in (0..ch).step_by(2).chain((1..ch).step_by(2)) {
+                tmp.extend_from_slice(row(r));
+            }
+        } else {
+            for r in 0..ch {
+                tmp.extend_from_slice(row(r));
+            }
+        }
+        let (s, d) = tmp.split_at_mut(ns * sw);
+        if fwd {
+            K::forward(s, d, sw);
+        } else {
+            K::inverse(s, d, sw);
+        }
+        for r in 0..ch {
+            let from = match (fwd, r % 2) {
+                (true, _) => r,
+                (false, 0) => r / 2,
+                (false, _) => ns + r / 2,
+            };
+            buf[r * stride + x0..r * stride + x0 + sw]
+                .copy_from_slice(&tmp[from * sw..(from + 1) * sw]);
+        }
+    }
+}
+
 /// One level, forward or inverse, on the top-left `cw` x `ch` region of a `stride`-wide buffer.
 fn level<T: Copy + Default, K: Kernel<T>>(
     buf: &mut [T],
@@ -208,61 +270,15 @@ fn level<T: Copy + Default, K: Kernel<T>>(
                 row.copy_from_slice(line);
             } else {
                 line.copy_from_slice(row);
-                let (s, d) = line.split_at_mut(ns);
-                K::inverse(s, d, 1);
-                for (x, &v) in row.iter_mut().step_by(2).zip(s.iter()) {
-                    *x = v;
-                }
-                for (x, &v) in row.iter_mut().skip(1).step_by(2).zip(d.iter()) {
-                    *x = v;
-                }
-            }
-        }
-    };
-    let cols = |buf: &mut [T], tmp: &mut Vec<T>, fwd: bool| {
-        if ch < 2 {
-            return;
-        }
-        let ns = ch.div_ceil(2);
-        // Strips of at most STRIP_COLUMNS columns, each gathered into the scratch (low rows
-        // first), lifted there with the strip's columns as lanes, and put back: the strip stays
-        // in cache through the lifting steps, the scratch holds one strip only, and every
-        // column sees the same arithmetic as in one block.
-        for x0 in (0..cw).step_by(STRIP_COLUMNS) {
-            let sw = STRIP_COLUMNS.min(cw - x0);
-            let row = |r: usize| &buf[r * stride + x0..r * stride + x0 + sw];
-            tmp.clear();
-            if fwd {
-                for r in (0..ch).step_by(2).chain((1..ch).step_by(2)) {
-                    tmp.extend_from_slice(row(r));
-                }
-            } else {
-                for r in 0..ch {
-                    tmp.extend_from_slice(row(r));
-                }
-            }
-            let (s, d) = tmp.split_at_mut(ns * sw);
-            if fwd {
-                K::forward(s, d, sw);
-            } else {
-                K::inverse(s, d, sw);
-            }
-            for r in 0..ch {
-                let from = match (fwd, r % 2) {
-                    (true, _) => r,
-                    (false, 0) => r / 2,
-                    (false, _) => ns + r / 2,
-                };
-                buf[r * stride + x0..r * stride + x0 + sw]
-                    .copy_from_slice(&tmp[from * sw..(from + 1) * sw]);
+                inverse_row::<T, K>(line, ns, row);
             }
         }
     };
     if forward {
         rows(buf, tmp, true);
-        cols(buf, tmp, true);
+        columns::<T, K>(buf, stride, cw, ch, true, tmp);
     } else {
-        cols(buf, tmp, false);
+        columns::<T, K>(buf, stride, cw, ch, false, tmp);
         rows(buf, tmp, false);
     }
 }
@@ -286,6 +302,44 @@ fn transform<T: Copy + Default, K: Kernel<T>>(
             let (cw, ch) = low_size(width, height, l);
             level::<T, K>(buf, width, cw, ch, false, tmp);
         }
+    }
+}
+
+/// The inverse 9/7 transform of `buf`, whose last step (the finest level's row lifting) hands
+/// each row of samples, top to bottom, to `row_out` instead of writing it back into `buf`:
+/// a caller that only reads the rows once saves a pass over the plane. `scratch` as in
+/// [`run_97`]; the rows are the same numbers [`inverse_97`] would leave in `buf`.
+pub fn inverse_97_rows(
+    buf: &mut [f32],
+    width: usize,
+    height: usize,
+    levels: u32,
+    scratch: &mut Vec<f32>,
+    mut row_out: impl FnMut(usize, &[f32]),
+) {
+    assert_eq!(buf.len(), width * height, "buffer is not width x height");
+    for l in (1..levels).rev() {
+        let (cw, ch) = low_size(width, height, l);
+        level::<f32, Cdf97>(buf, width, cw, ch, false, scratch);
+    }
+    if levels == 0 || width < 2 {
+        if levels > 0 {
+            level::<f32, Cdf97>(buf, width, width, height, false, scratch);
+        }
+        for (r, row) in buf.chunks_exact(width).enumerate() {
+            row_out(r, row);
+        }
+        return;
+    }
+    // The finest level: its columns as [`level`] lifts them, then each row from a line.
+    columns::<f32, Cdf97>(buf, width, width, height, false, scratch);
+    let ns = width.div_ceil(2);
+    let mut line = vec![0.0; width];
+    let mut out = vec![0.0; width];
+    for (r, row) in buf.chunks_exact(width).enumerate() {
+        line.copy_from_slice(row);
+        inverse_row::<f32, Cdf97>(&mut line, ns, &mut out);
+        row_out(r, &out);
     }
 }
 
@@ -469,6 +523,31 @@ mod tests {
                     .fold(0.0, f32::max);
                 assert!(err < 1e-3, "{w}x{h}, {levels} levels: max error {err}");
             }
+        }
+    }
+
+    #[test]
+    fn rows_handed_out_are_the_inverse_exactly() {
+        for (w, h, levels) in [
+            (1, 1, 0),
+            (1, 9, 2),
+            (9, 1, 2),
+            (7, 5, 0),
+            (33, 17, 3),
+            (130, 70, 5),
+        ] {
+            let coefs: Vec<f32> = (0..w * h)
+                .map(|i| ((i * 37 % 101) as f32 - 50.0) * if i % 7 == 0 { 3.0 } else { 0.1 })
+                .collect();
+            let mut whole = coefs.clone();
+            inverse_97(&mut whole, w, h, levels);
+            let mut rows = Vec::new();
+            let mut buf = coefs.clone();
+            inverse_97_rows(&mut buf, w, h, levels, &mut Vec::new(), |r, row| {
+                assert_eq!((r, row.len()), (rows.len() / w, w));
+                rows.extend_from_slice(row);
+            });
+            assert_eq!(rows, whole, "{w}x{h}, {levels} levels");
         }
     }
 
