@@ -37,12 +37,23 @@ fn tool_dir() -> String {
     Path::new(TDMA_RUN).parent().unwrap().display().to_string()
 }
 
-fn sweep(dir: &Path, args: &[&str]) -> common::hostile::Run {
+/// python3's arguments for `scripts/sweep ARGS --tool-dir <the tools under test>`.
+fn sweep_argv(args: &[&str]) -> Vec<String> {
     let mut all = vec![sweep_script()];
     all.extend(args.iter().map(|a| a.to_string()));
     all.extend(["--tool-dir".into(), tool_dir()]);
+    all
+}
+
+fn sweep(dir: &Path, args: &[&str]) -> common::hostile::Run {
+    let all = sweep_argv(args);
     let all: Vec<&str> = all.iter().map(String::as_str).collect();
     run_in(dir, "python3", &all, b"", LIMIT)
+}
+
+/// The run id a run folder's path ends with (in the joblog, in pending.txt).
+fn run_id_of(line: &str) -> String {
+    line.rsplit('/').next().unwrap().to_string()
 }
 
 fn run_ids(out: &Path) -> BTreeSet<String> {
@@ -62,10 +73,7 @@ fn completed(out: &Path) -> BTreeSet<String> {
 /// The runs GNU parallel's joblog lists (the run folder ends each command).
 fn joblog_runs(out: &Path) -> BTreeSet<String> {
     let log = std::fs::read_to_string(out.join("joblog")).unwrap();
-    log.lines()
-        .skip(1)
-        .map(|l| l.rsplit('/').next().unwrap().to_string())
-        .collect()
+    log.lines().skip(1).map(run_id_of).collect()
 }
 
 fn csv_rows(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
@@ -188,12 +196,7 @@ fn slurm_writes_a_job_array_that_runs_its_share_and_gathers() {
         String::from_utf8_lossy(&task.stderr)
     );
     let pending = std::fs::read_to_string(out.join("pending.txt")).unwrap();
-    let share: BTreeSet<String> = pending
-        .lines()
-        .skip(4)
-        .take(4)
-        .map(|l| l.rsplit('/').next().unwrap().to_string())
-        .collect();
+    let share: BTreeSet<String> = pending.lines().skip(4).take(4).map(run_id_of).collect();
     assert_eq!(completed(&out), share);
 
     let gathered = sweep(dir.path(), &["grid.json", "--out", "out", "--gather-only"]);
@@ -212,9 +215,7 @@ fn a_signal_keeps_what_completed_and_the_next_sweep_resumes() {
     let grid = r#"{"tool":"tdma-run","args":{"--sim":[null],"--duration":[1800]},"seeds":3}"#;
     std::fs::write(dir.path().join("grid.json"), grid).unwrap();
     let out = dir.path().join("out");
-    let mut args = vec![sweep_script()];
-    args.extend(["grid.json", "--out", "out", "--jobs", "1", "--tool-dir"].map(String::from));
-    args.push(tool_dir());
+    let args = sweep_argv(&["grid.json", "--out", "out", "--jobs", "1"]);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let stopped = run_signalled(
         dir.path(),

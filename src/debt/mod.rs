@@ -663,12 +663,23 @@ fn to_components(img: &Image, gray: bool, lossless: bool) -> Vec<Vec<f32>> {
     }
 }
 
+/// YCbCr -> RGB (JPEG's, full range): row `c` holds the weights of Y, Cb and Cr in channel `c`.
+const YCBCR_TO_RGB: [[f32; 3]; 3] = [
+    [1.0, 0.0, 1.402],
+    [1.0, -0.344_136, -0.714_136],
+    [1.0, 1.772, 0.0],
+];
+
+/// A sample from a reconstructed value: clamped first, so adding one half and truncating
+/// rounds to nearest.
+fn to_sample(v: f32) -> u8 {
+    (v.clamp(0.0, 255.0) + 0.5) as u8
+}
+
 fn from_components(planes: &[Vec<f32>], width: usize, height: usize, lossless: bool) -> Image {
     let n = width * height;
-    // Clamped first, so adding one half and truncating rounds to nearest.
-    let clamp = |v: f32| (v.clamp(0.0, 255.0) + 0.5) as u8;
     if planes.len() == 1 {
-        let data = planes[0].iter().map(|&y| clamp(y + 128.0)).collect();
+        let data = planes[0].iter().map(|&y| to_sample(y + 128.0)).collect();
         return Image {
             width,
             height,
@@ -689,13 +700,10 @@ fn from_components(planes: &[Vec<f32>], width: usize, height: usize, lossless: b
             let g = y - ((cb + cr) / 4.0).floor();
             (cr + g, g, cb + g)
         } else {
-            (
-                y + 1.402 * cr,
-                y - 0.344_136 * cb - 0.714_136 * cr,
-                y + 1.772 * cb,
-            )
+            let [r, g, b] = YCBCR_TO_RGB;
+            (y + r[2] * cr, y + g[1] * cb + g[2] * cr, y + b[1] * cb)
         };
-        data.extend_from_slice(&[clamp(r), clamp(g), clamp(b)]);
+        data.extend_from_slice(&[to_sample(r), to_sample(g), to_sample(b)]);
     }
     Image {
         width,
@@ -1189,9 +1197,8 @@ fn put_channel<const N: usize>(data: &mut [u8], plane: &[f32], c: usize) {
     let (pixels, _) = data.as_chunks_mut::<N>();
     let mut run = [0u8; RUN];
     for (pixels, values) in pixels.chunks_mut(RUN).zip(plane.chunks(RUN)) {
-        // Clamped first, so adding one half and truncating rounds to nearest.
         for (q, &v) in run.iter_mut().zip(values) {
-            *q = ((v + 128.0).clamp(0.0, 255.0) + 0.5) as u8;
+            *q = to_sample(v + 128.0);
         }
         for (pixel, &q) in pixels.iter_mut().zip(&run) {
             pixel[c] = q;
@@ -1214,12 +1221,10 @@ fn synthesise_channels(
     header: &Header,
 ) -> Image {
     const GREY: [[f32; 3]; 1] = [[1.0, 0.0, 0.0]];
-    const RGB: [[f32; 3]; 3] = [
-        [1.0, 0.0, 1.402],
-        [1.0, -0.344_136, -0.714_136],
-        [1.0, 1.772, 0.0],
-    ];
-    let mix: &[[f32; 3]] = if coefficients.len() == 1 { &GREY } else { &RGB };
+    let mix: &[[f32; 3]] = match coefficients.len() {
+        1 => &GREY,
+        _ => &YCBCR_TO_RGB,
+    };
     let channels = mix.len();
     let n = width * height;
     // Written once per channel below; a fresh page's first access is a write (one fault).
@@ -1227,11 +1232,8 @@ fn synthesise_channels(
     let mut plane: Vec<f32> = Vec::new();
     let mut scratch = Vec::new();
     for (c, weights) in mix.iter().enumerate() {
-        if c == 0 {
-            plane.resize(n, 0.0);
-        } else {
-            plane.fill(0.0);
-        }
+        plane.clear();
+        plane.resize(n, 0.0);
         for (coefs, &weight) in coefficients.iter().zip(weights) {
             if weight != 0.0 {
                 for &(i, v) in coefs {

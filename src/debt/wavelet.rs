@@ -322,17 +322,17 @@ pub fn inverse_97_rows(
         let (cw, ch) = low_size(width, height, l);
         level::<f32, Cdf97>(buf, width, cw, ch, false, scratch);
     }
+    // The finest level: its columns as [`level`] lifts them, then each row from a line (a
+    // row one sample wide, or an image without levels, has no row lifting).
+    if levels > 0 {
+        columns::<f32, Cdf97>(buf, width, width, height, false, scratch);
+    }
     if levels == 0 || width < 2 {
-        if levels > 0 {
-            level::<f32, Cdf97>(buf, width, width, height, false, scratch);
-        }
         for (r, row) in buf.chunks_exact(width).enumerate() {
             row_out(r, row);
         }
         return;
     }
-    // The finest level: its columns as [`level`] lifts them, then each row from a line.
-    columns::<f32, Cdf97>(buf, width, width, height, false, scratch);
     let ns = width.div_ceil(2);
     let mut line = vec![0.0; width];
     let mut out = vec![0.0; width];
