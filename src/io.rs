@@ -138,6 +138,47 @@ pub fn read_at_most(path: &Path, max_bytes: u64) -> io::Result<Vec<u8>> {
     })
 }
 
+/// What a file of this type is, for messages ("a FIFO"); `None` for a device (character or
+/// block), which only opening it tells more about.
+pub fn kind_name(kind: std::fs::FileType) -> Option<&'static str> {
+    use std::os::unix::fs::FileTypeExt;
+    if kind.is_file() {
+        Some("a regular file")
+    } else if kind.is_dir() {
+        Some("a directory")
+    } else if kind.is_fifo() {
+        Some("a FIFO")
+    } else if kind.is_socket() {
+        Some("a socket")
+    } else {
+        None
+    }
+}
+
+/// Opens `path` for reading if it is a regular file, without blocking: a FIFO, a socket or a
+/// device where a file of a set is expected (a bag's `.db3`, its `metadata.yaml`) is refused
+/// with an error of kind `InvalidInput` naming what it is, instead of waiting forever in the
+/// open for a writer that never comes. The file is opened `O_NONBLOCK` (which only affects
+/// FIFOs and devices), checked, then switched back to blocking reads.
+pub fn open_regular(path: &Path) -> io::Result<File> {
+    use nix::fcntl::{FcntlArg, OFlag, fcntl};
+    use std::os::unix::fs::OpenOptionsExt;
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(OFlag::O_NONBLOCK.bits())
+        .open(path)?;
+    let kind = file.metadata()?.file_type();
+    if !kind.is_file() {
+        let what = kind_name(kind).unwrap_or("a device");
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!("expected a regular file, found {what}"),
+        ));
+    }
+    fcntl(&file, FcntlArg::F_SETFL(OFlag::empty())).map_err(io::Error::from)?;
+    Ok(file)
+}
+
 /// Reads what is left of `reader` if it holds at most `max_bytes` (`None` if it holds more),
 /// reading `max_bytes + 1` bytes at most: the one bounded read every whole-input reader uses.
 pub fn read_bounded(reader: impl Read, max_bytes: u64) -> io::Result<Option<Vec<u8>>> {

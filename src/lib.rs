@@ -36,5 +36,6 @@ pub mod measure;
 pub mod octo;
 pub mod rcp;
 pub mod stats;
+pub mod strict_json;
 pub mod vehicle;
 pub mod wire;

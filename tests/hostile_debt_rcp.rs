@@ -10,8 +10,8 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use common::hostile::{
-    BAD_NUMBERS, Run, assert_contract, assert_whole_csv, garbage, head_one, run_in, run_signalled,
-    signalled_on_a_silent_pipe, temp_files,
+    BAD_NUMBERS, Run, SignalWhen, Stdin, assert_contract, assert_whole_csv, garbage, head_one,
+    run_in, signal_when, signalled_on_a_silent_pipe, temp_files,
 };
 use common::testdata;
 use nix::sys::signal::Signal;
@@ -334,12 +334,16 @@ fn sigterm_stops_a_sweep_with_whole_rows() {
         .map(|k| (k * 20).to_string())
         .collect::<Vec<_>>()
         .join(",");
-    let run = run_signalled(
+    // 800 trials: signalled once two rows are written, far from the end.
+    let run = signal_when(
         s.dir.path(),
         ENCODE,
         &["--sweep", &budgets, "in.png", "in.png", "--csv", "t.csv"],
-        Duration::from_millis(1500),
-        Signal::SIGTERM,
+        Stdin::Bytes(b""),
+        SignalWhen {
+            signal: Signal::SIGTERM,
+            ready: &|seen| seen.lines_in("t.csv") >= 3,
+        },
         LIMIT,
     );
     assert_contract(&run, &[143], "debt-encode --sweep, SIGTERM");
@@ -356,12 +360,15 @@ fn sigterm_stops_a_sweep_with_whole_rows() {
     assert!(rows > 1 && rows < 801, "{rows} lines");
     assert!(temp_files(s.dir.path()).is_empty());
     // SIGINT: 130.
-    let run = run_signalled(
+    let run = signal_when(
         s.dir.path(),
         ENCODE,
         &["--sweep", &budgets, "in.png", "--csv", "-"],
-        Duration::from_millis(800),
-        Signal::SIGINT,
+        Stdin::Bytes(b""),
+        SignalWhen {
+            signal: Signal::SIGINT,
+            ready: &|seen| seen.stdout.iter().filter(|&&b| b == b'\n').count() >= 3,
+        },
         LIMIT,
     );
     assert_contract(&run, &[130], "debt-encode --sweep, SIGINT");
@@ -371,7 +378,8 @@ fn sigterm_stops_a_sweep_with_whole_rows() {
 fn a_live_capture_ends_0_on_sigterm_and_1_when_the_port_closes() {
     let s = Scratch::new();
     let (master, path) = common::open_pty();
-    let run = run_signalled(
+    // A silent port: signalled once the capture has begun (it says so).
+    let run = signal_when(
         s.dir.path(),
         DUMP,
         &[
@@ -384,8 +392,11 @@ fn a_live_capture_ends_0_on_sigterm_and_1_when_the_port_closes() {
             "--summary",
             "-",
         ],
-        Duration::from_millis(600),
-        Signal::SIGTERM,
+        Stdin::Bytes(b""),
+        SignalWhen {
+            signal: Signal::SIGTERM,
+            ready: &|seen| seen.said("until it closes or Ctrl-C"),
+        },
         LIMIT,
     );
     assert_contract(&run, &[0], "rcp-dump --port, SIGTERM");
@@ -408,7 +419,14 @@ fn a_live_capture_ends_0_on_sigterm_and_1_when_the_port_closes() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_millis(500));
+    // The master goes once the tool has the port open and has read the frame from it.
+    let mut line = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(child.stdout.as_mut().unwrap()),
+        &mut line,
+    )
+    .unwrap();
+    assert!(line.starts_with('{'), "{line}");
     drop(master);
     let status = common::wait_for_exit(&mut child, LIMIT);
     assert_eq!(status.code(), Some(1));
@@ -567,20 +585,20 @@ fn rcp_dump_reads_tcp_and_udp_ports() {
     for f in &frames {
         sender.send_to(f, bind).unwrap();
     }
-    std::thread::sleep(Duration::from_millis(300));
+    // Signalled once every frame is printed (the header and a row each; output is flushed per
+    // datagram).
+    let mut stdout = std::io::BufReader::new(child.stdout.take().unwrap());
+    let mut out = String::new();
+    for _ in 0..=frames.len() {
+        std::io::BufRead::read_line(&mut stdout, &mut out).unwrap();
+    }
     nix::sys::signal::kill(
         nix::unistd::Pid::from_raw(child.id() as i32),
         Signal::SIGINT,
     )
     .unwrap();
     let status = common::wait_for_exit(&mut child, LIMIT);
-    let mut out = String::new();
-    child
-        .stdout
-        .take()
-        .unwrap()
-        .read_to_string(&mut out)
-        .unwrap();
+    stdout.read_to_string(&mut out).unwrap();
     let mut err = String::new();
     stderr.read_to_string(&mut err).unwrap();
     assert_eq!(status.code(), Some(0), "{err}");

@@ -14,8 +14,8 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use common::hostile::{
-    BAD_NUMBERS, Run, assert_contract, assert_whole_csv, garbage, head_one, run, run_in,
-    run_signalled, temp_files,
+    BAD_NUMBERS, Run, SignalWhen, Stdin, assert_contract, assert_whole_csv, garbage, head_one, run,
+    run_in, signal_once, signal_when, temp_files,
 };
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
@@ -311,17 +311,24 @@ fn s100_json() -> Vec<u8> {
 #[test]
 fn link_sim_pipe_stops_at_a_signal_with_complete_outputs() {
     let dir = tempfile::tempdir().unwrap();
-    std::fs::write(dir.path().join("big.bin"), frames(200_000)).unwrap();
+    // Frames without end on standard input: the run ends only by the signal, which comes once
+    // the trace holds rows.
+    let input = frames(1000);
     for (signal, code) in [(Signal::SIGTERM, 143), (Signal::SIGINT, 130)] {
+        // The sign is rows in this run's trace, not the last run's.
+        let _ = std::fs::remove_file(dir.path().join("t.csv"));
         let args = [
-            "big.bin", "-o", "out.bin", "--trace", "t.csv", "--stats", "s.json",
+            "-", "-o", "out.bin", "--trace", "t.csv", "--stats", "s.json",
         ];
-        let out = run_signalled(
+        let out = signal_when(
             dir.path(),
             LINK_SIM,
             &args,
-            Duration::from_millis(400),
-            signal,
+            Stdin::Forever(&input),
+            SignalWhen {
+                signal,
+                ready: &|seen| seen.lines_in("t.csv") > 100,
+            },
             LIMIT,
         );
         assert_contract(&out, &[code], &format!("{signal:?}"));
@@ -335,7 +342,7 @@ fn link_sim_pipe_stops_at_a_signal_with_complete_outputs() {
         let stats = json(&dir.path().join("s.json"));
         assert_eq!(stats["interrupted"], format!("interrupted by {signal:?}"));
         let delivered = stats["a_to_b"]["frames_delivered"].as_u64().unwrap();
-        assert!((1..200_000).contains(&delivered), "{delivered}");
+        assert!(delivered >= 100, "{delivered}");
         // The frames that arrived are all there, whole.
         let output = std::fs::read(dir.path().join("out.bin")).unwrap();
         assert_eq!(output.len() as u64, delivered * 20);
@@ -346,7 +353,7 @@ fn link_sim_pipe_stops_at_a_signal_with_complete_outputs() {
 fn link_sim_pipe_stops_at_a_signal_while_its_input_is_silent() {
     let dir = tempfile::tempdir().unwrap();
     let mut child = Command::new(LINK_SIM)
-        .args(["--stats", "s.json"])
+        .args(["--stats", "s.json", "--trace", "t.csv"])
         .current_dir(dir.path())
         .stdin(Stdio::piped())
         .stdout(Stdio::null())
@@ -355,8 +362,14 @@ fn link_sim_pipe_stops_at_a_signal_while_its_input_is_silent() {
         .unwrap();
     let mut stdin = child.stdin.take().unwrap();
     stdin.write_all(&frames(3)).unwrap();
-    std::thread::sleep(Duration::from_millis(300));
-    kill(Pid::from_raw(child.id() as i32), Signal::SIGTERM).unwrap();
+    // Signalled once the three frames are traced (a header and three rows), the input silent.
+    let trace = dir.path().join("t.csv");
+    signal_once(
+        &mut child,
+        Signal::SIGTERM,
+        &|| common::hostile::lines_in(&trace) == 4,
+        LIMIT,
+    );
     let started = Instant::now();
     let status = loop {
         if let Some(status) = child.try_wait().unwrap() {
@@ -381,12 +394,16 @@ fn link_sim_pipe_stops_at_a_signal_while_waiting_for_a_named_pipe_writer() {
     let fifo = dir.path().join("frames.fifo");
     nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).unwrap();
     let args = ["frames.fifo", "-o", "out.bin", "--stats", "s.json"];
-    let out = run_signalled(
+    // Without a writer the open never returns: the signal comes once the handler is in place.
+    let out = signal_when(
         dir.path(),
         LINK_SIM,
         &args,
-        Duration::from_millis(300),
-        Signal::SIGTERM,
+        Stdin::Bytes(b""),
+        SignalWhen {
+            signal: Signal::SIGTERM,
+            ready: &|_| true,
+        },
         LIMIT,
     );
     assert_contract(&out, &[143], "a named pipe without a writer");
@@ -616,12 +633,18 @@ fn modem_bench_sim_stops_at_a_signal_with_summary_and_fit() {
         (Signal::SIGINT, 130),
         (Signal::SIGHUP, 129),
     ] {
-        let out = run_signalled(
+        // The sign is rows in this run's file, not the last run's.
+        let _ = std::fs::remove_file(dir.path().join("p.csv"));
+        // 10^8 packets do not end in a test's time: signalled once rows are written.
+        let out = signal_when(
             dir.path(),
             MODEM_BENCH,
             &args,
-            Duration::from_millis(500),
-            signal,
+            Stdin::Bytes(b""),
+            SignalWhen {
+                signal,
+                ready: &|seen| seen.lines_in("p.csv") > 10,
+            },
             LIMIT,
         );
         assert_contract(&out, &[code], &format!("{signal:?}"));
@@ -666,11 +689,27 @@ fn modem_bench_sim_memory_does_not_grow_with_the_count() {
         let line = status.lines().find(|l| l.starts_with("VmRSS:")).unwrap();
         line.split_whitespace().nth(1).unwrap().parse().unwrap()
     };
-    std::thread::sleep(Duration::from_millis(500));
+    // Measured by work done, not by time: the bytes of rows written so far (`wchar`).
+    let written = |pid: u32| -> u64 {
+        let io = std::fs::read_to_string(format!("/proc/{pid}/io")).unwrap_or_default();
+        io.lines()
+            .find_map(|l| l.strip_prefix("wchar:"))
+            .and_then(|v| v.trim().parse().ok())
+            .unwrap_or(0)
+    };
+    let wait_for = |bytes: u64| {
+        let started = Instant::now();
+        while written(child.id()) < bytes {
+            assert!(started.elapsed() < LIMIT, "no progress to {bytes} bytes");
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    };
+    // Early: after 1 MB of rows (tens of thousands of packets); late: after 10 MB more.
+    wait_for(1 << 20);
     let early = rss_kb(child.id());
-    std::thread::sleep(Duration::from_millis(2000));
+    wait_for(11 << 20);
     let late = rss_kb(child.id());
-    kill(Pid::from_raw(child.id() as i32), Signal::SIGTERM).unwrap();
+    signal_once(&mut child, Signal::SIGTERM, &|| true, LIMIT);
     let status = child.wait().unwrap();
     assert_eq!(status.code(), Some(143));
     assert!(

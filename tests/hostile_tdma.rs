@@ -10,8 +10,8 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use common::hostile::{
-    BAD_NUMBERS, assert_contract, assert_whole_csv, garbage, head_one, run, run_in, run_signalled,
-    temp_files,
+    BAD_NUMBERS, SignalWhen, Stdin, assert_contract, assert_whole_csv, garbage, head_one, lines_in,
+    run, run_in, signal_once, signal_when, temp_files,
 };
 use nix::sys::signal::Signal;
 
@@ -308,12 +308,16 @@ fn interrupted(signal: Signal, code: i32) {
         "--images-out",
         "received",
     ];
-    let out = run_signalled(
+    // A week does not end in a test's time: signalled once the track has rows.
+    let out = signal_when(
         dir.path(),
         TDMA_RUN,
         &args,
-        Duration::from_millis(2500),
-        signal,
+        Stdin::Bytes(b""),
+        SignalWhen {
+            signal,
+            ready: &|seen| seen.lines_in("t.csv") > 50,
+        },
         LIMIT,
     );
     assert_contract(&out, &[code], &format!("{signal:?} mid-run"));
@@ -408,19 +412,31 @@ fn rss_kb(pid: u32) -> u64 {
 fn memory_stays_flat_at_the_shortest_ipg() {
     // At 1 ms slots the S100 drops most frames; each lost slot carrying an order used to stay
     // in a map for the whole session (about 3 MB/s).
+    let dir = tempfile::tempdir().unwrap();
+    let track = dir.path().join("t.csv");
     let mut child = std::process::Command::new(TDMA_RUN)
-        .args(["--ipg", "1", "--duration", "604800"])
+        .args(["--ipg", "1", "--duration", "604800", "--track"])
+        .arg(&track)
         .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_secs(2));
+    // Measured by session time simulated (track rows, one per 0.1 s of the session), not
+    // by wall time: early after 2000 rows, late after 3000 more.
+    let wait_for = |rows: usize| {
+        let started = std::time::Instant::now();
+        while lines_in(&track) < rows {
+            assert!(
+                started.elapsed() < LIMIT,
+                "no progress to {rows} track rows"
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    };
+    wait_for(2000);
     let early = rss_kb(child.id());
-    std::thread::sleep(Duration::from_secs(3));
+    wait_for(5000);
     let late = rss_kb(child.id());
-    let _ = nix::sys::signal::kill(
-        nix::unistd::Pid::from_raw(child.id() as i32),
-        Signal::SIGTERM,
-    );
+    signal_once(&mut child, Signal::SIGTERM, &|| true, LIMIT);
     let status = common::wait_for_exit(&mut child, LIMIT);
     assert_eq!(status.code(), Some(143));
     assert!(late < early + 2048, "{early} kB, 3 s later {late} kB");
@@ -430,7 +446,8 @@ fn memory_stays_flat_at_the_shortest_ipg() {
 fn ctrl_c_ends_a_real_time_run_with_exit_0_and_its_summary() {
     let (_master, slave) = common::open_pty();
     let dir = tempfile::tempdir().unwrap();
-    let out = run_signalled(
+    // Real time on a silent port: signalled once the handler is in place.
+    let out = signal_when(
         dir.path(),
         TDMA_RUN,
         &[
@@ -445,8 +462,11 @@ fn ctrl_c_ends_a_real_time_run_with_exit_0_and_its_summary() {
             "--events",
             "e.csv",
         ],
-        Duration::from_millis(1500),
-        Signal::SIGINT,
+        Stdin::Bytes(b""),
+        SignalWhen {
+            signal: Signal::SIGINT,
+            ready: &|_| true,
+        },
         LIMIT,
     );
     assert_contract(&out, &[0], "SIGINT on a real-time ROV");

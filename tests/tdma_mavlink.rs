@@ -674,8 +674,8 @@ fn an_unreachable_autopilot_is_exit_2_with_one_line() {
 #[test]
 fn garbage_and_non_finite_numbers_on_the_link_change_nothing() {
     use mavlink::dialects::ardupilotmega::{
-        HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavMessage, MavModeFlag, MavState,
-        MavType,
+        ATTITUDE_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavMessage,
+        MavModeFlag, MavState, MavType,
     };
     let port = free_udp_port();
     let mut drive = connect(
@@ -709,6 +709,16 @@ fn garbage_and_non_finite_numbers_on_the_link_change_nothing() {
         y: f32::INFINITY,
         ..LOCAL_POSITION_NED_DATA::DEFAULT
     }));
+    // Finite but beyond the toolkit's 100 km site, and an angle beyond 2π.
+    let far_position = frame(&MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
+        x: -1e38,
+        z: 1e38,
+        ..LOCAL_POSITION_NED_DATA::DEFAULT
+    }));
+    let wild_attitude = frame(&MavMessage::ATTITUDE(ATTITUDE_DATA {
+        yaw: 1e38,
+        ..ATTITUDE_DATA::DEFAULT
+    }));
     // Pseudo-random bytes, truncated frames and frames with a wrong checksum.
     let mut seed = 0x2545_f491_u32;
     let mut noise = || {
@@ -736,6 +746,8 @@ fn garbage_and_non_finite_numbers_on_the_link_change_nothing() {
             }
             peer.send(&heartbeat).unwrap();
             peer.send(&nan_position).unwrap();
+            peer.send(&far_position).unwrap();
+            peer.send(&wild_attitude).unwrap();
             false
         },
     );
@@ -744,12 +756,29 @@ fn garbage_and_non_finite_numbers_on_the_link_change_nothing() {
     assert_eq!(drive.autopilot(), Some((1, 1)));
     assert_eq!(
         state.position_m, [0.0; 3],
-        "non-finite positions are dropped"
+        "non-finite and out-of-range positions are dropped"
+    );
+    assert_eq!(state.heading_deg, 0.0, "an angle beyond 2π is dropped");
+    // One warning per kind of message, however many were dropped.
+    let warnings: Vec<&String> = events
+        .iter()
+        .filter_map(|e| match e {
+            DriveEvent::Note(n) if n.starts_with("warning:") => Some(n),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(warnings.len(), 2, "{events:?}");
+    assert!(
+        warnings[0].contains("LOCAL_POSITION_NED dropped: field x"),
+        "{warnings:?}"
     );
     assert!(
-        events
-            .iter()
-            .all(|e| matches!(e, DriveEvent::Note(n) if n.contains("autopilot found"))),
+        warnings[1].contains("ATTITUDE dropped: field yaw: expected within ±6.28"),
+        "{warnings:?}"
+    );
+    assert!(
+        events.iter().all(|e| matches!(e, DriveEvent::Note(n)
+            if n.contains("autopilot found") || n.starts_with("warning:"))),
         "{events:?}"
     );
 }

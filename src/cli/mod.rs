@@ -159,8 +159,25 @@ pub fn only_with(
 /// Ends a tool's `main`: maps its outcome to an exit code (0 ok, 1 a requested check failed,
 /// 2 bad usage or input, a closed pipe downstream is 0) and prints the error in one line,
 /// prefixed with the tool's name.
+///
+/// An error that ends a run after a signal asked it to stop still ends it as interrupted
+/// (130, 143 or 129): the step that did not poll the flag (a decompression, an open, a large
+/// read) found the error only after the user had stopped the run, so the stop is what the
+/// exit code reports; the error is still printed, marked as such.
 pub fn finish(tool: &str, outcome: anyhow::Result<u8>) -> std::process::ExitCode {
-    crate::io::finish_main(tool, outcome)
+    match outcome {
+        Err(err)
+            if stop::requested() && crate::io::exit_code(err.as_ref()) != crate::io::EXIT_OK =>
+        {
+            let note = stop::note().unwrap_or_else(|| "interrupted".into());
+            crate::io::warn(
+                tool,
+                &format!("{} ({note})", crate::io::error_text(err.as_ref())),
+            );
+            std::process::ExitCode::from(stop::code_or(crate::io::EXIT_BAD_INPUT))
+        }
+        outcome => crate::io::finish_main(tool, outcome),
+    }
 }
 
 #[cfg(test)]

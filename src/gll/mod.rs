@@ -110,16 +110,9 @@ pub fn open_serial(path: &str, baud: u32) -> Result<Box<dyn serialport::SerialPo
 
 /// Why `path`, which exists, cannot be a serial port: `None` when it may be one (or is gone).
 pub(crate) fn not_a_terminal(path: &str) -> Option<String> {
-    use std::os::unix::fs::FileTypeExt;
     let kind = std::fs::metadata(path).ok()?.file_type();
-    let what = if kind.is_file() {
-        "a regular file"
-    } else if kind.is_dir() {
-        "a directory"
-    } else if kind.is_fifo() {
-        "a FIFO"
-    } else if kind.is_socket() {
-        "a socket"
+    let what = if let Some(what) = crate::io::kind_name(kind) {
+        what
     } else {
         use std::os::unix::fs::OpenOptionsExt;
         // Non-blocking: a serial line waiting for carrier must not hold the error up.

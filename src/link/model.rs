@@ -321,6 +321,11 @@ impl Model {
 
     /// Reads a model from JSON text, then checks it ([`Model::validate`]).
     pub fn from_json(text: &str) -> Result<Model, ModelError> {
+        // A repeated key is refused before the typed read (which would keep the last one).
+        crate::strict_json::from_str(text).map_err(|err| ModelError::Json {
+            field: ".".into(),
+            message: err.to_string(),
+        })?;
         let mut de = serde_json::Deserializer::from_str(text);
         let model: Model = serde_path_to_error::deserialize(&mut de).map_err(|err| {
             let field = err.path().to_string();
@@ -589,6 +594,10 @@ mod tests {
             (
                 r#"{"bitrate_bps": 9, "intrinsic_delay_ms": 1} x"#,
                 "field `.`: trailing characters",
+            ),
+            (
+                r#"{"bitrate_bps": 9, "intrinsic_delay_ms": 1, "bitrate_bps": 90}"#,
+                "field `.`: duplicate key \"bitrate_bps\" (at bitrate_bps)",
             ),
         ];
         for (text, expected) in cases {

@@ -665,6 +665,14 @@ fn open_scans<'a>(
             let n = stream.node_count() as usize;
             return Ok(ScanSource::Scans(Box::new(stream), n, InputFormat::Graph));
         }
+        // A rosbag2 file is read in place (SQLite, or its directory's metadata), never as a
+        // stream: a FIFO or a device there is refused at once, not waited on.
+        if format == Some(InputFormat::Rosbag2) && !(meta.is_file() || is_dir) {
+            crate::io::open_regular(path).map_err(|source| IoError::Open {
+                path: path.to_path_buf(),
+                source,
+            })?;
+        }
         if format.is_some_and(InputFormat::is_bag) && (meta.is_file() || is_dir) {
             let rec = Recording::open(path, &options, stop)?;
             return Ok(ScanSource::Bag(Box::new(rec)));

@@ -99,10 +99,26 @@ pub enum TfError {
     },
 }
 
+/// The most frames of a cycle an error names: a cycle of 10^5 frames is named by its first
+/// few and its length, so the error stays one readable line.
+const CYCLE_FRAMES_SHOWN: usize = 8;
+/// The most characters of one frame's name an error shows.
+const FRAME_NAME_SHOWN: usize = 64;
+
 fn cycle(frames: &[String]) -> String {
-    let mut s: Vec<String> = frames.iter().map(|f| format!("{f:?}")).collect();
-    if let Some(first) = s.first().cloned() {
-        s.push(first);
+    let name = |f: &String| {
+        if f.chars().count() > FRAME_NAME_SHOWN {
+            let head: String = f.chars().take(FRAME_NAME_SHOWN).collect();
+            format!("{head:?}...")
+        } else {
+            format!("{f:?}")
+        }
+    };
+    let mut s: Vec<String> = frames.iter().take(CYCLE_FRAMES_SHOWN).map(name).collect();
+    if frames.len() > CYCLE_FRAMES_SHOWN {
+        s.push(format!("... ({} frames in all)", frames.len()));
+    } else if let Some(first) = frames.first() {
+        s.push(name(first));
     }
     s.join(" -> ")
 }
@@ -893,6 +909,17 @@ mod tests {
             t.lookup("map", "odom", 0).unwrap_err(),
             Unavailable::NotFinished
         );
+        // A long cycle is named by its first frames and its length, in one short line.
+        let mut long_cycle = TfTree::new();
+        for i in 0..100_000 {
+            let child = format!("f{}", (i + 1) % 100_000);
+            long_cycle
+                .add(&ts(0, &format!("f{i}"), &child, id), true)
+                .unwrap();
+        }
+        let e = long_cycle.finish().unwrap_err().to_string();
+        assert!(e.len() < 300, "{} bytes: {e}", e.len());
+        assert!(e.ends_with("-> ... (100000 frames in all)"), "{e}");
         let mut two = TfTree::new();
         two.add(&ts(0, "a", "b", id), false).unwrap();
         two.add(&ts(0, "b", "a", id), false).unwrap();

@@ -138,8 +138,8 @@ impl ClientTopic {
                 payload.len()
             ));
         }
-        let value: serde_json::Value =
-            serde_json::from_slice(payload).map_err(|e| format!("expected a JSON object: {e}"))?;
+        let value: serde_json::Value = crate::strict_json::from_slice(payload)
+            .map_err(|e| format!("expected a JSON object: {e}"))?;
         let Some(map) = value.as_object() else {
             return Err(format!(
                 "expected a JSON object, found {}",

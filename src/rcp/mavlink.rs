@@ -381,8 +381,53 @@ struct Inbox {
     /// ATTITUDE: roll, pitch, yaw (rad), yaw speed (rad/s); and how many.
     attitude: Option<[f64; 4]>,
     attitudes: u64,
+    /// Whether the one warning for a dropped position / attitude was given.
+    position_warned: bool,
+    attitude_warned: bool,
     acks: VecDeque<(MavCmd, MavResult)>,
     notes: VecDeque<String>,
+}
+
+/// The fields of LOCAL_POSITION_NED kept, with the largest magnitude each may have: x, y, z
+/// within the toolkit's 100 km site ([`super::session::MAX_POSITION_M`]); vx, vy, vz within
+/// 100 m/s (no underwater vehicle comes near it).
+const POSITION_BOUNDS: [(&str, f64); 6] = [
+    ("x", super::session::MAX_POSITION_M),
+    ("y", super::session::MAX_POSITION_M),
+    ("z", super::session::MAX_POSITION_M),
+    ("vx", 100.0),
+    ("vy", 100.0),
+    ("vz", 100.0),
+];
+
+/// The fields of ATTITUDE kept, with the largest magnitude each may have: angles within 2π
+/// rad, the yaw rate within 100 rad/s.
+const ATTITUDE_BOUNDS: [(&str, f64); 4] = [
+    ("roll", std::f64::consts::TAU),
+    ("pitch", std::f64::consts::TAU),
+    ("yaw", std::f64::consts::TAU),
+    ("yawspeed", 100.0),
+];
+
+/// True if every value is finite and within its bound: an autopilot's pose that is not (NaN,
+/// ±1e38) is dropped rather than becoming the vehicle's.
+fn plausible(values: &[f64], bounds: &[(&str, f64)]) -> bool {
+    values
+        .iter()
+        .zip(bounds)
+        .all(|(v, (_, bound))| v.is_finite() && v.abs() <= *bound)
+}
+
+/// The one warning for a dropped message: its first implausible field, the bound and the value.
+fn dropped_note(message: &str, values: &[f64], bounds: &[(&str, f64)]) -> String {
+    let bad = values
+        .iter()
+        .zip(bounds)
+        .find(|(v, (_, bound))| !(v.is_finite() && v.abs() <= *bound));
+    let what = bad.map_or_else(String::new, |(v, (field, bound))| {
+        format!(": field {field}: expected within ±{bound}, found {v}")
+    });
+    format!("warning: autopilot's {message} dropped{what} (later ones dropped without a word)")
 }
 
 fn push_bounded<T>(queue: &mut VecDeque<T>, item: T) {
@@ -793,16 +838,28 @@ fn keep(shared: &Shared, header: &MavHeader, message: MavMessage, our_system: u8
         }
         MavMessage::LOCAL_POSITION_NED(p) => {
             let values = [p.x, p.y, p.z, p.vx, p.vy, p.vz].map(f64::from);
-            if values.iter().all(|v| v.is_finite()) {
+            if plausible(&values, &POSITION_BOUNDS) {
                 inbox.position = Some(values);
                 inbox.positions += 1;
+            } else {
+                if !inbox.position_warned {
+                    inbox.position_warned = true;
+                    let text = dropped_note("LOCAL_POSITION_NED", &values, &POSITION_BOUNDS);
+                    push_bounded(&mut inbox.notes, text);
+                }
             }
         }
         MavMessage::ATTITUDE(a) => {
             let values = [a.roll, a.pitch, a.yaw, a.yawspeed].map(f64::from);
-            if values.iter().all(|v| v.is_finite()) {
+            if plausible(&values, &ATTITUDE_BOUNDS) {
                 inbox.attitude = Some(values);
                 inbox.attitudes += 1;
+            } else {
+                if !inbox.attitude_warned {
+                    inbox.attitude_warned = true;
+                    let text = dropped_note("ATTITUDE", &values, &ATTITUDE_BOUNDS);
+                    push_bounded(&mut inbox.notes, text);
+                }
             }
         }
         MavMessage::COMMAND_ACK(ack) => push_bounded(&mut inbox.acks, (ack.command, ack.result)),

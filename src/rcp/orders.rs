@@ -110,10 +110,11 @@ pub(crate) fn object_of(
     line: &str,
 ) -> Result<serde_json::Map<String, serde_json::Value>, crate::wire::json::JsonError> {
     use crate::wire::json::JsonError;
-    let value: serde_json::Value = serde_json::from_str(line).map_err(|e| JsonError::Syntax {
-        column: e.column(),
-        message: e.to_string(),
-    })?;
+    let value: serde_json::Value =
+        crate::strict_json::from_str(line).map_err(|e| JsonError::Syntax {
+            column: e.column(),
+            message: e.to_string(),
+        })?;
     match value {
         serde_json::Value::Object(map) => Ok(map),
         other => Err(JsonError::BadValue {
@@ -360,6 +361,11 @@ mod tests {
             "{error}"
         );
         assert!(Live::parse(r#"{"type":"unknown","ot":5,"body":"000000000000000000"}"#).is_err());
+        let error = Live::parse(r#"{"type":"cancel","t_s":3,"t_s":4}"#).unwrap_err();
+        assert!(
+            error.to_string().contains("duplicate key \"t_s\""),
+            "{error}"
+        );
     }
 
     #[test]

@@ -126,7 +126,7 @@ impl Scenario {
     /// Parses and checks a scenario; model files are found relative to `base_dir`.
     pub fn parse(text: &str, base_dir: &Path) -> Result<Scenario, ScenarioError> {
         let value: Value =
-            serde_json::from_str(text).map_err(|e| field(".", format!("not JSON: {e}")))?;
+            crate::strict_json::from_str(text).map_err(|e| field(".", format!("not JSON: {e}")))?;
         let Value::Object(top) = &value else {
             return Err(field(
                 ".",
@@ -851,6 +851,11 @@ mod tests {
             (
                 &THREE.replace(r#""seed":1"#, r#""sead":1"#),
                 ".: unknown field \"sead\"",
+            ),
+            (
+                // A repeated key is refused, not "the last one wins".
+                &THREE.replace(r#""seed":1"#, r#""seed":1,"seed":2"#),
+                ".: not JSON: duplicate key \"seed\" (at seed): expected each key once",
             ),
             (
                 &THREE

@@ -164,7 +164,7 @@ pub fn encode_hex(bytes: &[u8]) -> String {
 
 /// Reads one JSON line into a frame value, checked with [`MessageRepr::validate`].
 pub fn parse_line(line: &str) -> Result<MessageRepr, JsonError> {
-    let value: Value = serde_json::from_str(line).map_err(|e| JsonError::Syntax {
+    let value: Value = crate::strict_json::from_str(line).map_err(|e| JsonError::Syntax {
         column: e.column(),
         message: e.to_string(),
     })?;
@@ -586,6 +586,11 @@ mod tests {
     fn errors_name_the_field() {
         let err = |line: &str| parse_line(line).unwrap_err().to_string();
         let base = VECTORS[0].0;
+        assert!(
+            err(&base.replace(r#""rd":true,"#, r#""rd":true,"rd":false,"#))
+                .contains("duplicate key \"rd\""),
+            "a repeated field is refused"
+        );
         assert_eq!(
             err(&base.replace(r#""x_cm":-250"#, r#""x_cm":40000"#)),
             "field x_cm: expected an integer -32768..=32767, found 40000"

@@ -8,7 +8,6 @@
 //! allocated for it.
 
 use std::collections::HashMap;
-use std::fs::File;
 use std::io::{self, BufReader, Cursor, Read, Seek, SeekFrom};
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -262,8 +261,8 @@ impl McapFile {
         count: bool,
         stop: &AtomicBool,
     ) -> Result<McapFile, BagError> {
-        let file =
-            File::open(path).map_err(|e| BagError::io(Location::file(name), "opening", e))?;
+        let file = crate::io::open_regular(path)
+            .map_err(|e| BagError::io(Location::file(name), "opening", e))?;
         Self::new(
             name,
             Box::new(BufReader::with_capacity(1 << 16, file)),

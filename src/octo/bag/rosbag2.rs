@@ -21,6 +21,9 @@ use super::{Bag, BagError, Location, Message, Source, Topic};
 
 /// The largest `metadata.yaml` read: 16 MiB (a bag of thousands of topics and files is far less).
 const MAX_METADATA_BYTES: u64 = 16 << 20;
+/// The most files a bag's metadata may list: each is held open while the bag is read (an
+/// SQLite connection or an MCAP reader), and a process may have only so many open files.
+pub const MAX_BAG_FILES: usize = 1000;
 
 /// What `metadata.yaml` says that matters here.
 #[derive(Debug)]
@@ -51,7 +54,8 @@ pub(super) fn open(path: &Path, stop: &AtomicBool) -> Result<Bag, BagError> {
     let name = shown(path);
     if path.is_dir() {
         let yaml = path.join("metadata.yaml");
-        if !yaml.is_file() {
+        // One that is there but not a file (a FIFO) is named as such when it is opened.
+        if !yaml.exists() {
             return Err(BagError::new(
                 Location::file(&name),
                 "not a rosbag2 directory (expected a metadata.yaml in it, found none)",
@@ -149,7 +153,8 @@ fn decompress_file(path: &Path, stop: &AtomicBool) -> Result<TempFile, BagError>
     static NEXT: AtomicU64 = AtomicU64::new(0);
     let name = shown(path);
     let at = Location::file(&name);
-    let input = std::fs::File::open(path).map_err(|e| BagError::io(at.clone(), "opening", e))?;
+    let input =
+        crate::io::open_regular(path).map_err(|e| BagError::io(at.clone(), "opening", e))?;
     let mut decoder = zstd::stream::read::Decoder::new(input)
         .map_err(|e| BagError::io(at.clone(), "reading zstd", e))?;
     let stem = path
@@ -247,7 +252,7 @@ fn read_metadata(path: &Path) -> Result<Metadata, BagError> {
     let name = shown(path);
     let at = Location::file(&name);
     let bytes = crate::io::read_bounded(
-        std::fs::File::open(path).map_err(|e| BagError::io(at.clone(), "opening", e))?,
+        crate::io::open_regular(path).map_err(|e| BagError::io(at.clone(), "opening", e))?,
         MAX_METADATA_BYTES,
     )
     .map_err(|e| BagError::io(at.clone(), "reading", e))?
@@ -374,8 +379,16 @@ fn parse_metadata(text_in: &str) -> Result<Metadata, String> {
             )),
         }
     };
-    let mut files = Vec::new();
-    for (i, f) in list("relative_file_paths")?.iter().enumerate() {
+    let mut files: Vec<String> = Vec::new();
+    let listed = list("relative_file_paths")?;
+    if listed.len() > MAX_BAG_FILES {
+        return Err(format!(
+            "rosbag2 metadata field {}: expected at most {MAX_BAG_FILES} files, found {}",
+            field("relative_file_paths"),
+            listed.len()
+        ));
+    }
+    for (i, f) in listed.iter().enumerate() {
         let path = text(f, &format!("{}[{i}]", field("relative_file_paths")))?;
         // As rosbag2's later versions write it: a name in the bag's directory (older ones
         // prefixed the directory's own name).
@@ -386,6 +399,13 @@ fn parse_metadata(text_in: &str) -> Result<Metadata, String> {
         if name.is_empty() {
             return Err(format!(
                 "rosbag2 metadata field {}[{i}]: expected a file name, found {path:?}",
+                field("relative_file_paths")
+            ));
+        }
+        // Listed twice, a file's clouds would be inserted twice.
+        if let Some(first) = files.iter().position(|f| *f == name) {
+            return Err(format!(
+                "rosbag2 metadata field {}[{i}]: {name:?} is listed twice (first at [{first}])",
                 field("relative_file_paths")
             ));
         }
@@ -490,7 +510,8 @@ impl Db3File {
         count: bool,
     ) -> Result<Db3File, BagError> {
         // A clear message for a missing or unreadable file (SQLite only says "unable to open").
-        std::fs::File::open(path).map_err(|e| BagError::io(Location::file(name), "opening", e))?;
+        crate::io::open_regular(path)
+            .map_err(|e| BagError::io(Location::file(name), "opening", e))?;
         let conn = Connection::open_with_flags(
             PathBuf::from(path),
             OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX,
