@@ -1,17 +1,20 @@
 //! `--metrics` of every tool that produces figures, and `scripts/sweep` over GNU parallel and
 //! Slurm: the issue's 20-run grid, resuming after deleted folders and after a signal, the job
-//! array script, bad grids. Needs python3 and GNU parallel (installed by .ci/run), and
-//! matplotlib for the plots.
+//! array script, bad grids, only the toolkit's tools, foreign `--out` folders, control
+//! characters in paths. Needs python3 and GNU parallel (installed by .ci/run), and matplotlib
+//! for the plots.
 
 mod common;
 
 use std::collections::BTreeSet;
+use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::process::Command;
-use std::time::Duration;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
-use common::hostile::{assert_contract, run_in, run_signalled};
-use nix::sys::signal::Signal;
+use common::hostile::{Run, assert_contract, run_in};
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
 use serde_json::Value;
 
 const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
@@ -45,10 +48,103 @@ fn sweep_argv(args: &[&str]) -> Vec<String> {
     all
 }
 
-fn sweep(dir: &Path, args: &[&str]) -> common::hostile::Run {
+fn sweep(dir: &Path, args: &[&str]) -> Run {
     let all = sweep_argv(args);
     let all: Vec<&str> = all.iter().map(String::as_str).collect();
     run_in(dir, "python3", &all, b"", LIMIT)
+}
+
+/// `scripts/sweep ARGS` as given (no --tool-dir added).
+fn sweep_raw(dir: &Path, args: &[&str]) -> Run {
+    let script = sweep_script();
+    let mut all = vec![script.as_str()];
+    all.extend_from_slice(args);
+    run_in(dir, "python3", &all, b"", LIMIT)
+}
+
+/// Asserts a refusal: exit 2 and one line, `sweep: ...`, without a traceback.
+fn assert_one_line_refusal(run: &Run, what: &str) -> String {
+    assert_contract(run, &[2], what);
+    let line = run.stderr.trim_end();
+    assert!(
+        line.starts_with("sweep: ") && !line.contains('\n') && !line.contains("Traceback"),
+        "{what}: {line}"
+    );
+    line.to_string()
+}
+
+/// The names in `dir` (not recursive).
+fn names(dir: &Path) -> BTreeSet<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect()
+}
+
+/// Runs `scripts/sweep ARGS --tool-dir <the tools under test>` in `dir`, polls the filesystem
+/// (every 20 ms, for at most LIMIT) until `started` says the work has begun, then sends
+/// `signal` once and waits (at most LIMIT) for the sweep to end. Unlike a fixed delay, this
+/// does not depend on how long anything takes.
+fn sweep_signalled_once_started(
+    dir: &Path,
+    args: &[&str],
+    started: impl Fn() -> bool,
+    signal: Signal,
+) -> Run {
+    let mut child = Command::new("python3")
+        .args(sweep_argv(args))
+        .current_dir(dir)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("python3 starts");
+    let mut err = child.stderr.take().expect("stderr");
+    let reader = std::thread::spawn(move || {
+        let mut text = String::new();
+        let _ = err.read_to_string(&mut text);
+        text
+    });
+    let begun = Instant::now();
+    while !started() {
+        if let Some(status) = child.try_wait().expect("try_wait") {
+            panic!(
+                "the sweep ended ({status}) before its work started: {}",
+                reader.join().unwrap_or_default()
+            );
+        }
+        if begun.elapsed() > LIMIT {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!(
+                "no sign of the work within {LIMIT:?}: {}",
+                reader.join().unwrap_or_default()
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    kill(Pid::from_raw(child.id() as i32), signal).expect("the sweep is there to signal");
+    let signalled = Instant::now();
+    let mut hung = false;
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("try_wait") {
+            break status;
+        }
+        if signalled.elapsed() > LIMIT {
+            hung = true;
+            let _ = child.kill();
+            break child.wait().expect("wait");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    use std::os::unix::process::ExitStatusExt;
+    Run {
+        code: status.code(),
+        signal: status.signal(),
+        stdout: Vec::new(),
+        stderr: reader.join().unwrap_or_default(),
+        hung,
+    }
 }
 
 /// The run id a run folder's path ends with (in the joblog, in pending.txt).
@@ -209,32 +305,93 @@ fn slurm_writes_a_job_array_that_runs_its_share_and_gathers() {
     );
 }
 
+/// A joystick script for tdma-run: half a minute of slow surge.
+const SCRIPT_CSV: &str = "t_s,vx,vy,vz,vyaw\n0,0.1,0,0,0\n30,0,0,0,0\n";
+
 #[test]
 fn a_signal_keeps_what_completed_and_the_next_sweep_resumes() {
+    // No timing in this test. Three runs, one at a time in the grid's order: two short ones,
+    // then one whose --script is a named pipe that nobody writes, so that run cannot end (its
+    // tool waits for the pipe) until the signal stops it. The sign of that is the third run's
+    // folder holding `stdout`: the sweep opens it just before it starts that run's tool, and,
+    // with --jobs 1, only after the first two runs have completed (a run's result.json is in
+    // place before GNU parallel starts the next). So whenever SIGTERM arrives after the sign,
+    // exactly two runs are complete and the third is mid-run. Then the pipe is replaced by a
+    // file of the same name (the same run: its id is its parameters), and the resume has only
+    // that run to do, one that ends.
     let dir = tempfile::tempdir().unwrap();
-    let grid = r#"{"tool":"tdma-run","args":{"--sim":[null],"--duration":[1800]},"seeds":3}"#;
-    std::fs::write(dir.path().join("grid.json"), grid).unwrap();
-    let out = dir.path().join("out");
-    let args = sweep_argv(&["grid.json", "--out", "out", "--jobs", "1"]);
-    let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let stopped = run_signalled(
-        dir.path(),
-        "python3",
-        &args,
-        Duration::from_millis(1500),
+    let d = dir.path();
+    std::fs::write(d.join("a.csv"), SCRIPT_CSV).unwrap();
+    std::fs::write(d.join("b.csv"), SCRIPT_CSV).unwrap();
+    let pipe = d.join("pipe.csv");
+    nix::unistd::mkfifo(&pipe, nix::sys::stat::Mode::S_IRWXU).unwrap();
+    let grid = r#"{"tool":"tdma-run","args":{"--sim":[null],"--duration":[10],"--script":["a.csv","b.csv","pipe.csv"]}}"#;
+    std::fs::write(d.join("grid.json"), grid).unwrap();
+    let out = d.join("out");
+    let runs_started = || {
+        std::fs::read_dir(out.join("runs"))
+            .map(|entries| {
+                entries
+                    .flatten()
+                    .filter(|e| e.path().join("stdout").exists())
+                    .count()
+            })
+            .unwrap_or(0)
+    };
+    let stopped = sweep_signalled_once_started(
+        d,
+        &["grid.json", "--out", "out", "--jobs", "1"],
+        || runs_started() == 3,
         Signal::SIGTERM,
-        LIMIT,
     );
     assert_contract(&stopped, &[143], "SIGTERM mid-sweep");
+    assert!(
+        stopped.stderr.contains("interrupted: 2 of 3 runs complete"),
+        "{}",
+        stopped.stderr
+    );
     let done = completed(&out);
     assert!(done.len() < 3, "stopped before the end");
-    let resumed = sweep(dir.path(), &["grid.json", "--out", "out", "--jobs", "2"]);
+    assert_eq!(done.len(), 2, "the two runs before the one on the pipe");
+    let missing: BTreeSet<String> = run_ids(&out).difference(&done).cloned().collect();
+    let kept: Vec<Vec<u8>> = done
+        .iter()
+        .map(|id| std::fs::read(out.join("runs").join(id).join("result.json")).unwrap())
+        .collect();
+    // Nothing is left reading the pipe (a stray tool would finish the run behind our back):
+    // opening it to write without waiting fails (ENXIO) once it has no reader. Polled, as the
+    // killed tool's files close as the kernel ends it.
+    let begun = Instant::now();
+    loop {
+        use std::os::unix::fs::OpenOptionsExt;
+        match std::fs::OpenOptions::new()
+            .write(true)
+            .custom_flags(nix::libc::O_NONBLOCK)
+            .open(&pipe)
+        {
+            Err(e) if e.raw_os_error() == Some(nix::libc::ENXIO) => break,
+            other => assert!(
+                begun.elapsed() < LIMIT,
+                "a run still reads the pipe: {other:?}"
+            ),
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::fs::remove_file(&pipe).unwrap();
+    std::fs::write(&pipe, SCRIPT_CSV).unwrap();
+
+    let resumed = sweep(d, &["grid.json", "--out", "out", "--jobs", "2"]);
     assert_contract(&resumed, &[0], "resumed sweep");
     assert_eq!(completed(&out).len(), 3);
-    assert_eq!(
-        joblog_runs(&out).len(),
-        3 - done.len(),
-        "only what was missing"
+    assert_eq!(joblog_runs(&out), missing, "only what was missing");
+    for (id, before) in done.iter().zip(&kept) {
+        let after = std::fs::read(out.join("runs").join(id).join("result.json")).unwrap();
+        assert_eq!(&after, before, "{id}: a completed run kept as it was");
+    }
+    assert!(
+        resumed.stderr.contains("2 complete, 1 to run"),
+        "{}",
+        resumed.stderr
     );
 }
 
@@ -255,7 +412,28 @@ fn bad_grids_and_flags_are_one_line_exit_2_and_run_nothing() {
         ("g.json", r#"{"tool":"tdma-run","seeds":0}"#, &[]),
         ("g.json", r#"{"tool":"tdma-run","seeds":[1,1]}"#, &[]),
         ("g.json", r#"{"tool":"no-such-tool-here"}"#, &[]),
+        (
+            "g.json",
+            r#"{"tool":"no-such-tool-here"}"#,
+            &["--allow-any-tool"],
+        ),
+        ("g.json", r#"{"tool":"sh","args":{"-c":["true"]}}"#, &[]),
         ("g.json", r#"{"tool":"../tdma-run"}"#, &[]),
+        (
+            "g.json",
+            r#"{"tool":"tdma-run","positional":["in\nput"]}"#,
+            &[],
+        ),
+        (
+            "g.json",
+            r#"{"tool":"tdma-run","args":{"--model":["s\r100"]}}"#,
+            &[],
+        ),
+        (
+            "g.json",
+            r#"{"tool":"tdma-run","args":{"--b\u007fer":[0]}}"#,
+            &[],
+        ),
         ("g.json", r#"{"tool":"tdma-run","extra":1}"#, &[]),
         (
             "g.json",
@@ -274,20 +452,275 @@ fn bad_grids_and_flags_are_one_line_exit_2_and_run_nothing() {
         if !grid.is_empty() {
             std::fs::write(dir.path().join(name), grid).unwrap();
         }
-        let out = format!("out{k}");
+        // Half the cases in a folder below one that does not exist either.
+        let out = if k % 2 == 0 {
+            format!("out{k}")
+        } else {
+            format!("new{k}/out")
+        };
         let mut args = vec![*name, "--out", &out];
         args.extend_from_slice(extra);
         let run = sweep(dir.path(), &args);
-        assert_contract(&run, &[2], &format!("{grid} {extra:?}"));
-        let line = run.stderr.trim_end();
+        assert_one_line_refusal(&run, &format!("{grid} {extra:?}"));
+        let top = out.split('/').next().unwrap();
         assert!(
-            line.starts_with("sweep: ") && !line.contains('\n') && !line.contains("Traceback"),
-            "{grid}: {line}"
+            !dir.path().join(top).exists(),
+            "{grid} {extra:?}: {top} left behind"
         );
-        assert!(
-            !dir.path().join(&out).join("results.csv").exists(),
-            "{grid}: gathered"
+    }
+    // Nothing is written into an existing sweep's folder either.
+    std::fs::write(
+        dir.path().join("ok.json"),
+        r#"{"tool":"tdma-run","args":{"--sim":[null],"--duration":[10]}}"#,
+    )
+    .unwrap();
+    let first = sweep(dir.path(), &["ok.json", "--out", "kept"]);
+    assert_contract(&first, &[0], "a sweep to add to");
+    let before = names(&dir.path().join("kept"));
+    let runs_before = run_ids(&dir.path().join("kept"));
+    let pending_before = std::fs::read(dir.path().join("kept/pending.txt")).unwrap();
+    for grid in [
+        r#"{"tool":"no-such-tool-here","args":{"--x":[1]}}"#,
+        r#"{"tool":"tdma-run","args":{"--x":[1,2]},"seeds":100000}"#,
+    ] {
+        std::fs::write(dir.path().join("g.json"), grid).unwrap();
+        let run = sweep(dir.path(), &["g.json", "--out", "kept"]);
+        assert_one_line_refusal(&run, grid);
+        assert_eq!(names(&dir.path().join("kept")), before, "{grid}");
+        assert_eq!(run_ids(&dir.path().join("kept")), runs_before, "{grid}");
+        assert_eq!(
+            std::fs::read(dir.path().join("kept/pending.txt")).unwrap(),
+            pending_before,
+            "{grid}"
         );
+    }
+}
+
+/// The toolkit's tools, as the sweep names them when it refuses another program.
+const TOOLS: [&str; 8] = [
+    "debt-encode",
+    "debt-decode",
+    "rcp-pack",
+    "rcp-dump",
+    "link-sim",
+    "modem-bench",
+    "tdma-run",
+    "octo-delta",
+];
+
+#[test]
+fn only_the_toolkits_tools_run_unless_allow_any_tool() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("CANARY"), "alive\n").unwrap();
+    std::fs::write(
+        d.join("grid.json"),
+        r#"{"tool":"sh","args":{"-c":["rm -f CANARY"]}}"#,
+    )
+    .unwrap();
+    let run = sweep(d, &["grid.json", "--out", "out"]);
+    let line = assert_one_line_refusal(&run, "a grid naming sh");
+    assert!(d.join("CANARY").exists(), "sh ran: {line}");
+    assert!(!d.join("out").exists(), "{line}");
+    assert!(line.contains("\"sh\""), "names the tool: {line}");
+    for tool in TOOLS {
+        assert!(line.contains(tool), "lists {tool}: {line}");
+    }
+    assert!(line.contains("--allow-any-tool"), "{line}");
+
+    let help = sweep_raw(d, &["--help"]);
+    assert_contract(&help, &[0], "--help");
+    let text = String::from_utf8_lossy(&help.stdout);
+    assert!(text.contains("--allow-any-tool"), "{text}");
+
+    // With the flag, any program runs: this one writes a metrics document where --metrics says.
+    let grid = r#"{"tool":"sh","args":{"-c":["printf '{\"figure\":1}' > \"$1\""]}}"#;
+    std::fs::write(d.join("any.json"), grid).unwrap();
+    let run = sweep(d, &["any.json", "--out", "any", "--allow-any-tool"]);
+    assert_contract(&run, &[0], "--allow-any-tool");
+    let (header, rows) = csv_rows(&d.join("any/results.csv"));
+    assert_eq!((header.last().unwrap().as_str(), rows.len()), ("figure", 1));
+    assert!(d.join("CANARY").exists());
+
+    // A run's params.json naming another program does not run without the flag either.
+    let id = completed(&d.join("any")).into_iter().next().unwrap();
+    let folder = d.join("any/runs").join(&id);
+    std::fs::remove_file(folder.join("result.json")).unwrap();
+    let one = Command::new("python3")
+        .arg(sweep_script())
+        .arg("--run-one")
+        .arg(&folder)
+        .env_remove("SWEEP_ALLOW_ANY_TOOL")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&one.stderr);
+    assert_eq!(one.status.code(), Some(2), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("\"sh\""), "{err}");
+    assert!(!folder.join("result.json").exists(), "it ran: {err}");
+}
+
+#[test]
+fn an_existing_out_that_no_sweep_wrote_is_refused_unless_force() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("grid.json"),
+        r#"{"tool":"tdma-run","args":{"--sim":[null],"--duration":[10],"--ber":[0,0.0007]}}"#,
+    )
+    .unwrap();
+    let mine = d.join("mine");
+    std::fs::create_dir_all(mine.join("plots")).unwrap();
+    let theirs = [
+        ("results.csv", "precious\n"),
+        ("joblog", "mine\n"),
+        ("pending.txt", "mine\n"),
+        ("notes.txt", "mine\n"),
+        ("plots/ber.png", "mine\n"),
+    ];
+    for (name, text) in theirs {
+        std::fs::write(mine.join(name), text).unwrap();
+    }
+    let untouched = |what: &str| {
+        for (name, text) in theirs {
+            assert_eq!(
+                std::fs::read_to_string(mine.join(name)).unwrap(),
+                text,
+                "{what}: {name}"
+            );
+        }
+    };
+    let run = sweep(d, &["grid.json", "--out", "mine"]);
+    let line = assert_one_line_refusal(&run, "a folder of someone else's files");
+    assert!(line.contains("mine: "), "names the folder: {line}");
+    assert!(
+        line.contains("'joblog'"),
+        "names a file it did not write: {line}"
+    );
+    assert!(line.contains("--force"), "{line}");
+    untouched("refused");
+    assert_eq!(
+        names(&mine),
+        ["joblog", "notes.txt", "pending.txt", "plots", "results.csv"]
+            .map(String::from)
+            .into(),
+        "nothing added"
+    );
+
+    // --force writes into it: the sweep's names are replaced, the rest is left alone.
+    let forced = sweep(d, &["grid.json", "--out", "mine", "--force"]);
+    assert_contract(&forced, &[0], "--force");
+    assert_eq!(csv_rows(&mine.join("results.csv")).1.len(), 2);
+    assert_eq!(
+        std::fs::read_to_string(mine.join("notes.txt")).unwrap(),
+        "mine\n"
+    );
+    assert!(mine.join("sweep.json").exists());
+    // A sweep's folder with a file no sweep writes is still refused, naming that file.
+    let run = sweep(d, &["grid.json", "--out", "mine"]);
+    let line = assert_one_line_refusal(&run, "a sweep's folder with notes.txt");
+    assert!(line.contains("'notes.txt'"), "{line}");
+    std::fs::remove_file(mine.join("notes.txt")).unwrap();
+    let again = sweep(d, &["grid.json", "--out", "mine"]);
+    assert_contract(&again, &[0], "the sweep's folder, resumed");
+    assert!(
+        again.stderr.contains("2 of 2 runs complete"),
+        "{}",
+        again.stderr
+    );
+
+    // An empty folder is taken as a new one.
+    std::fs::create_dir(d.join("empty")).unwrap();
+    let run = sweep(d, &["grid.json", "--out", "empty"]);
+    assert_contract(&run, &[0], "an empty --out");
+    assert_eq!(completed(&d.join("empty")).len(), 2);
+}
+
+#[test]
+fn a_sweeps_folder_resumed_with_another_grid_reuses_the_shared_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("out");
+    let grid = |name: &str, args: &str| {
+        let text = format!(r#"{{"tool":"tdma-run","args":{{"--sim":[null],{args}}}}}"#);
+        std::fs::write(d.join(name), text).unwrap();
+    };
+    grid("a.json", r#""--duration":[10],"--ber":[0,0.0007]"#);
+    grid("b.json", r#""--duration":[10],"--ber":[0,0.0007,0.001]"#);
+    grid("c.json", r#""--duration":[10,20]"#);
+    let first = sweep(d, &["a.json", "--out", "out"]);
+    assert_contract(&first, &[0], "grid a");
+    assert!(out.join("plots/ber.png").exists(), "{}", first.stderr);
+    let a_runs = completed(&out);
+
+    // b adds a BER: the two runs of a are reused, one runs.
+    let second = sweep(d, &["b.json", "--out", "out"]);
+    assert_contract(&second, &[0], "grid b in a's folder");
+    assert!(second.stderr.contains("another grid"), "{}", second.stderr);
+    assert_eq!(joblog_runs(&out).len(), 1, "only the new run");
+    assert!(completed(&out).is_superset(&a_runs));
+    assert_eq!(csv_rows(&out.join("results.csv")).1.len(), 3);
+    let kept: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("sweep.json")).unwrap()).unwrap();
+    assert_eq!(kept["args"]["--ber"].as_array().unwrap().len(), 3, "{kept}");
+
+    // c sweeps another parameter: its plots replace b's, all runs stay.
+    let third = sweep(d, &["c.json", "--out", "out"]);
+    assert_contract(&third, &[0], "grid c in the same folder");
+    assert_eq!(csv_rows(&out.join("results.csv")).1.len(), 2);
+    assert!(out.join("plots/duration.png").exists(), "{}", third.stderr);
+    assert!(!out.join("plots/ber.png").exists(), "b's plot left");
+    assert_eq!(run_ids(&out).len(), 5, "no run deleted");
+    // sweep.json is itself a grid: the folder regathers from it.
+    let regather = sweep(d, &["out/sweep.json", "--out", "out", "--gather-only"]);
+    assert_contract(&regather, &[0], "--gather-only from sweep.json");
+    assert!(
+        !regather.stderr.contains("another grid"),
+        "{}",
+        regather.stderr
+    );
+}
+
+#[test]
+fn control_characters_in_paths_are_refused_before_anything_is_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let grid = r#"{"tool":"tdma-run","args":{"--sim":[null],"--duration":[10]}}"#;
+    std::fs::write(d.join("grid.json"), grid).unwrap();
+    std::fs::write(d.join("gr\tid.json"), grid).unwrap();
+    let tools = tool_dir();
+    let cases: &[(&[&str], &str, &str)] = &[
+        (&["grid.json", "--out", "bad\nout"], "--out", "position 4"),
+        (&["grid.json", "--out", "out\r"], "--out", "position 4"),
+        (
+            &["gr\tid.json", "--out", "out"],
+            "grid's path",
+            "position 3",
+        ),
+        (
+            &["grid.json", "--out", "out", "--tool-dir", "to\u{7f}ols"],
+            "--tool-dir",
+            "position 3",
+        ),
+        (
+            &["grid.json", "--out", "out", "--sshloginfile", "\u{1b}[1m"],
+            "--sshloginfile",
+            "position 1",
+        ),
+        (
+            &["grid.json", "--out", "a/b\nc", "--tool-dir", &tools],
+            "--out",
+            "position 4",
+        ),
+    ];
+    let before = names(d);
+    for (args, names_what, at) in cases {
+        let run = sweep_raw(d, args);
+        let line = assert_one_line_refusal(&run, &format!("{args:?}"));
+        assert!(line.contains(names_what), "{args:?}: {line}");
+        assert!(line.contains(at), "{args:?}: {line}");
+        assert!(line.contains("control character"), "{args:?}: {line}");
+        assert_eq!(names(d), before, "{args:?}: wrote something");
     }
 }
 
