@@ -38,6 +38,7 @@ use std::time::{Duration, Instant};
 use foxglove::websocket::{Capability, Client, ClientChannel, ServerListener};
 use foxglove::{Context, PartialMetadata, RawChannel, Schema, WebSocketServerHandle};
 
+use super::foxglove_gate::{Gate, Reports};
 use super::mcap_log::{Clock, Topic, View, ViewMessage};
 use super::operator::Joystick;
 use super::orders::{Live, OrderSource};
@@ -321,6 +322,8 @@ impl ServerListener for Listener {
 /// The orders Foxglove clients publish (see the module doc), as they come.
 pub struct LiveOrders {
     inbox: Arc<Mutex<Inbox>>,
+    /// The handshakes the gate refused.
+    reports: Option<Reports>,
 }
 
 impl OrderSource for LiveOrders {
@@ -333,6 +336,7 @@ impl OrderSource for LiveOrders {
     fn take_warnings(&mut self) -> Vec<String> {
         let mut inbox = lock(&self.inbox);
         let mut warnings: Vec<String> = inbox.warnings.drain(..).collect();
+        warnings.extend(self.reports.iter().flat_map(Reports::take));
         if inbox.dropped_orders > 0 {
             warnings.push(format!(
                 "foxglove: {} orders dropped: more than {MAX_QUEUED} waiting",
@@ -353,6 +357,8 @@ impl OrderSource for LiveOrders {
 
 /// The live view: an [`Observer`] publishing the session on the server's channels.
 pub struct LiveView {
+    /// The handshake layer on the address given (dropped first: no new connections).
+    gate: Option<Gate>,
     server: Option<WebSocketServerHandle>,
     /// The channels, by [`Topic::index`]; they live as long as the context.
     channels: Vec<Arc<RawChannel>>,
@@ -415,10 +421,13 @@ pub fn start(addr: &str, role: Role) -> Result<(LiveView, LiveOrders), FoxgloveE
         channels.push(channel);
     }
     let inbox = Arc::new(Mutex::new(Inbox::default()));
+    // The SDK listens on a loopback port of its own; the gate, on the address given, carries
+    // every viewer's connection to it (see `foxglove_gate`: stock viewers offer the protocol's
+    // older name, which the SDK refuses).
     let mut server = context
         .websocket_server()
         .name(format!("tdma-run {}", role.name()))
-        .bind(host, port)
+        .bind("127.0.0.1", 0)
         .message_backlog_size(BACKLOG_MESSAGES);
     if role == Role::Operator {
         server = server
@@ -429,7 +438,14 @@ pub fn start(addr: &str, role: Role) -> Result<(LiveView, LiveOrders), FoxgloveE
             }));
     }
     let handle = server.start_blocking().map_err(sdk)?;
+    let gate = Gate::start(&format!("{host}:{port}"), handle.port()).map_err(|source| {
+        FoxgloveError::Bind {
+            addr: addr.to_string(),
+            source,
+        }
+    })?;
     let view = LiveView {
+        gate: Some(gate),
         server: Some(handle),
         channels,
         _context: context,
@@ -437,13 +453,14 @@ pub fn start(addr: &str, role: Role) -> Result<(LiveView, LiveOrders), FoxgloveE
         addr: addr.to_string(),
         last_preview: None,
     };
-    Ok((view, LiveOrders { inbox }))
+    let reports = view.gate.as_ref().map(Gate::reports);
+    Ok((view, LiveOrders { inbox, reports }))
 }
 
 impl LiveView {
-    /// The port the server listens on.
+    /// The port the server listens on (the gate's).
     pub fn port(&self) -> u16 {
-        self.server.as_ref().map_or(0, WebSocketServerHandle::port)
+        self.gate.as_ref().map_or(0, Gate::port)
     }
 
     /// The address it was started on, as given.
@@ -489,6 +506,7 @@ impl LiveView {
     }
 
     fn shut_down(&mut self) {
+        self.gate.take();
         let Some(server) = self.server.take() else {
             return;
         };
@@ -681,6 +699,7 @@ mod tests {
         assert_eq!(inbox.dropped_warnings, MAX_WARNINGS as u64);
         let mut orders = LiveOrders {
             inbox: Arc::new(Mutex::new(inbox)),
+            reports: None,
         };
         assert_eq!(orders.poll(SimTime::ZERO).len(), MAX_QUEUED);
         assert!(orders.poll(SimTime::ZERO).is_empty());

@@ -15,6 +15,7 @@ pub mod camera;
 pub mod console;
 pub mod drive;
 pub mod foxglove;
+pub mod foxglove_gate;
 pub mod harness;
 pub mod mavlink;
 pub mod mcap_log;
