@@ -56,11 +56,61 @@ const POSE_IN_FRAME: &str = r#"{"title":"foxglove.PoseInFrame","type":"object","
 
 const COMPRESSED_IMAGE: &str = r#"{"title":"foxglove.CompressedImage","type":"object","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"frame_id":{"type":"string"},"data":{"type":"string","contentEncoding":"base64"},"format":{"type":"string"}}}"#;
 
-const LOG: &str = r#"{"title":"foxglove.Log","type":"object","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"level":{"type":"integer","oneOf":[{"title":"UNKNOWN","const":0},{"title":"DEBUG","const":1},{"title":"INFO","const":2},{"title":"WARNING","const":3},{"title":"ERROR","const":4},{"title":"FATAL","const":5}]},"message":{"type":"string"},"name":{"type":"string"},"file":{"type":"string"},"line":{"type":"integer","minimum":0}}}"#;
+const LOG: &str = r#"{"title":"foxglove.Log","type":"object","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"level":{"type":"integer","minimum":0,"maximum":5,"description":"0 UNKNOWN, 1 DEBUG, 2 INFO, 3 WARNING, 4 ERROR, 5 FATAL"},"message":{"type":"string"},"name":{"type":"string"},"file":{"type":"string"},"line":{"type":"integer","minimum":0}}}"#;
 
 const BODY_VELOCITY: &str = r#"{"title":"rovlink.BodyVelocity","type":"object","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"surge_mps":{"type":"number"},"sway_mps":{"type":"number"},"heave_mps":{"type":"number"},"yaw_rate_dps":{"type":"number"}}}"#;
 
-const LINK_FRAME: &str = r#"{"title":"rovlink.LinkFrame","type":"object","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"direction":{"type":"string"},"kind":{"type":"string"},"bytes":{"type":"integer"},"fate":{"type":"string"},"t_sent_s":{"type":["number","null"]},"t_received_s":{"type":["number","null"]},"delay_ms":{"type":["number","null"]}}}"#;
+const LINK_FRAME: &str = r#"{"title":"rovlink.LinkFrame","type":"object","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"direction":{"type":"string"},"kind":{"type":"string"},"bytes":{"type":"integer"},"fate":{"type":"string"},"t_sent_s":{"type":"number","description":"omitted when not sent"},"t_received_s":{"type":"number","description":"omitted when not received"},"delay_ms":{"type":"number","description":"omitted when not delivered"}}}"#;
+
+/// `value` with every `null` member of its objects left out: an optional field (a frame's
+/// `t_received_s` when it was lost) is omitted, since Foxglove's JSON Schema reader refuses
+/// the type arrays (`["number", "null"]`) that would describe a null.
+pub fn without_nulls(value: &serde_json::Value) -> serde_json::Value {
+    use serde_json::Value;
+    match value {
+        Value::Object(map) => Value::Object(
+            map.iter()
+                .filter(|(_, v)| !v.is_null())
+                .map(|(k, v)| (k.clone(), without_nulls(v)))
+                .collect(),
+        ),
+        Value::Array(items) => Value::Array(items.iter().map(without_nulls).collect()),
+        other => other.clone(),
+    }
+}
+
+/// What Foxglove's JSON Schema reader would refuse in `schema` (the path and why): type
+/// arrays, `oneOf` / `anyOf` / `allOf`, a property without a type, an object without
+/// properties, an array without items. Empty for a schema every viewer reads.
+pub fn schema_problems(schema: &serde_json::Value, path: &str) -> Vec<String> {
+    use serde_json::Value;
+    let Value::Object(map) = schema else {
+        return vec![format!("{path}: not an object")];
+    };
+    let mut out: Vec<String> = ["oneOf", "anyOf", "allOf"]
+        .iter()
+        .filter(|w| map.contains_key(**w))
+        .map(|w| format!("{path}: uses {w}"))
+        .collect();
+    match map.get("type") {
+        None => out.push(format!("{path}: has no type")),
+        Some(Value::String(kind)) if kind == "object" => match map.get("properties") {
+            Some(Value::Object(props)) => {
+                for (name, sub) in props {
+                    out.extend(schema_problems(sub, &format!("{path}.{name}")));
+                }
+            }
+            _ => out.push(format!("{path}: an object without properties")),
+        },
+        Some(Value::String(kind)) if kind == "array" => match map.get("items") {
+            Some(items) => out.extend(schema_problems(items, &format!("{path}[]"))),
+            None => out.push(format!("{path}: an array without items")),
+        },
+        Some(Value::String(_)) => {}
+        Some(other) => out.push(format!("{path}: type {other}, not one name")),
+    }
+    out
+}
 
 /// Foxglove's log level DEBUG.
 pub const DEBUG: u8 = 1;
@@ -232,7 +282,7 @@ impl View {
         ViewMessage {
             topic,
             log_time_ns,
-            json: json.to_string(),
+            json: without_nulls(json).to_string(),
         }
     }
 
@@ -574,6 +624,41 @@ impl Observer for McapLog {
 mod tests {
     use super::*;
     use crate::wire::operator::Order;
+
+    #[test]
+    fn every_schema_is_one_every_viewer_reads() {
+        for topic in Topic::ALL {
+            let schema: serde_json::Value = serde_json::from_str(topic.schema()).unwrap();
+            assert_eq!(
+                schema_problems(&schema, "$"),
+                Vec::<String>::new(),
+                "{}",
+                topic.name()
+            );
+        }
+        // The checker finds what Foxglove refused.
+        let bad = serde_json::json!({"type": "object", "properties": {
+            "t": {"type": ["number", "null"]}, "u": {}, "v": {"type": "integer", "oneOf": []},
+            "w": {"type": "array"}}});
+        assert_eq!(
+            schema_problems(&bad, "$"),
+            [
+                "$.t: type [\"number\",\"null\"], not one name",
+                "$.u: has no type",
+                "$.v: uses oneOf",
+                "$.w: an array without items"
+            ]
+        );
+    }
+
+    #[test]
+    fn optional_fields_are_left_out_not_null() {
+        let v = serde_json::json!({"a": null, "b": {"c": null, "d": 1}, "e": [null, {"f": null}]});
+        assert_eq!(
+            without_nulls(&v),
+            serde_json::json!({"b": {"d": 1}, "e": [null, {}]})
+        );
+    }
 
     fn pose(t_s: f64, link_up: bool, goal: bool) -> PoseSample {
         PoseSample {

@@ -17,13 +17,13 @@ use std::collections::BTreeMap;
 use mcap::write::NoSeek;
 use serde_json::json;
 
-use super::mcap_log::{Clock, McapLogError, Topic, View, ViewMessage};
+use super::mcap_log::{Clock, McapLogError, Topic, View, ViewMessage, without_nulls};
 use super::network::HopEvent;
 use super::{PoseSample, Role};
 use crate::cli::output::Dest;
 use crate::io::Output;
 
-const HOP_FRAME: &str = r#"{"title":"rovlink.HopFrame","type":"object","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"medium":{"type":"string"},"src":{"type":["integer","null"]},"dst":{"type":["integer","null"]},"tx":{"type":"integer"},"rx":{"type":"integer"},"kind":{"type":"string"},"bytes":{"type":"integer"},"fate":{"type":"string"},"action":{"type":"string"},"t_sent_s":{"type":"number"},"t_received_s":{"type":["number","null"]},"delay_ms":{"type":["number","null"]}}}"#;
+const HOP_FRAME: &str = r#"{"title":"rovlink.HopFrame","type":"object","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"medium":{"type":"string"},"src":{"type":"integer","description":"omitted when the frame had no readable header"},"dst":{"type":"integer","description":"omitted when the frame had no readable header"},"tx":{"type":"integer"},"rx":{"type":"integer"},"kind":{"type":"string"},"bytes":{"type":"integer"},"fate":{"type":"string"},"action":{"type":"string"},"t_sent_s":{"type":"number"},"t_received_s":{"type":"number","description":"omitted when not received"},"delay_ms":{"type":"number","description":"omitted when not delivered"}}}"#;
 
 /// The per-vehicle channels: the log's own, except the single link's frames.
 fn vehicle_topics() -> impl Iterator<Item = Topic> {
@@ -155,7 +155,7 @@ impl NetMcapLog {
             "kind": e.kind, "bytes": e.bytes, "fate": e.fate, "action": e.action,
             "t_sent_s": e.t_sent_s, "t_received_s": e.t_received_s, "delay_ms": delay_ms,
         });
-        self.write(self.frames, ns, &json.to_string());
+        self.write(self.frames, ns, &without_nulls(&json).to_string());
     }
 
     /// A completed image of `vehicle`.
@@ -184,5 +184,16 @@ impl NetMcapLog {
             .map(|v| v.event(end, t_s, event))
             .unwrap_or_default();
         self.write_vehicle(vehicle, &messages);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_hop_schema_is_one_every_viewer_reads() {
+        let schema: serde_json::Value = serde_json::from_str(HOP_FRAME).unwrap();
+        assert!(super::super::mcap_log::schema_problems(&schema, "$").is_empty());
     }
 }
