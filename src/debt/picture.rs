@@ -527,6 +527,25 @@ pub fn to_png(img: &Image) -> Result<Vec<u8>, PictureError> {
     encode(img, OutputFormat::Png)
 }
 
+/// Encodes an image as JPEG at `quality` (1..=100), grey or RGB as it is: for previews,
+/// where size matters more than the last detail.
+pub fn to_jpeg(img: &Image, quality: u8) -> Result<Vec<u8>, PictureError> {
+    use image::ImageEncoder;
+    let color = if img.channels == 1 {
+        image::ExtendedColorType::L8
+    } else {
+        image::ExtendedColorType::Rgb8
+    };
+    let mut bytes = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, quality.clamp(1, 100))
+        .write_image(&img.data, img.width as u32, img.height as u32, color)
+        .map_err(|e| PictureError::Encode {
+            format: OutputFormat::Jpeg,
+            reason: e.to_string(),
+        })?;
+    Ok(bytes)
+}
+
 /// Encodes an image in a format: `Ppm` always RGB, `Pgm` always grey ([`to_gray`]), the
 /// others as the image is.
 pub fn encode(img: &Image, format: OutputFormat) -> Result<Vec<u8>, PictureError> {

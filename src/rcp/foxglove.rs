@@ -35,7 +35,7 @@ use std::collections::VecDeque;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use foxglove::websocket::{Capability, Client, ClientChannel, ServerListener};
+use foxglove::websocket::{Capability, ChannelView, Client, ClientChannel, ServerListener};
 use foxglove::{Context, PartialMetadata, RawChannel, Schema, WebSocketServerHandle};
 
 use super::foxglove_gate::{Gate, Reports};
@@ -59,7 +59,20 @@ pub const BACKLOG_MESSAGES: usize = 256;
 pub const STOP_WAIT: Duration = Duration::from_secs(1);
 /// The shortest wall time between two previews of the image in progress (decoding and
 /// PNG-encoding one costs milliseconds; a simulation makes trunks far faster than that).
-pub const PREVIEW_EVERY: Duration = Duration::from_millis(250);
+pub const PREVIEW_EVERY: Duration = Duration::from_millis(500);
+/// The longest a still vehicle's pose goes unpublished: it is republished this often.
+pub const POSE_EVERY: Duration = Duration::from_secs(1);
+/// The channels whose latest message a new subscriber gets at once.
+pub const KEPT: [Topic; 8] = [
+    Topic::Pose,
+    Topic::Goal,
+    Topic::Actual,
+    Topic::Commanded,
+    Topic::Image,
+    Topic::Preview,
+    Topic::Tf,
+    Topic::Events,
+];
 /// The topic of the JSON order channel.
 pub const ORDERS_TOPIC: &str = "/orders";
 /// How long a Twist stays in force without a newer one (the Teleop panel's default rate is
@@ -217,6 +230,8 @@ struct Inbox {
     dropped_warnings: u64,
     /// When the Twist in force arrived, while one is.
     twist_at: Option<Instant>,
+    /// The client topics already warned about (each is warned about once per session).
+    warned_topics: std::collections::HashSet<String>,
 }
 
 impl Inbox {
@@ -253,6 +268,14 @@ impl Inbox {
         }
     }
 
+    /// Warns about client topic `topic` once for the whole session: a viewer advertises its
+    /// panels' topics again at every layout reload.
+    fn warn_topic(&mut self, topic: &str, warning: String) {
+        if self.warned_topics.len() < 4 * MAX_WARNINGS && self.warned_topics.insert(topic.into()) {
+            self.warn(warning);
+        }
+    }
+
     fn warn(&mut self, warning: String) {
         if self.warnings.len() >= MAX_WARNINGS {
             self.dropped_warnings += 1;
@@ -273,6 +296,48 @@ fn lock(inbox: &Mutex<Inbox>) -> MutexGuard<'_, Inbox> {
 /// The SDK's callbacks: client channels and their messages, into the inbox.
 struct Listener {
     inbox: Arc<Mutex<Inbox>>,
+    /// The view's channels and their latest messages, for new subscribers.
+    latest: Arc<Latest>,
+}
+
+/// The channels, by [`Topic::index`], and the latest message of each [`KEPT`] one.
+struct Latest {
+    channels: Vec<Arc<RawChannel>>,
+    messages: Mutex<Vec<Option<ViewMessage>>>,
+}
+
+impl Latest {
+    fn keep(&self, message: &ViewMessage) {
+        if KEPT.contains(&message.topic) {
+            let mut messages = self.messages.lock().unwrap_or_else(|p| p.into_inner());
+            if let Some(slot) = messages.get_mut(message.topic.index()) {
+                *slot = Some(message.clone());
+            }
+        }
+    }
+
+    /// Sends the latest message of `channel` (if it has one) to `client` alone.
+    fn send_to(&self, client: &Client, channel: &ChannelView) {
+        let Some(index) = self.channels.iter().position(|c| c.id() == channel.id()) else {
+            return;
+        };
+        let message = self
+            .messages
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .get(index)
+            .cloned()
+            .flatten();
+        if let (Some(message), Some(channel)) = (message, self.channels.get(index)) {
+            channel.log_with_meta_to_sink(
+                message.json.as_bytes(),
+                PartialMetadata {
+                    log_time: Some(message.log_time_ns),
+                },
+                client.sink_id(),
+            );
+        }
+    }
 }
 
 impl Listener {
@@ -287,10 +352,17 @@ impl Listener {
 }
 
 impl ServerListener for Listener {
+    fn on_subscribe(&self, client: Client, channel: ChannelView) {
+        self.latest.send_to(&client, &channel);
+    }
+
     fn on_client_advertise(&self, client: Client, channel: &ClientChannel) {
         if let Err(why) = ClientTopic::of(&channel.topic, &channel.schema_name, &channel.encoding) {
-            let warning = format!("{}: refused: {why}", Listener::name(&client, channel));
-            lock(&self.inbox).warn(warning);
+            let warning = format!(
+                "{}: refused: {why} (said once per topic)",
+                Listener::name(&client, channel)
+            );
+            lock(&self.inbox).warn_topic(&channel.topic, warning);
         }
     }
 
@@ -360,13 +432,16 @@ pub struct LiveView {
     /// The handshake layer on the address given (dropped first: no new connections).
     gate: Option<Gate>,
     server: Option<WebSocketServerHandle>,
-    /// The channels, by [`Topic::index`]; they live as long as the context.
-    channels: Vec<Arc<RawChannel>>,
+    /// The channels, by [`Topic::index`] (they live as long as the context), and the latest
+    /// message of each kept one.
+    latest: Arc<Latest>,
     _context: Arc<Context>,
     view: View,
     addr: String,
-    /// When the last preview was built.
-    last_preview: Option<Instant>,
+    /// When the last preview was built, and the length of the prefix it showed.
+    last_preview: Option<(Instant, usize)>,
+    /// The last pose, and when it was published (a still vehicle's is republished).
+    last_pose: Option<(PoseSample, Instant)>,
 }
 
 /// Splits HOST:PORT (IPv6 in brackets, `[::1]:8765`).
@@ -420,6 +495,10 @@ pub fn start(addr: &str, role: Role) -> Result<(LiveView, LiveOrders), FoxgloveE
             .map_err(sdk)?;
         channels.push(channel);
     }
+    let latest = Arc::new(Latest {
+        channels,
+        messages: Mutex::new(vec![None; Topic::ALL.len()]),
+    });
     let inbox = Arc::new(Mutex::new(Inbox::default()));
     // The SDK listens on a loopback port of its own; the gate, on the address given, carries
     // every viewer's connection to it (see `foxglove_gate`: stock viewers offer the protocol's
@@ -428,14 +507,15 @@ pub fn start(addr: &str, role: Role) -> Result<(LiveView, LiveOrders), FoxgloveE
         .websocket_server()
         .name(format!("tdma-run {}", role.name()))
         .bind("127.0.0.1", 0)
-        .message_backlog_size(BACKLOG_MESSAGES);
+        .message_backlog_size(BACKLOG_MESSAGES)
+        .listener(Arc::new(Listener {
+            inbox: inbox.clone(),
+            latest: latest.clone(),
+        }));
     if role == Role::Operator {
         server = server
             .capabilities([Capability::ClientPublish])
-            .supported_encodings(["json"])
-            .listener(Arc::new(Listener {
-                inbox: inbox.clone(),
-            }));
+            .supported_encodings(["json"]);
     }
     let handle = server.start_blocking().map_err(sdk)?;
     let gate = Gate::start(&format!("{host}:{port}"), handle.port()).map_err(|source| {
@@ -447,11 +527,12 @@ pub fn start(addr: &str, role: Role) -> Result<(LiveView, LiveOrders), FoxgloveE
     let view = LiveView {
         gate: Some(gate),
         server: Some(handle),
-        channels,
+        latest,
         _context: context,
         view: View::new(Clock::Wall),
         addr: addr.to_string(),
         last_preview: None,
+        last_pose: None,
     };
     let reports = view.gate.as_ref().map(Gate::reports);
     Ok((view, LiveOrders { inbox, reports }))
@@ -477,14 +558,19 @@ impl LiveView {
 
     /// Builds only what some client subscribes to: nothing at all with no client, and no
     /// picture decoded for nobody.
+    /// ... and the kept channels' (but the preview's: a decode for nobody), whose latest
+    /// message a new subscriber gets at once.
     fn follow_subscriptions(&mut self) {
-        let channels = &self.channels;
-        self.view
-            .want(|topic| channels.get(topic.index()).is_some_and(|c| c.has_sinks()));
+        let channels = &self.latest.channels;
+        self.view.want(|topic| {
+            (KEPT.contains(&topic) && topic != Topic::Preview)
+                || channels.get(topic.index()).is_some_and(|c| c.has_sinks())
+        });
     }
 
     fn publish(&self, message: &ViewMessage) {
-        if let Some(channel) = self.channels.get(message.topic.index()) {
+        self.latest.keep(message);
+        if let Some(channel) = self.latest.channels.get(message.topic.index()) {
             channel.log_with_meta(
                 message.json.as_bytes(),
                 PartialMetadata {
@@ -535,6 +621,17 @@ impl Observer for LiveView {
         self.follow_subscriptions();
         let messages = self.view.frame(e);
         self.publish_all(&messages);
+        // A still vehicle's status changes nothing, so no pose comes: republish the last one
+        // (stamped now) at least every POSE_EVERY, so that a viewer opened now shows it.
+        let now = Instant::now();
+        if let Some((mut pose, at)) = self.last_pose
+            && now.saturating_duration_since(at) >= POSE_EVERY
+        {
+            pose.t_s = pose
+                .t_s
+                .max(e.t_received_s.or(e.t_sent_s).unwrap_or(pose.t_s));
+            self.pose(&pose);
+        }
     }
 
     fn image(&mut self, t_s: f64, stream: &[u8]) {
@@ -548,18 +645,19 @@ impl Observer for LiveView {
         self.follow_subscriptions();
         let messages = self.view.pose(pose);
         self.publish_all(&messages);
+        self.last_pose = Some((*pose, Instant::now()));
     }
 
     fn event(&mut self, end: Role, t_s: f64, event: &Event) {
-        if matches!(event, Event::ImageProgress { .. }) {
+        if let Event::ImageProgress { prefix, .. } = event {
+            // Only when new trunks changed the picture, and at most every PREVIEW_EVERY.
             let now = Instant::now();
-            if self
-                .last_preview
-                .is_some_and(|at| now.saturating_duration_since(at) < PREVIEW_EVERY)
-            {
+            if self.last_preview.is_some_and(|(at, len)| {
+                len == prefix.len() || now.saturating_duration_since(at) < PREVIEW_EVERY
+            }) {
                 return;
             }
-            self.last_preview = Some(now);
+            self.last_preview = Some((now, prefix.len()));
         }
         self.follow_subscriptions();
         let messages = self.view.event(end, t_s, event);

@@ -112,6 +112,19 @@ pub fn schema_problems(schema: &serde_json::Value, path: &str) -> Vec<String> {
     out
 }
 
+const FRAME_TRANSFORMS: &str = r#"{"title":"foxglove.FrameTransforms","type":"object","properties":{"transforms":{"type":"array","items":{"title":"foxglove.FrameTransform","type":"object","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"parent_frame_id":{"type":"string"},"child_frame_id":{"type":"string"},"translation":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}},"rotation":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"w":{"type":"number"}}}}}}}}"#;
+
+/// The z-up world frame of the transform tree ([`Topic::Tf`]): x north, y west, z up.
+pub const WORLD_FRAME: &str = "world";
+/// The frame positions are given in: x north, y east, z down (depth), under [`WORLD_FRAME`].
+pub const NED_FRAME: &str = "ned";
+/// The vehicle's body frame, under [`NED_FRAME`], in a single session (`vehicle_N` in a
+/// network).
+pub const BODY_FRAME: &str = "rov";
+
+/// JPEG quality of `/camera/preview`.
+pub const PREVIEW_JPEG_QUALITY: u8 = 70;
+
 /// Foxglove's log level DEBUG.
 pub const DEBUG: u8 = 1;
 /// Foxglove's log level INFO.
@@ -140,11 +153,13 @@ pub enum Topic {
     Preview,
     /// `/session/log` (live only).
     Events,
+    /// `/tf`: the transform tree, world -> ned -> the vehicle's body.
+    Tf,
 }
 
 impl Topic {
     /// Every channel, in the order a view adds them: the MCAP log's first.
-    pub const ALL: [Topic; 9] = [
+    pub const ALL: [Topic; 10] = [
         Topic::Pose,
         Topic::Goal,
         Topic::Actual,
@@ -154,6 +169,7 @@ impl Topic {
         Topic::Image,
         Topic::Preview,
         Topic::Events,
+        Topic::Tf,
     ];
 
     /// The topic, e.g. `/rov/pose`.
@@ -168,6 +184,7 @@ impl Topic {
             Topic::Image => "/camera/image",
             Topic::Preview => "/camera/preview",
             Topic::Events => "/session/log",
+            Topic::Tf => "/tf",
         }
     }
 
@@ -179,6 +196,7 @@ impl Topic {
             Topic::Frames => "rovlink.LinkFrame",
             Topic::Log | Topic::Events => "foxglove.Log",
             Topic::Image | Topic::Preview => "foxglove.CompressedImage",
+            Topic::Tf => "foxglove.FrameTransforms",
         }
     }
 
@@ -190,6 +208,7 @@ impl Topic {
             Topic::Frames => LINK_FRAME,
             Topic::Log | Topic::Events => LOG,
             Topic::Image | Topic::Preview => COMPRESSED_IMAGE,
+            Topic::Tf => FRAME_TRANSFORMS,
         }
     }
 
@@ -242,6 +261,8 @@ pub struct View {
     clock: Clock,
     link_up: Option<bool>,
     wanted: [bool; Topic::ALL.len()],
+    /// The body frame's name on `/tf`.
+    body_frame: String,
 }
 
 impl View {
@@ -251,7 +272,14 @@ impl View {
             clock,
             link_up: None,
             wanted: [true; Topic::ALL.len()],
+            body_frame: BODY_FRAME.to_string(),
         }
+    }
+
+    /// The vehicle's body frame on `/tf` is `name` (a network's `vehicle_2`).
+    pub fn with_body_frame(mut self, name: &str) -> View {
+        self.body_frame = name.to_string();
+        self
     }
 
     /// From now on, builds the messages of the channels `wanted` says yes to only.
@@ -337,19 +365,28 @@ impl View {
         out
     }
 
-    fn picture(&self, topic: Topic, t_s: f64, stream: &[u8]) -> Option<ViewMessage> {
+    /// A DEBT stream (or prefix) decoded, as PNG, or as JPEG at `jpeg_quality`.
+    fn picture(
+        &self,
+        topic: Topic,
+        t_s: f64,
+        stream: &[u8],
+        jpeg_quality: Option<u8>,
+    ) -> Option<ViewMessage> {
         if !self.wants(topic) {
             return None;
         }
-        let png = crate::debt::decode(stream)
-            .ok()
-            .and_then(|img| crate::debt::picture::to_png(&img).ok())?;
+        let img = crate::debt::decode(stream).ok()?;
+        let (bytes, format) = match jpeg_quality {
+            Some(q) => (crate::debt::picture::to_jpeg(&img, q).ok()?, "jpeg"),
+            None => (crate::debt::picture::to_png(&img).ok()?, "png"),
+        };
         let (ns, timestamp) = self.stamp(t_s);
-        let data = base64::engine::general_purpose::STANDARD.encode(png);
+        let data = base64::engine::general_purpose::STANDARD.encode(bytes);
         Some(View::message(
             topic,
             ns,
-            &json!({"timestamp": timestamp, "frame_id": "camera", "data": data, "format": "png"}),
+            &json!({"timestamp": timestamp, "frame_id": "camera", "data": data, "format": format}),
         ))
     }
 
@@ -359,7 +396,7 @@ impl View {
         if !self.wants(Topic::Image) {
             return None;
         }
-        self.picture(Topic::Image, t_s, stream).or_else(|| {
+        self.picture(Topic::Image, t_s, stream, None).or_else(|| {
             self.log(
                 Topic::Log,
                 t_s,
@@ -370,17 +407,24 @@ impl View {
         })
     }
 
-    /// The image in progress (a DEBT prefix) as PNG on `/camera/preview`; nothing when the
-    /// prefix does not decode yet.
+    /// The image in progress (a DEBT prefix) as JPEG on `/camera/preview` (a picture still
+    /// arriving is blurry: JPEG at [`PREVIEW_JPEG_QUALITY`] is a fraction of its PNG); nothing
+    /// when the prefix does not decode yet.
     pub fn preview(&self, t_s: f64, prefix: &[u8]) -> Option<ViewMessage> {
-        self.picture(Topic::Preview, t_s, prefix)
+        self.picture(Topic::Preview, t_s, prefix, Some(PREVIEW_JPEG_QUALITY))
     }
 
     /// The vehicle's pose, goal and velocities; a line on `/link/log` when the link was lost
     /// or recovered since the last pose.
     pub fn pose(&mut self, pose: &PoseSample) -> Vec<ViewMessage> {
         let mut out = Vec::new();
-        let pose_topics = [Topic::Pose, Topic::Goal, Topic::Actual, Topic::Commanded];
+        let pose_topics = [
+            Topic::Pose,
+            Topic::Goal,
+            Topic::Actual,
+            Topic::Commanded,
+            Topic::Tf,
+        ];
         if pose_topics.iter().any(|&t| self.wants(t)) {
             let (ns, timestamp) = self.stamp(pose.t_s);
             let goal = pose
@@ -399,6 +443,15 @@ impl View {
                 (
                     Topic::Commanded,
                     Some(velocity_json(&timestamp, pose.commanded_velocity)),
+                ),
+                (
+                    Topic::Tf,
+                    Some(tf_json(
+                        &timestamp,
+                        &self.body_frame,
+                        pose.position_m,
+                        pose.heading_deg,
+                    )),
                 ),
             ];
             for (topic, json) in messages {
@@ -576,6 +629,25 @@ impl McapLog {
 }
 
 /// A pose message: NED position, heading as a rotation about the down axis.
+/// `/tf` at a pose: world -> ned (a half turn about north: z down becomes z up) and ned ->
+/// `body` (the position, and the heading as a turn about ned's z).
+fn tf_json(
+    timestamp: &serde_json::Value,
+    body: &str,
+    position_m: [f64; 3],
+    heading_deg: f64,
+) -> serde_json::Value {
+    let half = heading_deg.to_radians() / 2.0;
+    json!({"transforms": [
+        {"timestamp": timestamp, "parent_frame_id": WORLD_FRAME, "child_frame_id": NED_FRAME,
+         "translation": {"x": 0.0, "y": 0.0, "z": 0.0},
+         "rotation": {"x": 1.0, "y": 0.0, "z": 0.0, "w": 0.0}},
+        {"timestamp": timestamp, "parent_frame_id": NED_FRAME, "child_frame_id": body,
+         "translation": {"x": position_m[0], "y": position_m[1], "z": position_m[2]},
+         "rotation": {"x": 0.0, "y": 0.0, "z": half.sin(), "w": half.cos()}},
+    ]})
+}
+
 fn pose_json(
     timestamp: &serde_json::Value,
     position_m: [f64; 3],
@@ -584,7 +656,7 @@ fn pose_json(
     let half = heading_deg.to_radians() / 2.0;
     json!({
         "timestamp": timestamp,
-        "frame_id": "ned",
+        "frame_id": NED_FRAME,
         "pose": {
             "position": {"x": position_m[0], "y": position_m[1], "z": position_m[2]},
             "orientation": {"x": 0.0, "y": 0.0, "z": half.sin(), "w": half.cos()},
@@ -682,15 +754,35 @@ mod tests {
         let mut view = View::new(Clock::Session { base_ns: 1_000 });
         let first = view.pose(&pose(2.5, true, true));
         use Topic::*;
-        assert_eq!(topics(&first), [Pose, Goal, Actual, Commanded]);
+        assert_eq!(topics(&first), [Pose, Goal, Actual, Commanded, Tf]);
         assert!(first.iter().all(|m| m.log_time_ns == 2_500_001_000));
         let json: serde_json::Value = serde_json::from_str(&first[0].json).unwrap();
         assert_eq!(json["timestamp"]["sec"], 2);
         assert_eq!(json["timestamp"]["nsec"], 500_001_000);
         assert!((json["pose"]["orientation"]["z"].as_f64().unwrap() - 1.0).abs() < 1e-12);
+        // The transform tree: world -> ned (a half turn about north), ned -> rov at the pose.
+        let tf: serde_json::Value = serde_json::from_str(&first[4].json).unwrap();
+        let t = &tf["transforms"];
+        assert_eq!(
+            (
+                t[0]["parent_frame_id"].as_str(),
+                t[0]["child_frame_id"].as_str()
+            ),
+            (Some("world"), Some("ned"))
+        );
+        assert_eq!(t[0]["rotation"]["x"], 1.0);
+        assert_eq!(
+            (
+                t[1]["parent_frame_id"].as_str(),
+                t[1]["child_frame_id"].as_str()
+            ),
+            (Some("ned"), Some("rov"))
+        );
+        assert_eq!(t[1]["translation"], json["pose"]["position"]);
+        assert_eq!(t[1]["rotation"], json["pose"]["orientation"]);
         let lost = view.pose(&pose(3.0, false, false));
-        assert_eq!(topics(&lost), [Pose, Actual, Commanded, Log]);
-        assert!(lost[3].json.contains("link lost"), "{}", lost[3].json);
+        assert_eq!(topics(&lost), [Pose, Actual, Commanded, Tf, Log]);
+        assert!(lost[4].json.contains("link lost"), "{}", lost[4].json);
         // Only the link log wanted: nothing else is built, the link is still followed.
         view.want(|t| t == Log);
         assert!(view.pose(&pose(3.5, false, false)).is_empty());

@@ -83,7 +83,10 @@ impl NetMcapLog {
         .map_err(wrap)?;
         let views = vehicles
             .iter()
-            .map(|&v| (v, View::new(Clock::Session { base_ns: 0 })))
+            .map(|&v| {
+                let view = View::new(Clock::Session { base_ns: 0 });
+                (v, view.with_body_frame(&format!("vehicle_{v}")))
+            })
             .collect();
         Ok(NetMcapLog {
             path: name,
