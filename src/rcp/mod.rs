@@ -25,6 +25,7 @@ pub mod network;
 pub mod operator;
 pub mod orders;
 pub mod outputs;
+pub mod pace;
 pub mod realnet;
 pub mod realtime;
 pub mod routing;

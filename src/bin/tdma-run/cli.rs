@@ -163,6 +163,12 @@ pub struct Args {
     #[arg(long, value_name = "MS|auto", default_value = "auto", value_parser = ipg)]
     pub ipg: Ipg,
 
+    /// Run a simulation (--sim or --scenario) at X times real time (1 = real time), to watch
+    /// it live, e.g. in Foxglove with --foxglove; the results are the same as unpaced.
+    #[arg(long, value_name = "X", conflicts_with = "role",
+          value_parser = value::real(rovlink::rcp::pace::MIN_PACE, rovlink::rcp::pace::MAX_PACE, "x"))]
+    pub pace: Option<f64>,
+
     /// Session length, s (at most a week) [default: 600, or the scenario's].
     #[arg(long, value_name = "S", value_parser = duration())]
     pub duration: Option<f64>,

@@ -19,6 +19,7 @@ use rovlink::rcp::harness::Tee;
 use rovlink::rcp::outputs::{
     Destinations, Recorder, check_images_out, summary, wall_clock_ns, write_metrics,
 };
+use rovlink::rcp::pace::Pacer;
 use rovlink::rcp::realtime::{self, Ended, Role};
 use rovlink::rcp::session::{self, Observer, Parts, SessionConfig};
 use rovlink::rcp::{camera, script};
@@ -122,7 +123,13 @@ fn run(args: &Args) -> Result<u8> {
     let bar = progress::bar(role.is_none(), args.duration_s().ceil() as u64, template);
     let mut recorder = Recorder::new(dests, args.buoy, base_ns, bar)?;
     let mut stderr = Stderr;
-    let mut observer = Tee(vec![&mut recorder, &mut stderr]);
+    let mut pacer = args.pace.map(|pace| Pacer::new(pace, stop::flag()));
+    let mut observer = Tee(Vec::new());
+    if let Some(pacer) = pacer.as_mut() {
+        observer.0.push(pacer);
+    }
+    observer.0.push(&mut recorder);
+    observer.0.push(&mut stderr);
     if let Some(view) = live.as_mut() {
         observer.0.push(view);
     }

@@ -10,6 +10,7 @@ use rovlink::io::EXIT_OK;
 use rovlink::rcp::net_outputs::{NetDestinations, NetRecorder};
 use rovlink::rcp::network::{self, NetObserver, NetworkMetrics};
 use rovlink::rcp::outputs::{summary, write_metrics};
+use rovlink::rcp::pace::Pacer;
 use rovlink::rcp::scenario::Scenario;
 use rovlink::rcp::{Event, PoseSample, Role, camera};
 use rovlink::say;
@@ -76,7 +77,15 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     let wall = std::time::Instant::now();
     let mut metrics = {
         let mut observer = Both(&mut recorder);
-        network::run(&scenario, &pictures.images, &mut observer, stop::flag())?
+        let mut paced;
+        let observer: &mut dyn NetObserver = match args.pace {
+            Some(pace) => {
+                paced = Paced(Pacer::new(pace, stop::flag()), &mut observer);
+                &mut paced
+            }
+            None => &mut observer,
+        };
+        network::run(&scenario, &pictures.images, observer, stop::flag())?
     };
     mark_interrupted(&mut metrics);
     if let Some(out) = metrics_out.as_mut() {
@@ -127,6 +136,38 @@ pub(crate) fn network_summary(metrics: &NetworkMetrics) -> Vec<String> {
         }
     }
     lines
+}
+
+/// A network observer held back to the wall clock by a [`Pacer`] (`--pace`).
+struct Paced<'a, 'b>(Pacer<'a>, &'b mut dyn NetObserver);
+
+impl NetObserver for Paced<'_, '_> {
+    fn hop(&mut self, event: &network::HopEvent) {
+        self.0.hop(event);
+        self.1.hop(event);
+    }
+
+    fn image(&mut self, vehicle: u8, t_s: f64, stream: &[u8]) {
+        self.1.image(vehicle, t_s, stream);
+    }
+
+    fn pose(&mut self, vehicle: u8, pose: &PoseSample) {
+        NetObserver::pose(&mut self.0, vehicle, pose);
+        self.1.pose(vehicle, pose);
+    }
+
+    fn event(&mut self, vehicle: u8, end: Role, t_s: f64, event: &Event) {
+        NetObserver::event(&mut self.0, vehicle, end, t_s, event);
+        self.1.event(vehicle, end, t_s, event);
+    }
+
+    fn warning(&mut self, t_s: f64, text: &str) {
+        self.1.warning(t_s, text);
+    }
+
+    fn failed(&self) -> bool {
+        self.1.failed()
+    }
 }
 
 /// The recorder, with warnings also on standard error.
