@@ -1,6 +1,8 @@
 //! A live Foxglove view of a session, and a console an operator drives from Foxglove: a
-//! WebSocket server (the official `foxglove` SDK, subprotocol `foxglove.sdk.v1`) bound only to
-//! the address it is given.
+//! WebSocket server (the official `foxglove` SDK, behind [`super::foxglove_gate`] so that
+//! viewers offering `foxglove.websocket.v1` are served as well as `foxglove.sdk.v1`) bound only
+//! to the address it is given. A new subscriber gets the latest message of each [`KEPT`]
+//! channel at once, and a still vehicle's pose is republished every [`POSE_EVERY`].
 //!
 //! [`start`] returns two halves:
 //! - [`LiveView`], an [`Observer`]: the channels of the MCAP log ([`Topic`]: pose,
