@@ -42,6 +42,7 @@ use foxglove::{Context, PartialMetadata, RawChannel, Schema, WebSocketServerHand
 
 use super::foxglove_gate::{Gate, Reports};
 use super::mcap_log::{Clock, Topic, View, ViewMessage};
+use super::network::{HopEvent, NetObserver};
 use super::operator::Joystick;
 use super::orders::{Live, OrderSource};
 use super::session::{FrameEvent, Observer};
@@ -302,18 +303,23 @@ struct Listener {
     latest: Arc<Latest>,
 }
 
-/// The channels, by [`Topic::index`], and the latest message of each [`KEPT`] one.
+/// The view's channels, and the latest message of each [`KEPT`] one.
 struct Latest {
     channels: Vec<Arc<RawChannel>>,
     messages: Mutex<Vec<Option<ViewMessage>>>,
 }
 
 impl Latest {
-    fn keep(&self, message: &ViewMessage) {
-        if KEPT.contains(&message.topic) {
+    /// Keeps the message published on channel `index` if its topic is [`KEPT`].
+    fn keep(&self, index: usize, topic: Topic, json: &str, log_time_ns: u64) {
+        if KEPT.contains(&topic) {
             let mut messages = self.messages.lock().unwrap_or_else(|p| p.into_inner());
-            if let Some(slot) = messages.get_mut(message.topic.index()) {
-                *slot = Some(message.clone());
+            if let Some(slot) = messages.get_mut(index) {
+                *slot = Some(ViewMessage {
+                    topic,
+                    log_time_ns,
+                    json: json.to_string(),
+                });
             }
         }
     }
@@ -429,17 +435,26 @@ impl OrderSource for LiveOrders {
     }
 }
 
-/// The live view: an [`Observer`] publishing the session on the server's channels.
+/// The live view: an [`Observer`] (a single session) or a [`NetObserver`] (a network, one lane
+/// per vehicle under `/vehicle/N/`) publishing the session on the server's channels.
 pub struct LiveView {
     /// The handshake layer on the address given (dropped first: no new connections).
     gate: Option<Gate>,
     server: Option<WebSocketServerHandle>,
-    /// The channels, by [`Topic::index`] (they live as long as the context), and the latest
-    /// message of each kept one.
+    /// The channels (they live as long as the context), and the latest message of each kept
+    /// one: lane `k`'s topic `t` at `k * Topic::ALL.len() + t.index()`, then a network's
+    /// `/network/frames`.
     latest: Arc<Latest>,
     _context: Arc<Context>,
-    view: View,
+    lanes: Vec<Lane>,
     addr: String,
+}
+
+/// One vehicle's part of the view.
+struct Lane {
+    /// Its vehicle's address in a network (none in a single session).
+    vehicle: Option<u8>,
+    view: View,
     /// When the last preview was built, and the length of the prefix it showed.
     last_preview: Option<(Instant, usize)>,
     /// The last pose, and when it was published (a still vehicle's is republished).
@@ -471,6 +486,23 @@ fn host_port(addr: &str) -> Result<(&str, u16), FoxgloveError> {
 /// `role` of [`Role::Rov`] offers no publishing to clients (its orders come over the link),
 /// and its [`LiveOrders`] stays empty. Must not be called from inside an async runtime.
 pub fn start(addr: &str, role: Role) -> Result<(LiveView, LiveOrders), FoxgloveError> {
+    serve(addr, role, &[None])
+}
+
+/// Starts the server of a network's view (see [`start`]): each vehicle's channels under
+/// `/vehicle/N/` (as the network's MCAP log has them, its body frame `vehicle_N` on
+/// `/vehicle/N/tf`), and `/network/frames`. Clients cannot publish: a network's orders come
+/// from its scenario.
+pub fn start_network(addr: &str, vehicles: &[u8]) -> Result<LiveView, FoxgloveError> {
+    let lanes: Vec<Option<u8>> = vehicles.iter().map(|&v| Some(v)).collect();
+    serve(addr, Role::Rov, &lanes).map(|(view, _)| view)
+}
+
+fn serve(
+    addr: &str,
+    role: Role,
+    lanes: &[Option<u8>],
+) -> Result<(LiveView, LiveOrders), FoxgloveError> {
     let (host, port) = host_port(addr)?;
     let context = Context::new();
     let sdk = |e: foxglove::FoxgloveError| match e {
@@ -483,23 +515,34 @@ pub fn start(addr: &str, role: Role) -> Result<(LiveView, LiveOrders), FoxgloveE
             message: other.to_string(),
         },
     };
-    let mut channels = Vec::with_capacity(Topic::ALL.len());
-    for topic in Topic::ALL {
-        let channel = context
-            .channel_builder(topic.name())
+    let channel = |name: &str, schema_name: &str, schema: &'static str| {
+        context
+            .channel_builder(name)
             .message_encoding("json")
-            .schema(Schema::new(
-                topic.schema_name(),
-                "jsonschema",
-                topic.schema().as_bytes(),
-            ))
+            .schema(Schema::new(schema_name, "jsonschema", schema.as_bytes()))
             .build_raw()
-            .map_err(sdk)?;
-        channels.push(channel);
+            .map_err(sdk)
+    };
+    let mut channels = Vec::with_capacity(lanes.len() * Topic::ALL.len() + 1);
+    for lane in lanes {
+        for topic in Topic::ALL {
+            let name = match lane {
+                Some(vehicle) => super::net_mcap::vehicle_topic(*vehicle, topic),
+                None => topic.name().to_string(),
+            };
+            channels.push(channel(&name, topic.schema_name(), topic.schema())?);
+        }
+    }
+    if lanes.iter().any(Option::is_some) {
+        channels.push(channel(
+            super::net_mcap::NETWORK_FRAMES_TOPIC,
+            "rovlink.HopFrame",
+            super::net_mcap::HOP_FRAME,
+        )?);
     }
     let latest = Arc::new(Latest {
+        messages: Mutex::new(vec![None; channels.len()]),
         channels,
-        messages: Mutex::new(vec![None; Topic::ALL.len()]),
     });
     let inbox = Arc::new(Mutex::new(Inbox::default()));
     // The SDK listens on a loopback port of its own; the gate, on the address given, carries
@@ -526,15 +569,25 @@ pub fn start(addr: &str, role: Role) -> Result<(LiveView, LiveOrders), FoxgloveE
             source,
         }
     })?;
+    let lanes = lanes
+        .iter()
+        .map(|&vehicle| Lane {
+            vehicle,
+            view: match vehicle {
+                Some(v) => View::new(Clock::Wall).with_body_frame(&format!("vehicle_{v}")),
+                None => View::new(Clock::Wall),
+            },
+            last_preview: None,
+            last_pose: None,
+        })
+        .collect();
     let view = LiveView {
         gate: Some(gate),
         server: Some(handle),
         latest,
         _context: context,
-        view: View::new(Clock::Wall),
+        lanes,
         addr: addr.to_string(),
-        last_preview: None,
-        last_pose: None,
     };
     let reports = view.gate.as_ref().map(Gate::reports);
     Ok((view, LiveOrders { inbox, reports }))
@@ -558,33 +611,54 @@ impl LiveView {
             .map_or(0, WebSocketServerHandle::client_count)
     }
 
-    /// Builds only what some client subscribes to: nothing at all with no client, and no
-    /// picture decoded for nobody.
-    /// ... and the kept channels' (but the preview's: a decode for nobody), whose latest
-    /// message a new subscriber gets at once.
-    fn follow_subscriptions(&mut self) {
-        let channels = &self.latest.channels;
-        self.view.want(|topic| {
-            (KEPT.contains(&topic) && topic != Topic::Preview)
-                || channels.get(topic.index()).is_some_and(|c| c.has_sinks())
-        });
+    /// The handshakes the gate refused, not yet reported (a network's view has no
+    /// [`LiveOrders`] to report them).
+    pub fn take_refusals(&self) -> Vec<String> {
+        self.gate
+            .as_ref()
+            .map(|g| g.reports().take())
+            .unwrap_or_default()
     }
 
-    fn publish(&self, message: &ViewMessage) {
-        self.latest.keep(message);
-        if let Some(channel) = self.latest.channels.get(message.topic.index()) {
+    /// The lane of `vehicle` (the only one in a single session).
+    fn lane_of(&self, vehicle: Option<u8>) -> Option<usize> {
+        match vehicle {
+            None => (!self.lanes.is_empty()).then_some(0),
+            Some(v) => self.lanes.iter().position(|l| l.vehicle == Some(v)),
+        }
+    }
+
+    /// Lane `lane` builds what some client subscribes to, and the kept channels' messages
+    /// (but the preview's: a decode for nobody), whose latest a new subscriber gets at once.
+    fn follow_subscriptions(&mut self, lane: usize) {
+        let base = lane * Topic::ALL.len();
+        let channels = &self.latest.channels;
+        if let Some(lane) = self.lanes.get_mut(lane) {
+            lane.view.want(|topic| {
+                (KEPT.contains(&topic) && topic != Topic::Preview)
+                    || channels
+                        .get(base + topic.index())
+                        .is_some_and(|c| c.has_sinks())
+            });
+        }
+    }
+
+    fn publish_at(&self, index: usize, topic: Topic, json: &str, log_time_ns: u64) {
+        self.latest.keep(index, topic, json, log_time_ns);
+        if let Some(channel) = self.latest.channels.get(index) {
             channel.log_with_meta(
-                message.json.as_bytes(),
+                json.as_bytes(),
                 PartialMetadata {
-                    log_time: Some(message.log_time_ns),
+                    log_time: Some(log_time_ns),
                 },
             );
         }
     }
 
-    fn publish_all(&self, messages: &[ViewMessage]) {
-        for message in messages {
-            self.publish(message);
+    fn publish_all(&self, lane: usize, messages: &[ViewMessage]) {
+        for m in messages {
+            let index = lane * Topic::ALL.len() + m.topic.index();
+            self.publish_at(index, m.topic, &m.json, m.log_time_ns);
         }
     }
 
@@ -610,6 +684,67 @@ impl LiveView {
             let _ = done_rx.recv_timeout(STOP_WAIT);
         }
     }
+
+    fn lane_frame(&mut self, lane: usize, e: &FrameEvent) {
+        self.follow_subscriptions(lane);
+        let Some(l) = self.lanes.get(lane) else {
+            return;
+        };
+        let messages = l.view.frame(e);
+        self.publish_all(lane, &messages);
+        self.republish_still(lane, e.t_received_s.or(e.t_sent_s));
+    }
+
+    /// A still vehicle's status changes nothing, so no pose comes: the last one is published
+    /// again (stamped `t_s`) at least every [`POSE_EVERY`], so that a viewer opened now shows it.
+    fn republish_still(&mut self, lane: usize, t_s: Option<f64>) {
+        let now = Instant::now();
+        if let Some((mut pose, at)) = self.lanes.get(lane).and_then(|l| l.last_pose)
+            && now.saturating_duration_since(at) >= POSE_EVERY
+        {
+            pose.t_s = pose.t_s.max(t_s.unwrap_or(pose.t_s));
+            self.lane_pose(lane, &pose);
+        }
+    }
+
+    fn lane_image(&mut self, lane: usize, t_s: f64, stream: &[u8]) {
+        self.follow_subscriptions(lane);
+        if let Some(message) = self.lanes.get(lane).and_then(|l| l.view.image(t_s, stream)) {
+            self.publish_all(lane, &[message]);
+        }
+    }
+
+    fn lane_pose(&mut self, lane: usize, pose: &PoseSample) {
+        self.follow_subscriptions(lane);
+        let Some(l) = self.lanes.get_mut(lane) else {
+            return;
+        };
+        let messages = l.view.pose(pose);
+        l.last_pose = Some((*pose, Instant::now()));
+        self.publish_all(lane, &messages);
+    }
+
+    fn lane_event(&mut self, lane: usize, end: Role, t_s: f64, event: &Event) {
+        let Some(l) = self.lanes.get_mut(lane) else {
+            return;
+        };
+        if let Event::ImageProgress { prefix, .. } = event {
+            // Only when new trunks changed the picture, and at most every PREVIEW_EVERY.
+            let now = Instant::now();
+            if l.last_preview.is_some_and(|(at, len)| {
+                len == prefix.len() || now.saturating_duration_since(at) < PREVIEW_EVERY
+            }) {
+                return;
+            }
+            l.last_preview = Some((now, prefix.len()));
+        }
+        self.follow_subscriptions(lane);
+        let Some(l) = self.lanes.get(lane) else {
+            return;
+        };
+        let messages = l.view.event(end, t_s, event);
+        self.publish_all(lane, &messages);
+    }
 }
 
 impl Drop for LiveView {
@@ -620,50 +755,60 @@ impl Drop for LiveView {
 
 impl Observer for LiveView {
     fn frame(&mut self, e: &FrameEvent) {
-        self.follow_subscriptions();
-        let messages = self.view.frame(e);
-        self.publish_all(&messages);
-        // A still vehicle's status changes nothing, so no pose comes: republish the last one
-        // (stamped now) at least every POSE_EVERY, so that a viewer opened now shows it.
-        let now = Instant::now();
-        if let Some((mut pose, at)) = self.last_pose
-            && now.saturating_duration_since(at) >= POSE_EVERY
-        {
-            pose.t_s = pose
-                .t_s
-                .max(e.t_received_s.or(e.t_sent_s).unwrap_or(pose.t_s));
-            self.pose(&pose);
-        }
+        self.lane_frame(0, e);
     }
 
     fn image(&mut self, t_s: f64, stream: &[u8]) {
-        self.follow_subscriptions();
-        if let Some(message) = self.view.image(t_s, stream) {
-            self.publish(&message);
-        }
+        self.lane_image(0, t_s, stream);
     }
 
     fn pose(&mut self, pose: &PoseSample) {
-        self.follow_subscriptions();
-        let messages = self.view.pose(pose);
-        self.publish_all(&messages);
-        self.last_pose = Some((*pose, Instant::now()));
+        self.lane_pose(0, pose);
     }
 
     fn event(&mut self, end: Role, t_s: f64, event: &Event) {
-        if let Event::ImageProgress { prefix, .. } = event {
-            // Only when new trunks changed the picture, and at most every PREVIEW_EVERY.
-            let now = Instant::now();
-            if self.last_preview.is_some_and(|(at, len)| {
-                len == prefix.len() || now.saturating_duration_since(at) < PREVIEW_EVERY
-            }) {
-                return;
-            }
-            self.last_preview = Some((now, prefix.len()));
+        self.lane_event(0, end, t_s, event);
+    }
+}
+
+impl NetObserver for LiveView {
+    fn hop(&mut self, e: &HopEvent) {
+        let index = self.lanes.len() * Topic::ALL.len();
+        let Some(channel) = self.latest.channels.get(index) else {
+            return;
+        };
+        if channel.has_sinks() {
+            let now_ns = super::mcap_log::wall_clock_ns();
+            let json = super::net_mcap::hop_json(e, now_ns);
+            channel.log_with_meta(
+                json.as_bytes(),
+                PartialMetadata {
+                    log_time: Some(now_ns),
+                },
+            );
         }
-        self.follow_subscriptions();
-        let messages = self.view.event(end, t_s, event);
-        self.publish_all(&messages);
+        // A still vehicle's pose is republished on the network's ticks too.
+        for lane in 0..self.lanes.len() {
+            self.republish_still(lane, e.t_received_s.or(Some(e.t_sent_s)));
+        }
+    }
+
+    fn image(&mut self, vehicle: u8, t_s: f64, stream: &[u8]) {
+        if let Some(lane) = self.lane_of(Some(vehicle)) {
+            self.lane_image(lane, t_s, stream);
+        }
+    }
+
+    fn pose(&mut self, vehicle: u8, pose: &PoseSample) {
+        if let Some(lane) = self.lane_of(Some(vehicle)) {
+            self.lane_pose(lane, pose);
+        }
+    }
+
+    fn event(&mut self, vehicle: u8, end: Role, t_s: f64, event: &Event) {
+        if let Some(lane) = self.lane_of(Some(vehicle)) {
+            self.lane_event(lane, end, t_s, event);
+        }
     }
 }
 

@@ -23,7 +23,24 @@ use super::{PoseSample, Role};
 use crate::cli::output::Dest;
 use crate::io::Output;
 
-const HOP_FRAME: &str = r#"{"title":"rovlink.HopFrame","type":"object","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"medium":{"type":"string"},"src":{"type":"integer","description":"omitted when the frame had no readable header"},"dst":{"type":"integer","description":"omitted when the frame had no readable header"},"tx":{"type":"integer"},"rx":{"type":"integer"},"kind":{"type":"string"},"bytes":{"type":"integer"},"fate":{"type":"string"},"action":{"type":"string"},"t_sent_s":{"type":"number"},"t_received_s":{"type":"number","description":"omitted when not received"},"delay_ms":{"type":"number","description":"omitted when not delivered"}}}"#;
+/// The JSON Schema of `/network/frames`.
+pub const HOP_FRAME: &str = r#"{"title":"rovlink.HopFrame","type":"object","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"medium":{"type":"string"},"src":{"type":"integer","description":"omitted when the frame had no readable header"},"dst":{"type":"integer","description":"omitted when the frame had no readable header"},"tx":{"type":"integer"},"rx":{"type":"integer"},"kind":{"type":"string"},"bytes":{"type":"integer"},"fate":{"type":"string"},"action":{"type":"string"},"t_sent_s":{"type":"number"},"t_received_s":{"type":"number","description":"omitted when not received"},"delay_ms":{"type":"number","description":"omitted when not delivered"}}}"#;
+
+/// The topic of a network's frames.
+pub const NETWORK_FRAMES_TOPIC: &str = "/network/frames";
+
+/// A frame's fate at one receiver as a `/network/frames` message, stamped `timestamp_ns`.
+pub fn hop_json(e: &HopEvent, timestamp_ns: u64) -> String {
+    let ns = timestamp_ns;
+    let delay_ms = e.t_received_s.map(|r| (r - e.t_sent_s) * 1e3);
+    let json = json!({
+        "timestamp": {"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000},
+        "medium": e.medium, "src": e.src, "dst": e.dst, "tx": e.tx, "rx": e.rx,
+        "kind": e.kind, "bytes": e.bytes, "fate": e.fate, "action": e.action,
+        "t_sent_s": e.t_sent_s, "t_received_s": e.t_received_s, "delay_ms": delay_ms,
+    });
+    without_nulls(&json).to_string()
+}
 
 /// The per-vehicle channels: the log's own, except the single link's frames.
 fn vehicle_topics() -> impl Iterator<Item = Topic> {
@@ -77,7 +94,7 @@ impl NetMcapLog {
             &mut writer,
             "rovlink.HopFrame",
             HOP_FRAME,
-            "/network/frames",
+            NETWORK_FRAMES_TOPIC,
             &none,
         )
         .map_err(wrap)?;
@@ -151,14 +168,7 @@ impl NetMcapLog {
     pub fn hop(&mut self, e: &HopEvent) {
         let t_s = e.t_received_s.unwrap_or(e.t_sent_s);
         let ns = (t_s.max(0.0) * 1e9).round() as u64;
-        let delay_ms = e.t_received_s.map(|r| (r - e.t_sent_s) * 1e3);
-        let json = json!({
-            "timestamp": {"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000},
-            "medium": e.medium, "src": e.src, "dst": e.dst, "tx": e.tx, "rx": e.rx,
-            "kind": e.kind, "bytes": e.bytes, "fate": e.fate, "action": e.action,
-            "t_sent_s": e.t_sent_s, "t_received_s": e.t_received_s, "delay_ms": delay_ms,
-        });
-        self.write(self.frames, ns, &without_nulls(&json).to_string());
+        self.write(self.frames, ns, &hop_json(e, ns));
     }
 
     /// A completed image of `vehicle`.

@@ -147,6 +147,39 @@ pub trait NetObserver {
     }
 }
 
+/// Several network observers, each seeing everything in turn (failed once any has).
+pub struct NetTee<'a>(pub Vec<&'a mut dyn NetObserver>);
+
+impl NetObserver for NetTee<'_> {
+    fn hop(&mut self, event: &HopEvent) {
+        self.0.iter_mut().for_each(|o| o.hop(event));
+    }
+
+    fn image(&mut self, vehicle: u8, t_s: f64, stream: &[u8]) {
+        self.0
+            .iter_mut()
+            .for_each(|o| o.image(vehicle, t_s, stream));
+    }
+
+    fn pose(&mut self, vehicle: u8, pose: &PoseSample) {
+        self.0.iter_mut().for_each(|o| o.pose(vehicle, pose));
+    }
+
+    fn event(&mut self, vehicle: u8, end: Role, t_s: f64, event: &Event) {
+        self.0
+            .iter_mut()
+            .for_each(|o| o.event(vehicle, end, t_s, event));
+    }
+
+    fn warning(&mut self, t_s: f64, text: &str) {
+        self.0.iter_mut().for_each(|o| o.warning(t_s, text));
+    }
+
+    fn failed(&self) -> bool {
+        self.0.iter().any(|o| o.failed())
+    }
+}
+
 /// A network observer that observes nothing.
 pub struct QuietNet;
 

@@ -182,7 +182,7 @@ pub struct Args {
     #[arg(long, value_name = "FILE", help_heading = "Network",
           conflicts_with_all = ["sim", "role", "port", "script", "waypoints", "buoy", "start",
                                 "ipg", "image_size", "trunk", "roi", "orders", "camera",
-                                "camera_cmd", "preview", "foxglove", "vehicle"])]
+                                "camera_cmd", "preview", "vehicle"])]
     pub scenario: Option<PathBuf>,
 
     /// The operator modem's position, NED m (each within 100 km): its distance to the ROV

@@ -318,6 +318,6 @@ fn open_orders(path: &std::path::Path, live: bool) -> Result<rovlink::rcp::conso
 }
 
 /// The host part of HOST:PORT, for the URL said at start.
-fn host_of(addr: &str) -> &str {
+pub(crate) fn host_of(addr: &str) -> &str {
     addr.rsplit_once(':').map_or(addr, |(host, _)| host)
 }

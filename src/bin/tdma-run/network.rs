@@ -8,7 +8,7 @@ use rovlink::cli::output::{Kind, Outputs};
 use rovlink::cli::{progress, stop};
 use rovlink::io::EXIT_OK;
 use rovlink::rcp::net_outputs::{NetDestinations, NetRecorder};
-use rovlink::rcp::network::{self, NetObserver, NetworkMetrics};
+use rovlink::rcp::network::{self, NetObserver, NetTee, NetworkMetrics};
 use rovlink::rcp::outputs::{summary, write_metrics};
 use rovlink::rcp::pace::Pacer;
 use rovlink::rcp::scenario::Scenario;
@@ -74,19 +74,38 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
         scenario.cycle_s() * 1e3,
         slots.join(", ")
     );
+    // A live view of every vehicle (`/vehicle/N/...`), as the MCAP log has them.
+    let mut live = match &args.foxglove {
+        Some(addr) => {
+            let view = rovlink::rcp::foxglove::start_network(addr, &scenario.vehicles())
+                .map_err(|e| UsageError(e.to_string()))?;
+            say!(
+                "Foxglove: ws://{}:{} (every vehicle under /vehicle/N/)",
+                crate::host_of(addr),
+                view.port()
+            );
+            Some(view)
+        }
+        None => None,
+    };
     let wall = std::time::Instant::now();
     let mut metrics = {
-        let mut observer = Both(&mut recorder);
-        let mut paced;
-        let observer: &mut dyn NetObserver = match args.pace {
-            Some(pace) => {
-                paced = Paced(Pacer::new(pace, stop::flag()), &mut observer);
-                &mut paced
-            }
-            None => &mut observer,
-        };
-        network::run(&scenario, &pictures.images, observer, stop::flag())?
+        let mut pacer = args.pace.map(|pace| Pacer::new(pace, stop::flag()));
+        let mut both = Both(&mut recorder);
+        let mut observers = NetTee(Vec::new());
+        if let Some(pacer) = pacer.as_mut() {
+            observers.0.push(pacer);
+        }
+        observers.0.push(&mut both);
+        if let Some(view) = live.as_mut() {
+            observers.0.push(view);
+        }
+        network::run(&scenario, &pictures.images, &mut observers, stop::flag())?
     };
+    if let Some(view) = live.take() {
+        view.take_refusals().iter().for_each(|line| say!("{line}"));
+        view.stop();
+    }
     mark_interrupted(&mut metrics);
     if let Some(out) = metrics_out.as_mut() {
         write_metrics(out, scenario.seed, &metrics)?;
@@ -136,38 +155,6 @@ pub(crate) fn network_summary(metrics: &NetworkMetrics) -> Vec<String> {
         }
     }
     lines
-}
-
-/// A network observer held back to the wall clock by a [`Pacer`] (`--pace`).
-struct Paced<'a, 'b>(Pacer<'a>, &'b mut dyn NetObserver);
-
-impl NetObserver for Paced<'_, '_> {
-    fn hop(&mut self, event: &network::HopEvent) {
-        self.0.hop(event);
-        self.1.hop(event);
-    }
-
-    fn image(&mut self, vehicle: u8, t_s: f64, stream: &[u8]) {
-        self.1.image(vehicle, t_s, stream);
-    }
-
-    fn pose(&mut self, vehicle: u8, pose: &PoseSample) {
-        NetObserver::pose(&mut self.0, vehicle, pose);
-        self.1.pose(vehicle, pose);
-    }
-
-    fn event(&mut self, vehicle: u8, end: Role, t_s: f64, event: &Event) {
-        NetObserver::event(&mut self.0, vehicle, end, t_s, event);
-        self.1.event(vehicle, end, t_s, event);
-    }
-
-    fn warning(&mut self, t_s: f64, text: &str) {
-        self.1.warning(t_s, text);
-    }
-
-    fn failed(&self) -> bool {
-        self.1.failed()
-    }
 }
 
 /// The recorder, with warnings also on standard error.
