@@ -129,13 +129,15 @@ fn a_client_receives_poses_and_images_as_they_are_published() {
         view.pose(&pose(t_s, [f64::from(k) * 0.1, -1.0, 2.0], 10.0));
         slowest_pose = slowest_pose.max(call.elapsed());
         if k.is_multiple_of(10) {
+            // A trunk more each time: a preview is sent only when new trunks changed it.
+            let n = (8 + k as usize / 10).min(trunks.len());
             view.event(
                 Role::Operator,
                 t_s,
                 &Event::ImageProgress {
-                    trunks: 8,
+                    trunks: n,
                     of: None,
-                    prefix: trunks[..8].concat(),
+                    prefix: trunks[..n].concat(),
                 },
             );
             view.image(t_s, &stream);
@@ -176,7 +178,14 @@ fn a_client_receives_poses_and_images_as_they_are_published() {
         log_ns / 1_000_000_000
     );
     assert_eq!(png_size(&seen["last"]["/camera/image"]), (160, 120));
-    assert_eq!(png_size(&seen["last"]["/camera/preview"]), (160, 120));
+    // The preview is JPEG (a picture still arriving; a fraction of its PNG), full size.
+    let preview = &seen["last"]["/camera/preview"];
+    assert_eq!(preview["format"], "jpeg");
+    let jpeg = base64::engine::general_purpose::STANDARD
+        .decode(preview["data"].as_str().unwrap())
+        .unwrap();
+    let decoded = image::load_from_memory_with_format(&jpeg, image::ImageFormat::Jpeg).unwrap();
+    assert_eq!((decoded.width(), decoded.height()), (160, 120));
     assert_eq!(
         seen["last"]["/link/log"]["message"],
         "answers lost: no ROV frame for 5 s"
