@@ -6,11 +6,11 @@ mod common;
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::process::{Child, Command, Stdio};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
+use common::hostile::{lines_in, signal_once};
 use common::{open_pty, run};
-use nix::sys::signal::{Signal, kill};
-use nix::unistd::Pid;
+use nix::sys::signal::Signal;
 
 const MODEM_BENCH: &str = env!("CARGO_BIN_EXE_modem-bench");
 const LINK_SIM: &str = env!("CARGO_BIN_EXE_link-sim");
@@ -141,9 +141,17 @@ fn bad_arguments_are_refused() {
     assert!(out.stdout.is_empty());
 }
 
+/// modem-bench's `--timeout` in the real-time tests: a probe later than this counts as lost.
+/// Only a hang takes so long; it lengthens no run (a campaign ends when every probe is in).
+const PROBE_TIMEOUT: &str = "10";
+
+/// The most a signalled or unplugged tool takes to end: only a hang takes this long.
+const EXIT_LIMIT: Duration = Duration::from_secs(30);
+
+/// Ends a link-sim with SIGTERM, once it catches it.
 fn stop(mut child: Child) {
-    kill(Pid::from_raw(child.id() as i32), Signal::SIGTERM).unwrap();
-    child.wait().unwrap();
+    signal_once(&mut child, Signal::SIGTERM, &|| true, EXIT_LIMIT);
+    common::wait_for_exit(&mut child, EXIT_LIMIT);
 }
 
 #[test]
@@ -163,7 +171,7 @@ fn real_time_through_link_sim_measures_its_model() {
             "--interval",
             "150",
             "--timeout",
-            "3",
+            PROBE_TIMEOUT,
         ],
         b"",
     );
@@ -176,9 +184,11 @@ fn real_time_through_link_sim_measures_its_model() {
         let size: f64 = row[1].parse().unwrap();
         let delay: f64 = row[4].parse().unwrap();
         let expected = 85.0 + size * 8.0 / 1900.0 * 1e3;
-        // Frames queue behind each other at 150 ms intervals: never earlier than the model.
+        // Frames queue behind each other at 150 ms intervals (up to about 200 ms): never
+        // earlier than the model. Above, only a bound on a hang: a loaded machine delivers
+        // late (the model's exact delays are checked in virtual time, tests/cli_link.rs).
         assert!(delay >= expected - 1.0, "{row:?} vs {expected}");
-        assert!(delay < expected + 600.0, "{row:?} vs {expected}");
+        assert!(delay < expected + 5000.0, "{row:?} vs {expected}");
     }
 }
 
@@ -208,7 +218,7 @@ fn the_evologics_dialect_works_end_to_end() {
             "--interval",
             "400",
             "--timeout",
-            "5",
+            PROBE_TIMEOUT,
         ],
         b"",
     );
@@ -220,13 +230,15 @@ fn the_evologics_dialect_works_end_to_end() {
     let first: f64 = rows.iter().find(|r| r[0] == "0").unwrap()[4]
         .parse()
         .unwrap();
-    // 443 ms + 16 bytes at 1620 bit/s (79 ms) + 0.67 ms of propagation.
-    assert!((522.0..1200.0).contains(&first), "{first}");
+    // 443 ms + 16 bytes at 1620 bit/s (79 ms) + 0.67 ms of propagation; late only by a
+    // loaded machine (the bound above is one on a hang).
+    assert!((522.0..6000.0).contains(&first), "{first}");
 }
 
 #[test]
 fn an_echoing_far_end_gives_round_trips() {
     let (mut master, path) = open_pty();
+    let (done, finished) = std::sync::mpsc::channel::<()>();
     let echo = std::thread::spawn(move || {
         let mut buf = [0u8; 256];
         let mut echoed = 0;
@@ -240,8 +252,8 @@ fn an_echoing_far_end_gives_round_trips() {
                 _ => break,
             }
         }
-        // Keep the line open until modem-bench has read the last echo.
-        std::thread::sleep(Duration::from_millis(500));
+        // Keep the line open until modem-bench has read the last echo: until it has ended.
+        let _ = finished.recv_timeout(Duration::from_secs(120));
     });
     let out = run(
         MODEM_BENCH,
@@ -256,17 +268,19 @@ fn an_echoing_far_end_gives_round_trips() {
             "--interval",
             "100",
             "--timeout",
-            "2",
+            PROBE_TIMEOUT,
         ],
         b"",
     );
+    done.send(()).unwrap();
     echo.join().unwrap();
     assert_eq!(out.code, 0, "{}", out.stderr);
     let rows = rows(&out.stdout_text());
     assert_eq!(rows.len(), 3);
     for row in rows {
         let delay: f64 = row[4].parse().unwrap();
-        assert!((29.0..1000.0).contains(&delay), "{row:?}");
+        // The far end answers 30 ms late; above, a bound on a hang only.
+        assert!((29.0..5000.0).contains(&delay), "{row:?}");
     }
 }
 
@@ -280,7 +294,7 @@ fn a_port_that_vanishes_keeps_the_rows_and_exits_1() {
         .args([
             "--tx", &tx_path, "--rx", &rx_path, "--size", "20", "--count", "50",
         ])
-        .args(["--interval", "100", "--timeout", "5", "-o"])
+        .args(["--interval", "100", "--timeout", PROBE_TIMEOUT, "-o"])
         .arg(&csv)
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
@@ -294,9 +308,21 @@ fn a_port_that_vanishes_keeps_the_rows_and_exits_1() {
         rx_master.write_all(&buf[..n]).unwrap();
         forwarded += n;
     }
-    std::thread::sleep(Duration::from_millis(300));
+    // Unplug once modem-bench has recorded both (the header and two rows), not after a guess.
+    let started = Instant::now();
+    while lines_in(&csv) < 3 {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "modem-bench ended before recording the forwarded probes"
+        );
+        assert!(
+            started.elapsed() < EXIT_LIMIT,
+            "the forwarded probes were not recorded"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
     drop(rx_master);
-    let status = common::wait_for_exit(&mut child, Duration::from_secs(5));
+    let status = common::wait_for_exit(&mut child, EXIT_LIMIT);
     let mut stderr = String::new();
     child
         .stderr
@@ -347,7 +373,7 @@ fn udp_endpoints_through_link_sim() {
             "--interval",
             "300",
             "--timeout",
-            "2",
+            PROBE_TIMEOUT,
         ],
         b"",
     );
@@ -357,8 +383,8 @@ fn udp_endpoints_through_link_sim() {
     assert_eq!(rows.len(), 3);
     for row in rows {
         let delay: f64 = row[4].parse().unwrap();
-        // 85 ms + 30 bytes at 1900 bit/s.
-        assert!((211.0..800.0).contains(&delay), "{row:?}");
+        // 85 ms + 30 bytes at 1900 bit/s; above, a bound on a hang only.
+        assert!((211.0..5000.0).contains(&delay), "{row:?}");
     }
 }
 
@@ -377,9 +403,15 @@ fn ctrl_c_keeps_the_rows_and_writes_the_summary() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_millis(1500));
-    kill(Pid::from_raw(child.id() as i32), Signal::SIGINT).unwrap();
-    let status = common::wait_for_exit(&mut child, Duration::from_secs(5));
+    // Ctrl-C once five rows are in the file (it runs for 100 s otherwise).
+    let rows_in = || lines_in(&csv) >= 6;
+    signal_once(
+        &mut child,
+        Signal::SIGINT,
+        &rows_in,
+        Duration::from_secs(60),
+    );
+    let status = common::wait_for_exit(&mut child, EXIT_LIMIT);
     stop(sim);
     let mut stderr = String::new();
     child

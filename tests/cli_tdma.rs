@@ -3,9 +3,77 @@
 
 mod common;
 
+use std::io::{BufRead, Read};
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
+use std::time::{Duration, Instant};
+
 use common::run;
 
 const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
+
+/// How long a process may take to show a sign (a line, a byte) or to end when it should:
+/// only a hang takes this long, however loaded the machine.
+const LIMIT: Duration = Duration::from_secs(30);
+
+/// A child's output read line by line in a thread, as it comes: the test waits for the line
+/// that says the child is under way, and keeps everything said for its messages.
+struct Said {
+    lines: Receiver<String>,
+    text: String,
+}
+
+impl Said {
+    fn of(stream: impl Read + Send + 'static) -> Said {
+        let (tx, lines) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for line in std::io::BufReader::new(stream).lines() {
+                let Ok(line) = line else { return };
+                if tx.send(line).is_err() {
+                    return;
+                }
+            }
+        });
+        Said {
+            lines,
+            text: String::new(),
+        }
+    }
+
+    /// Waits until a line holds `text`; fails if the stream ends first (the child ended) or
+    /// `limit` passes.
+    fn wait_for(&mut self, text: &str, limit: Duration) {
+        let deadline = Instant::now() + limit;
+        loop {
+            match self
+                .lines
+                .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+            {
+                Ok(line) => {
+                    self.text.push_str(&line);
+                    self.text.push('\n');
+                    if line.contains(text) {
+                        return;
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => {
+                    panic!("nothing said {text:?} within {limit:?}: {}", self.text)
+                }
+                Err(RecvTimeoutError::Disconnected) => {
+                    panic!("ended before saying {text:?}: {}", self.text)
+                }
+            }
+        }
+    }
+
+    /// Everything said, to the end of the stream (once the child has ended).
+    fn rest(mut self) -> String {
+        for line in self.lines.iter() {
+            self.text.push_str(&line);
+            self.text.push('\n');
+        }
+        self.text
+    }
+}
 
 #[test]
 fn a_session_writes_metrics_and_one_event_per_frame() {
@@ -163,7 +231,9 @@ fn the_two_ends_run_in_real_time_through_link_sim() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    std::thread::sleep(std::time::Duration::from_millis(300));
+    // The operator starts once the ROV listens on its port (it says so), not after a guess.
+    let mut rov_said = Said::of(rov.stderr.take().unwrap());
+    rov_said.wait_for("ROV: answering every slot", LIMIT);
     let op = run(
         TDMA_RUN,
         &[
@@ -191,10 +261,10 @@ fn the_two_ends_run_in_real_time_through_link_sim() {
         b"",
     );
     assert_eq!(op.code, 0, "{}", op.stderr);
-    let status = common::wait_for_exit(&mut rov, std::time::Duration::from_secs(20));
+    let status = common::wait_for_exit(&mut rov, LIMIT);
     let _ = link.kill();
     let _ = link.wait();
-    assert!(status.success(), "ROV end: {status:?}");
+    assert!(status.success(), "ROV end: {status:?}: {}", rov_said.rest());
 
     let (o, r) = (
         json(&dir.path().join("op.json")),
@@ -317,18 +387,37 @@ fn a_simulated_session_logs_to_mcap_and_track() {
 fn a_port_that_closes_ends_the_run_with_exit_1_and_keeps_the_outputs() {
     let dir = tempfile::tempdir().unwrap();
     let metrics = dir.path().join("m.json");
-    let (mut link, a, _b) = common::link_sim_pty(&["--model", "s100"]);
+    let (mut link, a, b) = common::link_sim_pty(&["--model", "s100"]);
     let mut op = std::process::Command::new(TDMA_RUN)
         .args(["--role", "operator", "--port", &a, "--duration", "60"])
         .args(["--metrics", metrics.to_str().unwrap()])
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let said = Said::of(op.stderr.take().unwrap());
+    // The link goes once the operator's first frame has crossed it: a byte at side B (which
+    // link-sim keeps raw), not a guess at how long the operator takes to start.
+    let far_end = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(&b)
+        .unwrap();
+    let mut reader = far_end.try_clone().unwrap();
+    let (tx, heard) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut byte = [0u8; 1];
+        let _ = tx.send(reader.read(&mut byte).is_ok_and(|n| n == 1));
+    });
+    assert_eq!(
+        heard.recv_timeout(LIMIT),
+        Ok(true),
+        "no frame from the operator"
+    );
     let _ = link.kill();
     let _ = link.wait();
-    let status = common::wait_for_exit(&mut op, std::time::Duration::from_secs(10));
-    assert_eq!(status.code(), Some(1));
+    let status = common::wait_for_exit(&mut op, LIMIT);
+    drop(far_end);
+    assert_eq!(status.code(), Some(1), "{}", said.rest());
     let m = json(&metrics);
     assert!(
         m["operator_to_rov"]["frames_sent"].as_u64().unwrap() >= 1,

@@ -64,6 +64,35 @@ fn wait_for_clients(view: &LiveView, n: usize) {
     }
 }
 
+/// Calls `publish` every `every` until `child` (a client) has ended: what a client's window
+/// must see is published for as long as it is open, however late it opened or reads. Fails
+/// after `limit`.
+fn publish_until_ended(
+    child: &mut Child,
+    every: Duration,
+    limit: Duration,
+    mut publish: impl FnMut(),
+) {
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        assert!(
+            start.elapsed() < limit,
+            "client.py still running after {limit:?}"
+        );
+        publish();
+        std::thread::sleep(every);
+    }
+}
+
+/// The longest one call of the Observer API may take. A call that waited on a client would
+/// wait as long as the client does not read (seconds, for the stuck client below); a loaded
+/// machine may preempt a call for tens of milliseconds. So this bounds a hang, not speed.
+const SLOWEST_POSE: Duration = Duration::from_secs(1);
+
+/// The longest an image may take to publish: its decoding and PNG cost tens of milliseconds
+/// (more in a debug build on a loaded machine); a wait for the stuck client would be seconds.
+const SLOWEST_IMAGE: Duration = Duration::from_secs(2);
+
 fn pose(t_s: f64, position_m: [f64; 3], heading_deg: f64) -> PoseSample {
     PoseSample {
         t_s,
@@ -107,23 +136,29 @@ fn a_client_receives_poses_and_images_as_they_are_published() {
     let (mut view, _orders) = start(Role::Operator);
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("seen.json");
-    let child = client(
+    // The client's window (from its start) leaves seconds to spare after the two seconds of
+    // publishing below, however slowly it connects.
+    let mut child = client(
         &view,
         &out,
         &[
             "--topics",
             "/rov/pose,/rov/goal,/camera/image,/camera/preview,/link/log,/session/log",
             "--seconds",
-            "4",
+            "8",
         ],
     );
     wait_for_clients(&view, 1);
     let (stream, trunks) = image_stream();
-    let started = Instant::now();
     let before_ns = rovlink::rcp::mcap_log::wall_clock_ns();
-    let mut k: u32 = 0;
     let mut slowest_pose = Duration::ZERO;
-    while started.elapsed() < Duration::from_millis(2000) {
+    // Forty poses 50 ms apart, an image every tenth: counted, not timed, so that a slow
+    // machine publishes them all.
+    for k in 0..40u32 {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "client.py's window ended before the poses were published"
+        );
         let t_s = f64::from(k) * 0.05;
         let call = Instant::now();
         view.pose(&pose(t_s, [f64::from(k) * 0.1, -1.0, 2.0], 10.0));
@@ -143,15 +178,31 @@ fn a_client_receives_poses_and_images_as_they_are_published() {
             view.image(t_s, &stream);
             view.event(Role::Operator, t_s, &Event::OrderAcknowledged(k.into()));
         }
-        k += 1;
         std::thread::sleep(Duration::from_millis(50));
     }
-    // The last pose, and nothing after it: the client's last pose must be this one.
-    view.pose(&pose(99.0, [12.5, -3.25, 7.0], 90.0));
-    view.event(Role::Operator, 99.0, &Event::AnswersLost);
+    // The last pose, and nothing after it: the client's last pose must be this one. It is
+    // published again (the same pose, the same event) until the client's window ends, so it
+    // is the last whenever the client reads it.
+    let last_pose = pose(99.0, [12.5, -3.25, 7.0], 90.0);
+    let mut repeats = 0;
+    publish_until_ended(
+        &mut child,
+        Duration::from_millis(50),
+        Duration::from_secs(30),
+        || {
+            let call = Instant::now();
+            view.pose(&last_pose);
+            slowest_pose = slowest_pose.max(call.elapsed());
+            view.event(Role::Operator, 99.0, &Event::AnswersLost);
+            repeats += 1;
+        },
+    );
     let seen = finish(child, &out, Duration::from_secs(15));
     let after_ns = rovlink::rcp::mcap_log::wall_clock_ns();
-    eprintln!("received {seen:.200}; {k} poses published, slowest Observer::pose {slowest_pose:?}");
+    eprintln!(
+        "received {seen:.200}; 40 poses published and the last {repeats} times, slowest \
+         Observer::pose {slowest_pose:?}"
+    );
 
     assert!(count(&seen, "/rov/pose") >= 10, "{seen}");
     assert!(count(&seen, "/rov/goal") >= 10, "{seen}");
@@ -203,7 +254,7 @@ fn a_client_receives_poses_and_images_as_they_are_published() {
     assert_eq!(seen["schemas"]["/link/frames"], "rovlink.LinkFrame");
     assert_eq!(seen["schemas"]["/camera/image"], "foxglove.CompressedImage");
     assert_eq!(seen["server"]["name"], "tdma-run operator");
-    assert!(slowest_pose < Duration::from_millis(50), "{slowest_pose:?}");
+    assert!(slowest_pose < SLOWEST_POSE, "{slowest_pose:?}");
     view.stop();
 }
 
@@ -231,7 +282,7 @@ fn a_teleop_twist_and_json_orders_come_out_as_live_orders() {
             "--topics",
             "/rov/pose",
             "--seconds",
-            "1.5",
+            "3",
             "--publish-twist",
             "--publish-order",
             goto,
@@ -286,7 +337,7 @@ fn a_teleop_twist_and_json_orders_come_out_as_live_orders() {
         &out,
         &[
             "--seconds",
-            "1",
+            "3",
             "--publish-twist",
             r#"{"linear":{"x":0,"y":1,"z":0.5},"angular":{"x":0,"y":0,"z":1}}"#,
             "--twist-topic",
@@ -314,17 +365,26 @@ fn garbage_cut_connections_and_stuck_clients_break_nothing() {
     let (stream, _) = image_stream();
     let hostile = dir.path().join("hostile.json");
     let stuck = dir.path().join("stuck.json");
-    let garbage = client(
+    let mut garbage = client(
         &view,
         &hostile,
-        &["--topics", "/rov/pose", "--seconds", "3", "--garbage"],
+        &["--topics", "/rov/pose", "--seconds", "4", "--garbage"],
     );
-    let stalled = client(&view, &stuck, &["--seconds", "3", "--stall"]);
+    // Stuck for longer than a call may take (SLOWEST_IMAGE): a call that waited for it
+    // would show.
+    let mut stalled = client(&view, &stuck, &["--seconds", "5", "--stall"]);
     wait_for_clients(&view, 2);
     let started = Instant::now();
     let (mut slowest_pose, mut slowest_image) = (Duration::ZERO, Duration::ZERO);
     let mut k: u32 = 0;
-    while started.elapsed() < Duration::from_millis(2500) {
+    // Publishing goes on while either client is there: the hostile one is served however
+    // late it subscribes, and the stuck one is published to all through its stall.
+    let running = |child: &mut Child| child.try_wait().unwrap().is_none();
+    while running(&mut garbage) || running(&mut stalled) {
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "client.py still running"
+        );
         let call = Instant::now();
         view.pose(&pose(f64::from(k), [1.0, 2.0, 3.0], 0.0));
         slowest_pose = slowest_pose.max(call.elapsed());
@@ -348,18 +408,33 @@ fn garbage_cut_connections_and_stuck_clients_break_nothing() {
         !hostile_seen["statuses"].as_array().unwrap().is_empty(),
         "{hostile_seen}"
     );
-    // Publishing never waited for the stuck client (an image costs its decoding and PNG).
-    assert!(
-        slowest_pose < Duration::from_millis(100),
-        "{slowest_pose:?}"
-    );
-    assert!(
-        slowest_image < Duration::from_millis(500),
-        "{slowest_image:?}"
-    );
-    // Nothing the garbage said became an order; all of it was reported, in short lines.
-    assert!(orders.poll(SimTime::ZERO).is_empty());
-    let warnings = orders.take_warnings();
+    // Publishing never waited for the stuck client (an image costs its decoding and PNG, tens
+    // of milliseconds; the bound is one on a wait for the client, seconds).
+    assert!(slowest_pose < SLOWEST_POSE, "{slowest_pose:?}");
+    assert!(slowest_image < SLOWEST_IMAGE, "{slowest_image:?}");
+    // Nothing the garbage said became an order; all of it was reported, in short lines. (The
+    // server reports as it reads: the warnings are gathered until all are in.)
+    let expected = [
+        "refused: expected encoding json",
+        "refused: expected topic /orders",
+        "message skipped: expected a JSON object",
+        "field linear.x: expected a number, found null",
+        "expected at most 65536 bytes, found 104",
+        "field x_cm",
+    ];
+    let (mut warnings, mut became_orders) = (Vec::new(), Vec::new());
+    let gathering = Instant::now();
+    while !expected
+        .iter()
+        .all(|text| warnings.iter().any(|w: &String| w.contains(text)))
+        && gathering.elapsed() < Duration::from_secs(10)
+    {
+        became_orders.extend(orders.poll(SimTime::ZERO));
+        warnings.extend(orders.take_warnings());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    became_orders.extend(orders.poll(SimTime::ZERO));
+    assert!(became_orders.is_empty(), "{became_orders:?}");
     let has = |text: &str| warnings.iter().any(|w| w.contains(text));
     assert!(has("refused: expected encoding json"), "{warnings:#?}");
     assert!(has("refused: expected topic /orders"), "{warnings:#?}");
@@ -388,12 +463,18 @@ fn garbage_cut_connections_and_stuck_clients_break_nothing() {
     }
     assert_eq!(view.clients(), 0);
     let out = dir.path().join("after.json");
-    let child = client(&view, &out, &["--topics", "/rov/pose", "--seconds", "1.5"]);
+    let mut child = client(&view, &out, &["--topics", "/rov/pose", "--seconds", "3"]);
     wait_for_clients(&view, 1);
-    for k in 0..20 {
-        view.pose(&pose(f64::from(k), [4.0, 5.0, 6.0], 0.0));
-        std::thread::sleep(Duration::from_millis(25));
-    }
+    let mut k = 0u32;
+    publish_until_ended(
+        &mut child,
+        Duration::from_millis(25),
+        Duration::from_secs(30),
+        || {
+            view.pose(&pose(f64::from(k), [4.0, 5.0, 6.0], 0.0));
+            k += 1;
+        },
+    );
     let seen = finish(child, &out, Duration::from_secs(10));
     assert!(count(&seen, "/rov/pose") > 0, "{seen}");
 }
@@ -406,7 +487,7 @@ fn a_rov_end_offers_no_publishing() {
     let child = client(
         &view,
         &out,
-        &["--seconds", "1", "--publish-order", r#"{"type":"cancel"}"#],
+        &["--seconds", "3", "--publish-order", r#"{"type":"cancel"}"#],
     );
     let seen = finish(child, &out, Duration::from_secs(10));
     assert_eq!(seen["server"]["name"], "tdma-run rov");
@@ -465,12 +546,54 @@ fn stopping_is_prompt_and_tells_the_clients() {
     view.stop();
     let took = started.elapsed();
     let seen = finish(child, &out, Duration::from_secs(10));
-    assert!(took < Duration::from_secs(2), "stop took {took:?}");
+    // Stop waits STOP_WAIT at most, never for the client's 20 s; the rest is slack for a
+    // loaded machine.
+    assert!(
+        took < foxglove::STOP_WAIT + Duration::from_secs(4),
+        "stop took {took:?}"
+    );
     assert_eq!(seen["closed_by_server"], true, "{seen}");
-    // The port is free again.
-    let (again, _orders) = foxglove::start(&format!("127.0.0.1:{port}"), Role::Operator)
-        .expect("the port is free after stop");
+    // The port is free again (once the server's shutdown, which may outlast STOP_WAIT on a
+    // loaded machine, has let it go).
+    let rebinding = Instant::now();
+    let again = loop {
+        match foxglove::start(&format!("127.0.0.1:{port}"), Role::Operator) {
+            Ok((again, _orders)) => break again,
+            Err(e) => assert!(
+                rebinding.elapsed() < Duration::from_secs(10),
+                "the port is not free after stop: {e}"
+            ),
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
     drop(again);
+}
+
+/// Reads `child`'s standard error until a line holds `text` (failing if it ends first or
+/// says nothing of the kind within 30 s); the rest is read aside and comes with the handle.
+fn said_until(child: &mut Child, text: &str) -> std::thread::JoinHandle<String> {
+    use std::io::BufRead;
+    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
+    let (tx, rx) = std::sync::mpsc::channel();
+    let wanted = text.to_string();
+    let reader = std::thread::spawn(move || {
+        let mut said = String::new();
+        let mut line = String::new();
+        let mut told = false;
+        while stderr.read_line(&mut line).is_ok_and(|n| n > 0) {
+            said.push_str(&line);
+            if !told && line.contains(&wanted) {
+                told = tx.send(()).is_ok();
+            }
+            line.clear();
+        }
+        said
+    });
+    if rx.recv_timeout(Duration::from_secs(30)).is_err() {
+        let _ = child.kill();
+        panic!("nothing said {text:?}: {}", reader.join().unwrap());
+    }
+    reader
 }
 
 /// A free port on 127.0.0.1 (bound and released: another process could take it first, which
@@ -493,9 +616,11 @@ fn an_operator_driven_from_foxglove_over_link_sim() {
         .args(["--role", "rov", "--port", &b, "--duration", "14"])
         .args(["--image-size", "400", "--metrics", &path("rov.json")])
         .args(["--track", &path("track.csv")])
-        .stderr(Stdio::null())
+        .stderr(Stdio::piped())
         .spawn()
         .unwrap();
+    // The operator starts once the ROV listens on its port (it says so), not after a guess.
+    let rov_said = said_until(&mut rov, "ROV: answering every slot");
     let port = free_port().to_string();
     let address = format!("127.0.0.1:{port}");
     let mut operator = Command::new(TDMA_RUN)
@@ -524,7 +649,11 @@ fn an_operator_driven_from_foxglove_over_link_sim() {
     let mut stderr = String::new();
     std::io::Read::read_to_string(&mut operator.stderr.take().unwrap(), &mut stderr).unwrap();
     assert!(operator_status.success(), "operator: {stderr}");
-    assert!(rov_status.success(), "ROV: {rov_status:?}");
+    assert!(
+        rov_status.success(),
+        "ROV: {rov_status:?}: {}",
+        rov_said.join().unwrap()
+    );
 
     // The operator's view: the pose of every status, completed images, the frames.
     assert!(count(&seen, "/rov/pose") >= 5, "{seen}");

@@ -8,16 +8,16 @@
 
 mod common;
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::process::{Command, ExitStatus, Stdio};
+use std::time::Duration;
 
 use common::hostile::{
-    Run, assert_contract, assert_whole_csv, garbage, head_one, run, run_in,
-    signalled_on_a_silent_pipe, temp_files,
+    Run, assert_contract, assert_whole_csv, garbage, head_one, lines_in, run, run_in, signal_once,
+    temp_files,
 };
-use nix::sys::signal::{Signal, kill};
-use nix::unistd::Pid;
+use nix::sys::signal::Signal;
 use rovlink::octo::cloud::{PcdData, write_pcd, write_ply, write_xyz};
 use rovlink::octo::{Pose, Scan};
 
@@ -377,8 +377,8 @@ fn closed_pipes_downstream_are_success() {
     }
 }
 
-/// Starts a long build (the survey many times over) in `dir`, sends `signal` once the stats
-/// file has two rows, and returns the run.
+/// Starts a long build (the survey many times over) in `dir`, sends `signal` once the build
+/// catches it and the stats file has two rows, and returns the run.
 fn interrupted_build(dir: &Path, signal: Signal) -> (Option<i32>, String) {
     ok(
         &octo(dir, &["synth", "--scans", "6", "-o", "long.graph"]),
@@ -406,22 +406,68 @@ fn interrupted_build(dir: &Path, signal: Signal) -> (Option<i32>, String) {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let started = Instant::now();
-    loop {
-        let rows = std::fs::read_to_string(dir.join("i.csv")).map_or(0, |t| t.lines().count());
-        if rows >= 3 || started.elapsed() > LIMIT {
-            break;
-        }
-        assert!(child.try_wait().unwrap().is_none(), "the build ended early");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    kill(Pid::from_raw(child.id() as i32), signal).unwrap();
-    let out = child.wait_with_output().unwrap();
-    assert!(started.elapsed() < LIMIT, "the build did not stop");
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    let stderr = child.stderr.take().unwrap();
+    let said = std::thread::spawn(move || std::io::read_to_string(stderr).unwrap_or_default());
+    let stats = dir.join("i.csv");
+    signal_once(&mut child, signal, &|| lines_in(&stats) >= 3, LIMIT);
+    let status = common::wait_for_exit(&mut child, LIMIT);
+    (status.code(), said.join().unwrap())
+}
+
+/// True if a thread of process `pid` is blocked reading a pipe (its `wchan` in /proc names
+/// the kernel's pipe read: `pipe_read`, `anon_pipe_read`, `pipe_wait` by kernel version). A
+/// pipe read blocks only on an empty pipe.
+fn blocked_reading_a_pipe(pid: u32) -> bool {
+    let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
+        return false;
+    };
+    tasks.flatten().any(|task| {
+        std::fs::read_to_string(task.path().join("wchan")).is_ok_and(|w| w.contains("pipe"))
+    })
+}
+
+/// Runs octo-delta with `args` in `dir`, reading the named pipe `dir/fifo` (created here)
+/// whose writer sends `bytes` and then stays open and silent, as a live producer does. Sends
+/// SIGTERM once the tool catches it, all the bytes are written and the tool waits on the empty
+/// pipe (no guess at how long it takes to get there); fails the test if it has not ended
+/// within LIMIT of that. Returns the exit status and standard error.
+fn signalled_while_reading_a_silent_pipe(
+    dir: &Path,
+    fifo: &str,
+    args: &[&str],
+    bytes: &[u8],
+) -> (ExitStatus, String) {
+    let fifo = dir.join(fifo);
+    let _ = std::fs::remove_file(&fifo);
+    nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).expect("mkfifo");
+    let mut child = Command::new(OCTO)
+        .args(args)
+        .current_dir(dir)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("binary starts");
+    let stderr = child.stderr.take().unwrap();
+    let said = std::thread::spawn(move || std::io::read_to_string(stderr).unwrap_or_default());
+    // Read and write: opening does not wait for the reader, and the pipe never ends. Written
+    // aside: more than a pipe holds waits for the tool to read it.
+    let mut writer = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(&fifo)
+        .expect("the pipe opens");
+    let bytes = bytes.to_vec();
+    let writing = std::thread::spawn(move || {
+        writer.write_all(&bytes).expect("the pipe takes the bytes");
+        writer
+    });
+    let pid = child.id();
+    let waiting = || writing.is_finished() && blocked_reading_a_pipe(pid);
+    signal_once(&mut child, Signal::SIGTERM, &waiting, LIMIT);
+    let status = common::wait_for_exit(&mut child, LIMIT);
+    drop(writing.join().unwrap());
+    (status, said.join().unwrap())
 }
 
 #[test]
@@ -544,17 +590,8 @@ fn a_signal_stops_a_build_reading_a_silent_pipe() {
             "--ot",
             "out.ot",
         ];
-        let wait = Duration::from_millis(1500);
-        let (status, err) = signalled_on_a_silent_pipe(
-            dir.path(),
-            "scans.graph",
-            OCTO,
-            &args,
-            bytes,
-            Signal::SIGTERM,
-            wait,
-            LIMIT,
-        );
+        let (status, err) =
+            signalled_while_reading_a_silent_pipe(dir.path(), "scans.graph", &args, bytes);
         assert_eq!(status.code(), Some(143), "{format}: {err}");
         assert!(err.contains("interrupted by SIGTERM"), "{format}: {err}");
         assert!(

@@ -2,10 +2,20 @@
 //! promptly, and a signal is obeyed even while the run waits on an order FIFO or a camera
 //! command.
 
+mod common;
+
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use common::hostile::signal_once;
+use nix::sys::signal::Signal;
+use rovlink::rcp::camera::COMMAND_TIMEOUT_S;
+
 const BIN: &str = env!("CARGO_BIN_EXE_tdma-run");
+
+/// How long a run may take to show the sign a test waits for, or to end when it has nothing
+/// left to wait for: only a hang takes this long, however loaded the machine.
+const LIMIT: Duration = Duration::from_secs(30);
 
 /// Waits for `child` at most `limit`; kills it and fails if it is still running then.
 fn wait_within(mut child: Child, limit: Duration) -> (i32, String) {
@@ -37,16 +47,35 @@ fn spawn(args: &[&str], dir: &std::path::Path) -> Child {
         .unwrap()
 }
 
-fn sigterm(child: &Child) {
-    let pid = nix::unistd::Pid::from_raw(i32::try_from(child.id()).unwrap());
-    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).unwrap();
+/// True if process `pid` has a thread named `name` (its `comm` in /proc).
+fn has_thread(pid: u32, name: &str) -> bool {
+    let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
+        return false;
+    };
+    tasks.flatten().any(|task| {
+        std::fs::read_to_string(task.path().join("comm")).is_ok_and(|comm| comm.trim() == name)
+    })
+}
+
+/// True if process `pid` has a child process (some /proc/N/stat names it as the parent).
+fn has_child(pid: u32) -> bool {
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return false;
+    };
+    entries.flatten().any(|entry| {
+        let stat = std::fs::read_to_string(entry.path().join("stat")).unwrap_or_default();
+        // After the command name in parentheses: the state, then the parent's id.
+        stat.rsplit_once(')')
+            .and_then(|(_, rest)| rest.split_whitespace().nth(1))
+            .is_some_and(|ppid| ppid == pid.to_string())
+    })
 }
 
 #[test]
 fn sigterm_while_the_simulation_waits_for_an_orders_fifo_writer_ends_it_with_143_and_no_output() {
     let dir = tempfile::tempdir().unwrap();
     nix::unistd::mkfifo(&dir.path().join("orders"), nix::sys::stat::Mode::S_IRWXU).unwrap();
-    let child = spawn(
+    let mut child = spawn(
         &[
             "--duration",
             "60",
@@ -57,9 +86,12 @@ fn sigterm_while_the_simulation_waits_for_an_orders_fifo_writer_ends_it_with_143
         ],
         dir.path(),
     );
-    std::thread::sleep(Duration::from_millis(700));
-    sigterm(&child);
-    let (code, err) = wait_within(child, Duration::from_secs(3));
+    // The signal goes once the run waits for the FIFO's writer: its thread that opens the
+    // FIFO (and blocks there) is running.
+    let pid = child.id();
+    let waiting = || has_thread(pid, "orders-open");
+    signal_once(&mut child, Signal::SIGTERM, &waiting, LIMIT);
+    let (code, err) = wait_within(child, LIMIT);
     assert_eq!(code, 143, "{err}");
     assert!(err.contains("--orders orders"), "{err}");
     assert!(!dir.path().join("m.json").exists());
@@ -69,17 +101,28 @@ fn sigterm_while_the_simulation_waits_for_an_orders_fifo_writer_ends_it_with_143
 fn a_camera_command_that_never_answers_costs_a_simulation_one_timeout_and_sigterm_ends_a_wait() {
     let dir = tempfile::tempdir().unwrap();
     let args = ["--duration", "600", "--camera-cmd", "sleep 1000"];
+    let timeout = Duration::from_secs_f64(COMMAND_TIMEOUT_S);
     let started = Instant::now();
-    let (code, err) = wait_within(spawn(&args, dir.path()), Duration::from_secs(20));
+    let (code, err) = wait_within(spawn(&args, dir.path()), 2 * timeout + LIMIT);
     assert_eq!(code, 0, "{err}");
-    assert!(started.elapsed() < Duration::from_secs(15), "{err}");
+    // One timeout, not two: the simulation itself takes a fraction of a second, and the
+    // second timeout would make it twice as long, whatever the machine's speed.
+    let took = started.elapsed();
+    assert!(took >= timeout && took < 2 * timeout, "{took:?}: {err}");
     assert!(err.contains("600 s over s100"), "{err}");
 
-    let child = spawn(&args, dir.path());
-    std::thread::sleep(Duration::from_millis(700));
-    sigterm(&child);
-    let (code, err) = wait_within(child, Duration::from_secs(3));
+    // The signal goes once the capture waits: the camera command runs (a child process).
+    let mut child = spawn(&args, dir.path());
+    let pid = child.id();
+    let waiting = || has_child(pid);
+    signal_once(&mut child, Signal::SIGTERM, &waiting, LIMIT);
+    let signalled = Instant::now();
+    let (code, err) = wait_within(child, LIMIT);
     assert_eq!(code, 143, "{err}");
+    // The wait ended on the signal, not at the command's timeout (a run that ignored the
+    // signal would end there, with 143 too).
+    let took = signalled.elapsed();
+    assert!(took < timeout / 2, "{took:?}: {err}");
 }
 
 #[test]

@@ -87,9 +87,11 @@ fn false_preamble_is_given_up_when_the_line_goes_idle() {
     let (mut child, mut stderr) = start_dump(&path, "ndjson");
     // 0x55 0x02 0xff announces a 255-byte payload; the real frame behind it is only 16 bytes.
     let frame = &common::vector_frames()[1];
+    // Timed from before the bytes are written: rcp-dump cannot have read them (and started
+    // its idle time) earlier, however late this thread runs after the writes.
+    let started = std::time::Instant::now();
     master.write_all(&[0x55, 0x02, 0xff]).unwrap();
     master.write_all(frame).unwrap();
-    let started = std::time::Instant::now();
     let mut stdout = BufReader::new(child.stdout.take().unwrap());
     let mut line = String::new();
     stdout.read_line(&mut line).unwrap();
@@ -111,8 +113,8 @@ fn false_preamble_is_given_up_when_the_line_goes_idle() {
 
 #[test]
 fn dump_stops_cleanly_on_ctrl_c_with_its_summary() {
-    use nix::sys::signal::{Signal, kill};
-    use nix::unistd::Pid;
+    use common::hostile::signal_once;
+    use nix::sys::signal::Signal;
 
     let (mut master, path) = open_pty();
     let (mut child, mut stderr) = start_dump(&path, "csv");
@@ -121,7 +123,13 @@ fn dump_stops_cleanly_on_ctrl_c_with_its_summary() {
     let mut out = String::new();
     stdout.read_line(&mut out).unwrap();
     stdout.read_line(&mut out).unwrap();
-    kill(Pid::from_raw(child.id() as i32), Signal::SIGINT).unwrap();
+    // Ctrl-C once rcp-dump catches it (it has printed the frame: it is well under way).
+    signal_once(
+        &mut child,
+        Signal::SIGINT,
+        &|| true,
+        std::time::Duration::from_secs(30),
+    );
     stdout.read_to_string(&mut out).unwrap();
     let mut rest = String::new();
     stderr.read_to_string(&mut rest).unwrap();

@@ -4,10 +4,11 @@
 
 mod common;
 
-use std::io::Write;
+use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::time::Duration;
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
+use std::time::{Duration, Instant};
 
 use common::run;
 use serde_json::Value;
@@ -375,6 +376,61 @@ fn the_simulated_rov_takes_its_pictures_from_a_directory_or_a_command() {
     }
 }
 
+/// How long a process may take to show the sign a test waits for, or to end when it should:
+/// only a hang takes this long, however loaded the machine.
+const LIMIT: Duration = Duration::from_secs(30);
+
+/// A stream's lines, read in a thread as they come, each with the instant it came.
+fn lines_as_they_come(
+    stream: impl std::io::Read + Send + 'static,
+) -> (Receiver<(Instant, String)>, std::thread::JoinHandle<()>) {
+    let (tx, rx) = std::sync::mpsc::channel();
+    let reader = std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stream).lines() {
+            let Ok(line) = line else { return };
+            if tx.send((Instant::now(), line)).is_err() {
+                return;
+            }
+        }
+    });
+    (rx, reader)
+}
+
+/// Takes lines from `lines` into `taken` until `sign` holds for one (`what` it shows); fails if
+/// the stream ends first (the process ended) or LIMIT passes.
+fn wait_for_line(
+    lines: &Receiver<(Instant, String)>,
+    taken: &mut Vec<(Instant, String)>,
+    what: &str,
+    sign: impl Fn(&str) -> bool,
+) {
+    let deadline = Instant::now() + LIMIT;
+    loop {
+        match lines.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+            Ok((at, line)) => {
+                let found = sign(&line);
+                taken.push((at, line));
+                if found {
+                    return;
+                }
+            }
+            Err(e) => {
+                let said: Vec<&str> = taken.iter().map(|(_, l)| l.as_str()).collect();
+                let why = match e {
+                    RecvTimeoutError::Timeout => "not within the limit",
+                    RecvTimeoutError::Disconnected => "the stream ended",
+                };
+                panic!("no {what}: {why}: {said:#?}");
+            }
+        }
+    }
+}
+
+/// True if `line` is a JSON object that `holds` says yes to.
+fn json_line(line: &str, holds: impl Fn(&Value) -> bool) -> bool {
+    serde_json::from_str::<Value>(line).is_ok_and(|v| holds(&v))
+}
+
 #[test]
 fn real_time_orders_written_into_a_fifo_while_the_operator_runs_are_acknowledged() {
     let dir = tempfile::tempdir().unwrap();
@@ -397,7 +453,12 @@ fn real_time_orders_written_into_a_fifo_while_the_operator_runs_are_acknowledged
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_millis(300));
+    // The operator starts once the ROV listens on its port (it says so), not after a guess.
+    let (rov_stderr, rov_reader) = lines_as_they_come(rov.stderr.take().unwrap());
+    let mut rov_said = Vec::new();
+    wait_for_line(&rov_stderr, &mut rov_said, "ROV start line", |l| {
+        l.contains("ROV: answering every slot")
+    });
     let mut op = Command::new(TDMA_RUN)
         .args([
             "--role",
@@ -416,19 +477,15 @@ fn real_time_orders_written_into_a_fifo_while_the_operator_runs_are_acknowledged
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let stdout = op.stdout.take().unwrap();
     // The operator's telemetry, read live from its pipe.
-    let reader = std::thread::spawn(move || {
-        use std::io::BufRead;
-        let mut lines = Vec::new();
-        for line in std::io::BufReader::new(stdout).lines() {
-            lines.push((std::time::Instant::now(), line.unwrap()));
-        }
-        lines
+    let (telemetry_lines, reader) = lines_as_they_come(op.stdout.take().unwrap());
+    let mut timed = Vec::new();
+    // Orders while it runs: once the first status of the (disarmed) vehicle is in, two
+    // writers one after the other; once the GoTo is acknowledged and the vehicle on its way,
+    // one more, held open. Each waits for its sign, not for a guessed time.
+    wait_for_line(&telemetry_lines, &mut timed, "status", |l| {
+        json_line(l, |v| v["type"] == "rov")
     });
-    // Orders while it runs: two writers one after the other, then one held open.
-    std::thread::sleep(Duration::from_secs(2));
-    let written = std::time::Instant::now();
     for line in [
         r#"{"type":"velocity","vx":64,"vy":0,"vz":0,"vyaw":0,"arm":true,"disarm":false,"nav":"manual"}"#.to_string(),
         format!("{GOTO}}}"),
@@ -436,7 +493,16 @@ fn real_time_orders_written_into_a_fifo_while_the_operator_runs_are_acknowledged
         let mut w = std::fs::OpenOptions::new().write(true).open(&fifo).unwrap();
         writeln!(w, "{line}").unwrap();
     }
-    std::thread::sleep(Duration::from_secs(3));
+    // Telemetry comes as it happens: the GoTo's acknowledgement is read while the operator
+    // runs (the order written next is acknowledged by it too), not when it ends.
+    wait_for_line(&telemetry_lines, &mut timed, "GoTo acknowledgement", |l| {
+        json_line(l, |v| {
+            v["type"] == "order" && v["state"] == "acknowledged" && v["order"]["type"] == "goto"
+        })
+    });
+    wait_for_line(&telemetry_lines, &mut timed, "vehicle on its way", |l| {
+        json_line(l, |v| v["type"] == "rov" && v["x_cm"].as_i64() > Some(50))
+    });
     let mut w = std::fs::OpenOptions::new().write(true).open(&fifo).unwrap();
     writeln!(w, "not an order").unwrap();
     writeln!(
@@ -444,18 +510,25 @@ fn real_time_orders_written_into_a_fifo_while_the_operator_runs_are_acknowledged
         r#"{{"type":"hold_heading","heading_deg":45,"enable":true}}"#
     )
     .unwrap();
-    let status = common::wait_for_exit(&mut op, Duration::from_secs(20));
+    let status = common::wait_for_exit(&mut op, LIMIT);
     drop(w);
     let mut stderr = String::new();
     std::io::Read::read_to_string(&mut op.stderr.take().unwrap(), &mut stderr).unwrap();
     assert!(status.success(), "operator: {stderr}");
-    let rov_status = common::wait_for_exit(&mut rov, Duration::from_secs(20));
+    let rov_status = common::wait_for_exit(&mut rov, LIMIT);
     let _ = link.kill();
     let _ = link.wait();
-    assert!(rov_status.success(), "ROV end: {rov_status:?}");
+    rov_reader.join().unwrap();
+    rov_said.extend(rov_stderr.iter());
+    let rov_text: Vec<&str> = rov_said.iter().map(|(_, l)| l.as_str()).collect();
+    assert!(
+        rov_status.success(),
+        "ROV end: {rov_status:?}: {rov_text:#?}"
+    );
     assert!(stderr.contains(": line 3: not valid JSON"), "{stderr}");
 
-    let timed = reader.join().unwrap();
+    reader.join().unwrap();
+    timed.extend(telemetry_lines.iter());
     let text: String = timed.iter().map(|(_, l)| format!("{l}\n")).collect();
     let lines = telemetry(&text);
     let acked = of(&lines, "order", Some("acknowledged"));
@@ -464,13 +537,8 @@ fn real_time_orders_written_into_a_fifo_while_the_operator_runs_are_acknowledged
         .map(|a| a["order"]["type"].as_str().unwrap())
         .collect();
     assert_eq!(kinds, ["goto", "hold_heading"], "{text}");
-    // Lines arrived as they happened: the GoTo's acknowledgement within seconds of writing
-    // it, long before the operator ended.
-    let (seen, _) = timed
-        .iter()
-        .find(|(_, l)| l.contains(r#""state":"acknowledged""#))
-        .unwrap();
-    assert!(seen.duration_since(written) < Duration::from_secs(3));
+    // (Lines arrived as they happened: the HoldHeading was written only once the GoTo's
+    // acknowledgement had been read, and the operator acknowledged it before it ended.)
     // The vehicle armed and moved on the orders (the operator's statuses say so).
     let statuses = of(&lines, "rov", None);
     assert_eq!(statuses.first().unwrap()["arm"], false);

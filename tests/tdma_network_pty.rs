@@ -6,6 +6,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+use std::sync::mpsc::Receiver;
+use std::thread::JoinHandle;
 use std::time::Duration;
 
 const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
@@ -63,7 +65,8 @@ fn three_nodes(text: &str, duration_s: f64) -> Vec<(serde_json::Value, String)> 
     let vehicles_s = duration_s + 2.0;
     let far = node(dir.path(), &routes, "rov", 2, &[&ports[2]], vehicles_s);
     let relay = node(dir.path(), &routes, "rov", 1, &[&ports[1]], vehicles_s);
-    std::thread::sleep(Duration::from_millis(300));
+    far.wait_started();
+    relay.wait_started();
     let operator = node(dir.path(), &routes, "operator", 0, &[&ports[0]], duration_s);
     let limit = Duration::from_secs_f64(duration_s + 10.0);
     let runs = vec![
@@ -135,6 +138,10 @@ struct NodeRun {
     child: Child,
     metrics: PathBuf,
     events: PathBuf,
+    /// Told once the node says it runs (its line "...: cycle ... ms (slots: ...) on PORT").
+    started: Receiver<()>,
+    /// Its standard error, read aside as it comes.
+    said: JoinHandle<String>,
 }
 
 fn node(
@@ -166,24 +173,49 @@ fn node(
             .arg(if k == 0 { "--port" } else { "--port2" })
             .arg(port);
     }
-    let child = command
+    let mut child = command
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
         .expect("tdma-run starts");
+    let mut stderr = std::io::BufReader::new(child.stderr.take().expect("stderr"));
+    let (tx, started) = std::sync::mpsc::channel();
+    let said = std::thread::spawn(move || {
+        use std::io::BufRead;
+        let (mut said, mut line) = (String::new(), String::new());
+        while stderr.read_line(&mut line).is_ok_and(|n| n > 0) {
+            if line.contains(": cycle ") {
+                let _ = tx.send(());
+            }
+            said.push_str(&line);
+            line.clear();
+        }
+        said
+    });
     NodeRun {
         child,
         metrics,
         events,
+        started,
+        said,
     }
 }
 
 impl NodeRun {
+    /// Waits until the node says it runs (its ports open, its session under way): the nodes
+    /// that must listen first do, whatever the machine's speed. Fails if it ends first or
+    /// says nothing within 30 s.
+    fn wait_started(&self) {
+        assert!(
+            self.started.recv_timeout(Duration::from_secs(30)).is_ok(),
+            "the node did not start"
+        );
+    }
+
     /// Waits for the node to end (well within `limit`) and returns its metrics.
     fn finish(mut self, limit: Duration) -> (serde_json::Value, String) {
         let status = common::wait_for_exit(&mut self.child, limit);
-        let stderr =
-            std::io::read_to_string(self.child.stderr.take().expect("stderr")).unwrap_or_default();
+        let stderr = self.said.join().unwrap_or_default();
         assert!(status.success(), "{status:?}: {stderr}");
         let text = std::fs::read_to_string(&self.metrics).expect("metrics written");
         let events = std::fs::read_to_string(&self.events).expect("events written");
@@ -220,7 +252,8 @@ fn a_relay_on_two_media_carries_the_far_vehicle_both_ways() {
         &[&relay_down, &relay_up],
         14.0,
     );
-    std::thread::sleep(Duration::from_millis(300));
+    far.wait_started();
+    relay.wait_started();
     let operator = node(dir.path(), &routes, "operator", 0, &[&op_port], 12.0);
     let (o, o_events) = operator.finish(Duration::from_secs(25));
     let (r, _) = relay.finish(Duration::from_secs(10));
