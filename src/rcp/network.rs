@@ -32,7 +32,7 @@ use super::orders::Script;
 use super::routing::Router;
 use super::rov::{Rov, RovConfig};
 use super::scenario::Scenario;
-use super::session::{Direction, Metrics, Observer, STOPPED, kind_of};
+use super::session::{Direction, FrameEvent, Metrics, Observer, STOPPED, kind_of};
 use super::{Event, PoseSample, Role};
 use crate::debt;
 use crate::link::{Fate, Medium, ModelError, SimTime};
@@ -141,6 +141,9 @@ pub trait NetObserver {
     fn event(&mut self, _vehicle: u8, _end: Role, _t_s: f64, _event: &Event) {}
     /// Something to tell the user.
     fn warning(&mut self, _t_s: f64, _text: &str) {}
+    /// A frame this node sent or received (a real-time node of a network, which sees its own
+    /// frames, not the network's hops).
+    fn node_frame(&mut self, _event: &FrameEvent) {}
     /// True once the observer can record nothing more: the run ends at the next event.
     fn failed(&self) -> bool {
         false
@@ -173,6 +176,10 @@ impl NetObserver for NetTee<'_> {
 
     fn warning(&mut self, t_s: f64, text: &str) {
         self.0.iter_mut().for_each(|o| o.warning(t_s, text));
+    }
+
+    fn node_frame(&mut self, event: &FrameEvent) {
+        self.0.iter_mut().for_each(|o| o.node_frame(event));
     }
 
     fn failed(&self) -> bool {

@@ -262,6 +262,7 @@ impl NodeOutputs<'_> {
         if let Some(frames) = self.frames.as_mut() {
             frames.row(e, addresses, medium);
         }
+        self.observer.node_frame(e);
     }
 }
 
