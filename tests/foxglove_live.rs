@@ -15,7 +15,7 @@ use base64::Engine;
 use rovlink::link::SimTime;
 use rovlink::rcp::foxglove::{self, LiveOrders, LiveView};
 use rovlink::rcp::orders::{Live, OrderSource};
-use rovlink::rcp::session::Observer;
+use rovlink::rcp::report::Observer;
 use rovlink::rcp::{Event, ImageSettings, PoseSample, Role};
 use rovlink::wire::Nav;
 use rovlink::wire::operator::Order;

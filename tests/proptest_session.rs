@@ -9,7 +9,8 @@ use std::sync::atomic::AtomicBool;
 use proptest::prelude::*;
 use rovlink::link::Model;
 use rovlink::rcp::operator::Joystick;
-use rovlink::rcp::session::{self, JoystickChange, Quiet, SessionConfig, Waypoint};
+use rovlink::rcp::report::Quiet;
+use rovlink::rcp::session::{self, JoystickChange, SessionConfig, Waypoint};
 use rovlink::rcp::{ImageSettings, test_image};
 
 prop_compose! {

@@ -45,7 +45,7 @@ use super::mcap_log::{Clock, Topic, View, ViewMessage};
 use super::network::{HopEvent, NetObserver};
 use super::operator::Joystick;
 use super::orders::{Live, OrderSource};
-use super::session::{FrameEvent, Observer};
+use super::report::{FrameEvent, Observer};
 use super::{Event, PoseSample, Role};
 use crate::link::SimTime;
 use crate::wire::Nav;

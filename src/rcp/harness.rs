@@ -19,9 +19,9 @@ use std::collections::HashMap;
 
 use super::operator::{Operator, SlotContent};
 use super::orders::{Live, OrderSource};
+use super::report::{Metrics, Observer, image_period_s};
 use super::rov::Rov;
 use super::rules;
-use super::session::{Metrics, Observer, image_period_s};
 use super::{Event, PoseSample, Role};
 use crate::link::SimTime;
 use crate::wire::frame::Frame;
@@ -333,7 +333,7 @@ impl RovEnd {
 pub struct Tee<'a>(pub Vec<&'a mut dyn Observer>);
 
 impl Observer for Tee<'_> {
-    fn frame(&mut self, event: &super::session::FrameEvent) {
+    fn frame(&mut self, event: &super::report::FrameEvent) {
         self.0.iter_mut().for_each(|o| o.frame(event));
     }
 
@@ -361,7 +361,7 @@ impl Observer for Tee<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rcp::session::Quiet;
+    use crate::rcp::report::Quiet;
     use crate::wire::frame::ADDR_OPERATOR;
     use crate::wire::{Nav, operator};
 

@@ -31,7 +31,7 @@ use serde_json::json;
 
 use mcap::write::NoSeek;
 
-use super::session::{FrameEvent, Observer};
+use super::report::{FrameEvent, Observer};
 use super::{Event, PoseSample, Role};
 use crate::cli::output::Dest;
 use crate::io::{IoError, Output};

@@ -28,6 +28,7 @@ pub mod outputs;
 pub mod pace;
 pub mod realnet;
 pub mod realtime;
+pub mod report;
 pub mod routing;
 pub mod rov;
 pub mod rules;
@@ -37,6 +38,7 @@ pub mod session;
 
 use crate::debt;
 use crate::wire::operator::{Order, Roi};
+use crate::wire::rov::{MAX_TRUNKS, cut_trunks};
 use crate::wire::{Message, MessageRepr};
 
 /// A file's bytes through [`crate::io::read_bounded`]: `None` when it holds more than
@@ -174,9 +176,6 @@ impl Default for ImageSettings {
     }
 }
 
-/// Most trunks an image may have (ITSN is 6 bits).
-pub const MAX_TRUNKS: usize = 64;
-
 /// A frame carrying `message` from `src` to `dst`.
 pub fn emit(src: u8, dst: u8, message: Message) -> Vec<u8> {
     let repr = MessageRepr { src, dst, message };
@@ -225,17 +224,6 @@ pub fn trunks_of(image: &debt::Image, settings: &ImageSettings) -> Vec<Vec<u8>> 
     cut_trunks(&stream, trunk)
         .map(|trunks| trunks.into_iter().map(<[u8]>::to_vec).collect())
         .unwrap_or_default()
-}
-
-/// A stream cut into trunks of `trunk_bytes` (the last one shorter), as ITSN 0, 1, ... carry
-/// them; `Err` with the smallest trunk size that would do when it takes more than
-/// [`MAX_TRUNKS`].
-pub fn cut_trunks(stream: &[u8], trunk_bytes: usize) -> Result<Vec<&[u8]>, usize> {
-    let trunk = trunk_bytes.max(1);
-    if stream.len().div_ceil(trunk) > MAX_TRUNKS {
-        return Err(stream.len().div_ceil(MAX_TRUNKS));
-    }
-    Ok(stream.chunks(trunk).collect())
 }
 
 /// A built-in camera picture: `width` x `height` RGB, a seabed-like texture with a few

@@ -171,7 +171,7 @@ impl Script {
             .chain(waypoints.iter().map(|w| {
                 (
                     SimTime::from_secs_f64(w.t_s),
-                    Live::Order(super::realtime::goto_order(w.position_m, w.heading_deg)),
+                    Live::Order(goto_order(w.position_m, w.heading_deg)),
                 )
             }))
             .collect();
@@ -320,6 +320,17 @@ pub fn split_by_vehicle(
             }) as Box<dyn OrderSource>
         })
         .collect()
+}
+
+/// A GoTo order for a waypoint (centimetres and whole degrees on the wire).
+fn goto_order(position_m: [f64; 3], heading_deg: f64) -> Order {
+    let cm = |m: f64| (m * 100.0).round().clamp(-32768.0, 32767.0) as i16;
+    Order::GoTo {
+        x_cm: cm(position_m[0]),
+        y_cm: cm(position_m[1]),
+        z_cm: cm(position_m[2]),
+        heading_deg: (heading_deg.rem_euclid(360.0).round() as u16) % 360,
+    }
 }
 
 #[cfg(test)]

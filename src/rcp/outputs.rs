@@ -25,7 +25,7 @@ use serde_json::{Map, Value};
 
 use super::drive::DriveEvent;
 use super::mcap_log::McapLog;
-use super::session::{FrameEvent, Metrics, Observer};
+use super::report::{FrameEvent, Metrics, Observer};
 use super::{Event, PoseSample, Role};
 use crate::cli::UsageError;
 use crate::cli::output::Dest;

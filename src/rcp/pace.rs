@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use super::network::{HopEvent, NetObserver};
-use super::session::{FrameEvent, Observer};
+use super::report::{FrameEvent, Observer};
 use super::{Event, PoseSample, Role};
 
 /// How often a waiting pacer looks at the stop flag.

@@ -13,17 +13,17 @@
 //! ([`DirectionMetrics::delay_ms`] is `None`); the operator measures the round trip from a
 //! slot's frame to the ROV's answer instead.
 //!
-//! [`DirectionMetrics::delay_ms`]: super::session::DirectionMetrics::delay_ms
+//! [`DirectionMetrics::delay_ms`]: super::report::DirectionMetrics::delay_ms
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use super::harness::{OperatorEnd, Out, RovEnd, Tally};
-use super::session::{Direction, FrameEvent, Metrics, Observer, Parts, SessionConfig, kind_of};
+use super::report::{Direction, FrameEvent, Metrics, Observer, kind_of};
+use super::session::{Parts, SessionConfig};
 use crate::gll::{Endpoint, GllError};
 use crate::link::SimTime;
 use crate::stats::Running;
-use crate::wire::operator::Order;
 
 pub use super::Role;
 
@@ -261,16 +261,5 @@ impl Io<'_> {
                     .frame(&sent_event("rov_to_operator", &reply, sent_at));
             }
         }
-    }
-}
-
-/// A GoTo order for a waypoint (centimetres and whole degrees on the wire).
-pub(crate) fn goto_order(position_m: [f64; 3], heading_deg: f64) -> Order {
-    let cm = |m: f64| (m * 100.0).round().clamp(-32768.0, 32767.0) as i16;
-    Order::GoTo {
-        x_cm: cm(position_m[0]),
-        y_cm: cm(position_m[1]),
-        z_cm: cm(position_m[2]),
-        heading_deg: (heading_deg.rem_euclid(360.0).round() as u16) % 360,
     }
 }

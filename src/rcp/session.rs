@@ -8,20 +8,16 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use serde::Serialize;
-
 use std::collections::HashMap;
 
+use super::ImageSettings;
 use super::harness::{OperatorEnd, Out, RovEnd, Tally};
 use super::operator::{Joystick, SlotContent};
+use super::report::{Direction, FrameEvent, Metrics, Observer, STOPPED, kind_of};
 use super::rov::{Rov, RovConfig};
 use super::rules;
-use super::{Event, ImageSettings, PoseSample};
 use crate::debt;
-use crate::link::{Distance, Fate, Link, Model, ModelError, Report, Side, SimTime};
-use crate::stats::Running;
-use crate::wire::frame::Frame;
-use crate::wire::{Message, MessageRepr};
+use crate::link::{Distance, Fate, Link, Model, ModelError, Side, SimTime};
 
 /// A GoTo order sent at a time.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -272,194 +268,6 @@ pub fn auto_ipg_for(
         + rules::hop_s(model, rov_frame_bytes, distance_m)
 }
 
-/// One direction's figures.
-#[derive(Debug, Clone, Default, Serialize)]
-pub struct DirectionMetrics {
-    /// Bits of delivered frames per second, kbit/s.
-    pub throughput_kbps: f64,
-    /// Mean delay (arrival minus send), ms; none where one end cannot know it (real time).
-    pub delay_ms: Option<f64>,
-    /// Standard deviation of the delay, ms; none where the delay is unknown.
-    pub jitter_ms: Option<f64>,
-    /// Mean time between consecutive deliveries, ms.
-    pub iat_ms: f64,
-    /// Standard deviation of that time, ms.
-    pub iat_sigma_ms: f64,
-    /// Frames sent.
-    pub frames_sent: u64,
-    /// Frames delivered intact.
-    pub frames_delivered: u64,
-}
-
-/// The session's figures (`--metrics`).
-#[derive(Debug, Clone, Default, Serialize)]
-pub struct Metrics {
-    /// Whose figures: `simulation` (both ends, every field), or in real time `operator` or
-    /// `rov` (one end: the frames it sent and those it received; the far end's halves are 0).
-    pub measured_by: &'static str,
-    /// ROV to operator.
-    pub rov_to_operator: DirectionMetrics,
-    /// Operator to ROV.
-    pub operator_to_rov: DirectionMetrics,
-    /// Images the ROV started sending (simulation, or the ROV end in real time).
-    pub images_started: u64,
-    /// Images the operator completed.
-    pub images_completed: u64,
-    /// Mean time between completed images, s.
-    pub image_period_s: Option<f64>,
-    /// High-level orders queued by the operator.
-    pub orders_sent: u64,
-    /// Of those, acknowledged by the ROV's EOID.
-    pub orders_acknowledged: u64,
-    /// Orders the ROV executed.
-    pub orders_executed: u64,
-    /// Executions of an order already executed (must be 0).
-    pub orders_executed_twice: u64,
-    /// Orders acknowledged that the ROV had not executed (must be 0).
-    pub orders_acknowledged_unexecuted: u64,
-    /// Times the ROV lost the heartbeat.
-    pub link_losses: u64,
-    /// Times it came back.
-    pub link_recoveries: u64,
-    /// Real time, operator: mean time from a slot's frame to the ROV's answer, ms.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub round_trip_ms: Option<f64>,
-    /// Real time, operator: standard deviation of that time, ms.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub round_trip_jitter_ms: Option<f64>,
-    /// Session length, s: the time reached when the run was interrupted.
-    pub duration_s: f64,
-    /// Why the run ended early (e.g. `SIGTERM`); absent when it ran its whole duration.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub interrupted: Option<String>,
-}
-
-/// What [`run`] says when `stop` ended it, until the caller names the cause.
-pub const STOPPED: &str = "stopped";
-
-/// One frame's row of `--events` (the data of the paper's Fig. 10).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct FrameEvent {
-    /// `operator_to_rov` or `rov_to_operator`.
-    pub direction: &'static str,
-    /// velocity, goto, image_settings, hold_heading (operator); image_trunk or status (ROV).
-    pub kind: &'static str,
-    /// Frame length.
-    pub bytes: usize,
-    /// When it was sent, s (none for a frame received in real time: its send time is the far
-    /// end's).
-    pub t_sent_s: Option<f64>,
-    /// When it arrived, s (none when lost).
-    pub t_received_s: Option<f64>,
-    /// The link's fate for it.
-    pub fate: &'static str,
-}
-
-/// What happened along the way, for outputs beyond the metrics.
-pub trait Observer {
-    /// A frame's fate is known.
-    fn frame(&mut self, _event: &FrameEvent) {}
-    /// The operator completed an image (its DEBT stream) at `t_s`.
-    fn image(&mut self, _t_s: f64, _stream: &[u8]) {}
-    /// The vehicle after a step (the ROV's side), or as the last status reported it (an
-    /// operator in real time).
-    fn pose(&mut self, _pose: &PoseSample) {}
-    /// Something happened at `end`, at `t_s` (orders, images in progress, statuses, the link
-    /// and the vehicle): what `--telemetry` and a live Foxglove view show.
-    fn event(&mut self, _end: super::Role, _t_s: f64, _event: &Event) {}
-    /// Something to tell the user at `t_s` (an order source's bad line): one line.
-    fn warning(&mut self, _t_s: f64, _text: &str) {}
-    /// True once the observer can record nothing more (an output failed): the run ends at the
-    /// next event, as if stopped.
-    fn failed(&self) -> bool {
-        false
-    }
-}
-
-/// An observer that observes nothing.
-pub struct Quiet;
-
-impl Observer for Quiet {}
-
-/// One direction's running figures.
-#[derive(Default)]
-pub(crate) struct Direction {
-    delay_ms: Running,
-    iat_ms: Running,
-    last_delivery: Option<SimTime>,
-    sent: u64,
-    delivered: u64,
-    bits: u64,
-}
-
-impl Direction {
-    /// A frame went out.
-    pub(crate) fn sent(&mut self) {
-        self.sent += 1;
-    }
-
-    /// A frame of `len` bytes arrived intact at `t_rx`, `delay_ms` after it was sent if known.
-    pub(crate) fn delivered(&mut self, t_rx: SimTime, len: usize, delay_ms: Option<f64>) {
-        self.delivered += 1;
-        self.bits += len as u64 * 8;
-        if let Some(delay) = delay_ms {
-            self.delay_ms.push(delay);
-        }
-        if let Some(last) = self.last_delivery {
-            self.iat_ms
-                .push((t_rx.0.saturating_sub(last.0)) as f64 * 1e-6);
-        }
-        self.last_delivery = Some(t_rx);
-    }
-
-    fn record(&mut self, report: &Report) {
-        if report.duplicate {
-            return;
-        }
-        self.sent();
-        if let (Fate::Delivered, Some(t_rx)) = (report.fate, report.t_rx) {
-            let delay_ms = (t_rx.0 - report.t_offered.0) as f64 * 1e-6;
-            self.delivered(t_rx, report.len, Some(delay_ms));
-        }
-    }
-
-    pub(crate) fn metrics(&self, duration_s: f64) -> DirectionMetrics {
-        let known = self.delay_ms.count() > 0;
-        DirectionMetrics {
-            throughput_kbps: if duration_s > 0.0 {
-                self.bits as f64 / duration_s / 1000.0
-            } else {
-                0.0
-            },
-            delay_ms: known.then(|| self.delay_ms.mean()),
-            jitter_ms: known.then(|| self.delay_ms.std()),
-            iat_ms: self.iat_ms.mean(),
-            iat_sigma_ms: self.iat_ms.std(),
-            frames_sent: self.sent,
-            frames_delivered: self.delivered,
-        }
-    }
-}
-
-/// The mean time between completed images, s.
-pub(crate) fn image_period_s(image_times_s: &[f64]) -> Option<f64> {
-    let n = image_times_s.len();
-    (n > 1).then(|| (image_times_s[n - 1] - image_times_s[0]) / (n - 1) as f64)
-}
-
-/// What a frame is, for the events table.
-pub(crate) fn kind_of(bytes: &[u8]) -> &'static str {
-    let parsed = Frame::new_checked(bytes)
-        .ok()
-        .and_then(|f| MessageRepr::parse(&f).ok());
-    match parsed.map(|r| r.message) {
-        Some(Message::Operator(op)) => op.order.name(),
-        Some(Message::Rov(rov)) if !rov.trunk.is_empty() => "image_trunk",
-        Some(Message::Rov(_)) => "status",
-        _ => "raw",
-    }
-}
-
 /// Why a session could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum SessionError {
@@ -649,6 +457,7 @@ pub fn run_with(
 mod tests {
     use super::*;
     use crate::link::model::JitterDistribution;
+    use crate::rcp::report::Quiet;
 
     fn config(model: Model, duration_s: f64) -> SessionConfig {
         SessionConfig {

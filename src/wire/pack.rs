@@ -4,8 +4,8 @@
 use std::io::{self, BufRead, Read};
 
 use super::json::{self, JsonError};
+use super::rov::{MAX_TRUNKS, cut_trunks};
 use super::{Error, Message, MessageRepr, rov};
-use crate::rcp::{MAX_TRUNKS, cut_trunks};
 
 /// The longest input line read: far above any message's JSON.
 pub const MAX_LINE_BYTES: usize = 64 * 1024;

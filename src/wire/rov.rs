@@ -30,6 +30,8 @@ pub const STATUS_BYTES: usize = 11;
 pub const FIXED_BYTES: usize = HEADER_BYTES + STATUS_BYTES;
 /// The longest trunk a frame can carry (255-byte payload minus the fixed part).
 pub const MAX_TRUNK_BYTES: usize = super::frame::MAX_PAYLOAD_BYTES - FIXED_BYTES;
+/// Most trunks an image may have (ITSN is 6 bits).
+pub const MAX_TRUNKS: usize = 64;
 /// The status type this version defines.
 pub const ST_BASIC: u8 = 0;
 
@@ -577,6 +579,17 @@ impl Repr {
             Status::Unknown { raw, .. } => packet.after_header_mut().copy_from_slice(raw),
         }
     }
+}
+
+/// A stream cut into trunks of `trunk_bytes` (the last one shorter), as ITSN 0, 1, ... carry
+/// them; `Err` with the smallest trunk size that would do when it takes more than
+/// [`MAX_TRUNKS`].
+pub fn cut_trunks(stream: &[u8], trunk_bytes: usize) -> core::result::Result<Vec<&[u8]>, usize> {
+    let trunk = trunk_bytes.max(1);
+    if stream.len().div_ceil(trunk) > MAX_TRUNKS {
+        return Err(stream.len().div_ceil(MAX_TRUNKS));
+    }
+    Ok(stream.chunks(trunk).collect())
 }
 
 #[cfg(test)]

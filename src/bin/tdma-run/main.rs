@@ -21,7 +21,8 @@ use rovlink::rcp::outputs::{
 };
 use rovlink::rcp::pace::Pacer;
 use rovlink::rcp::realtime::{self, Ended, Role};
-use rovlink::rcp::session::{self, Observer, Parts, SessionConfig};
+use rovlink::rcp::report::Observer;
+use rovlink::rcp::session::{self, Parts, SessionConfig};
 use rovlink::rcp::{camera, script};
 use rovlink::say;
 
