@@ -41,7 +41,7 @@ use super::Role;
 use super::harness::{OperatorEnd, Out, RovEnd, Tally};
 use super::network::{NetObserver, NetworkMetrics, NodeMetrics, Tagged};
 use super::orders::{OrderSource, Script, split_by_vehicle};
-use super::realtime::{Clock, Ended, sent_event};
+use super::realtime::{Clock, DRAIN_WAIT, Ended, RoundTrips, is_late, sent_event, wake_at};
 use super::report::{Direction, FrameEvent, Metrics, kind_of};
 use super::routing::{BROADCAST, Decision, Dropped, MAX_VEHICLE, Router};
 use super::rov::{Rov, RovConfig};
@@ -53,7 +53,6 @@ use crate::cli::rows::{RowFormat, RowWriter};
 use crate::gll::{Endpoint, GllError, Received};
 use crate::io::IoError;
 use crate::link::SimTime;
-use crate::stats::Running;
 
 /// The longest a node with two endpoints waits on one before reading the other.
 pub const SLICE: Duration = Duration::from_millis(5);
@@ -380,11 +379,7 @@ struct Polled {
     tally: Tally,
     /// Operator to ROV, ROV to operator.
     directions: [Direction; 2],
-    round_trip_ms: Running,
-    /// The last slot's send time, until its answer arrives.
-    awaiting: Option<SimTime>,
-    /// A slot went out while the one before was unanswered: the next answer is not timed.
-    ambiguous: bool,
+    round_trips: RoundTrips,
 }
 
 impl Polled {
@@ -394,9 +389,7 @@ impl Polled {
             end,
             tally: Tally::new(false),
             directions: [Direction::default(), Direction::default()],
-            round_trip_ms: Running::new(),
-            awaiting: None,
-            ambiguous: false,
+            round_trips: RoundTrips::default(),
         }
     }
 
@@ -404,10 +397,7 @@ impl Polled {
         let mut metrics = self.tally.finish(role.name(), duration_s);
         metrics.operator_to_rov = self.directions[0].metrics(duration_s);
         metrics.rov_to_operator = self.directions[1].metrics(duration_s);
-        if self.round_trip_ms.count() > 0 {
-            metrics.round_trip_ms = Some(self.round_trip_ms.mean());
-            metrics.round_trip_jitter_ms = Some(self.round_trip_ms.std());
-        }
+        self.round_trips.fill(&mut metrics);
         metrics
     }
 }
@@ -577,7 +567,7 @@ impl Node<'_> {
                 let Some(end) = vehicle.end.as_mut() else {
                     continue;
                 };
-                let late = now.0.saturating_sub(end.slot_at().0) > 1_000_000;
+                let late = is_late(now, end.slot_at());
                 if end.slot_at() <= now && late && !drained {
                     // Late for the slot: what arrived meanwhile is read first, so a late
                     // answer is not timed against the new slot's frame.
@@ -591,8 +581,7 @@ impl Node<'_> {
                     let direction = "operator_to_rov";
                     self.originate(now, vehicle.address, &frame, direction, outputs)?;
                     vehicle.directions[0].sent();
-                    vehicle.ambiguous = vehicle.awaiting.is_some();
-                    vehicle.awaiting = Some(now);
+                    vehicle.round_trips.sent(now);
                 }
             }
             drained = false;
@@ -602,13 +591,10 @@ impl Node<'_> {
                 .min()
                 .unwrap_or(self.end)
                 .min(self.end);
-            // Wake at least every 0.2 s to notice Ctrl-C and live orders.
-            let mut deadline = clock
-                .instant(wake)
-                .min(Instant::now() + Duration::from_millis(200));
+            let mut deadline = wake_at(clock, wake);
             if behind {
                 drained = true;
-                deadline = Instant::now() + Duration::from_millis(1);
+                deadline = Instant::now() + DRAIN_WAIT;
             }
             let Some((k, received)) = self.receive(deadline)? else {
                 continue;
@@ -625,15 +611,7 @@ impl Node<'_> {
                 continue;
             };
             vehicle.directions[1].delivered(t, received.bytes.len(), None);
-            if let Some(sent) = vehicle.awaiting.take() {
-                if vehicle.ambiguous {
-                    vehicle.ambiguous = false;
-                } else {
-                    vehicle
-                        .round_trip_ms
-                        .push(t.0.saturating_sub(sent.0) as f64 * 1e-6);
-                }
-            }
+            vehicle.round_trips.answered(t);
             if let Some(end) = vehicle.end.as_mut() {
                 with_out(vehicle.address, &mut vehicle.tally, outputs, |out| {
                     end.receive(t, &received.bytes, out);
@@ -663,9 +641,7 @@ impl Node<'_> {
                 rov.poll(now, out)
             });
             last = now;
-            let deadline = clock
-                .instant(rov.next_at().min(self.end))
-                .min(Instant::now() + Duration::from_millis(200));
+            let deadline = wake_at(clock, rov.next_at().min(self.end));
             let Some((k, received)) = self.receive(deadline)? else {
                 continue;
             };

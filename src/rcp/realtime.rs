@@ -96,13 +96,10 @@ pub fn run(
         end,
         directions: &mut directions,
     };
-    let (outcome, round_trip_ms) = match role {
-        Role::Operator => {
-            let mut round_trip_ms = Running::new();
-            let outcome = io.operator(operator, &mut out, &mut round_trip_ms);
-            (outcome, Some(round_trip_ms))
-        }
-        Role::Rov => (io.rov(rov, &mut out), None),
+    let mut round_trips = RoundTrips::default();
+    let outcome = match role {
+        Role::Operator => io.operator(operator, &mut out, &mut round_trips),
+        Role::Rov => io.rov(rov, &mut out),
     };
     let ended = match outcome {
         Ok(true) => Ended::Done,
@@ -113,11 +110,68 @@ pub fn run(
     let mut metrics = tally.finish(role.name(), duration_s);
     metrics.operator_to_rov = directions[0].metrics(duration_s);
     metrics.rov_to_operator = directions[1].metrics(duration_s);
-    if let Some(rtt) = round_trip_ms.filter(|r| r.count() > 0) {
-        metrics.round_trip_ms = Some(rtt.mean());
-        metrics.round_trip_jitter_ms = Some(rtt.std());
-    }
+    round_trips.fill(&mut metrics);
     (metrics, ended)
+}
+
+/// How late an operator may send a slot's frame, ns: later than that, what arrived meanwhile is
+/// read first, so that a late answer is not timed against the new slot's frame.
+pub(super) const LATE_NS: u64 = 1_000_000;
+
+/// The longest a real-time loop waits before it looks at the stop flag and live orders again.
+pub(super) const WAKE_EVERY: Duration = Duration::from_millis(200);
+
+/// The wait that reads what arrived while a loop was late for its slot.
+pub(super) const DRAIN_WAIT: Duration = Duration::from_millis(1);
+
+/// True when a slot due at `slot_at` is more than [`LATE_NS`] behind `now`.
+pub(super) fn is_late(now: SimTime, slot_at: SimTime) -> bool {
+    now.0.saturating_sub(slot_at.0) > LATE_NS
+}
+
+/// When a loop waiting for `at` wakes: then, or [`WAKE_EVERY`] from now if that is sooner.
+pub(super) fn wake_at(clock: &Clock, at: SimTime) -> Instant {
+    clock.instant(at).min(Instant::now() + WAKE_EVERY)
+}
+
+/// An operator's round trips in real time: from a slot's frame to the next answer heard. When a
+/// slot goes out while the one before is unanswered, the next answer may be that late one, so
+/// it is not timed (it would give a round trip shorter than the link allows).
+#[derive(Debug, Default)]
+pub(super) struct RoundTrips {
+    /// The last slot's send time, until its answer arrives.
+    awaiting: Option<SimTime>,
+    /// A slot went out while the one before was unanswered: the next answer is not timed.
+    ambiguous: bool,
+    /// The round trips timed, ms.
+    ms: Running,
+}
+
+impl RoundTrips {
+    /// A slot's frame went out at `t`.
+    pub(super) fn sent(&mut self, t: SimTime) {
+        self.ambiguous = self.awaiting.is_some();
+        self.awaiting = Some(t);
+    }
+
+    /// An answer arrived at `t`.
+    pub(super) fn answered(&mut self, t: SimTime) {
+        if let Some(sent) = self.awaiting.take() {
+            if self.ambiguous {
+                self.ambiguous = false;
+            } else {
+                self.ms.push(t.0.saturating_sub(sent.0) as f64 * 1e-6);
+            }
+        }
+    }
+
+    /// The figures' round trip and its jitter, once one was timed.
+    pub(super) fn fill(&self, metrics: &mut Metrics) {
+        if self.ms.count() > 0 {
+            metrics.round_trip_ms = Some(self.ms.mean());
+            metrics.round_trip_jitter_ms = Some(self.ms.std());
+        }
+    }
 }
 
 /// The event row of a frame this end sent at `t`.
@@ -164,15 +218,9 @@ impl Io<'_> {
         &mut self,
         mut operator: OperatorEnd,
         out: &mut Out<'_>,
-        round_trip_ms: &mut Running,
+        round_trips: &mut RoundTrips,
     ) -> Result<bool, GllError> {
         let clock = self.clock;
-        // The last slot's send time, until its answer arrives.
-        let mut awaiting: Option<SimTime> = None;
-        // Set when a slot went out while the previous one was still unanswered: the next
-        // answer may be that late one, so it is not timed against the new slot's frame (it
-        // would give a round trip shorter than the link allows).
-        let mut ambiguous = false;
         let mut drained = false;
         loop {
             if self.stopped(out) {
@@ -182,7 +230,7 @@ impl Io<'_> {
             if now >= self.end {
                 return Ok(true);
             }
-            let late = now.0.saturating_sub(operator.slot_at().0) > 1_000_000;
+            let late = is_late(now, operator.slot_at());
             if (operator.slot_at() > now || drained || !late)
                 && let Some((frame, _)) = operator.poll(now, out)
             {
@@ -190,20 +238,15 @@ impl Io<'_> {
                 self.directions[0].sent();
                 out.observer
                     .frame(&sent_event("operator_to_rov", &frame, now));
-                ambiguous = awaiting.is_some();
-                awaiting = Some(now);
+                round_trips.sent(now);
                 drained = false;
             }
-            let wake = operator.next_at().min(self.end);
-            // Wake at least every 0.2 s to notice Ctrl-C and live orders.
-            let mut deadline = clock
-                .instant(wake)
-                .min(Instant::now() + Duration::from_millis(200));
+            let mut deadline = wake_at(clock, operator.next_at().min(self.end));
             if operator.slot_at() <= now {
                 // Late for the slot (busy with an image): what arrived meanwhile is read
                 // first, so a late answer is not timed against the new slot's frame.
                 drained = true;
-                deadline = Instant::now() + Duration::from_millis(1);
+                deadline = Instant::now() + DRAIN_WAIT;
             }
             let Some(received) = self.endpoint.receive(deadline)? else {
                 continue;
@@ -215,13 +258,7 @@ impl Io<'_> {
             self.directions[1].delivered(t, received.bytes.len(), None);
             out.observer
                 .frame(&received_event("rov_to_operator", &received.bytes, t));
-            if let Some(sent) = awaiting.take() {
-                if ambiguous {
-                    ambiguous = false;
-                } else {
-                    round_trip_ms.push(t.0.saturating_sub(sent.0) as f64 * 1e-6);
-                }
-            }
+            round_trips.answered(t);
             operator.receive(t, &received.bytes, out);
         }
     }
@@ -240,9 +277,7 @@ impl Io<'_> {
             }
             rov.poll(now, out);
             last = now;
-            let deadline = clock
-                .instant(rov.next_at().min(self.end))
-                .min(Instant::now() + Duration::from_millis(200));
+            let deadline = wake_at(clock, rov.next_at().min(self.end));
             let Some(received) = self.endpoint.receive(deadline)? else {
                 continue;
             };
