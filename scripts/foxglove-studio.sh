@@ -1,0 +1,175 @@
+#!/usr/bin/env bash
+# Foxglove Studio 1.48.0, unmodified, against tdma-run's live view and its --mcap logs (issue 28).
+#
+# Studio is the prebuilt bundle npm ships in @foxglove/studio-base 1.48.0 (assets/index.js, a
+# UMD module with React 17 external), rendered by scripts/foxglove-studio/{index.html,app.js}
+# as Studio's web app renders it, in headless Chromium (Debian `chromium`) driven by Playwright
+# (PyPI) with executable_path: no browser download, no bundler, no change to Studio. Not a CI
+# test: the first run downloads the 36 MB package (179 MB unpacked) from npm.
+#
+# Two sessions, each with --foxglove, --mcap and --metrics:
+#  - sim: `tdma-run --sim --pace 1` (both ends in one process, so frames have a delay_ms);
+#  - operator: `tdma-run --role operator` over `link-sim --pty` (the S100 model the tests use)
+#    to a ROV standing still (an all-zero joystick script).
+# Studio opens each live (`?ds=foxglove-websocket&ds.url=ws://...`) on a layout with 3D, Image,
+# Plot (/link/frames.delay_ms), Log (/session/log, /link/log), Publish and Teleop, watches,
+# sends the Publish panel's GoTo and waits for `order N acknowledged` on /session/log. Once the
+# sessions have ended, it opens their logs: as remote files (`?ds=remote-file`, HTTP ranges
+# from a loopback server) and the operator's as a local file too.
+# Each step fails on any entry of Studio's Problems list, any error in a panel's settings, any
+# console or page error, and panels left blank (scripts/foxglove-studio/check.py says which);
+# then each session's --metrics must count the GoTo acknowledged.
+#
+# Usage: scripts/foxglove-studio.sh [OUT_DIR]   (default target/foxglove-studio/out)
+# Environment: STUDIO_CACHE (where npm installs Studio; default target/foxglove-studio/cache,
+#              kept between runs), BIN (the directory of tdma-run and link-sim; default: a
+#              debug build of both), SECONDS_SIM / SECONDS_OP (the sessions' lengths, default
+#              110 and 150: long enough for both live checks), KEEP=1 keeps the work directory.
+# Needs: node and npm, python3 with playwright (pip install playwright), /usr/bin/chromium
+# (apt-get install chromium). Exit 0 when every check passes, 1 when one fails, 2 when a check
+# could not be made.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+out=${1:-target/foxglove-studio/out}
+cache=${STUDIO_CACHE:-target/foxglove-studio/cache}
+seconds_sim=${SECONDS_SIM:-110}
+seconds_op=${SECONDS_OP:-150}
+here=scripts/foxglove-studio
+
+fail_setup() { echo "foxglove-studio: $*" >&2; exit 2; }
+command -v npm >/dev/null || fail_setup "npm not found (apt-get install nodejs npm)"
+[ -x /usr/bin/chromium ] || fail_setup "/usr/bin/chromium not found (apt-get install chromium)"
+python3 -c 'import playwright' 2>/dev/null || fail_setup "python3 has no playwright (pip install playwright)"
+
+# Studio, installed once: the lock file's hash names what is in the cache.
+mkdir -p "$cache"
+stamp=$(sha256sum "$here/package-lock.json" | cut -c1-16)
+if [ "$(cat "$cache/installed" 2>/dev/null)" != "$stamp" ]; then
+  echo "foxglove-studio: installing @foxglove/studio-base 1.48.0 into $cache" >&2
+  started=$(date +%s)
+  cp "$here/package.json" "$here/package-lock.json" "$cache/"
+  npm ci --prefix "$cache" --no-audit --no-fund --loglevel=error >&2
+  [ -f "$cache/node_modules/@foxglove/studio-base/assets/index.js" ] \
+    || fail_setup "$cache: npm ci left no @foxglove/studio-base/assets/index.js"
+  echo "$stamp" >"$cache/installed"
+  echo "foxglove-studio: installed in $(($(date +%s) - started)) s" >&2
+fi
+
+if [ -z "${BIN:-}" ]; then
+  cargo build --quiet --bin tdma-run --bin link-sim
+  BIN=target/debug
+fi
+for tool in "$BIN/tdma-run" "$BIN/link-sim"; do
+  [ -x "$tool" ] || fail_setup "$tool: not built"
+done
+
+work=$(mktemp -d)
+pids=()
+cleanup() {
+  for pid in "${pids[@]}"; do kill "$pid" 2>/dev/null || true; done
+  wait 2>/dev/null || true
+  if [ "${KEEP:-0}" = 1 ]; then echo "foxglove-studio: kept $work" >&2; else rm -rf "$work"; fi
+}
+trap cleanup EXIT
+trap 'exit 130' INT
+trap 'exit 143' TERM
+
+wait_for_file() { # PATH SECONDS WHAT: wait until PATH has a line
+  local deadline=$(($(date +%s) + $2))
+  until [ -s "$1" ]; do
+    [ "$(date +%s)" -lt "$deadline" ] || fail_setup "$3: not seen within $2 s"
+    sleep 0.2
+  done
+}
+
+free_port() {
+  python3 -c "import socket; s=socket.socket(); s.bind(('127.0.0.1',0)); print(s.getsockname()[1])"
+}
+
+wait_for_line() { # FILE PATTERN SECONDS WHAT PID: wait until FILE has a line with PATTERN
+  local deadline=$(($(date +%s) + $3))
+  until grep -q "$2" "$1"; do
+    [ "$(date +%s)" -lt "$deadline" ] || fail_setup "$4: not seen within $3 s: $(tail -3 "$1")"
+    kill -0 "$5" 2>/dev/null || fail_setup "$4: the process exited: $(tail -3 "$1")"
+    sleep 0.1
+  done
+}
+
+mkdir -p "$work/data"
+# Session 1: a simulation at real time (both ends in one process: frames have a delay).
+sim_port=$(free_port)
+"$BIN/tdma-run" --sim --pace 1 --duration "$seconds_sim" --foxglove "127.0.0.1:$sim_port" \
+  --mcap "$work/data/sim.mcap" --metrics "$work/sim.json" 2>"$work/sim.err" &
+sim=$!
+pids+=($sim)
+wait_for_line "$work/sim.err" "Foxglove: ws://" 20 "the simulation's live view" "$sim"
+
+# Session 2: an operator over link-sim's pseudo-terminals, A for the operator, B for the ROV.
+"$BIN/link-sim" --pty --model s100 --bitrate-bps 9600 --intrinsic-delay-ms 20 --jitter-ms 2 \
+  --half-duplex false >"$work/link.out" 2>"$work/link.err" &
+pids+=($!)
+deadline=$(($(date +%s) + 10))
+until [ "$(wc -l <"$work/link.out")" -ge 2 ]; do
+  [ "$(date +%s)" -lt "$deadline" ] || fail_setup "link-sim gave no pty paths: $(cat "$work/link.err")"
+  sleep 0.1
+done
+side_a=$(sed -n 1p "$work/link.out")
+side_b=$(sed -n 2p "$work/link.out")
+printf 't_s,vx,vy,vz,vyaw\n0,0,0,0,0\n' >"$work/still.csv"
+"$BIN/tdma-run" --role rov --port "$side_b" --duration $((seconds_op + 15)) --image-size 400 \
+  --metrics "$work/rov.json" 2>"$work/rov.err" &
+pids+=($!)
+op_port=$(free_port)
+"$BIN/tdma-run" --role operator --port "$side_a" --ipg 150 --duration "$seconds_op" \
+  --image-size 400 --script "$work/still.csv" --foxglove "127.0.0.1:$op_port" \
+  --mcap "$work/data/operator.mcap" --metrics "$work/op.json" 2>"$work/op.err" &
+operator=$!
+pids+=($operator)
+wait_for_line "$work/op.err" "Foxglove: ws://" 20 "the operator's live view" "$operator"
+
+python3 "$here/serve.py" "$here" "$cache/node_modules" "$work/data" "$work/http.port" \
+  2>"$work/http.err" &
+pids+=($!)
+wait_for_file "$work/http.port" 10 "the page server's port"
+studio="http://127.0.0.1:$(cat "$work/http.port")/"
+
+mkdir -p "$out"
+status=0
+check() { # NAME ARGS...: one check.py run; one that could not be made (2) stops the script
+  local rc=0
+  python3 "$here/check.py" "$1" --studio "$studio" --out "$out" "${@:2}" || rc=$?
+  [ "$rc" -le 1 ] || exit "$rc"
+  [ "$rc" = 0 ] || status=1
+}
+live_topics=/rov/pose,/tf,/camera/image,/link/frames,/session/log
+file_topics=/rov/pose,/tf,/camera/image,/link/frames
+check sim-live --ws "ws://127.0.0.1:$sim_port" --publish --expect "$live_topics" --expect-delay
+check operator-live --ws "ws://127.0.0.1:$op_port" --publish --expect "$live_topics"
+
+# The logs are complete once the sessions have ended.
+wait "$sim" || fail_setup "the simulation failed: $(tail -5 "$work/sim.err")"
+wait "$operator" || fail_setup "the operator failed: $(tail -5 "$work/op.err")"
+for session in sim op; do
+  python3 -c '
+import json, sys
+metrics = json.load(open(sys.argv[2]))
+sent, acked = metrics.get("orders_sent", 0), metrics.get("orders_acknowledged", 0)
+print(f"{sys.argv[1]}: {sent} order(s) sent, {acked} acknowledged (its --metrics)")
+sys.exit(0 if acked >= 1 else 1)
+' "$session" "$work/$session.json" || status=1
+  { grep -v "Foxglove: ws://" "$work/$session.err" | grep -i "foxglove" || true; } | sed "s/^/$session: /"
+done
+
+check sim-file --remote-file "${studio}data/sim.mcap" --expect "$file_topics" \
+  --absent /session/log --expect-delay
+check operator-file --remote-file "${studio}data/operator.mcap" --expect "$file_topics" \
+  --absent /session/log
+check operator-local-file --local-file "$work/data/operator.mcap" --expect "$file_topics" \
+  --absent /session/log
+if [ "$status" = 0 ]; then
+  echo "foxglove-studio: passed: Foxglove Studio 1.48.0, live and from the logs; screenshots in $out"
+else
+  echo "foxglove-studio: FAILED (the lines above; everything seen in $out/*.json)"
+fi
+exit "$status"
