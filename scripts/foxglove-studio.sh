@@ -18,16 +18,18 @@
 # from a loopback server) and the operator's as a local file too.
 # Each step fails on any entry of Studio's Problems list, any error in a panel's settings, any
 # console or page error, and panels left blank (scripts/foxglove-studio/check.py says which);
-# then each session's --metrics must count the GoTo acknowledged.
+# then each session's --metrics must count the GoTo acknowledged, and tdma-run must have warned
+# of nothing Studio sent but the 3D panel's three channels. Last, a control: a log with
+# a schema Studio refuses (bad_log.py) must fail the same check with Studio's message.
 #
 # Usage: scripts/foxglove-studio.sh [OUT_DIR]   (default target/foxglove-studio/out)
 # Environment: STUDIO_CACHE (where npm installs Studio; default target/foxglove-studio/cache,
 #              kept between runs), BIN (the directory of tdma-run and link-sim; default: a
 #              debug build of both), SECONDS_SIM / SECONDS_OP (the sessions' lengths, default
 #              110 and 150: long enough for both live checks), KEEP=1 keeps the work directory.
-# Needs: node and npm, python3 with playwright (pip install playwright), /usr/bin/chromium
-# (apt-get install chromium). Exit 0 when every check passes, 1 when one fails, 2 when a check
-# could not be made.
+# Needs: node and npm, python3 with playwright and mcap (pip install playwright mcap),
+# /usr/bin/chromium (apt-get install chromium).
+# Exit 0 when every check passes, 1 when one fails, 2 when a check could not be made.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -40,7 +42,7 @@ here=scripts/foxglove-studio
 fail_setup() { echo "foxglove-studio: $*" >&2; exit 2; }
 command -v npm >/dev/null || fail_setup "npm not found (apt-get install nodejs npm)"
 [ -x /usr/bin/chromium ] || fail_setup "/usr/bin/chromium not found (apt-get install chromium)"
-python3 -c 'import playwright' 2>/dev/null || fail_setup "python3 has no playwright (pip install playwright)"
+python3 -c 'import playwright, mcap' 2>/dev/null || fail_setup "python3 lacks playwright or mcap (pip install playwright mcap)"
 
 # Studio, installed once: the lock file's hash names what is in the cache.
 mkdir -p "$cache"
@@ -159,6 +161,16 @@ print(f"{sys.argv[1]}: {sent} order(s) sent, {acked} acknowledged (its --metrics
 sys.exit(0 if acked >= 1 else 1)
 ' "$session" "$work/$session.json" || status=1
   { grep -v "Foxglove: ws://" "$work/$session.err" | grep -i "foxglove" || true; } | sed "s/^/$session: /"
+  # The 3D panel's three channels are refused (docs/tdma-foxglove.md); the Publish and Teleop
+  # panels' are not, and nothing Studio sends is skipped.
+  unexpected=$(grep "foxglove client" "$work/$session.err" | grep -v \
+    -e "(/move_base_simple/goal): refused" -e "(/clicked_point): refused" \
+    -e "(/initialpose): refused" || true)
+  if [ -n "$unexpected" ]; then
+    echo "$session: tdma-run warned of what Studio sent:"
+    echo "$unexpected"
+    status=1
+  fi
 done
 
 check sim-file --remote-file "${studio}data/sim.mcap" --expect "$file_topics" \
@@ -167,6 +179,21 @@ check operator-file --remote-file "${studio}data/operator.mcap" --expect "$file_
   --absent /session/log
 check operator-local-file --local-file "$work/data/operator.mcap" --expect "$file_topics" \
   --absent /session/log
+# The control: a log with a schema Studio refuses must fail, with Studio's own message.
+python3 "$here/bad_log.py" "$work/data/control.mcap"
+control=0
+python3 "$here/check.py" control --studio "$studio" --out "$work/control" \
+  --remote-file "${studio}data/control.mcap" --settle-s 2 >"$work/control.out" 2>&1 || control=$?
+refused='problem: .*Unsupported type \["number","null"\] for t_sent_s'
+if [ "$control" = 1 ] && grep -q "$refused" "$work/control.out"; then
+  echo "control: a log with a type array in a schema fails, as it must:" \
+    "$(grep -m1 -o 'Unsupported type \[[^]]*\] for t_sent_s' "$work/control.out" | head -1)"
+else
+  echo "control: a log with a type array in a schema did not fail with Studio's message" \
+    "(exit $control):"
+  cat "$work/control.out"
+  status=1
+fi
 if [ "$status" = 0 ]; then
   echo "foxglove-studio: passed: Foxglove Studio 1.48.0, live and from the logs; screenshots in $out"
 else

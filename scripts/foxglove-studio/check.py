@@ -100,10 +100,11 @@ class Findings:
         """One line per failure."""
         lines = []
         for problem in self.problems:
-            lines.append(f"problem: {problem['message']}" + (f" [{problem['details']}]" if problem["details"] else ""))
+            details = problem["details"][:300] + ("..." if len(problem["details"]) > 300 else "")
+            lines.append(f"problem: {problem['message']}" + (f" [{details}]" if details else ""))
         lines += [f"panel {e['panel']}: {e['node']}: {e['error']}" for e in self.panel_errors]
-        lines += [f"console error at {e['t_s']} s: {e['text']}" for e in self.console_errors]
-        lines += [f"page error at {e['t_s']} s: {e['text']}" for e in self.page_errors]
+        lines += [f"console error{repeated(n)}: {text}" for text, n in tally(self.console_errors)]
+        lines += [f"page error{repeated(n)}: {text}" for text, n in tally(self.page_errors)]
         lines += [f"blank: {b}" for b in self.blank]
         if self.publish is not None and "acknowledged" not in self.publish:
             lines.append(f"publish: {self.publish['error']}")
@@ -124,6 +125,18 @@ class Findings:
             "ready_s": self.ready_s,
             "console_warnings": self.console_warnings,
         }
+
+
+def tally(seen):
+    """(text, how many times) for each text of `seen`, in the order first seen."""
+    counts = {}
+    for item in seen:
+        counts[item["text"]] = counts.get(item["text"], 0) + 1
+    return list(counts.items())
+
+
+def repeated(times):
+    return f" (x{times})" if times > 1 else ""
 
 
 def wait_for(condition, seconds, what):
