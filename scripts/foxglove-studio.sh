@@ -7,15 +7,18 @@
 # (PyPI) with executable_path: no browser download, no bundler, no change to Studio. Not a CI
 # test: the first run downloads the 36 MB package (179 MB unpacked) from npm.
 #
-# Two sessions, each with --foxglove, --mcap and --metrics:
+# Three sessions, each with --foxglove and --mcap:
 #  - sim: `tdma-run --sim --pace 1` (both ends in one process, so frames have a delay_ms);
 #  - operator: `tdma-run --role operator` over `link-sim --pty` (the S100 model the tests use)
-#    to a ROV standing still (an all-zero joystick script).
+#    to a ROV standing still (an all-zero joystick script);
+#  - network: `tdma-run --scenario scenarios/relay-rf.json --pace 1`, on its own layout
+#    (layout-network.json: both vehicles in 3D, vehicle 2's image, /network/frames.delay_ms).
 # Studio opens each live (`?ds=foxglove-websocket&ds.url=ws://...`) on a layout with 3D, Image,
 # Plot (/link/frames.delay_ms), Log (/session/log, /link/log), Publish and Teleop, watches,
-# sends the Publish panel's GoTo and waits for `order N acknowledged` on /session/log. Once the
-# sessions have ended, it opens their logs: as remote files (`?ds=remote-file`, HTTP ranges
-# from a loopback server) and the operator's as a local file too.
+# sends the Publish panel's GoTo (not to the network: its orders are its waypoints) and waits
+# for `order N acknowledged` on /session/log; then the session is stopped as by Ctrl-C (it keeps
+# its outputs). Then Studio opens the logs: as remote files (`?ds=remote-file`, HTTP ranges from
+# a loopback server) and the operator's as a local file too.
 # Each step fails on any entry of Studio's Problems list, any error in a panel's settings, any
 # console or page error, and panels left blank (scripts/foxglove-studio/check.py says which);
 # then each session's --metrics must count the GoTo acknowledged, and tdma-run must have warned
@@ -25,8 +28,9 @@
 # Usage: scripts/foxglove-studio.sh [OUT_DIR]   (default target/foxglove-studio/out)
 # Environment: STUDIO_CACHE (where npm installs Studio; default target/foxglove-studio/cache,
 #              kept between runs), BIN (the directory of tdma-run and link-sim; default: a
-#              debug build of both), SECONDS_SIM / SECONDS_OP (the sessions' lengths, default
-#              110 and 150: long enough for both live checks), KEEP=1 keeps the work directory.
+#              debug build of both), SESSION_MAX_S (a bound on each session, default 1200 s;
+#              each is stopped by SIGINT once its live check is done), KEEP=1 keeps the work
+#              directory.
 # Needs: node and npm, python3 with playwright and mcap (pip install playwright mcap),
 # /usr/bin/chromium (apt-get install chromium).
 # Exit 0 when every check passes, 1 when one fails, 2 when a check could not be made.
@@ -35,8 +39,9 @@ cd "$(dirname "$0")/.."
 
 out=${1:-target/foxglove-studio/out}
 cache=${STUDIO_CACHE:-target/foxglove-studio/cache}
-seconds_sim=${SECONDS_SIM:-110}
-seconds_op=${SECONDS_OP:-150}
+# Each session runs until its live check is done, then is stopped as by Ctrl-C (which keeps its
+# outputs); this bounds it if the script dies first.
+seconds_max=${SESSION_MAX_S:-1200}
 here=scripts/foxglove-studio
 
 fail_setup() { echo "foxglove-studio: $*" >&2; exit 2; }
@@ -101,7 +106,7 @@ wait_for_line() { # FILE PATTERN SECONDS WHAT PID: wait until FILE has a line wi
 mkdir -p "$work/data"
 # Session 1: a simulation at real time (both ends in one process: frames have a delay).
 sim_port=$(free_port)
-"$BIN/tdma-run" --sim --pace 1 --duration "$seconds_sim" --foxglove "127.0.0.1:$sim_port" \
+"$BIN/tdma-run" --sim --pace 1 --duration "$seconds_max" --foxglove "127.0.0.1:$sim_port" \
   --mcap "$work/data/sim.mcap" --metrics "$work/sim.json" 2>"$work/sim.err" &
 sim=$!
 pids+=($sim)
@@ -119,16 +124,26 @@ done
 side_a=$(sed -n 1p "$work/link.out")
 side_b=$(sed -n 2p "$work/link.out")
 printf 't_s,vx,vy,vz,vyaw\n0,0,0,0,0\n' >"$work/still.csv"
-"$BIN/tdma-run" --role rov --port "$side_b" --duration $((seconds_op + 15)) --image-size 400 \
+"$BIN/tdma-run" --role rov --port "$side_b" --duration "$seconds_max" --image-size 400 \
   --metrics "$work/rov.json" 2>"$work/rov.err" &
-pids+=($!)
+rov=$!
+pids+=($rov)
 op_port=$(free_port)
-"$BIN/tdma-run" --role operator --port "$side_a" --ipg 150 --duration "$seconds_op" \
+"$BIN/tdma-run" --role operator --port "$side_a" --ipg 150 --duration "$seconds_max" \
   --image-size 400 --script "$work/still.csv" --foxglove "127.0.0.1:$op_port" \
   --mcap "$work/data/operator.mcap" --metrics "$work/op.json" 2>"$work/op.err" &
 operator=$!
 pids+=($operator)
 wait_for_line "$work/op.err" "Foxglove: ws://" 20 "the operator's live view" "$operator"
+
+# Session 3: a network (scenarios/relay-rf.json: an operator, a relay, a far vehicle) at real
+# time: every vehicle under /vehicle/N/, and /network/frames.
+net_port=$(free_port)
+"$BIN/tdma-run" --scenario scenarios/relay-rf.json --pace 1 --duration "$seconds_max" \
+  --foxglove "127.0.0.1:$net_port" --mcap "$work/data/network.mcap" 2>"$work/net.err" &
+network=$!
+pids+=($network)
+wait_for_line "$work/net.err" "Foxglove: ws://" 20 "the network's live view" "$network"
 
 python3 "$here/serve.py" "$here" "$cache/node_modules" "$work/data" "$work/http.port" \
   2>"$work/http.err" &
@@ -146,12 +161,21 @@ check() { # NAME ARGS...: one check.py run; one that could not be made (2) stops
 }
 live_topics=/rov/pose,/tf,/camera/image,/link/frames,/session/log
 file_topics=/rov/pose,/tf,/camera/image,/link/frames
+stop() { # PID ERR NAME: SIGINT (Ctrl-C), which ends a session keeping its outputs; its end
+  local rc=0
+  kill -INT "$1" 2>/dev/null || true
+  wait "$1" || rc=$?
+  [ "$rc" = 0 ] || [ "$rc" = 130 ] || fail_setup "$3 exited $rc: $(tail -3 "$2")"
+}
 check sim-live --ws "ws://127.0.0.1:$sim_port" --publish --expect "$live_topics" --expect-delay
+stop "$sim" "$work/sim.err" "the simulation"
 check operator-live --ws "ws://127.0.0.1:$op_port" --publish --expect "$live_topics"
-
-# The logs are complete once the sessions have ended.
-wait "$sim" || fail_setup "the simulation failed: $(tail -5 "$work/sim.err")"
-wait "$operator" || fail_setup "the operator failed: $(tail -5 "$work/op.err")"
+stop "$operator" "$work/op.err" "the operator"
+stop "$rov" "$work/rov.err" "the ROV"
+net_topics=/vehicle/1/rov/pose,/vehicle/2/rov/pose,/vehicle/1/tf,/network/frames
+check network-live --layout layout-network.json --ws "ws://127.0.0.1:$net_port" \
+  --expect "$net_topics" --expect-delay
+stop "$network" "$work/net.err" "the network"
 for session in sim op; do
   python3 -c '
 import json, sys
@@ -160,6 +184,8 @@ sent, acked = metrics.get("orders_sent", 0), metrics.get("orders_acknowledged", 
 print(f"{sys.argv[1]}: {sent} order(s) sent, {acked} acknowledged (its --metrics)")
 sys.exit(0 if acked >= 1 else 1)
 ' "$session" "$work/$session.json" || status=1
+done
+for session in sim op net; do
   { grep -v "Foxglove: ws://" "$work/$session.err" | grep -i "foxglove" || true; } | sed "s/^/$session: /"
   # The 3D panel's three channels are refused (docs/tdma-foxglove.md); the Publish and Teleop
   # panels' are not, and nothing Studio sends is skipped.
@@ -179,6 +205,8 @@ check operator-file --remote-file "${studio}data/operator.mcap" --expect "$file_
   --absent /session/log
 check operator-local-file --local-file "$work/data/operator.mcap" --expect "$file_topics" \
   --absent /session/log
+check network-file --layout layout-network.json --remote-file "${studio}data/network.mcap" \
+  --expect "$net_topics" --expect-delay
 # The control: a log with a schema Studio refuses must fail, with Studio's own message.
 python3 "$here/bad_log.py" "$work/data/control.mcap"
 control=0

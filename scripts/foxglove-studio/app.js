@@ -1,7 +1,8 @@
 // Renders Foxglove Studio's App from the @foxglove/studio-base bundle (window.StudioBase) the
 // way the web app does: fonts and translations first, then <App> with the data sources a
-// browser offers. Layouts and settings live in memory: the one layout is layout.json, served
-// beside this file, and it is the current one (studio.profile-data in localStorage, set here).
+// browser offers. Layouts and settings live in memory: the one layout is layout.json (or the
+// one ?layout= names), served beside this file, and it is the current one (studio.profile-data
+// in localStorage, set here).
 "use strict";
 
 (async () => {
@@ -58,7 +59,12 @@
     }
   }
 
-  const layoutData = await (await fetch("layout.json")).json();
+  // ?layout=NAME picks another layout file served beside this one (layout-network.json).
+  const layoutName = new URLSearchParams(window.location.search).get("layout") ?? "layout.json";
+  if (!/^layout[-a-z]*\.json$/.test(layoutName)) {
+    throw new Error(`?layout=${layoutName}: expected layout.json or layout-NAME.json`);
+  }
+  const layoutData = await (await fetch(layoutName)).json();
   const layoutStorage = new MemoryLayoutStorage();
   const layoutId = "rovlink-check";
   await layoutStorage.put("local", {

@@ -3,7 +3,8 @@
 
 Usage:
   check.py NAME --studio URL (--ws URL | --remote-file URL | --local-file PATH) --out DIR
-           [--publish] [--expect TOPIC,...] [--absent TOPIC,...] [--expect-delay] [--settle-s S]
+           [--layout layout.json|layout-network.json] [--publish] [--expect TOPIC,...]
+           [--absent TOPIC,...] [--expect-delay] [--settle-s S]
 
 The data source: --ws opens Studio on a Foxglove WebSocket server
 (`?ds=foxglove-websocket&ds.url=...`); --remote-file opens an MCAP log by URL
@@ -11,7 +12,9 @@ The data source: --ws opens Studio on a Foxglove WebSocket server
 through the file input Studio keeps for test drivers (`input[data-puppeteer-file-upload]`, what
 a file dropped on the window goes through: McapLocalDataSourceFactory). Studio's page comes
 from --studio (serve.py), its layout from layout.json: 3D, Image (/camera/image), Plot
-(/link/frames.delay_ms), Log (/session/log), Log (/link/log), Publish (/orders) and Teleop.
+(/link/frames.delay_ms), Log (/session/log), Log (/link/log), Publish (/orders) and Teleop;
+or from layout-network.json, for a network: 3D (both vehicles), Image (/vehicle/2/camera/image),
+Plot (/network/frames.delay_ms), Log (/vehicle/1/link/log, /vehicle/2/link/log).
 
 Each of these is a failure:
 - an entry of the data source's Problems list (its message, and what its dialog says);
@@ -21,7 +24,8 @@ Each of these is a failure:
   no /session/log: it is live only), which is listed as expected;
 - a console error or an uncaught page error;
 - a blank: a topic of --expect with no message counted in the Topics list, the Image panel
-  still waiting for an image, with --expect-delay a Plot with no value of delay_ms;
+  still waiting for an image, with --expect-delay a Plot with no value of delay_ms, still so
+  --within-s (120) after the first --settle-s (15) of watching;
 - with --publish: the Publish panel's GoTo not enabled, or no `order N acknowledged` in the
   /session/log panel within 45 s of sending it.
 
@@ -47,16 +51,19 @@ CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader", "--ignore-gpu-blocklist"]
 VIEWPORT = {"width": 1600, "height": 1000}
 
-# The layout's panels (layout.json's ids).
-PANELS = {
+# Names for the panels of the layouts, by their ids (layout.json, layout-network.json).
+PANEL_NAMES = {
     "3D!rov": "3D",
     "ImageViewPanel!camera": "Image",
     "Plot!delay": "Plot",
     "RosOut!session": "Log /session/log",
     "RosOut!link": "Log /link/log",
+    "RosOut!vehicle1": "Log /vehicle/1/link/log",
+    "RosOut!vehicle2": "Log /vehicle/2/link/log",
     "Publish!goto": "Publish",
     "Teleop!joystick": "Teleop",
 }
+PANELS = {}  # the panels of the layout in use: id -> name
 ACKNOWLEDGED = re.compile(r"order \d+ acknowledged")
 
 
@@ -266,20 +273,28 @@ def publish_goto(page, findings):
         findings.publish["error"] = "GoTo sent, no 'order N acknowledged' on /session/log within 45 s"
 
 
-def check_blanks(page, findings, expect, expect_delay):
-    findings.counts = topic_counts(page)
-    for topic in expect:
-        if findings.counts.get(topic, 0) == 0:
-            findings.blank.append(f"{topic}: no message counted in the Topics list")
-    if panel(page, "ImageViewPanel!camera").get_by_text("Waiting for images", exact=False).count() > 0:
-        findings.blank.append("Image: still 'Waiting for images on /camera/image'")
+def blanks(page, expect, expect_delay):
+    """What is still blank: (the Topics list's counts, one line per blank)."""
+    counts = topic_counts(page)
+    found = [f"{topic}: no message counted in the Topics list" for topic in expect if counts.get(topic, 0) == 0]
+    image = panel(page, "ImageViewPanel!camera")
+    if image.get_by_text("Waiting for images", exact=False).count() > 0:
+        found.append(f"Image: still '{' '.join(image.inner_text().split())}'")
     if panel(page, "3D!rov").locator("canvas").count() == 0:
-        findings.blank.append("3D: no canvas")
+        found.append("3D: no canvas")
     if expect_delay:
         # With values in the legend, the Plot shows the latest delay_ms after the path.
         legend = panel(page, "Plot!delay").inner_text()
         if not re.search(r"delay_ms\s+[-\d.]+", legend):
-            findings.blank.append("Plot: no value of /link/frames.delay_ms")
+            found.append("Plot: no value of delay_ms")
+    return counts, found
+
+
+def wait_for_data(page, expect, expect_delay, seconds):
+    """Waits, at most `seconds`, until nothing is blank (a session's first image takes a while)."""
+    deadline = time.monotonic() + seconds
+    while blanks(page, expect, expect_delay)[1] and time.monotonic() < deadline:
+        page.wait_for_timeout(1000)
 
 
 def seek_near_end(page):
@@ -306,12 +321,14 @@ def run(args):
     findings = Findings(args.name)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    layout = json.loads((Path(__file__).parent / args.layout).read_text())
+    PANELS.update({panel_id: PANEL_NAMES.get(panel_id, panel_id) for panel_id in layout["configById"]})
     if args.ws:
-        query = f"?ds=foxglove-websocket&ds.url={args.ws}"
+        query = f"?ds=foxglove-websocket&ds.url={args.ws}&layout={args.layout}"
     elif args.remote_file:
-        query = f"?ds=remote-file&ds.url={args.remote_file}"
+        query = f"?ds=remote-file&ds.url={args.remote_file}&layout={args.layout}"
     else:
-        query = ""
+        query = f"?layout={args.layout}"
     with sync_playwright() as playwright:
         try:
             browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
@@ -323,7 +340,7 @@ def run(args):
             page.on("pageerror", findings.on_page_error)
             page.goto(args.studio.rstrip("/") + "/" + query)
             wait_for(lambda: page.get_by_role("tab", name=re.compile("^Problems")).count() > 0 or (
-                page.locator("input[data-puppeteer-file-upload]").count() > 0 and not query
+                page.locator("input[data-puppeteer-file-upload]").count() > 0 and args.local_file
             ), 120, "Studio's page")
             if args.local_file:
                 page.keyboard.press("Escape")  # the welcome dialog
@@ -335,13 +352,15 @@ def run(args):
                 page.wait_for_timeout(3000)
                 seek_near_end(page)
             page.wait_for_timeout(int(args.settle_s * 1000))
+            expect = [t for t in args.expect.split(",") if t]
+            wait_for_data(page, expect, args.expect_delay, args.within_s)
             if args.publish:
                 publish_goto(page, findings)
             page.mouse.move(VIEWPORT["width"] - 5, VIEWPORT["height"] - 5)
             page.wait_for_timeout(1000)
             page.screenshot(path=str(out / f"{args.name}.png"))
             panel(page, "3D!rov").screenshot(path=str(out / f"{args.name}-3d.png"))
-            check_blanks(page, findings, [t for t in args.expect.split(",") if t], args.expect_delay)
+            findings.counts, findings.blank = blanks(page, expect, args.expect_delay)
             read_problems(page, findings)
             for panel_id in PANELS:
                 read_panel_errors(page, findings, panel_id, [t for t in args.absent.split(",") if t])
@@ -372,11 +391,15 @@ def main():
     source.add_argument("--remote-file", help="an MCAP file's URL")
     source.add_argument("--local-file", help="an MCAP file's path")
     parser.add_argument("--out", required=True, help="directory for screenshots and findings")
+    parser.add_argument("--layout", default="layout.json", choices=["layout.json", "layout-network.json"])
     parser.add_argument("--publish", action="store_true", help="send the Publish panel's GoTo")
     parser.add_argument("--expect", default="", help="topics that must have messages, comma-separated")
     parser.add_argument("--absent", default="", help="topics the source lacks, comma-separated")
     parser.add_argument("--expect-delay", action="store_true", help="the Plot must show delay_ms")
     parser.add_argument("--settle-s", type=float, default=15, help="seconds to watch before checking")
+    parser.add_argument(
+        "--within-s", type=float, default=120, help="at most this long more for data where it is blank"
+    )
     args = parser.parse_args()
     if args.local_file and not Path(args.local_file).is_file():
         print(f"check.py: --local-file {args.local_file}: expected a file, found none", file=sys.stderr)

@@ -3,7 +3,7 @@
 
 Usage: serve.py PAGE_DIR MODULES_DIR DATA_DIR PORT_FILE
 
-Serves PAGE_DIR's index.html, app.js and layout.json at /, MODULES_DIR (the installed
+Serves PAGE_DIR's index.html, app.js and layouts at /, MODULES_DIR (the installed
 node_modules: the bundle, React) at /node_modules/, and the regular files directly in DATA_DIR
 at /data/NAME with single-range support (HTTP 206), which Studio's remote file source needs to
 read an MCAP file's index and chunks. /favicon.ico is an empty answer (204), so that the page
@@ -21,7 +21,7 @@ import urllib.parse
 RANGE = re.compile(r"bytes=(\d*)-(\d*)$")
 
 
-PAGE_FILES = ("index.html", "app.js", "layout.json")
+PAGE_FILES = ("index.html", "app.js", "layout.json", "layout-network.json")
 
 
 def handler_for(page_dir, modules_dir, data_dir):
