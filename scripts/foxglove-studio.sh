@@ -1,0 +1,230 @@
+#!/usr/bin/env bash
+# Foxglove Studio 1.48.0, unmodified, against tdma-run's live view and its --mcap logs (issue 28).
+#
+# Studio is the prebuilt bundle npm ships in @foxglove/studio-base 1.48.0 (assets/index.js, a
+# UMD module with React 17 external), rendered by scripts/foxglove-studio/{index.html,app.js}
+# as Studio's web app renders it, in headless Chromium (Debian `chromium`) driven by Playwright
+# (PyPI) with executable_path: no browser download, no bundler, no change to Studio. Not a CI
+# test: the first run downloads the 36 MB package (179 MB unpacked) from npm.
+#
+# Three sessions, each with --foxglove and --mcap:
+#  - sim: `tdma-run --sim --pace 1` (both ends in one process, so frames have a delay_ms);
+#  - operator: `tdma-run --role operator` over `link-sim --pty` (the S100 model the tests use)
+#    to a ROV standing still (an all-zero joystick script);
+#  - network: `tdma-run --scenario scenarios/relay-rf.json --pace 1`, on its own layout
+#    (layout-network.json: both vehicles in 3D, vehicle 2's image, /network/frames.delay_ms).
+# Studio opens each live (`?ds=foxglove-websocket&ds.url=ws://...`) on a layout with 3D, Image,
+# Plot (/link/frames.delay_ms), Log (/session/log, /link/log), Publish and Teleop, watches,
+# sends the Publish panel's GoTo (not to the network: its orders are its waypoints) and waits
+# for `order N acknowledged` on /session/log; then the session is stopped as by Ctrl-C (it keeps
+# its outputs). Then Studio opens the logs: as remote files (`?ds=remote-file`, HTTP ranges from
+# a loopback server) and the operator's as a local file too.
+# Each step fails on any entry of Studio's Problems list, any error in a panel's settings, any
+# console or page error, and panels left blank (scripts/foxglove-studio/check.py says which);
+# then each session's --metrics must count the GoTo acknowledged, and tdma-run must have warned
+# of nothing Studio sent but the 3D panel's three channels. Last, a control: a log with
+# a schema Studio refuses (bad_log.py) must fail the same check with Studio's message.
+#
+# Usage: scripts/foxglove-studio.sh [OUT_DIR]   (default target/foxglove-studio/out)
+# Environment: STUDIO_CACHE (where npm installs Studio; default target/foxglove-studio/cache,
+#              kept between runs), BIN (the directory of tdma-run and link-sim; default: a
+#              debug build of both), SESSION_MAX_S (a bound on each session, default 1200 s;
+#              each is stopped by SIGINT once its live check is done), KEEP=1 keeps the work
+#              directory.
+# Needs: node and npm, python3 with playwright and mcap (pip install playwright mcap),
+# /usr/bin/chromium (apt-get install chromium).
+# Exit 0 when every check passes, 1 when one fails, 2 when a check could not be made.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+out=${1:-target/foxglove-studio/out}
+cache=${STUDIO_CACHE:-target/foxglove-studio/cache}
+# Each session runs until its live check is done, then is stopped as by Ctrl-C (which keeps its
+# outputs); this bounds it if the script dies first.
+seconds_max=${SESSION_MAX_S:-1200}
+here=scripts/foxglove-studio
+
+fail_setup() { echo "foxglove-studio: $*" >&2; exit 2; }
+command -v npm >/dev/null || fail_setup "npm not found (apt-get install nodejs npm)"
+[ -x /usr/bin/chromium ] || fail_setup "/usr/bin/chromium not found (apt-get install chromium)"
+python3 -c 'import playwright, mcap' 2>/dev/null || fail_setup "python3 lacks playwright or mcap (pip install playwright mcap)"
+
+# Studio, installed once: the lock file's hash names what is in the cache.
+mkdir -p "$cache"
+stamp=$(sha256sum "$here/package-lock.json" | cut -c1-16)
+if [ "$(cat "$cache/installed" 2>/dev/null)" != "$stamp" ]; then
+  echo "foxglove-studio: installing @foxglove/studio-base 1.48.0 into $cache" >&2
+  started=$(date +%s)
+  cp "$here/package.json" "$here/package-lock.json" "$cache/"
+  npm ci --prefix "$cache" --no-audit --no-fund --loglevel=error >&2
+  [ -f "$cache/node_modules/@foxglove/studio-base/assets/index.js" ] \
+    || fail_setup "$cache: npm ci left no @foxglove/studio-base/assets/index.js"
+  echo "$stamp" >"$cache/installed"
+  echo "foxglove-studio: installed in $(($(date +%s) - started)) s" >&2
+fi
+
+if [ -z "${BIN:-}" ]; then
+  cargo build --quiet --bin tdma-run --bin link-sim
+  BIN=target/debug
+fi
+for tool in "$BIN/tdma-run" "$BIN/link-sim"; do
+  [ -x "$tool" ] || fail_setup "$tool: not built"
+done
+
+work=$(mktemp -d)
+pids=()
+cleanup() {
+  for pid in "${pids[@]}"; do kill "$pid" 2>/dev/null || true; done
+  wait 2>/dev/null || true
+  if [ "${KEEP:-0}" = 1 ]; then echo "foxglove-studio: kept $work" >&2; else rm -rf "$work"; fi
+}
+trap cleanup EXIT
+trap 'exit 130' INT
+trap 'exit 143' TERM
+
+wait_for_file() { # PATH SECONDS WHAT: wait until PATH has a line
+  local deadline=$(($(date +%s) + $2))
+  until [ -s "$1" ]; do
+    [ "$(date +%s)" -lt "$deadline" ] || fail_setup "$3: not seen within $2 s"
+    sleep 0.2
+  done
+}
+
+free_port() {
+  python3 -c "import socket; s=socket.socket(); s.bind(('127.0.0.1',0)); print(s.getsockname()[1])"
+}
+
+wait_for_line() { # FILE PATTERN SECONDS WHAT PID: wait until FILE has a line with PATTERN
+  local deadline=$(($(date +%s) + $3))
+  until grep -q "$2" "$1"; do
+    [ "$(date +%s)" -lt "$deadline" ] || fail_setup "$4: not seen within $3 s: $(tail -3 "$1")"
+    kill -0 "$5" 2>/dev/null || fail_setup "$4: the process exited: $(tail -3 "$1")"
+    sleep 0.1
+  done
+}
+
+mkdir -p "$work/data"
+# Session 1: a simulation at real time (both ends in one process: frames have a delay).
+sim_port=$(free_port)
+"$BIN/tdma-run" --sim --pace 1 --duration "$seconds_max" --foxglove "127.0.0.1:$sim_port" \
+  --mcap "$work/data/sim.mcap" --metrics "$work/sim.json" 2>"$work/sim.err" &
+sim=$!
+pids+=($sim)
+wait_for_line "$work/sim.err" "Foxglove: ws://" 20 "the simulation's live view" "$sim"
+
+# Session 2: an operator over link-sim's pseudo-terminals, A for the operator, B for the ROV.
+"$BIN/link-sim" --pty --model s100 --bitrate-bps 9600 --intrinsic-delay-ms 20 --jitter-ms 2 \
+  --half-duplex false >"$work/link.out" 2>"$work/link.err" &
+pids+=($!)
+deadline=$(($(date +%s) + 10))
+until [ "$(wc -l <"$work/link.out")" -ge 2 ]; do
+  [ "$(date +%s)" -lt "$deadline" ] || fail_setup "link-sim gave no pty paths: $(cat "$work/link.err")"
+  sleep 0.1
+done
+side_a=$(sed -n 1p "$work/link.out")
+side_b=$(sed -n 2p "$work/link.out")
+printf 't_s,vx,vy,vz,vyaw\n0,0,0,0,0\n' >"$work/still.csv"
+"$BIN/tdma-run" --role rov --port "$side_b" --duration "$seconds_max" --image-size 400 \
+  --metrics "$work/rov.json" 2>"$work/rov.err" &
+rov=$!
+pids+=($rov)
+op_port=$(free_port)
+"$BIN/tdma-run" --role operator --port "$side_a" --ipg 150 --duration "$seconds_max" \
+  --image-size 400 --script "$work/still.csv" --foxglove "127.0.0.1:$op_port" \
+  --mcap "$work/data/operator.mcap" --metrics "$work/op.json" 2>"$work/op.err" &
+operator=$!
+pids+=($operator)
+wait_for_line "$work/op.err" "Foxglove: ws://" 20 "the operator's live view" "$operator"
+
+# Session 3: a network (scenarios/relay-rf.json: an operator, a relay, a far vehicle) at real
+# time: every vehicle under /vehicle/N/, and /network/frames.
+net_port=$(free_port)
+"$BIN/tdma-run" --scenario scenarios/relay-rf.json --pace 1 --duration "$seconds_max" \
+  --foxglove "127.0.0.1:$net_port" --mcap "$work/data/network.mcap" 2>"$work/net.err" &
+network=$!
+pids+=($network)
+wait_for_line "$work/net.err" "Foxglove: ws://" 20 "the network's live view" "$network"
+
+python3 "$here/serve.py" "$here" "$cache/node_modules" "$work/data" "$work/http.port" \
+  2>"$work/http.err" &
+pids+=($!)
+wait_for_file "$work/http.port" 10 "the page server's port"
+studio="http://127.0.0.1:$(cat "$work/http.port")/"
+
+mkdir -p "$out"
+status=0
+check() { # NAME ARGS...: one check.py run; one that could not be made (2) stops the script
+  local rc=0
+  python3 "$here/check.py" "$1" --studio "$studio" --out "$out" "${@:2}" || rc=$?
+  [ "$rc" -le 1 ] || exit "$rc"
+  [ "$rc" = 0 ] || status=1
+}
+live_topics=/rov/pose,/tf,/camera/image,/link/frames,/session/log
+file_topics=/rov/pose,/tf,/camera/image,/link/frames
+stop() { # PID ERR NAME: SIGINT (Ctrl-C), which ends a session keeping its outputs; its end
+  local rc=0
+  kill -INT "$1" 2>/dev/null || true
+  wait "$1" || rc=$?
+  [ "$rc" = 0 ] || [ "$rc" = 130 ] || fail_setup "$3 exited $rc: $(tail -3 "$2")"
+}
+check sim-live --ws "ws://127.0.0.1:$sim_port" --publish --expect "$live_topics" --expect-delay
+stop "$sim" "$work/sim.err" "the simulation"
+check operator-live --ws "ws://127.0.0.1:$op_port" --publish --expect "$live_topics"
+stop "$operator" "$work/op.err" "the operator"
+stop "$rov" "$work/rov.err" "the ROV"
+net_topics=/vehicle/1/rov/pose,/vehicle/2/rov/pose,/vehicle/1/tf,/network/frames
+check network-live --layout layout-network.json --ws "ws://127.0.0.1:$net_port" \
+  --expect "$net_topics" --expect-delay
+stop "$network" "$work/net.err" "the network"
+for session in sim op; do
+  python3 -c '
+import json, sys
+metrics = json.load(open(sys.argv[2]))
+sent, acked = metrics.get("orders_sent", 0), metrics.get("orders_acknowledged", 0)
+print(f"{sys.argv[1]}: {sent} order(s) sent, {acked} acknowledged (its --metrics)")
+sys.exit(0 if acked >= 1 else 1)
+' "$session" "$work/$session.json" || status=1
+done
+for session in sim op net; do
+  { grep -v "Foxglove: ws://" "$work/$session.err" | grep -i "foxglove" || true; } | sed "s/^/$session: /"
+  # The 3D panel's three channels are refused (docs/tdma-foxglove.md); the Publish and Teleop
+  # panels' are not, and nothing Studio sends is skipped.
+  unexpected=$(grep "foxglove client" "$work/$session.err" | grep -v \
+    -e "(/move_base_simple/goal): refused" -e "(/clicked_point): refused" \
+    -e "(/initialpose): refused" || true)
+  if [ -n "$unexpected" ]; then
+    echo "$session: tdma-run warned of what Studio sent:"
+    echo "$unexpected"
+    status=1
+  fi
+done
+
+check sim-file --remote-file "${studio}data/sim.mcap" --expect "$file_topics" \
+  --absent /session/log --expect-delay
+check operator-file --remote-file "${studio}data/operator.mcap" --expect "$file_topics" \
+  --absent /session/log
+check operator-local-file --local-file "$work/data/operator.mcap" --expect "$file_topics" \
+  --absent /session/log
+check network-file --layout layout-network.json --remote-file "${studio}data/network.mcap" \
+  --expect "$net_topics" --expect-delay
+# The control: a log with a schema Studio refuses must fail, with Studio's own message.
+python3 "$here/bad_log.py" "$work/data/control.mcap"
+control=0
+python3 "$here/check.py" control --studio "$studio" --out "$work/control" \
+  --remote-file "${studio}data/control.mcap" --settle-s 2 >"$work/control.out" 2>&1 || control=$?
+refused='problem: .*Unsupported type \["number","null"\] for t_sent_s'
+if [ "$control" = 1 ] && grep -q "$refused" "$work/control.out"; then
+  echo "control: a log with a type array in a schema fails, as it must:" \
+    "$(grep -m1 -o 'Unsupported type \[[^]]*\] for t_sent_s' "$work/control.out" | head -1)"
+else
+  echo "control: a log with a type array in a schema did not fail with Studio's message" \
+    "(exit $control):"
+  cat "$work/control.out"
+  status=1
+fi
+if [ "$status" = 0 ]; then
+  echo "foxglove-studio: passed: Foxglove Studio 1.48.0, live and from the logs; screenshots in $out"
+else
+  echo "foxglove-studio: FAILED (the lines above; everything seen in $out/*.json)"
+fi
+exit "$status"
