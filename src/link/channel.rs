@@ -32,10 +32,10 @@ use std::collections::{BinaryHeap, VecDeque};
 use serde::Serialize;
 
 use super::distance::Distance;
-use super::medium::MediumReport;
+use super::medium::{Medium, MediumReport};
 use super::model::{ErrorMode, JitterDistribution, Model, ModelError};
 use super::rng::Rng;
-use super::sched::{Scheduler, SimTime};
+use super::sched::SimTime;
 use crate::stats::Running;
 
 /// One end of a link.
@@ -534,39 +534,11 @@ impl Transmitter {
     }
 }
 
-/// One modem: its transmit side, and the receptions it is hearing.
-struct End {
-    model: Model,
-    tx: Transmitter,
-    /// Receptions arriving at this end now (indices into the reception slab).
-    hearing: Vec<usize>,
-    /// Latest reception end of frames arriving at this end (deliveries never overtake).
-    last_rx_end: SimTime,
-    /// Gilbert-Elliott state of the channel into the other end: true when bad.
-    burst_bad: bool,
-}
-
-#[derive(Debug, Clone, Copy)]
-enum Event {
-    /// Try to put the side's FIFO head on air.
-    Kick(Side),
-    /// The side's transmission ends.
-    TxEnd(Side),
-    /// A reception starts (slab index).
-    RxStart(usize),
-    /// A reception ends (slab index).
-    RxEnd(usize),
-}
-
-/// Two modems and the channel between them, driven by time.
+/// Two modems and the channel between them, driven by time: the two-node [`Medium`] whose
+/// nodes send with a model each (A's frames follow `a_to_b`, B's `b_to_a`) and are a
+/// [`Distance`] apart, seen by sides.
 pub struct Link {
-    ends: [End; 2],
-    sched: Scheduler<Event>,
-    receptions: Receptions,
-    distance: Distance,
-    distance_cursor: usize,
-    /// Reports as a two-node medium's (sides by index), made [`Report`]s as they leave.
-    reports: VecDeque<MediumReport>,
+    medium: Medium,
 }
 
 impl Link {
@@ -578,22 +550,8 @@ impl Link {
         seed: u64,
         distance: Distance,
     ) -> Result<Link, ModelError> {
-        a_to_b.validate()?;
-        b_to_a.validate()?;
-        let end = |model: Model, side: Side| End {
-            model,
-            tx: Transmitter::new(seed, side.index()),
-            hearing: Vec::new(),
-            last_rx_end: SimTime::ZERO,
-            burst_bad: false,
-        };
         Ok(Link {
-            ends: [end(a_to_b, Side::A), end(b_to_a, Side::B)],
-            sched: Scheduler::new(),
-            receptions: Receptions::default(),
-            distance,
-            distance_cursor: 0,
-            reports: VecDeque::new(),
+            medium: Medium::pair(a_to_b, b_to_a, seed, distance)?,
         })
     }
 
@@ -604,166 +562,64 @@ impl Link {
 
     /// The model of frames sent from `side`.
     pub fn model(&self, side: Side) -> &Model {
-        &self.ends[side.index()].model
+        self.medium.model_of(side.index())
     }
 
     /// The link's current time.
     pub fn now(&self) -> SimTime {
-        self.sched.now()
+        self.medium.now()
     }
 
     /// When the next event is due (none when nothing is in flight).
     pub fn next_event_time(&self) -> Option<SimTime> {
-        self.sched.next_due()
+        self.medium.next_event_time()
     }
 
     /// Events scheduled since the start (each is handled once): the simulation's work.
     pub fn events_scheduled(&self) -> u64 {
-        self.sched.scheduled()
+        self.medium.events_scheduled()
     }
 
     /// Frames offered but not yet reported.
     pub fn in_flight(&self) -> usize {
-        self.ends.iter().map(|end| end.tx.queued()).sum::<usize>() + self.receptions.in_flight()
+        self.medium.in_flight()
     }
 
     /// True when `side` has nothing waiting and is not transmitting: a frame offered now goes
     /// straight to its intrinsic delay.
     pub fn tx_idle(&self, side: Side) -> bool {
-        self.ends[side.index()].tx.idle(self.now())
+        self.medium.tx_idle(side.index())
     }
 
     /// Sets the distance from now on (a vehicle simulation drives this).
     pub fn set_distance(&mut self, distance_m: f64) {
-        self.distance = Distance::Fixed(distance_m);
+        self.medium.set_track(Distance::Fixed(distance_m));
     }
 
     /// The distance now, m.
     pub fn distance_m(&mut self) -> f64 {
-        let now = self.now().as_secs_f64();
-        self.distance.at(now, &mut self.distance_cursor)
+        self.medium.pair_distance_m()
     }
 
     /// The next report, in the order fates were decided.
     pub fn pop_report(&mut self) -> Option<Report> {
-        self.reports.pop_front().map(link_report)
+        self.medium.pop_report().map(link_report)
     }
 
     /// Offers a frame from `side` at the current time; returns its sequence number. A frame
     /// that does not fit in the FIFO is reported at once as `overflow`.
     pub fn offer(&mut self, side: Side, bytes: Vec<u8>) -> u64 {
-        let now = self.now();
-        let end = &mut self.ends[side.index()];
-        let len = bytes.len();
-        let seq = match end.tx.enqueue(&end.model, now, bytes) {
-            Ok(seq) => seq,
-            Err(seq) => {
-                let pair = (side.index(), side.other().index());
-                self.reports
-                    .push_back(lost_report(pair, (seq, len, now), None));
-                return seq;
-            }
-        };
-        self.try_transmit(side);
-        seq
+        self.medium.offer(side.index(), bytes)
     }
 
     /// Processes the next event, moving time to it; false when nothing is pending.
     pub fn step(&mut self) -> bool {
-        match self.sched.pop() {
-            Some((_, event)) => {
-                self.handle(event);
-                true
-            }
-            None => false,
-        }
+        self.medium.step()
     }
 
     /// Processes every event due up to `t`, then moves time to `t` (never backwards).
     pub fn advance(&mut self, t: SimTime) {
-        // pop_until moves the clock to t once nothing more is due.
-        while let Some((_, event)) = self.sched.pop_until(t) {
-            self.handle(event);
-        }
-    }
-
-    fn handle(&mut self, event: Event) {
-        match event {
-            Event::Kick(side) => {
-                let now = self.now();
-                if self.ends[side.index()].tx.woken(now) {
-                    self.try_transmit(side);
-                }
-            }
-            Event::TxEnd(side) => self.try_transmit(side),
-            Event::RxStart(slot) => self.reception_starts(slot),
-            Event::RxEnd(slot) => self.reception_ends(slot),
-        }
-    }
-
-    /// Puts the FIFO head on air if the transmitter is free and the head is ready; otherwise
-    /// makes sure a wake-up is pending for when it will be.
-    fn try_transmit(&mut self, side: Side) {
-        let now = self.now();
-        let end = &mut self.ends[side.index()];
-        let (frame, air_end) = match end.tx.next_on_air(&end.model, now) {
-            OnAir::Nothing => return,
-            OnAir::WakeAt(due) => {
-                self.sched.schedule(due, Event::Kick(side));
-                return;
-            }
-            OnAir::Frame(frame, air_end) => (frame, air_end),
-        };
-        self.sched.schedule(air_end, Event::TxEnd(side));
-
-        // Half duplex (a property of this side's modem, kept in the model of what it sends):
-        // what this side is hearing now is lost.
-        if self.ends[side.index()].model.half_duplex {
-            self.receptions
-                .collide(&self.ends[side.index()].hearing, now);
-        }
-
-        let distance = self.distance_m();
-        let pair = (side.index(), side.other().index());
-        let model = &self.ends[side.index()].model;
-        if !model.in_range(distance) {
-            let lost = (frame.seq, frame.bytes.len(), frame.t_offered);
-            self.reports.push_back(lost_report(pair, lost, Some(now)));
-            return;
-        }
-        let propagation_s = model.propagation_s(distance);
-        let reorder = model.reorder;
-        let receiver = &mut self.ends[side.other().index()];
-        let times = (now, air_end);
-        let last_rx_end = &mut receiver.last_rx_end;
-        let (reception, rx_start) =
-            Reception::of(&frame, pair, times, propagation_s, reorder, last_rx_end);
-        let rx_end = reception.rx_end;
-        let slot = self.receptions.insert(reception);
-        self.sched.schedule(rx_start, Event::RxStart(slot));
-        self.sched.schedule(rx_end, Event::RxEnd(slot));
-    }
-
-    fn reception_starts(&mut self, slot: usize) {
-        let now = self.now();
-        let Some(to) = self.receptions.receiver(slot) else {
-            return;
-        };
-        let receiver = &mut self.ends[to & 1];
-        let deaf = receiver.model.half_duplex && receiver.tx.air_busy_until > now;
-        self.receptions.start(slot, &receiver.hearing, deaf, now);
-        receiver.hearing.push(slot);
-    }
-
-    fn reception_ends(&mut self, slot: usize) {
-        let now = self.now();
-        let Some(reception) = self.receptions.take(slot) else {
-            return;
-        };
-        self.ends[reception.to & 1].hearing.retain(|&s| s != slot);
-        let end = &mut self.ends[reception.from & 1];
-        let (streams, burst_bad) = (&mut end.tx.streams, &mut end.burst_bad);
-        reception.end(&end.model, streams, burst_bad, now, &mut self.reports);
+        self.medium.advance(t);
     }
 }
 
@@ -1370,11 +1226,11 @@ pub(super) mod tests {
         // bounds the backlog, and the reception slab's high-water mark stays tiny.
         assert_eq!(link.in_flight(), 0);
         assert!(
-            link.receptions.high_water() <= 4,
+            link.medium.slab_high_water() <= 4,
             "slab grew to {}",
-            link.receptions.high_water()
+            link.medium.slab_high_water()
         );
-        assert!(link.sched.is_empty());
+        assert_eq!(link.next_event_time(), None);
     }
 
     #[test]

@@ -34,10 +34,11 @@
 
 use std::collections::{HashMap, VecDeque};
 
-use super::Fate;
 use super::channel::{OnAir, Reception, Receptions, Transmitter, lost_report};
 use super::model::{Model, ModelError};
 use super::sched::{Scheduler, SimTime};
+use super::{Distance, Fate};
+use crate::geometry::distance_m;
 
 /// The fate of one frame at one receiver (or of a duplicate copy of it).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -95,16 +96,18 @@ enum Event {
 
 /// N modems on one channel, driven by time.
 pub struct Medium {
-    model: Model,
+    /// The model each node sends with, by node.
+    models: Vec<Model>,
     nodes: Vec<Node>,
+    /// A two-node medium's distance over time, with its lookup cursor, in place of the
+    /// positions (the [`super::Link`] this medium is).
+    track: Option<(Distance, usize)>,
     /// Keyed by (sender, receiver); created by the first frame between them.
     pairs: HashMap<(usize, usize), Pair>,
     sched: Scheduler<Event>,
     receptions: Receptions,
     reports: VecDeque<MediumReport>,
 }
-
-use crate::geometry::distance_m;
 
 impl Medium {
     /// A medium of `positions_m.len()` nodes at those NED positions, every node sending
@@ -121,6 +124,36 @@ impl Medium {
                 problem: format!("expected finite coordinates, found {:?}", positions_m[k]),
             });
         }
+        let models = vec![model; positions_m.len()];
+        Ok(Medium::of(models, seed, positions_m, None))
+    }
+
+    /// Two modems, node 0 sending with `a_to_b` and node 1 with `b_to_a`, `distance` apart
+    /// (a [`Distance::Track`] moves them in time): the [`super::Link`]. Invalid models are an
+    /// error.
+    pub(super) fn pair(
+        a_to_b: Model,
+        b_to_a: Model,
+        seed: u64,
+        distance: Distance,
+    ) -> Result<Medium, ModelError> {
+        a_to_b.validate()?;
+        b_to_a.validate()?;
+        let positions_m = vec![[0.0; 3]; 2];
+        Ok(Medium::of(
+            vec![a_to_b, b_to_a],
+            seed,
+            positions_m,
+            Some((distance, 0)),
+        ))
+    }
+
+    fn of(
+        models: Vec<Model>,
+        seed: u64,
+        positions_m: Vec<[f64; 3]>,
+        track: Option<(Distance, usize)>,
+    ) -> Medium {
         let nodes = positions_m
             .into_iter()
             .enumerate()
@@ -130,14 +163,15 @@ impl Medium {
                 hearing: Vec::new(),
             })
             .collect();
-        Ok(Medium {
-            model,
+        Medium {
+            models,
             nodes,
+            track,
             pairs: HashMap::new(),
             sched: Scheduler::new(),
             receptions: Receptions::default(),
             reports: VecDeque::new(),
-        })
+        }
     }
 
     /// The number of nodes.
@@ -145,9 +179,36 @@ impl Medium {
         self.nodes.len()
     }
 
-    /// The model every node sends with.
+    /// The model every node sends with (node 0's, where a pair's differ).
     pub fn model(&self) -> &Model {
-        &self.model
+        &self.models[0]
+    }
+
+    /// The model `node` sends with (node 0's for an unknown node).
+    pub fn model_of(&self, node: usize) -> &Model {
+        self.models.get(node).unwrap_or(&self.models[0])
+    }
+
+    /// The most receptions in flight at once so far (the reception slab's size).
+    #[cfg(test)]
+    pub(super) fn slab_high_water(&self) -> usize {
+        self.receptions.high_water()
+    }
+
+    /// Sets a pair's distance from now on (nothing on a medium of positions).
+    pub(super) fn set_track(&mut self, distance: Distance) {
+        if let Some(track) = self.track.as_mut() {
+            *track = (distance, 0);
+        }
+    }
+
+    /// A pair's distance now, m (between nodes 0 and 1 on a medium of positions).
+    pub(super) fn pair_distance_m(&mut self) -> f64 {
+        let now_s = self.now().as_secs_f64();
+        match self.track.as_mut() {
+            Some((distance, cursor)) => distance.at(now_s, cursor),
+            None => self.distance_m(0, 1),
+        }
     }
 
     /// Moves `node` to `position_m` from now on (a position that is not finite is ignored).
@@ -203,7 +264,7 @@ impl Medium {
             return 0;
         };
         let len = bytes.len();
-        match sender.tx.enqueue(&self.model, now, bytes) {
+        match sender.tx.enqueue(&self.models[node], now, bytes) {
             Ok(seq) => {
                 self.try_transmit(node);
                 seq
@@ -263,7 +324,8 @@ impl Medium {
         let Some(sender) = self.nodes.get_mut(node) else {
             return;
         };
-        let (frame, air_end) = match sender.tx.next_on_air(&self.model, now) {
+        let model = &self.models[node];
+        let (frame, air_end) = match sender.tx.next_on_air(model, now) {
             OnAir::Nothing => return,
             OnAir::WakeAt(due) => {
                 self.sched.schedule(due, Event::Kick(node));
@@ -273,24 +335,28 @@ impl Medium {
         };
         let from = sender.position_m;
         self.sched.schedule(air_end, Event::TxEnd(node));
-        if self.model.half_duplex {
+        if model.half_duplex {
             self.receptions.collide(&sender.hearing, now);
         }
+        let now_s = now.as_secs_f64();
         for to in (0..self.nodes.len()).filter(|&to| to != node) {
             let Some(receiver) = self.nodes.get(to) else {
                 continue;
             };
-            let distance = distance_m(from, receiver.position_m);
-            if !self.model.in_range(distance) {
+            let distance = match self.track.as_mut() {
+                Some((track, cursor)) => track.at(now_s, cursor),
+                None => distance_m(from, receiver.position_m),
+            };
+            if !model.in_range(distance) {
                 let lost = (frame.seq, frame.bytes.len(), frame.t_offered);
                 let range = lost_report((node, to), lost, Some(now));
                 self.reports.push_back(range);
                 continue;
             }
-            let propagation_s = self.model.propagation_s(distance);
+            let propagation_s = model.propagation_s(distance);
             let last_rx_end = &mut self.pairs.entry((node, to)).or_default().last_rx_end;
             let times = (now, air_end);
-            let reorder = self.model.reorder;
+            let reorder = model.reorder;
             let (reception, rx_start) = Reception::of(
                 &frame,
                 (node, to),
@@ -310,14 +376,13 @@ impl Medium {
     /// the receiver is hearing another frame or (half duplex) is on air itself.
     fn reception_starts(&mut self, slot: usize) {
         let now = self.now();
-        let Some(receiver) = self
-            .receptions
-            .receiver(slot)
-            .and_then(|to| self.nodes.get_mut(to))
-        else {
+        let Some(to) = self.receptions.receiver(slot) else {
             return;
         };
-        let deaf = self.model.half_duplex && receiver.tx.air_busy_until > now;
+        let Some(receiver) = self.nodes.get_mut(to) else {
+            return;
+        };
+        let deaf = self.models[to].half_duplex && receiver.tx.air_busy_until > now;
         self.receptions.start(slot, &receiver.hearing, deaf, now);
         receiver.hearing.push(slot);
     }
@@ -337,7 +402,13 @@ impl Medium {
         };
         let burst_bad = &mut self.pairs.entry((from, to)).or_default().burst_bad;
         let streams = &mut sender.tx.streams;
-        reception.end(&self.model, streams, burst_bad, now, &mut self.reports);
+        reception.end(
+            &self.models[from],
+            streams,
+            burst_bad,
+            now,
+            &mut self.reports,
+        );
     }
 }
 
@@ -656,7 +727,7 @@ mod tests {
         let mut model = quiet(s100());
         model.fifo_bytes = 100;
         let mut medium = three();
-        medium.model = model;
+        medium.models = vec![model; 3];
         medium.offer(1, vec![0; 57]);
         medium.offer(1, vec![0; 57]);
         let overflow: Vec<_> = std::iter::from_fn(|| medium.pop_report()).collect();
