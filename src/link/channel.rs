@@ -25,6 +25,11 @@
 //!
 //! Unless `reorder` is set, deliveries in one direction never overtake each other, even when the
 //! distance shrinks. Memory holds only frames in flight.
+//!
+//! The machinery is the [`Medium`]'s (one event core for both): a [`Link`] is the two-node
+//! medium whose nodes send with a model each and are a [`Distance`] apart; this module keeps
+//! what both share (the transmitter, the receptions, the fate of an arrival) and the link's
+//! view by sides.
 
 use std::cmp::{Ordering, Reverse};
 use std::collections::{BinaryHeap, VecDeque};

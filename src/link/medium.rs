@@ -1,4 +1,5 @@
-//! A shared medium: one model for N modems with positions, driven by time.
+//! A shared medium: N modems with positions, driven by time (one model for all; a
+//! [`super::Link`], the two-node medium, has one per side).
 //!
 //! [`Medium`] generalises [`super::Link`] from two modems to N on one channel (an RF or
 //! acoustic band every node on it hears): a transmission from one node reaches every other node
@@ -6,8 +7,8 @@
 //! for its air time. At each receiver separately, a reception that overlaps another reception,
 //! or (half duplex) the receiver's own transmission, is lost with every reception it overlaps
 //! (fate `collision`), exactly as in the two-node model; loss, bit errors, corruption and
-//! duplication are then drawn per reception. The two-node medium is the [`super::Link`] with
-//! the same model both ways, frame for frame and fate for fate, under the same seed.
+//! duplication are then drawn per reception. A [`super::Link`] is the two-node medium, a model
+//! for each side and a distance (fixed or a track) in place of positions.
 //!
 //! Like [`super::Link`] it never reads a clock: a driver offers frames at the medium's time
 //! ([`Medium::offer`]), moves time forward ([`Medium::step`], [`Medium::advance`]) and collects
