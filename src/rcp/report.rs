@@ -73,7 +73,8 @@ pub struct Metrics {
     pub interrupted: Option<String>,
 }
 
-/// What a driver ([`super::session::run`], [`super::network::run`]) says when `stop` ended it, until the caller names the cause.
+/// What a driver ([`super::session::run`], [`super::network::run`]) says when `stop` ended it,
+/// until the caller names the cause.
 pub const STOPPED: &str = "stopped";
 
 /// One frame's row of `--events` (the data of the paper's Fig. 10).
