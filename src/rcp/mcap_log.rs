@@ -516,6 +516,9 @@ impl View {
                     if *accepted { INFO } else { WARNING },
                     &format!("autopilot answered {command}: {result}"),
                 ),
+                super::drive::DriveEvent::Refused { why, reason } => {
+                    events(WARNING, &format!("vehicle refused ({why}): {reason}"))
+                }
                 super::drive::DriveEvent::Note(note) => events(INFO, &format!("vehicle: {note}")),
             },
             Event::CameraFailed(why) => events(WARNING, &format!("camera: {why}")),

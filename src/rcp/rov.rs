@@ -10,10 +10,24 @@
 //! first, until a heartbeat arrives. A GoTo in execution when the link is lost is abandoned (it
 //! is what took the ROV out of range; resuming it would oscillate at the range's edge): after
 //! recovery the ROV holds position under the joystick until the operator orders again.
+//!
+//! Holding: what a GoTo reached, and where recovery's backtracking was when the link came
+//! back, is held (the drive is still asked to go there: an autopilot stays in GUIDED at the
+//! setpoint) until the operator's next order: a Velocity order that differs from the one in
+//! force when the hold began (stick input, arm, disarm, another mode), or a GoTo or
+//! HoldHeading. The status says RD 1 meanwhile: no order is in execution.
+//!
+//! Refusals: a vehicle without a position estimate ([`DriveState::position_known`] false)
+//! cannot run a GoTo nor backtrack: the GoTo is refused at once (EOID toggles, nothing is
+//! executed, the vehicle keeps the sticks' mode) and the status says why (ST = 1, WHY
+//! no_position, until the operator's next order); backtracking is skipped (the vehicle holds
+//! its depth with neutral sticks). The drive's own reasons (an arm or a mode the autopilot
+//! refused, silence) go into the same field while they last; NP says the pose is unknown.
 
 use std::collections::VecDeque;
 
 use super::camera::{Camera, Cycle};
+use super::drive::DriveEvent;
 use super::drive::{Demand, Drive, DriveState, SimDrive};
 use super::{Event, ImageSettings, PoseSample, emit, trunks_of};
 use crate::debt;
@@ -21,7 +35,7 @@ use crate::link::SimTime;
 use crate::vehicle::Command;
 use crate::wire::frame::{ADDR_OPERATOR, Frame};
 use crate::wire::operator::Order;
-use crate::wire::rov::{BasicStatus, Status};
+use crate::wire::rov::{BasicStatus, Extension, Status, Why};
 use crate::wire::{Message, MessageRepr, Nav, rov};
 
 /// The ROV's fixed figures.
@@ -60,6 +74,19 @@ enum Executing {
     GoTo([f64; 3], f64),
 }
 
+/// A Velocity order's fields: vx, vy, vz, vyaw, arm, disarm, nav.
+type VelocityOrder = ([i8; 4], bool, bool, Nav);
+
+/// A point held after a GoTo or backtracking, until the operator orders otherwise.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Hold {
+    /// Where, NED m, and the heading, degrees.
+    target_m: [f64; 3],
+    heading_deg: f64,
+    /// The Velocity order in force when the hold began: a different one ends the hold.
+    order: Option<VelocityOrder>,
+}
+
 /// An image being sent.
 struct Outgoing {
     trunks: Vec<Vec<u8>>,
@@ -79,6 +106,13 @@ pub struct Rov {
     eoid: bool,
     loc: bool,
     executing: Option<Executing>,
+    hold: Option<Hold>,
+    /// The last Velocity order received.
+    velocity: Option<VelocityOrder>,
+    /// A refusal of the engine's own (a GoTo without position), reported until the next order.
+    refused: Option<Why>,
+    /// True while backtracking is skipped for want of a position (reported once per loss).
+    backtrack_refused: bool,
     arm: bool,
     nav: Nav,
     joystick: [f64; 4],
@@ -114,6 +148,10 @@ impl Rov {
             eoid: false,
             loc: false,
             executing: None,
+            hold: None,
+            velocity: None,
+            refused: None,
+            backtrack_refused: false,
             arm: false,
             nav: Nav::Manual,
             joystick: [0.0; 4],
@@ -185,7 +223,19 @@ impl Rov {
             // The order in execution led out of range: it is abandoned, so that once the link
             // is back the ROV holds where it regained it instead of driving out again.
             self.executing = None;
+            self.hold = None;
             self.events.push(Event::LinkLost);
+        }
+        let position_known = self.drive.state().position_known;
+        if !position_known {
+            if let Some(Executing::GoTo(..)) = self.executing.take() {
+                self.refuse(
+                    Why::NoPosition,
+                    "the GoTo in execution was abandoned: the vehicle lost its position estimate"
+                        .to_string(),
+                );
+            }
+            self.hold = None;
         }
         if self.link_up && now >= self.next_push {
             if self.stack.len() == self.cfg.stack_depth {
@@ -194,7 +244,17 @@ impl Rov {
             self.stack.push_back(self.drive.state().position_m);
             self.next_push = now.after_secs(self.cfg.stack_period_s);
         }
-        let command = if !self.link_up {
+        let command = if !self.link_up && !position_known {
+            // No position: nothing to backtrack to; neutral sticks (a depth-holding mode).
+            if !self.backtrack_refused {
+                self.backtrack_refused = true;
+                self.events.push(Event::Vehicle(DriveEvent::Refused {
+                    why: Why::NoPosition,
+                    reason: "link lost: no backtracking, the vehicle has no position estimate; it holds its depth with neutral sticks".to_string(),
+                }));
+            }
+            idle()
+        } else if !self.link_up {
             // Backtracking: drive to the newest stacked position, pop it when reached.
             while let Some(&back) = self.stack.back() {
                 if self.drive.state().distance_to(back) > self.drive.arrival_m()
@@ -217,24 +277,39 @@ impl Rov {
             match self.executing {
                 Some(Executing::GoTo([x, y, z], heading_deg)) => {
                     if self.drive.reached([x, y, z], heading_deg) {
+                        // Done: held there until the operator's next order.
                         self.executing = None;
-                        idle()
-                    } else {
+                        self.hold = Some(Hold {
+                            target_m: [x, y, z],
+                            heading_deg,
+                            order: self.velocity,
+                        });
+                    }
+                    Command::GoTo {
+                        x,
+                        y,
+                        z,
+                        heading_deg,
+                    }
+                }
+                None => match self.hold {
+                    Some(hold) => {
+                        let [x, y, z] = hold.target_m;
                         Command::GoTo {
                             x,
                             y,
                             z,
-                            heading_deg,
+                            heading_deg: hold.heading_deg,
                         }
                     }
-                }
-                None if self.arm => Command::Thrust {
-                    surge: self.joystick[0],
-                    sway: self.joystick[1],
-                    heave: self.joystick[2],
-                    yaw: self.joystick[3],
+                    None if self.arm => Command::Thrust {
+                        surge: self.joystick[0],
+                        sway: self.joystick[1],
+                        heave: self.joystick[2],
+                        yaw: self.joystick[3],
+                    },
+                    None => idle(),
                 },
-                None => idle(),
             }
         };
         let demand = Demand {
@@ -266,6 +341,16 @@ impl Rov {
         self.last_heartbeat = now;
         if !self.link_up {
             self.link_up = true;
+            self.backtrack_refused = false;
+            // Where backtracking was going is held until the operator orders otherwise.
+            let state = self.drive.state();
+            if let (Some(&target_m), true) = (self.stack.back(), state.position_known) {
+                self.hold = Some(Hold {
+                    target_m,
+                    heading_deg: state.heading_deg,
+                    order: self.velocity,
+                });
+            }
             self.events.push(Event::LinkRecovered);
         }
 
@@ -284,6 +369,17 @@ impl Rov {
                 disarm,
                 nav,
             } => {
+                let order = ([vx, vy, vz, vyaw], arm, disarm, nav);
+                if self.velocity != Some(order) {
+                    // The operator's next order: a hold or a refusal of the last ends here.
+                    if self.hold.is_some_and(|h| h.order != Some(order)) {
+                        self.hold = None;
+                    }
+                    if self.velocity.is_some() {
+                        self.refused = None;
+                    }
+                    self.velocity = Some(order);
+                }
                 self.joystick = [vx, vy, vz, vyaw].map(super::operator::thrust_percent);
                 if arm {
                     self.arm = true;
@@ -299,8 +395,18 @@ impl Rov {
                 if msg.oid == self.eoid {
                     self.eoid = !self.eoid;
                     self.loc = false;
-                    self.execute(order);
-                    self.events.push(Event::OrderExecuted(order));
+                    self.refused = None;
+                    if matches!(order, Order::GoTo { .. }) && !self.drive.state().position_known {
+                        // Refused at once, and said so: the order is taken (EOID toggles)
+                        // but nothing runs.
+                        self.refuse(
+                            Why::NoPosition,
+                            format!("{order:?} refused: the vehicle has no position estimate"),
+                        );
+                    } else {
+                        self.execute(order);
+                        self.events.push(Event::OrderExecuted(order));
+                    }
                 }
             }
             Order::Unknown { .. } => {}
@@ -321,7 +427,18 @@ impl Rov {
         Some(self.reply(msg.rit))
     }
 
+    /// Reports a refusal of the engine's own: an event now, WHY in the status until the next
+    /// order.
+    fn refuse(&mut self, why: Why, reason: String) {
+        self.refused = Some(why);
+        self.events
+            .push(Event::Vehicle(DriveEvent::Refused { why, reason }));
+    }
+
     fn execute(&mut self, order: Order) {
+        if !matches!(order, Order::ImageSettings { .. }) {
+            self.hold = None;
+        }
         match order {
             Order::GoTo {
                 x_cm,
@@ -419,6 +536,23 @@ impl Rov {
             roll_deg: degrees(state.roll_deg),
             pitch_deg: degrees(state.pitch_deg),
             yaw_deg: degrees(state.heading_deg),
+            extension: None,
+        };
+        let why = self.refused.unwrap_or(state.why);
+        let status = if !state.position_known || why != Why::Nothing {
+            BasicStatus {
+                // Without a position, X, Y, Z are not one: 0 rather than a stale value.
+                x_cm: if state.position_known { x_cm } else { 0 },
+                y_cm: if state.position_known { y_cm } else { 0 },
+                z_cm: if state.position_known { z_cm } else { 0 },
+                extension: Some(Extension {
+                    no_position: !state.position_known,
+                    why,
+                }),
+                ..status
+            }
+        } else {
+            status
         };
         let (mut ft, mut lt, mut itsn, mut trunk) = (false, false, 0u8, Vec::new());
         if let (false, Some(image)) = (
@@ -439,6 +573,16 @@ impl Rov {
             itsn = k as u8;
             trunk = image.trunks[k].clone();
         }
+        // A trunk of the largest size leaves no room for the extension byte: that frame goes
+        // as ST = 0 (the next one without such a trunk says it again).
+        let status = if trunk.len() > rov::MAX_EXTENDED_TRUNK_BYTES {
+            BasicStatus {
+                extension: None,
+                ..status
+            }
+        } else {
+            status
+        };
         let message = Message::Rov(rov::Repr {
             ft,
             lt,
