@@ -413,8 +413,7 @@ fn a_goto_on_the_real_ardusub_is_reached_and_held_and_the_pose_is_the_autopilots
     let sims = s.watched("sim");
     let at = |t: f64| {
         sims.iter()
-            .filter(|l| l["t"].as_f64().unwrap() <= t)
-            .last()
+            .rfind(|l| l["t"].as_f64().unwrap() <= t)
             .unwrap_or_else(|| panic!("no SIMSTATE before {t}\n{}", s.story()))
             .clone()
     };
@@ -428,8 +427,7 @@ fn a_goto_on_the_real_ardusub_is_reached_and_held_and_the_pose_is_the_autopilots
     let heading = s
         .watched("att")
         .iter()
-        .filter(|l| l["t"].as_f64().unwrap() <= stick_from + 3.0)
-        .last()
+        .rfind(|l| l["t"].as_f64().unwrap() <= stick_from + 3.0)
         .unwrap_or_else(|| panic!("no ATTITUDE\n{}", s.story()))["yaw_deg"]
         .as_f64()
         .unwrap()
@@ -509,10 +507,7 @@ fn a_goto_on_the_real_ardusub_is_reached_and_held_and_the_pose_is_the_autopilots
         .iter()
         .filter(|(t, _)| (reached_at + 3.0..=hold_to).contains(t))
         .filter_map(|(t, st)| {
-            let theirs = positions
-                .iter()
-                .filter(|p| p["t"].as_f64().unwrap() <= *t)
-                .last()?;
+            let theirs = positions.iter().rfind(|p| p["t"].as_f64().unwrap() <= *t)?;
             let ours = ["x_cm", "y_cm", "z_cm"].map(|k| st[k].as_f64().unwrap() / 100.0);
             Some(distance(ours, xyz(theirs)))
         })
@@ -531,8 +526,7 @@ fn a_goto_on_the_real_ardusub_is_reached_and_held_and_the_pose_is_the_autopilots
         "position_after_operator_start_s": position_at - s.operator_t0,
         "goto_to_within_0_5_m_s": reached_at - goto_at,
         "goto_to_within_0_3_m_s": within_03_at.map(|t| t - goto_at),
-        "goto_distance_m": positions.iter().filter(|p| p["t"].as_f64().unwrap() <= goto_at)
-            .last().map(|p| error_at(p)),
+        "goto_distance_m": positions.iter().rfind(|p| p["t"].as_f64().unwrap() <= goto_at).map(error_at),
         "hold_error_max_m": hold_error_m,
         "hold_samples": held.len(),
         "hold_error_after_arrival_max_m": hold_after_arrival_m,

@@ -353,7 +353,6 @@ fn simulate(
                                     &MavMessage::STATUSTEXT(STATUSTEXT_DATA {
                                         severity: MavSeverity::MAV_SEVERITY_WARNING,
                                         text: bytes.into(),
-                                        ..STATUSTEXT_DATA::DEFAULT
                                     }),
                                 );
                             }
