@@ -629,4 +629,118 @@ mod tests {
                 .any(|e| matches!(e, Event::ImageStarted { .. }))
         );
     }
+
+    /// Runs `slots` operator slots of 0.64 s between `operator` and `rov`; returns the ROV's
+    /// last status and its events.
+    fn slots(
+        operator: &mut Operator,
+        rov: &mut Rov,
+        from: u64,
+        slots: u64,
+    ) -> (BasicStatus, Vec<Event>) {
+        let mut events = Vec::new();
+        let mut last = None;
+        for slot in from..from + slots {
+            let t = SimTime(slot * 640_000_000);
+            rov.poll(t);
+            let (frame, _) = operator.poll(t);
+            let reply = rov.receive(t, &frame).expect("a reply to every slot");
+            operator.receive(t, &reply);
+            events.extend(rov.take_events());
+            last = operator.last_status;
+        }
+        (last.expect("a status"), events)
+    }
+
+    const GOTO: Order = Order::GoTo {
+        x_cm: 100,
+        y_cm: 0,
+        z_cm: 0,
+        heading_deg: 0,
+    };
+
+    #[test]
+    fn what_a_goto_reached_is_held_until_the_next_order() {
+        let mut rov = Rov::new(RovConfig::default(), [0.0; 3], Vec::new());
+        let mut operator = Operator::new(1, 640_000_000);
+        operator.set_modes(true, false, Nav::Stabilize);
+        slots(&mut operator, &mut rov, 0, 2);
+        operator.push_order(GOTO);
+        let (status, events) = slots(&mut operator, &mut rov, 2, 30);
+        assert!(events.contains(&Event::OrderExecuted(GOTO)), "{events:?}");
+        // Reached and held: RD 1 (nothing in execution), still guided at the target.
+        assert!(status.rd && status.nav == Nav::Guided, "{status:?}");
+        assert_eq!(status.extension, None);
+        assert!((rov.state().position_m[0] - 1.0).abs() < 0.1);
+        let (status, _) = slots(&mut operator, &mut rov, 32, 5);
+        assert_eq!(
+            status.nav,
+            Nav::Guided,
+            "the same Velocity order keeps the hold"
+        );
+        // Stick input ends it: back to the operator's mode, the sticks drive.
+        operator.set_joystick(crate::rcp::operator::Joystick {
+            vx: 50.0,
+            ..Default::default()
+        });
+        let (status, _) = slots(&mut operator, &mut rov, 37, 5);
+        assert_eq!(status.nav, Nav::Stabilize, "{status:?}");
+        assert!(rov.state().position_m[0] > 1.2);
+    }
+
+    /// The built-in model without a position estimate.
+    struct Blind(SimDrive);
+
+    impl Drive for Blind {
+        fn step(&mut self, now: SimTime, dt_s: f64, demand: &Demand) {
+            self.0.step(now, dt_s, demand);
+        }
+        fn state(&self) -> DriveState {
+            DriveState {
+                position_known: false,
+                ..self.0.state()
+            }
+        }
+    }
+
+    #[test]
+    fn without_a_position_a_goto_is_refused_at_once_and_said_until_the_next_order() {
+        let mut rov = Rov::with(
+            RovConfig::default(),
+            Box::new(Blind(SimDrive::new([2.0, 3.0, 4.0]))),
+            Box::new(Cycle::new(Vec::new())),
+        );
+        let mut operator = Operator::new(1, 640_000_000);
+        operator.set_modes(true, false, Nav::Stabilize);
+        let (status, _) = slots(&mut operator, &mut rov, 0, 2);
+        // No position: NP, and X, Y, Z are not the model's stale 2, 3, 4.
+        assert_eq!(
+            status.extension,
+            Some(Extension {
+                no_position: true,
+                why: Why::Nothing
+            })
+        );
+        assert_eq!([status.x_cm, status.y_cm, status.z_cm], [0; 3]);
+        let index = operator.push_order(GOTO);
+        let (status, events) = slots(&mut operator, &mut rov, 2, 4);
+        assert!(!events.contains(&Event::OrderExecuted(GOTO)), "{events:?}");
+        assert!(
+            events.iter().any(|e| matches!(e, Event::Vehicle(DriveEvent::Refused { why: Why::NoPosition, reason }) if reason.contains("no position estimate"))),
+            "{events:?}"
+        );
+        assert_eq!(status.why(), Why::NoPosition);
+        assert!(status.rd, "nothing left pending");
+        assert_eq!(status.nav, Nav::Stabilize);
+        assert!(
+            operator
+                .take_events()
+                .contains(&Event::OrderAcknowledged(index))
+        );
+        // The next order clears the reason.
+        operator.set_modes(true, false, Nav::DepthHold);
+        let (status, _) = slots(&mut operator, &mut rov, 6, 3);
+        assert_eq!(status.why(), Why::Nothing);
+        assert!(!status.position_known());
+    }
 }
