@@ -18,6 +18,7 @@
 //! - [`vehicle`]: the ROV's kinematic model.
 //! - [`octo`]: an OctoMap-compatible occupancy octree, point-cloud readers and the map-delta
 //!   stream.
+//! - [`geometry`]: the one distance between two points.
 //! - [`stats`]: running statistics (mean, deviation, jitter estimators).
 //! - [`io`]: files and streams as every tool uses them (`-` for stdin/stdout, atomic output
 //!   files, errors that name the file, the exit-code table).
@@ -29,6 +30,7 @@
 
 pub mod cli;
 pub mod debt;
+pub mod geometry;
 pub mod gll;
 pub mod io;
 pub mod link;

@@ -87,10 +87,7 @@ impl Vehicle {
 
     /// Distance to a point, m.
     pub fn distance_to(&self, point: [f64; 3]) -> f64 {
-        let d: f64 = (0..3)
-            .map(|k| (self.position_m[k] - point[k]).powi(2))
-            .sum();
-        d.sqrt()
+        crate::geometry::distance_m(self.position_m, point)
     }
 
     /// True when a go-to target is reached (position and heading).

@@ -596,16 +596,6 @@ fn said_until(child: &mut Child, text: &str) -> std::thread::JoinHandle<String> 
     reader
 }
 
-/// A free port on 127.0.0.1 (bound and released: another process could take it first, which
-/// fails the test loudly rather than passing it wrongly).
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
 #[test]
 fn an_operator_driven_from_foxglove_over_link_sim() {
     const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
@@ -621,7 +611,7 @@ fn an_operator_driven_from_foxglove_over_link_sim() {
         .unwrap();
     // The operator starts once the ROV listens on its port (it says so), not after a guess.
     let rov_said = said_until(&mut rov, "ROV: answering every slot");
-    let port = free_port().to_string();
+    let port = common::free_port().to_string();
     let address = format!("127.0.0.1:{port}");
     let mut operator = Command::new(TDMA_RUN)
         .args(["--role", "operator", "--port", &a, "--ipg", "150"])

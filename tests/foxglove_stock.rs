@@ -9,43 +9,12 @@
 
 mod common;
 
-use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use serde_json::Value;
 
 const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
-const CLIENT: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/tests/foxglove/stock_client.mjs"
-);
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-/// Runs the stock client for `seconds`, offering `subprotocol`, publishing `order`.
-fn stock_client(url: &str, subprotocol: &str, order: &str, out: &Path) -> Value {
-    let run = Command::new("node")
-        .arg(CLIENT)
-        .args(["--url", url, "--subprotocol", subprotocol, "--seconds", "6"])
-        .args(["--publish-order", order, "--out", out.to_str().unwrap()])
-        .stdin(Stdio::null())
-        .output()
-        .expect("node runs (apt-get install nodejs npm; npm ci --prefix tests/foxglove)");
-    assert!(
-        run.status.success(),
-        "stock client ({subprotocol}): {}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    serde_json::from_slice(&std::fs::read(out).unwrap()).unwrap()
-}
-
 #[test]
 fn stock_and_sdk_clients_see_a_still_vehicle_at_once_and_drive_it() {
     let dir = tempfile::tempdir().unwrap();
@@ -62,7 +31,7 @@ fn stock_and_sdk_clients_see_a_still_vehicle_at_once_and_drive_it() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let address = format!("127.0.0.1:{}", free_port());
+    let address = format!("127.0.0.1:{}", common::free_port());
     let mut operator = Command::new(TDMA_RUN)
         .args(["--role", "operator", "--port", &a, "--ipg", "150"])
         .args(["--duration", "18", "--image-size", "400", "--script"])
@@ -85,8 +54,16 @@ fn stock_and_sdk_clients_see_a_still_vehicle_at_once_and_drive_it() {
         ("foxglove.sdk.v1", goto(-300)),
     ]
     .map(|(subprotocol, order)| {
-        let out = dir.path().join(format!("{subprotocol}.json"));
-        (subprotocol, stock_client(&url, subprotocol, &order, &out))
+        let args = [
+            "--url",
+            &url,
+            "--subprotocol",
+            subprotocol,
+            "--seconds",
+            "6",
+        ];
+        let seen = common::stock_client(&[&args[..], &["--publish-order", &order]].concat());
+        (subprotocol, seen)
     });
     let operator_status = common::wait_for_exit(&mut operator, Duration::from_secs(30));
     let rov_status = common::wait_for_exit(&mut rov, Duration::from_secs(30));

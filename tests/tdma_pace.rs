@@ -2,6 +2,8 @@
 //! that it can be watched live, with the same results as unpaced. Only lower bounds on the wall
 //! time are checked (a loaded machine can only make a run slower, never a paced one faster).
 
+mod common;
+
 use std::process::Command;
 use std::time::{Duration, Instant};
 
@@ -55,17 +57,7 @@ fn a_paced_scenario_takes_its_time_and_gives_the_same_figures() {
 /// stock Foxglove client (tests/foxglove/stock_client.mjs, as in tests/foxglove_stock.rs).
 #[test]
 fn a_paced_scenario_can_be_watched_live_in_foxglove() {
-    const CLIENT: &str = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tests/foxglove/stock_client.mjs"
-    );
-    let dir = tempfile::tempdir().unwrap();
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let address = format!("127.0.0.1:{port}");
+    let address = format!("127.0.0.1:{}", common::free_port());
     let mut run = Command::new(TDMA_RUN)
         .args(["--scenario", SCENARIO, "--duration", "15", "--pace", "1"])
         .args(["--foxglove", &address])
@@ -78,23 +70,11 @@ fn a_paced_scenario_can_be_watched_live_in_foxglove() {
         line.clear();
         assert!(std::io::BufRead::read_line(&mut stderr, &mut line).unwrap() > 0);
     }
-    let out = dir.path().join("seen.json");
-    let client = Command::new("node")
-        .arg(CLIENT)
-        .args(["--url", &format!("ws://{address}"), "--seconds", "4"])
-        .args(["--out", out.to_str().unwrap()])
-        .output()
-        .expect("node runs (apt-get install nodejs npm; npm ci --prefix tests/foxglove)");
-    assert!(
-        client.status.success(),
-        "{}",
-        String::from_utf8_lossy(&client.stderr)
-    );
+    let seen = common::stock_client(&["--url", &format!("ws://{address}"), "--seconds", "4"]);
     let status = run.wait().unwrap();
     let mut rest = String::new();
     std::io::Read::read_to_string(&mut stderr, &mut rest).unwrap();
     assert!(status.success(), "{rest}");
-    let seen: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
     for topic in [
         "/vehicle/1/rov/pose",
         "/vehicle/2/rov/pose",
@@ -106,6 +86,12 @@ fn a_paced_scenario_can_be_watched_live_in_foxglove() {
             "{topic}: {seen}"
         );
     }
+    // As the MCAP log: a network's vehicles have no link of their own.
+    let advertised = seen["advertised"].as_array().unwrap();
+    assert!(
+        !advertised.iter().any(|t| t == "/vehicle/1/link/frames"),
+        "{seen}"
+    );
     let first_ms = seen["first_ms"]["/vehicle/1/rov/pose"].as_f64();
     assert!(first_ms.is_some_and(|ms| ms < 2000.0), "{seen}");
 }

@@ -104,11 +104,7 @@ pub struct Medium {
     reports: VecDeque<MediumReport>,
 }
 
-/// The distance between two positions, m.
-fn distance_m(a: [f64; 3], b: [f64; 3]) -> f64 {
-    let [dx, dy, dz] = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-    (dx * dx + dy * dy + dz * dz).sqrt()
-}
+use crate::geometry::distance_m;
 
 impl Medium {
     /// A medium of `positions_m.len()` nodes at those NED positions, every node sending

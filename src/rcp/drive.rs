@@ -62,10 +62,7 @@ pub struct DriveState {
 impl DriveState {
     /// Distance to a point, m.
     pub fn distance_to(&self, point_m: [f64; 3]) -> f64 {
-        (0..3)
-            .map(|k| (self.position_m[k] - point_m[k]).powi(2))
-            .sum::<f64>()
-            .sqrt()
+        crate::geometry::distance_m(self.position_m, point_m)
     }
 }
 

@@ -305,11 +305,16 @@ struct Listener {
 
 /// The view's channels, and the latest message of each [`KEPT`] one.
 struct Latest {
-    channels: Vec<Arc<RawChannel>>,
+    channels: Vec<Option<Arc<RawChannel>>>,
     messages: Mutex<Vec<Option<ViewMessage>>>,
 }
 
 impl Latest {
+    /// Channel `index`, if the view has it.
+    fn channel(&self, index: usize) -> Option<&Arc<RawChannel>> {
+        self.channels.get(index).and_then(Option::as_ref)
+    }
+
     /// Keeps the message published on channel `index` if its topic is [`KEPT`].
     fn keep(&self, index: usize, topic: Topic, json: &str, log_time_ns: u64) {
         if KEPT.contains(&topic) {
@@ -326,7 +331,9 @@ impl Latest {
 
     /// Sends the latest message of `channel` (if it has one) to `client` alone.
     fn send_to(&self, client: &Client, channel: &ChannelView) {
-        let Some(index) = self.channels.iter().position(|c| c.id() == channel.id()) else {
+        let Some(index) =
+            (self.channels.iter()).position(|c| c.as_ref().is_some_and(|c| c.id() == channel.id()))
+        else {
             return;
         };
         let message = self
@@ -336,7 +343,7 @@ impl Latest {
             .get(index)
             .cloned()
             .flatten();
-        if let (Some(message), Some(channel)) = (message, self.channels.get(index)) {
+        if let (Some(message), Some(channel)) = (message, self.channel(index)) {
             channel.log_with_meta_to_sink(
                 message.json.as_bytes(),
                 PartialMetadata {
@@ -442,11 +449,13 @@ pub struct LiveView {
     gate: Option<Gate>,
     server: Option<WebSocketServerHandle>,
     /// The channels (they live as long as the context), and the latest message of each kept
-    /// one: lane `k`'s topic `t` at `k * Topic::ALL.len() + t.index()`, then a network's
-    /// `/network/frames`.
+    /// one: lane `k`'s topic `t` at `k * Topic::ALL.len() + t.index()` (none for a network
+    /// vehicle's link frames), then a network's `/network/frames` or a node's `/link/frames`.
     latest: Arc<Latest>,
     _context: Arc<Context>,
     lanes: Vec<Lane>,
+    /// A real-time network node's view of its own frames (its `/link/frames`).
+    node: Option<View>,
     addr: String,
 }
 
@@ -486,22 +495,55 @@ fn host_port(addr: &str) -> Result<(&str, u16), FoxgloveError> {
 /// `role` of [`Role::Rov`] offers no publishing to clients (its orders come over the link),
 /// and its [`LiveOrders`] stays empty. Must not be called from inside an async runtime.
 pub fn start(addr: &str, role: Role) -> Result<(LiveView, LiveOrders), FoxgloveError> {
-    serve(addr, role, &[None])
+    let name = format!("tdma-run {}", role.name());
+    serve(addr, &name, role == Role::Operator, &[None], Extra::Nothing)
 }
 
-/// Starts the server of a network's view (see [`start`]): each vehicle's channels under
-/// `/vehicle/N/` (as the network's MCAP log has them, its body frame `vehicle_N` on
-/// `/vehicle/N/tf`), and `/network/frames`. Clients cannot publish: a network's orders come
-/// from its scenario.
+/// Starts the server of a simulated network's view (see [`start`]): each vehicle's channels
+/// under `/vehicle/N/` (as the network's MCAP log has them: all but the single link's
+/// `link/frames`; its body frame `vehicle_N` on `/vehicle/N/tf`), and `/network/frames`, every
+/// hop of every frame. Clients cannot publish: a network's orders come from its scenario.
 pub fn start_network(addr: &str, vehicles: &[u8]) -> Result<LiveView, FoxgloveError> {
     let lanes: Vec<Option<u8>> = vehicles.iter().map(|&v| Some(v)).collect();
-    serve(addr, Role::Rov, &lanes).map(|(view, _)| view)
+    serve(
+        addr,
+        "tdma-run network",
+        false,
+        &lanes,
+        Extra::NetworkFrames,
+    )
+    .map(|(view, _)| view)
+}
+
+/// Starts the server of one real-time node of a network (`tdma-run --routes`, see
+/// [`start`]): the channels of `vehicles` (every vehicle for the operator, its own for a ROV)
+/// under `/vehicle/N/` as [`start_network`] has them, and `/link/frames`, the frames this node
+/// sent and received (`rovlink.LinkFrame`, as a single session's link: a received frame's send
+/// time is the far node's, so it has no `t_sent_s` or `delay_ms`), fed by
+/// [`NetObserver::node_frame`]. Clients cannot publish: a node's orders come from its flags.
+pub fn start_node(addr: &str, role: Role, vehicles: &[u8]) -> Result<LiveView, FoxgloveError> {
+    let lanes: Vec<Option<u8>> = vehicles.iter().map(|&v| Some(v)).collect();
+    let name = format!("tdma-run {} (network node)", role.name());
+    serve(addr, &name, false, &lanes, Extra::NodeFrames).map(|(view, _)| view)
+}
+
+/// A view's channels beyond its lanes'.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum Extra {
+    /// None (a single session).
+    Nothing,
+    /// A simulated network's `/network/frames`.
+    NetworkFrames,
+    /// A real-time node's own `/link/frames`.
+    NodeFrames,
 }
 
 fn serve(
     addr: &str,
-    role: Role,
+    name: &str,
+    publish: bool,
     lanes: &[Option<u8>],
+    extra: Extra,
 ) -> Result<(LiveView, LiveOrders), FoxgloveError> {
     let (host, port) = host_port(addr)?;
     let context = Context::new();
@@ -527,18 +569,29 @@ fn serve(
     for lane in lanes {
         for topic in Topic::ALL {
             let name = match lane {
+                // A vehicle of a network has no link of its own: its frames are the network's.
+                Some(_) if topic == Topic::Frames => {
+                    channels.push(None);
+                    continue;
+                }
                 Some(vehicle) => super::net_mcap::vehicle_topic(*vehicle, topic),
                 None => topic.name().to_string(),
             };
-            channels.push(channel(&name, topic.schema_name(), topic.schema())?);
+            channels.push(Some(channel(&name, topic.schema_name(), topic.schema())?));
         }
     }
-    if lanes.iter().any(Option::is_some) {
-        channels.push(channel(
+    match extra {
+        Extra::Nothing => {}
+        Extra::NetworkFrames => channels.push(Some(channel(
             super::net_mcap::NETWORK_FRAMES_TOPIC,
             "rovlink.HopFrame",
             super::net_mcap::HOP_FRAME,
-        )?);
+        )?)),
+        Extra::NodeFrames => channels.push(Some(channel(
+            Topic::Frames.name(),
+            Topic::Frames.schema_name(),
+            Topic::Frames.schema(),
+        )?)),
     }
     let latest = Arc::new(Latest {
         messages: Mutex::new(vec![None; channels.len()]),
@@ -550,14 +603,14 @@ fn serve(
     // older name, which the SDK refuses).
     let mut server = context
         .websocket_server()
-        .name(format!("tdma-run {}", role.name()))
+        .name(name)
         .bind("127.0.0.1", 0)
         .message_backlog_size(BACKLOG_MESSAGES)
         .listener(Arc::new(Listener {
             inbox: inbox.clone(),
             latest: latest.clone(),
         }));
-    if role == Role::Operator {
+    if publish {
         server = server
             .capabilities([Capability::ClientPublish])
             .supported_encodings(["json"]);
@@ -587,6 +640,7 @@ fn serve(
         latest,
         _context: context,
         lanes,
+        node: (extra == Extra::NodeFrames).then(|| View::new(Clock::Wall)),
         addr: addr.to_string(),
     };
     let reports = view.gate.as_ref().map(Gate::reports);
@@ -632,12 +686,12 @@ impl LiveView {
     /// (but the preview's: a decode for nobody), whose latest a new subscriber gets at once.
     fn follow_subscriptions(&mut self, lane: usize) {
         let base = lane * Topic::ALL.len();
-        let channels = &self.latest.channels;
+        let latest = &self.latest;
         if let Some(lane) = self.lanes.get_mut(lane) {
             lane.view.want(|topic| {
                 (KEPT.contains(&topic) && topic != Topic::Preview)
-                    || channels
-                        .get(base + topic.index())
+                    || latest
+                        .channel(base + topic.index())
                         .is_some_and(|c| c.has_sinks())
             });
         }
@@ -645,7 +699,7 @@ impl LiveView {
 
     fn publish_at(&self, index: usize, topic: Topic, json: &str, log_time_ns: u64) {
         self.latest.keep(index, topic, json, log_time_ns);
-        if let Some(channel) = self.latest.channels.get(index) {
+        if let Some(channel) = self.latest.channel(index) {
             channel.log_with_meta(
                 json.as_bytes(),
                 PartialMetadata {
@@ -774,10 +828,10 @@ impl Observer for LiveView {
 impl NetObserver for LiveView {
     fn hop(&mut self, e: &HopEvent) {
         let index = self.lanes.len() * Topic::ALL.len();
-        let Some(channel) = self.latest.channels.get(index) else {
+        let Some(channel) = self.latest.channel(index) else {
             return;
         };
-        if channel.has_sinks() {
+        if self.node.is_none() && channel.has_sinks() {
             let now_ns = super::mcap_log::wall_clock_ns();
             let json = super::net_mcap::hop_json(e, now_ns);
             channel.log_with_meta(
@@ -808,6 +862,24 @@ impl NetObserver for LiveView {
     fn event(&mut self, vehicle: u8, end: Role, t_s: f64, event: &Event) {
         if let Some(lane) = self.lane_of(Some(vehicle)) {
             self.lane_event(lane, end, t_s, event);
+        }
+    }
+
+    fn node_frame(&mut self, e: &FrameEvent) {
+        let index = self.lanes.len() * Topic::ALL.len();
+        if let Some(node) = self.node.as_mut() {
+            let subscribed = self.latest.channel(index).is_some_and(|c| c.has_sinks());
+            node.want(|topic| topic == Topic::Frames && subscribed);
+            let frames: Vec<ViewMessage> = (node.frame(e).into_iter())
+                .filter(|m| m.topic == Topic::Frames)
+                .collect();
+            for m in frames {
+                self.publish_at(index, m.topic, &m.json, m.log_time_ns);
+            }
+        }
+        // A still vehicle's pose is republished on the node's frames too.
+        for lane in 0..self.lanes.len() {
+            self.republish_still(lane, e.t_received_s.or(e.t_sent_s));
         }
     }
 }

@@ -20,6 +20,7 @@ use std::collections::HashMap;
 use super::operator::{Operator, SlotContent};
 use super::orders::{Live, OrderSource};
 use super::rov::Rov;
+use super::rules;
 use super::session::{Metrics, Observer, image_period_s};
 use super::{Event, PoseSample, Role};
 use crate::link::SimTime;
@@ -27,10 +28,6 @@ use crate::wire::frame::Frame;
 use crate::wire::operator::Order;
 use crate::wire::rov::BasicStatus;
 use crate::wire::{Message, MessageRepr};
-
-/// Silence after which the operator counts the ROV's answers as lost, s (the ROV's own
-/// heartbeat timeout).
-pub const ANSWERS_TIMEOUT_S: f64 = 5.0;
 
 /// The session's counters, from the events of one end (real time) or both (simulation).
 #[derive(Debug, Default)]
@@ -149,8 +146,8 @@ pub struct OperatorEnd {
     /// True when each new status is shown as the pose (when the operator is the only end the
     /// observer sees: in simulation the ROV's own steps are the poses).
     pub status_poses: bool,
-    /// Silence after which the ROV's answers count as lost, s ([`ANSWERS_TIMEOUT_S`] unless a
-    /// long multi-vehicle cycle needs more).
+    /// Silence after which the ROV's answers count as lost, s ([`rules::LINK_TIMEOUT_S`] until
+    /// the driver sets [`rules::link_timeout_s`] of its cycle).
     pub answers_timeout_s: f64,
 }
 
@@ -165,7 +162,7 @@ impl OperatorEnd {
             answers_up: true,
             last_status: None,
             status_poses: false,
-            answers_timeout_s: ANSWERS_TIMEOUT_S,
+            answers_timeout_s: rules::LINK_TIMEOUT_S,
         }
     }
 

@@ -30,6 +30,7 @@ pub mod realnet;
 pub mod realtime;
 pub mod routing;
 pub mod rov;
+pub mod rules;
 pub mod scenario;
 pub mod script;
 pub mod session;

@@ -26,21 +26,18 @@ use serde::Serialize;
 
 use super::camera::Cycle;
 use super::drive::SimDrive;
-use super::harness::{ANSWERS_TIMEOUT_S, OperatorEnd, Out, RovEnd, Tally};
+use super::harness::{OperatorEnd, Out, RovEnd, Tally};
 use super::operator::SlotContent;
 use super::orders::Script;
 use super::routing::Router;
 use super::rov::{Rov, RovConfig};
+use super::rules;
 use super::scenario::Scenario;
-use super::session::{Direction, Metrics, Observer, STOPPED, kind_of};
+use super::session::{Direction, FrameEvent, Metrics, Observer, STOPPED, kind_of};
 use super::{Event, PoseSample, Role};
 use crate::debt;
 use crate::link::{Fate, Medium, ModelError, SimTime};
 use crate::wire::frame::Frame;
-
-/// The multiple of the cycle after which a vehicle counts the link as lost (and the operator
-/// its answers), when that is longer than the single-vehicle timeouts.
-pub const TIMEOUT_CYCLES: f64 = 3.0;
 
 /// What one node's router did.
 #[derive(Debug, Clone, Default, Serialize, PartialEq, Eq)]
@@ -141,6 +138,9 @@ pub trait NetObserver {
     fn event(&mut self, _vehicle: u8, _end: Role, _t_s: f64, _event: &Event) {}
     /// Something to tell the user.
     fn warning(&mut self, _t_s: f64, _text: &str) {}
+    /// A frame this node sent or received (a real-time node of a network, which sees its own
+    /// frames, not the network's hops).
+    fn node_frame(&mut self, _event: &FrameEvent) {}
     /// True once the observer can record nothing more: the run ends at the next event.
     fn failed(&self) -> bool {
         false
@@ -173,6 +173,10 @@ impl NetObserver for NetTee<'_> {
 
     fn warning(&mut self, t_s: f64, text: &str) {
         self.0.iter_mut().for_each(|o| o.warning(t_s, text));
+    }
+
+    fn node_frame(&mut self, event: &FrameEvent) {
+        self.0.iter_mut().for_each(|o| o.node_frame(event));
     }
 
     fn failed(&self) -> bool {
@@ -339,8 +343,8 @@ pub fn run(
 ) -> Result<NetworkMetrics, NetworkError> {
     let cycle = scenario.cycle();
     let cycle_s = scenario.cycle_s();
-    let duplicate_window_s = cycle_s / 2.0;
-    let timeout_s = (TIMEOUT_CYCLES * cycle_s).max(ANSWERS_TIMEOUT_S);
+    let duplicate_window_s = rules::duplicate_window_s(cycle_s);
+    let timeout_s = rules::link_timeout_s(cycle_s);
     let mut media = Vec::new();
     let mut members = Vec::new();
     for (k, spec) in scenario.media.iter().enumerate() {

@@ -15,6 +15,7 @@
 //! [`Observer::failed`] is true (the session ends at its next event) and [`Recorder::finish`]
 //! returns it.
 
+use crate::geometry::distance_m;
 use std::path::{Path, PathBuf};
 
 use std::collections::BTreeMap;
@@ -311,10 +312,6 @@ fn preview_worker(shared: &(Mutex<PreviewState>, Condvar)) {
     }
 }
 
-fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
-    (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt()
-}
-
 /// A point's three CSV fields, empty when there is none.
 fn point(p: Option<[f64; 3]>) -> [String; 3] {
     p.map_or_else(Default::default, |p| p.map(|v| format!("{v:.4}")))
@@ -406,12 +403,12 @@ impl Observer for Recorder {
             y,
             z,
             format!("{:.2}", pose.heading_deg),
-            format!("{:.4}", distance(pose.position_m, self.buoy_m)),
+            format!("{:.4}", distance_m(pose.position_m, self.buoy_m)),
             gx,
             gy,
             gz,
             pose.goal_m.map_or(String::new(), |g| {
-                format!("{:.4}", distance(g, self.buoy_m))
+                format!("{:.4}", distance_m(g, self.buoy_m))
             }),
             bx,
             by,

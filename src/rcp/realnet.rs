@@ -44,6 +44,7 @@ use super::orders::{OrderSource, Script, split_by_vehicle};
 use super::realtime::{Clock, Ended, sent_event};
 use super::routing::{BROADCAST, Decision, Dropped, MAX_VEHICLE, Router};
 use super::rov::{Rov, RovConfig};
+use super::rules;
 use super::scenario::Scenario;
 use super::session::{Direction, FrameEvent, Metrics, Parts, SessionConfig, kind_of};
 use crate::cli::output::Dest;
@@ -58,9 +59,6 @@ pub const SLICE: Duration = Duration::from_millis(5);
 
 /// The most interfaces a node has (`--port`, `--port2`).
 pub const MAX_INTERFACES: usize = 2;
-
-/// The shortest heartbeat (and answers) timeout, s: the single-vehicle session's.
-pub const MIN_TIMEOUT_S: f64 = 5.0;
 
 /// Why a node cannot run in the network it was given.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -153,20 +151,20 @@ impl Network {
         self.scenario.cycle_s()
     }
 
-    /// The heartbeat timeout of every vehicle and the operator's answers timeout: three
-    /// cycles, at least [`MIN_TIMEOUT_S`].
+    /// The heartbeat timeout of every vehicle and the operator's answers timeout
+    /// ([`rules::link_timeout_s`] of the cycle).
     pub fn timeout_s(&self) -> f64 {
-        (3.0 * self.cycle_s()).max(MIN_TIMEOUT_S)
+        rules::link_timeout_s(self.cycle_s())
     }
 
-    /// This node's router: the file's routes, its neighbours per interface, a duplicate
-    /// window of half the cycle.
+    /// This node's router: the file's routes, its neighbours per interface, the duplicate
+    /// window of the cycle ([`rules::duplicate_window_s`]).
     pub fn router(&self) -> Router {
         Router::new(
             self.address,
             self.scenario.routes.clone(),
             self.scenario.neighbours(self.address),
-            self.cycle_s() / 2.0,
+            rules::duplicate_window_s(self.cycle_s()),
         )
     }
 }
@@ -262,6 +260,7 @@ impl NodeOutputs<'_> {
         if let Some(frames) = self.frames.as_mut() {
             frames.row(e, addresses, medium);
         }
+        self.observer.node_frame(e);
     }
 }
 
@@ -750,7 +749,7 @@ mod tests {
         assert_eq!(relay.router().interface_to(0), 0);
         assert_eq!(relay.router().interface_to(2), 1);
         let far = Network::new(three, "f.json", Role::Rov, 2, 1).unwrap();
-        assert_eq!(far.timeout_s(), (3.0 * far.cycle_s()).max(MIN_TIMEOUT_S));
+        assert_eq!(far.timeout_s(), (3.0 * far.cycle_s()).max(5.0));
     }
 
     /// One node's end of an in-memory medium: what it sends reaches the nodes in its range at

@@ -59,7 +59,7 @@ impl Default for RovConfig {
     fn default() -> Self {
         RovConfig {
             address: 1,
-            heartbeat_timeout_s: 5.0,
+            heartbeat_timeout_s: super::rules::LINK_TIMEOUT_S,
             stack_period_s: 2.0,
             stack_depth: 64,
             step_s: 0.1,

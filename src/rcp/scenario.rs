@@ -29,19 +29,16 @@ use serde_json::{Map, Value};
 use super::ImageSettings;
 use super::Role;
 use super::routing::{MAX_VEHICLE, Routes, RoutesError};
+use super::rules;
 use super::session::{
     MAX_DURATION_S, MAX_IPG_S, MAX_POSITION_M, MIN_IMAGE_BYTES, MIN_IPG_S, Waypoint,
 };
 use crate::link::{Model, ModelError};
-use crate::wire::frame::OVERHEAD_BYTES;
 
 /// Largest scenario file read, bytes.
 pub const MAX_SCENARIO_FILE_BYTES: u64 = 1 << 20;
 /// A scenario's length when it gives none, s.
 pub const DEFAULT_DURATION_S: f64 = 600.0;
-/// The operator frame's length in the automatic slot, bytes (a GoTo order's frame, the longest
-/// the operator sends).
-pub const OPERATOR_FRAME_BYTES: usize = 16;
 
 /// One node of the network.
 #[derive(Debug, Clone, PartialEq)]
@@ -247,8 +244,7 @@ impl Scenario {
 
     /// The automatic slot of `vehicle`, s (see the module doc).
     pub fn auto_slot_s(&self, vehicle: u8) -> f64 {
-        let rov_frame_bytes =
-            OVERHEAD_BYTES + crate::wire::rov::FIXED_BYTES + usize::from(self.settings.trunk_bytes);
+        let rov_frame_bytes = rules::rov_frame_bytes(self.settings.trunk_bytes);
         let hops = |src: u8, dst: u8| self.routes.path(src, dst).unwrap_or_else(|| vec![src, dst]);
         let mut slot_s = 0.0;
         for (out, path) in [(true, hops(0, vehicle)), (false, hops(vehicle, 0))] {
@@ -258,15 +254,13 @@ impl Scenario {
                     continue;
                 };
                 let bytes = if out {
-                    OPERATOR_FRAME_BYTES
+                    rules::OPERATOR_FRAME_BYTES
                 } else {
                     rov_frame_bytes
                 };
-                slot_s += model.air_time_s(bytes)
-                    + model.intrinsic_delay_ms * 1e-3
-                    + model.propagation_s(self.distance_m(a, b));
+                slot_s += rules::hop_s(model, bytes, self.distance_m(a, b));
                 if out {
-                    slot_s += 3.0 * model.jitter_ms * 1e-3;
+                    slot_s += rules::guard_s(model);
                 }
             }
         }
@@ -283,8 +277,7 @@ impl Scenario {
     /// The distance between two nodes' positions at the start, m.
     pub fn distance_m(&self, a: u8, b: u8) -> f64 {
         let at = |n: u8| self.node(n).map_or([0.0; 3], |n| n.position_m);
-        let (pa, pb) = (at(a), at(b));
-        (0..3).map(|k| (pa[k] - pb[k]).powi(2)).sum::<f64>().sqrt()
+        crate::geometry::distance_m(at(a), at(b))
     }
 
     /// The operator's cycle: one slot per vehicle, in address order.

@@ -15,6 +15,7 @@ use std::collections::HashMap;
 use super::harness::{OperatorEnd, Out, RovEnd, Tally};
 use super::operator::{Joystick, SlotContent};
 use super::rov::{Rov, RovConfig};
+use super::rules;
 use super::{Event, ImageSettings, PoseSample};
 use crate::debt;
 use crate::link::{Distance, Fate, Link, Model, ModelError, Report, Side, SimTime};
@@ -255,36 +256,20 @@ impl SessionConfig {
     }
 }
 
-/// The IPG wire.md derives from a model: both frames' air times, twice the intrinsic delay
-/// and the propagation at `distance_m`, and a guard of three jitter standard deviations.
-pub fn auto_ipg_s(
-    model: &Model,
-    operator_frame_bytes: usize,
-    rov_frame_bytes: usize,
-    distance_m: f64,
-) -> f64 {
-    model.air_time_s(operator_frame_bytes)
-        + model.air_time_s(rov_frame_bytes)
-        + 2.0 * (model.intrinsic_delay_ms * 1e-3 + model.propagation_s(distance_m))
-        + 3.0 * model.jitter_ms * 1e-3
-}
-
-/// [`auto_ipg_s`] for a session: the operator's 16-byte frame, the ROV's frame with a trunk of
-/// `settings.trunk_bytes`, the distance between `start_m` and `buoy_m`.
+/// The IPG wire.md derives from a model for a session, the one-hop case of a network's slot
+/// ([`rules::hop_s`] out, its guard, and back): the operator's frame, the ROV's frame with a
+/// trunk of `settings.trunk_bytes`, at the distance between `start_m` and `buoy_m`.
 pub fn auto_ipg_for(
     model: &Model,
     settings: &ImageSettings,
     start_m: [f64; 3],
     buoy_m: [f64; 3],
 ) -> f64 {
-    let rov_frame_bytes = crate::wire::frame::OVERHEAD_BYTES
-        + crate::wire::rov::FIXED_BYTES
-        + usize::from(settings.trunk_bytes);
-    let distance_m = (0..3)
-        .map(|k| (start_m[k] - buoy_m[k]).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    auto_ipg_s(model, 16, rov_frame_bytes, distance_m)
+    let distance_m = crate::geometry::distance_m(start_m, buoy_m);
+    let rov_frame_bytes = rules::rov_frame_bytes(settings.trunk_bytes);
+    rules::hop_s(model, rules::OPERATOR_FRAME_BYTES, distance_m)
+        + rules::guard_s(model)
+        + rules::hop_s(model, rov_frame_bytes, distance_m)
 }
 
 /// One direction's figures.
@@ -526,12 +511,16 @@ impl Parts {
 
     /// The two ends these parts make for `config`.
     pub(crate) fn ends(self, config: &SessionConfig) -> (OperatorEnd, RovEnd) {
+        let timeout_s = rules::link_timeout_s(config.ipg_s);
         let rov_config = RovConfig {
             settings: config.settings,
+            heartbeat_timeout_s: timeout_s,
             ..RovConfig::default()
         };
+        let mut operator = OperatorEnd::new(rov_config.address, config.ipg_s, self.orders);
+        operator.answers_timeout_s = timeout_s;
         (
-            OperatorEnd::new(rov_config.address, config.ipg_s, self.orders),
+            operator,
             RovEnd::new(Rov::with(rov_config, self.drive, self.camera)),
         )
     }

@@ -163,3 +163,39 @@ pub fn link_sim_pty(args: &[&str]) -> (std::process::Child, String, String) {
     stdout.read_line(&mut b).expect("side B's path");
     (child, a.trim().to_string(), b.trim().to_string())
 }
+
+/// A free port on 127.0.0.1 (bound and released: another process could take it first, which
+/// fails a test loudly rather than passing it wrongly).
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// Runs the stock Foxglove client (tests/foxglove/stock_client.mjs: `@foxglove/ws-protocol`
+/// from npm, on Node) with `args` (`--url`, `--seconds`, ...) and `--out` in a file of its
+/// own; what it saw (its JSON). Fails if it cannot connect.
+pub fn stock_client(args: &[&str]) -> serde_json::Value {
+    const CLIENT: &str = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/foxglove/stock_client.mjs"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("seen.json");
+    let run = Command::new("node")
+        .arg(CLIENT)
+        .args(args)
+        .arg("--out")
+        .arg(&out)
+        .stdin(Stdio::null())
+        .output()
+        .expect("node runs (apt-get install nodejs npm; npm ci --prefix tests/foxglove)");
+    assert!(
+        run.status.success(),
+        "stock client {args:?}: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap()
+}

@@ -285,7 +285,9 @@ pub struct Args {
     pub preview: bool,
 
     /// Serve a live Foxglove WebSocket view here (HOST:PORT; binds only there): the --mcap
-    /// channels live, and client channels /orders (JSON orders) and Twist (Teleop panel).
+    /// channels live, and client channels /orders (JSON orders) and Twist (Teleop panel) on a
+    /// single session's operator end. With --scenario or --routes, every vehicle under
+    /// /vehicle/N/ (view only).
     #[arg(long, value_name = "HOST:PORT", help_heading = "Field")]
     pub foxglove: Option<String>,
 }

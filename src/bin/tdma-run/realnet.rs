@@ -10,6 +10,7 @@ use rovlink::cli::{progress, stop};
 use rovlink::gll::Endpoint;
 use rovlink::io::EXIT_OK;
 use rovlink::rcp::net_outputs::{NetDestinations, NetRecorder};
+use rovlink::rcp::network::NetTee;
 use rovlink::rcp::outputs::write_metrics;
 use rovlink::rcp::realnet::{self, FrameRows, Network, NodeOutputs};
 use rovlink::rcp::realtime::Role;
@@ -81,11 +82,31 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
         Role::Operator => network.scenario.vehicles(),
         Role::Rov => vec![network.address],
     };
+    // A live view of the vehicles this node shows (`/vehicle/N/...`), as its MCAP log has them,
+    // and the node's own frames on `/link/frames`.
+    let mut live = match &args.foxglove {
+        Some(addr) => {
+            let view = rovlink::rcp::foxglove::start_node(addr, role, &shown)
+                .map_err(|e| UsageError(e.to_string()))?;
+            say!(
+                "Foxglove: ws://{}:{} (every vehicle under /vehicle/N/, this node's frames on \
+                 /link/frames)",
+                crate::host_of(addr),
+                view.port()
+            );
+            Some(view)
+        }
+        None => None,
+    };
     let mut recorder = NetRecorder::new(dests, &shown, bar)?;
     let mut frames = events_dest.map(FrameRows::new);
     say!("{}", start_line(&network, role, &ports, config.duration_s));
     let (mut metrics, ended) = {
-        let mut observer = Both(&mut recorder);
+        let mut both = Both(&mut recorder);
+        let mut observer = NetTee(vec![&mut both]);
+        if let Some(view) = live.as_mut() {
+            observer.0.push(view);
+        }
         let mut outputs = NodeOutputs {
             observer: &mut observer,
             frames: frames.as_mut(),
@@ -100,6 +121,10 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
             &mut outputs,
         )
     };
+    if let Some(view) = live.take() {
+        view.take_refusals().iter().for_each(|line| say!("{line}"));
+        view.stop();
+    }
     let code = crate::ended_code(ended, metrics.duration_s);
     mark_interrupted(&mut metrics);
     if let Some(out) = metrics_out.as_mut() {
@@ -118,13 +143,12 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
 fn usage(args: &Args) -> Result<(), UsageError> {
     let refused = [
         ("--ipg", matches!(args.ipg, Ipg::Millis(_))),
-        ("--foxglove", args.foxglove.is_some()),
         ("--preview", args.preview),
     ];
     match refused.iter().find(|(_, given)| *given) {
         Some((flag, _)) => Err(UsageError(format!(
             "{flag} does not apply with --routes (the cycle is the file's slots; outputs are \
-             --metrics, --events, --track, --images-out, --telemetry and --mcap)"
+             --metrics, --events, --track, --images-out, --telemetry, --mcap and --foxglove)"
         ))),
         None => Ok(()),
     }
