@@ -116,6 +116,13 @@ pub trait Drive: Send {
     fn take_events(&mut self) -> Vec<DriveEvent> {
         Vec::new()
     }
+    /// True when the vehicle does not stay where idle thrust leaves it (a positively buoyant
+    /// vehicle on an autopilot): the ROV engine then holds what a GoTo or recovery's
+    /// backtracking reached by asking for it until the operator's next order. The built-in
+    /// model stays put by itself (false).
+    fn needs_hold(&self) -> bool {
+        false
+    }
     /// True when the GoTo to `target_m`, `heading_deg` is reached.
     fn reached(&self, target_m: [f64; 3], heading_deg: f64) -> bool {
         let state = self.state();

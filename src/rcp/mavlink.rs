@@ -1344,6 +1344,12 @@ impl Drive for MavlinkDrive {
     fn take_events(&mut self) -> Vec<DriveEvent> {
         std::mem::take(&mut self.events)
     }
+
+    fn needs_hold(&self) -> bool {
+        // ArduSub in a stick mode with neutral sticks keeps its depth (ALT_HOLD) but not its
+        // place: the hold is GUIDED at the setpoint.
+        true
+    }
 }
 
 impl Drop for MavlinkDrive {

@@ -11,9 +11,10 @@
 //! is what took the ROV out of range; resuming it would oscillate at the range's edge): after
 //! recovery the ROV holds position under the joystick until the operator orders again.
 //!
-//! Holding: what a GoTo reached, and where recovery's backtracking was when the link came
-//! back, is held (the drive is still asked to go there: an autopilot stays in GUIDED at the
-//! setpoint) until the operator's next order: a Velocity order that differs from the one in
+//! Holding: on a vehicle that does not stay put when idle ([`Drive::needs_hold`]: a buoyant
+//! vehicle on an autopilot), what a GoTo reached, and where recovery's backtracking was going
+//! when the link came back, is held (the drive is still asked to go there: an autopilot stays
+//! in GUIDED at the setpoint) until the operator's next order: a Velocity order that differs from the one in
 //! force when the hold began (stick input, arm, disarm, another mode), or a GoTo or
 //! HoldHeading. The status says RD 1 meanwhile: no order is in execution.
 //!
@@ -277,19 +278,30 @@ impl Rov {
             match self.executing {
                 Some(Executing::GoTo([x, y, z], heading_deg)) => {
                     if self.drive.reached([x, y, z], heading_deg) {
-                        // Done: held there until the operator's next order.
+                        // Done: held there until the operator's next order (by the drive
+                        // itself where it stays put when idle).
                         self.executing = None;
-                        self.hold = Some(Hold {
+                        self.hold = self.drive.needs_hold().then_some(Hold {
                             target_m: [x, y, z],
                             heading_deg,
                             order: self.velocity,
                         });
-                    }
-                    Command::GoTo {
-                        x,
-                        y,
-                        z,
-                        heading_deg,
+                        match self.hold {
+                            Some(_) => Command::GoTo {
+                                x,
+                                y,
+                                z,
+                                heading_deg,
+                            },
+                            None => self.sticks(),
+                        }
+                    } else {
+                        Command::GoTo {
+                            x,
+                            y,
+                            z,
+                            heading_deg,
+                        }
                     }
                 }
                 None => match self.hold {
@@ -302,13 +314,7 @@ impl Rov {
                             heading_deg: hold.heading_deg,
                         }
                     }
-                    None if self.arm => Command::Thrust {
-                        surge: self.joystick[0],
-                        sway: self.joystick[1],
-                        heave: self.joystick[2],
-                        yaw: self.joystick[3],
-                    },
-                    None => idle(),
+                    None => self.sticks(),
                 },
             }
         };
@@ -344,7 +350,8 @@ impl Rov {
             self.backtrack_refused = false;
             // Where backtracking was going is held until the operator orders otherwise.
             let state = self.drive.state();
-            if let (Some(&target_m), true) = (self.stack.back(), state.position_known) {
+            let hold = state.position_known && self.drive.needs_hold();
+            if let (Some(&target_m), true) = (self.stack.back(), hold) {
                 self.hold = Some(Hold {
                     target_m,
                     heading_deg: state.heading_deg,
@@ -425,6 +432,20 @@ impl Rov {
             self.capture();
         }
         Some(self.reply(msg.rit))
+    }
+
+    /// The joystick's thrust while armed, idle otherwise.
+    fn sticks(&self) -> Command {
+        if self.arm {
+            Command::Thrust {
+                surge: self.joystick[0],
+                sway: self.joystick[1],
+                heave: self.joystick[2],
+                yaw: self.joystick[3],
+            }
+        } else {
+            idle()
+        }
     }
 
     /// Reports a refusal of the engine's own: an event now, WHY in the status until the next
@@ -659,9 +680,28 @@ mod tests {
         heading_deg: 0,
     };
 
+    /// The built-in model, as a vehicle that needs an explicit hold.
+    struct Drifting(SimDrive);
+
+    impl Drive for Drifting {
+        fn step(&mut self, now: SimTime, dt_s: f64, demand: &Demand) {
+            self.0.step(now, dt_s, demand);
+        }
+        fn state(&self) -> DriveState {
+            self.0.state()
+        }
+        fn needs_hold(&self) -> bool {
+            true
+        }
+    }
+
     #[test]
     fn what_a_goto_reached_is_held_until_the_next_order() {
-        let mut rov = Rov::new(RovConfig::default(), [0.0; 3], Vec::new());
+        let mut rov = Rov::with(
+            RovConfig::default(),
+            Box::new(Drifting(SimDrive::new([0.0; 3]))),
+            Box::new(Cycle::new(Vec::new())),
+        );
         let mut operator = Operator::new(1, 640_000_000);
         operator.set_modes(true, false, Nav::Stabilize);
         slots(&mut operator, &mut rov, 0, 2);
@@ -686,6 +726,16 @@ mod tests {
         let (status, _) = slots(&mut operator, &mut rov, 37, 5);
         assert_eq!(status.nav, Nav::Stabilize, "{status:?}");
         assert!(rov.state().position_m[0] > 1.2);
+        // The built-in model stays put by itself: no hold, the operator's mode at once.
+        let mut sim = Rov::new(RovConfig::default(), [0.0; 3], Vec::new());
+        let mut operator = Operator::new(1, 640_000_000);
+        operator.set_modes(true, false, Nav::Stabilize);
+        slots(&mut operator, &mut sim, 0, 2);
+        operator.push_order(GOTO);
+        let (status, _) = slots(&mut operator, &mut sim, 2, 30);
+        assert!(status.rd && status.nav == Nav::Stabilize, "{status:?}");
+        let at = sim.state().position_m;
+        assert!((at[0] - 1.0).abs() <= crate::vehicle::ARRIVAL_M, "{at:?}");
     }
 
     /// The built-in model without a position estimate.
