@@ -48,6 +48,7 @@ fn rov_frame(rng: &mut Lcg, seq: usize) -> Vec<u8> {
                 roll_deg: (rng.next() % 360) as u16,
                 pitch_deg: (rng.next() % 360) as u16,
                 yaw_deg: (rng.next() % 360) as u16,
+                extension: None,
             }),
             trunk,
         }),

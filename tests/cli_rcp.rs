@@ -439,3 +439,40 @@ fn bad_summary_path_fails_before_any_output() {
     );
     assert!(!out_file.exists());
 }
+
+/// Status version 1 (ST = 1): NP and WHY after the basic block, before the trunk.
+const STATUS_V1: &str = r#"{"type":"rov","src":1,"dst":0,"ft":true,"lt":false,"st":1,"isn":1,"ci":false,"itsn":0,"rd":true,"eoid":1,"loc":false,"hh":true,"arm":true,"nav":"guided","x_cm":0,"y_cm":0,"z_cm":0,"roll_deg":359,"pitch_deg":1,"yaw_deg":180,"position_known":false,"why":"no_position","trunk":"00010203"}"#;
+
+#[test]
+fn status_version_1_packs_dumps_and_reads_back() {
+    let hex = run(PACK, &["--hex"], format!("{STATUS_V1}\n").as_bytes());
+    assert_eq!(hex.code, 0, "{}", hex.stderr);
+    // ST 1 in byte 0 of the payload, byte 13 NP 1 WHY 3, then the trunk.
+    assert_eq!(
+        hex.stdout_text(),
+        "5510128180dc00000000000002d0036783000102033459\n"
+    );
+    let frame = run(PACK, &[], format!("{STATUS_V1}\n").as_bytes()).stdout;
+    let text = run(DUMP, &["-q"], &frame);
+    assert!(
+        text.stdout_text()
+            .contains("NP why=no_position ned=(0.00,0.00,0.00)m"),
+        "{}",
+        text.stdout_text()
+    );
+    let json = run(DUMP, &["-f", "ndjson", "-q"], &frame);
+    let mut line: serde_json::Value = serde_json::from_str(json.stdout_text().trim()).unwrap();
+    line.as_object_mut().unwrap().shift_remove("offset");
+    assert_eq!(line.to_string(), STATUS_V1);
+    // ST 0 has neither field: a line that gives one is refused, naming it.
+    let st0 = STATUS_V1.replace(r#""st":1"#, r#""st":0"#);
+    let refused = run(PACK, &[], format!("{st0}\n").as_bytes());
+    assert_eq!(refused.code, 2);
+    assert!(
+        refused
+            .stderr
+            .contains("field position_known: expected st 1 for a status with position_known false"),
+        "{}",
+        refused.stderr
+    );
+}

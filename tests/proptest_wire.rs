@@ -27,12 +27,14 @@ fn basic_status() -> impl Strategy<Value = BasicStatus> {
         ),
         (any::<i16>(), any::<i16>(), any::<i16>()),
         (0u16..360, 0u16..360, 0u16..360),
+        proptest::option::of((any::<bool>(), 0u8..32)),
     )
         .prop_map(
             |(
                 (rd, eoid, loc, hh, arm, nav),
                 (x_cm, y_cm, z_cm),
                 (roll_deg, pitch_deg, yaw_deg),
+                extension,
             )| BasicStatus {
                 rd,
                 eoid,
@@ -46,6 +48,10 @@ fn basic_status() -> impl Strategy<Value = BasicStatus> {
                 roll_deg,
                 pitch_deg,
                 yaw_deg,
+                extension: extension.map(|(no_position, why)| rov::Extension {
+                    no_position,
+                    why: rov::Why::from_bits(why),
+                }),
             },
         )
 }
@@ -55,8 +61,13 @@ fn rov_repr() -> impl Strategy<Value = rov::Repr> {
         basic_status(),
         proptest::collection::vec(any::<u8>(), 0..=rov::MAX_TRUNK_BYTES),
     )
-        .prop_map(|(s, trunk)| (Status::Basic(s), trunk));
-    let unknown = (1u8..64, proptest::collection::vec(any::<u8>(), 0..=253))
+        .prop_map(|(s, mut trunk)| {
+            if s.extension.is_some() {
+                trunk.truncate(rov::MAX_EXTENDED_TRUNK_BYTES);
+            }
+            (Status::Basic(s), trunk)
+        });
+    let unknown = (2u8..64, proptest::collection::vec(any::<u8>(), 0..=253))
         .prop_map(|(st, raw)| (Status::Unknown { st, raw }, Vec::new()));
     (
         any::<bool>(),
@@ -215,6 +226,11 @@ fn reference_payload(message: &Message) -> Vec<u8> {
                     w.push(s.yaw_deg.into(), 9);
                     w.push(s.pitch_deg.into(), 9);
                     w.push(s.roll_deg.into(), 9);
+                    if let Some(e) = s.extension {
+                        w.flag(e.no_position);
+                        w.push(0, 2);
+                        w.push(e.why.bits().into(), 5);
+                    }
                     w.bytes(&r.trunk);
                 }
                 Status::Unknown { raw, .. } => w.bytes(raw),

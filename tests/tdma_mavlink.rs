@@ -18,6 +18,7 @@ use rovlink::rcp::drive::{Demand, Drive, DriveEvent};
 use rovlink::rcp::mavlink::{MavlinkDrive, MavlinkOptions, connect};
 use rovlink::vehicle::Command;
 use rovlink::wire::Nav;
+use rovlink::wire::rov::Why;
 
 fn free_udp_port() -> u16 {
     std::net::UdpSocket::bind("127.0.0.1:0")
@@ -178,13 +179,14 @@ fn exercise(drive: &mut MavlinkDrive, standin: &StandIn) {
     assert!(seen.setpoints.len() < 20, "{}", seen.setpoints.len());
     // Neutral sticks while the GoTo runs.
     assert_eq!(seen.last_manual, Some([0, 0, 500, 0]));
-    // Back to manual, idle: the pose the drive reports is the stand-in's own.
+    // Back to manual, idle: ALT_HOLD (every stick mode holds depth); the pose the drive
+    // reports is the stand-in's own.
     let (_, manual) = drive_until(
         drive,
         clock,
         10.0,
         |_| demand(thrust(0.0), true, Nav::Manual),
-        |d| d.state().nav == Nav::Manual,
+        |d| d.state().nav == Nav::DepthHold,
     );
     assert!(manual);
     // Once its latest report is in (at 10 Hz, sooner or later on a loaded machine): stepped
@@ -208,7 +210,8 @@ fn exercise(drive: &mut MavlinkDrive, standin: &StandIn) {
         (state.heading_deg - seen.heading_deg).abs() < 1.0,
         "{state:?} {seen:?}"
     );
-    assert_eq!(seen.modes.last(), Some(&MANUAL));
+    assert_eq!(seen.modes.last(), Some(&ALT_HOLD));
+    assert!(!seen.modes.contains(&MANUAL), "{seen:?}");
     // We speak as system 255 component 190, a heartbeat a second.
     assert_eq!(seen.gcs, Some((255, 190)));
     let elapsed_s = clock.elapsed().as_secs_f64();
@@ -465,13 +468,13 @@ fn the_drive_works_against_the_pymavlink_standin() {
         |d| d.reached(goal, 45.0),
     );
     assert!(reached, "{events:?} {:?}", drive.state());
-    // Stop there (MANUAL, sticks neutral), then compare poses.
+    // Stop there (manual asked: ALT_HOLD, sticks neutral), then compare poses.
     let stop = |_| demand(thrust(0.0), true, Nav::Manual);
     let (_, stopped) = drive_until(&mut drive, clock, 10.0, stop, |d| {
-        d.state().nav == Nav::Manual
+        d.state().nav == Nav::DepthHold
     });
     assert!(stopped);
-    // In MANUAL with neutral sticks it stands still: once its reports have stopped changing
+    // In ALT_HOLD with neutral sticks it stands still: once its reports have stopped changing
     // (five steps alike, however late they come), ours is its last position.
     let (mut last, mut alike) = (None, 0);
     let (_, still) = drive_until(&mut drive, clock, 10.0, stop, |d| {
@@ -862,4 +865,164 @@ fn garbage_and_non_finite_numbers_on_the_link_change_nothing() {
             if n.contains("autopilot found") || n.starts_with("warning:"))),
         "{events:?}"
     );
+}
+
+#[test]
+fn neutral_sticks_in_any_stick_mode_hold_the_buoyant_vehicles_depth() {
+    // The stand-in rises at BUOYANT_RISE_MPS unless a depth-holding mode holds it, as the real
+    // BlueROV2 does in STABILIZE (SITL: 0.89 m to 0.09 m in 10 s).
+    let (mut drive, standin) = udp_pair(
+        &MavlinkOptions::default(),
+        Config {
+            start_m: [0.0, 0.0, 1.0],
+            ..Config::default()
+        },
+    );
+    let clock = Instant::now();
+    for nav in [Nav::Stabilize, Nav::Manual, Nav::DepthHold] {
+        let (events, held) = drive_until(
+            &mut drive,
+            clock,
+            10.0,
+            |_| demand(thrust(0.0), true, nav),
+            |d| d.state().armed && d.state().nav == Nav::DepthHold,
+        );
+        assert!(held, "{nav}: {events:?} {:?}", standin.seen());
+    }
+    // Three seconds of neutral sticks, however slowly they pass: the depth stays (floating,
+    // it would have risen 0.24 m).
+    let depth = standin.seen().position_m[2];
+    let from = Instant::now();
+    drive_until(
+        &mut drive,
+        clock,
+        10.0,
+        |_| demand(thrust(0.0), true, Nav::Stabilize),
+        |_| from.elapsed() >= Duration::from_secs(3),
+    );
+    let seen = standin.stop();
+    assert!((seen.position_m[2] - depth).abs() < 0.02, "{seen:?}");
+    assert!(depth > 0.9, "{depth}");
+    assert_eq!(seen.modes, [ALT_HOLD], "{seen:?}");
+}
+
+#[test]
+fn guided_refused_without_a_position_is_reported_and_the_position_unknown() {
+    // The stand-in gets its position 3 s after start, as SITL does about 40 s after boot.
+    let (mut drive, standin) = udp_pair(
+        &MavlinkOptions::default(),
+        Config {
+            position_after_s: Some(3.0),
+            ..Config::default()
+        },
+    );
+    let clock = Instant::now();
+    let (events, found) = drive_until(
+        &mut drive,
+        clock,
+        10.0,
+        |_| demand(thrust(0.0), true, Nav::HoldPosition),
+        |d| d.state().armed && d.state().nav == Nav::DepthHold,
+    );
+    assert!(found, "{events:?}");
+    // No position: hold_position is ALT_HOLD, and the state says the position is unknown.
+    assert!(!drive.state().position_known, "{:?}", drive.state());
+    // Asked for GUIDED (an operator's guided without a GoTo) while there is no position: the
+    // drive keeps ALT_HOLD instead of asking; once the position comes, GUIDED.
+    let (events, guided) = drive_until(
+        &mut drive,
+        clock,
+        10.0,
+        |_| demand(thrust(0.0), true, Nav::Guided),
+        |d| d.state().nav == Nav::Guided,
+    );
+    assert!(guided, "{events:?}");
+    assert!(drive.state().position_known);
+    let seen = standin.stop();
+    assert_eq!(
+        seen.modes_refused, 0,
+        "GUIDED asked without a position: {seen:?}"
+    );
+    assert_eq!(seen.modes, [ALT_HOLD, GUIDED], "{seen:?}");
+}
+
+#[test]
+fn a_mode_the_autopilot_refuses_is_said_with_its_words_and_a_goto_without_position_is_held_back() {
+    // ArduSub SITL refuses ALT_HOLD for its first moments ("Mode change failed: ALT_HOLD need
+    // alt estimate"), and has no position at all without a position source (GPS1_TYPE 0).
+    let (mut drive, standin) = udp_pair(
+        &MavlinkOptions::default(),
+        Config {
+            position_after_s: None,
+            depth_after_s: 2.0,
+            ..Config::default()
+        },
+    );
+    let clock = Instant::now();
+    let (events, refused) = drive_until(
+        &mut drive,
+        clock,
+        10.0,
+        |_| demand(thrust(0.0), true, Nav::Stabilize),
+        |d| d.state().why == Why::ModeRefused,
+    );
+    assert!(refused, "{events:?}");
+    let (more, held) = drive_until(
+        &mut drive,
+        clock,
+        10.0,
+        |_| demand(thrust(0.0), true, Nav::Stabilize),
+        |d| d.state().nav == Nav::DepthHold && d.state().armed,
+    );
+    assert!(held, "{more:?}");
+    assert_eq!(drive.state().why, Why::Nothing);
+    let refusals: Vec<&DriveEvent> = events
+        .iter()
+        .chain(&more)
+        .filter(|e| matches!(e, DriveEvent::Refused { .. }))
+        .collect();
+    // Said once per story: the ACK, then the autopilot's words with it (they may come
+    // together).
+    assert!(
+        (1..=2).contains(&refusals.len())
+            && matches!(refusals.last(), Some(DriveEvent::Refused { why: Why::ModeRefused, reason })
+                if reason.contains("ALT_HOLD (2)") && reason.contains("MAV_RESULT_FAILED")
+                    && reason.contains("Mode change failed: ALT_HOLD need alt estimate")),
+        "{refusals:?}"
+    );
+    assert!(!drive.state().position_known);
+    // A GoTo demand without a position: GUIDED is not asked for, no setpoint goes, the depth
+    // is held.
+    let goal = Command::GoTo {
+        x: 1.0,
+        y: 0.0,
+        z: 0.5,
+        heading_deg: 0.0,
+    };
+    let from = Instant::now();
+    drive_until(
+        &mut drive,
+        clock,
+        10.0,
+        |_| demand(goal, true, Nav::Guided),
+        |_| from.elapsed() >= Duration::from_secs(2),
+    );
+    let seen = standin.stop();
+    assert!(seen.setpoints.is_empty(), "{seen:?}");
+    assert_eq!(seen.modes, [ALT_HOLD], "{seen:?}");
+}
+
+#[test]
+fn the_stand_in_disarms_on_a_lost_gcs_as_ardusub_does() {
+    let (mut drive, standin) = udp_pair(&MavlinkOptions::default(), Config::default());
+    arms_with_half_stick(&mut drive, &standin, Instant::now(), "failsafe");
+    // The ROV end gone: no HEARTBEAT, no MANUAL_CONTROL. ArduSub's GCS failsafe disarms 5 s on.
+    drop(drive);
+    let gone = Instant::now();
+    while standin.seen().armed {
+        assert!(gone.elapsed() < LIMIT, "{:?}", standin.seen());
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(gone.elapsed() >= Duration::from_secs_f64(ardusub::GCS_FAILSAFE_S - 0.2));
+    assert_eq!(standin.stop().failsafes, 1);
 }

@@ -12,6 +12,7 @@
 use crate::link::SimTime;
 use crate::vehicle::{ARRIVAL_DEG, ARRIVAL_M, Command, Vehicle, angle_diff_deg};
 use crate::wire::Nav;
+use crate::wire::rov::Why;
 
 /// What the ROV engine asks of the vehicle for the next step.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -49,6 +50,13 @@ pub struct DriveState {
     pub nav: Nav,
     /// False while the vehicle (its autopilot) is silent: the status then says RD 0.
     pub responsive: bool,
+    /// True while the vehicle has a position estimate (an autopilot without one, e.g. ArduSub
+    /// without GPS, DVL or USBL, reports none): GoTo and backtracking need it, and without it
+    /// `position_m` is not a position.
+    pub position_known: bool,
+    /// Why the vehicle does not do what it was asked ([`Why::Nothing`] when it does): an arm
+    /// or a mode it refused, or silence.
+    pub why: Why,
 }
 
 impl DriveState {
@@ -77,6 +85,15 @@ pub enum DriveEvent {
         /// True for MAV_RESULT_ACCEPTED (and IN_PROGRESS).
         accepted: bool,
     },
+    /// Something asked cannot be done: an arm or a mode the vehicle refused, a GoTo or
+    /// backtracking without a position estimate. Reported once per refusal, and in the status
+    /// (WHY) while it lasts.
+    Refused {
+        /// The status's reason.
+        why: Why,
+        /// The whole story, e.g. the autopilot's own words.
+        reason: String,
+    },
     /// Anything else worth a line (e.g. a mode the autopilot has no number for).
     Note(String),
 }
@@ -98,6 +115,13 @@ pub trait Drive: Send {
     /// The events since the last call.
     fn take_events(&mut self) -> Vec<DriveEvent> {
         Vec::new()
+    }
+    /// True when the vehicle does not stay where idle thrust leaves it (a positively buoyant
+    /// vehicle on an autopilot): the ROV engine then holds what a GoTo or recovery's
+    /// backtracking reached by asking for it until the operator's next order. The built-in
+    /// model stays put by itself (false).
+    fn needs_hold(&self) -> bool {
+        false
     }
     /// True when the GoTo to `target_m`, `heading_deg` is reached.
     fn reached(&self, target_m: [f64; 3], heading_deg: f64) -> bool {
@@ -146,6 +170,8 @@ impl Drive for SimDrive {
             armed: self.armed,
             nav: self.nav,
             responsive: true,
+            position_known: true,
+            why: Why::Nothing,
         }
     }
 

@@ -40,6 +40,8 @@ pub struct Tally {
     /// Executions per order, by the order's number.
     executions: HashMap<u64, u64>,
     image_times_s: Vec<f64>,
+    /// WHY of the last status the operator saw.
+    last_why: Option<crate::wire::rov::Why>,
 }
 
 impl Tally {
@@ -70,6 +72,25 @@ impl Tally {
             (Role::Rov, Event::ImageStarted { .. }) => m.images_started += 1,
             (Role::Rov, Event::LinkLost) => m.link_losses += 1,
             (Role::Rov, Event::LinkRecovered) => m.link_recoveries += 1,
+            (Role::Rov, Event::Vehicle(super::drive::DriveEvent::Refused { .. })) => {
+                m.refusals += 1;
+            }
+            (Role::Operator, Event::Status(repr)) => {
+                if let crate::wire::Message::Rov(crate::wire::rov::Repr {
+                    status: crate::wire::rov::Status::Basic(status),
+                    ..
+                }) = &repr.message
+                {
+                    let why = status.why();
+                    if why != crate::wire::rov::Why::Nothing && Some(why) != self.last_why {
+                        m.refusals += 1;
+                    }
+                    self.last_why = Some(why);
+                    if !status.position_known() {
+                        m.statuses_without_position += 1;
+                    }
+                }
+            }
             (Role::Operator, Event::OrderSent { .. }) => m.orders_sent += 1,
             (Role::Operator, Event::OrderAcknowledged(index)) => {
                 m.orders_acknowledged += 1;

@@ -61,6 +61,7 @@ use super::drive::{Demand, Drive, DriveEvent, DriveState};
 use crate::link::SimTime;
 use crate::vehicle::{Command, Vehicle, angle_diff_deg};
 use crate::wire::Nav;
+use crate::wire::rov::Why;
 
 /// How often an arm or mode request the autopilot has not met is sent again, s.
 pub const COMMAND_RETRY_S: f64 = 1.5;
@@ -115,13 +116,45 @@ pub fn nav_of_custom_mode(custom_mode: u32) -> Option<Nav> {
         .map(|(_, nav)| *nav)
 }
 
-/// The ArduSub custom mode for a NAV; `None` for a reserved NAV value.
+/// The ArduSub custom mode a NAV reads back from ([`nav_of_custom_mode`]'s inverse; what is
+/// asked for is [`demanded_mode`]); `None` for a reserved NAV value.
 pub fn custom_mode_of(nav: Nav) -> Option<u32> {
     MODE_TABLE
         .iter()
         .find(|(_, n)| *n == nav)
         .map(|(mode, _)| *mode)
 }
+
+/// The ArduSub custom mode the ROV end asks for when the operator asks for `nav`: every stick
+/// mode holds depth, since a BlueROV2 is positively buoyant and in MANUAL or STABILIZE with
+/// neutral sticks floats up to the surface; HoldPosition is POSHOLD where the vehicle has a
+/// position estimate (`position_known`), ALT_HOLD where it has none; Guided is GUIDED. `None`
+/// for a reserved NAV value.
+///
+/// | NAV | ArduSub mode | what ArduSub holds with neutral sticks |
+/// | --- | --- | --- |
+/// | manual, stabilize, depth_hold | ALT_HOLD (2) | attitude and depth |
+/// | hold_position | POSHOLD (16); ALT_HOLD (2) without a position | attitude, depth, position |
+/// | guided | GUIDED (4) | the last setpoint (needs a position) |
+pub fn demanded_mode(nav: Nav, position_known: bool) -> Option<u32> {
+    match nav {
+        Nav::Manual | Nav::Stabilize | Nav::DepthHold => Some(ALT_HOLD),
+        Nav::HoldPosition if position_known => Some(POSHOLD),
+        Nav::HoldPosition => Some(ALT_HOLD),
+        Nav::Guided => Some(GUIDED),
+        Nav::Unknown(_) => None,
+    }
+}
+
+/// ArduSub's ALT_HOLD: attitude and depth held.
+pub const ALT_HOLD: u32 = 2;
+/// ArduSub's POSHOLD: attitude, depth and position held (needs a position estimate).
+pub const POSHOLD: u32 = 16;
+/// ArduSub's GUIDED: goes to and holds the last setpoint (needs a position estimate).
+pub const GUIDED: u32 = 4;
+
+/// LOCAL_POSITION_NED missing for this long means the vehicle has no position estimate, s.
+pub const POSITION_STALE_S: f64 = 3.0;
 
 /// ArduSub's name for a custom mode (`mode 12` for a number it does not define).
 pub fn ardusub_mode_name(custom_mode: u32) -> String {
@@ -599,6 +632,16 @@ pub struct MavlinkDrive {
     streams: [Stream; 2],
     /// The last result reported per command, so that retries answered alike say it once.
     reported: Vec<(MavCmd, MavResult)>,
+    /// When LOCAL_POSITION_NED last came.
+    position_at: Option<SimTime>,
+    /// The failed COMMAND_ACK result of the arm request in force.
+    arm_result: Option<MavResult>,
+    /// The failed COMMAND_ACK result of the mode request in force, and the autopilot's
+    /// "Mode change failed" text since it began.
+    mode_result: Option<MavResult>,
+    mode_text: Option<String>,
+    /// The refusals last reported (arm, mode), so that each is said once.
+    refusals_said: [Option<String>; 2],
     send_error: Option<String>,
 }
 
@@ -678,6 +721,8 @@ pub fn connect(endpoint: &str, options: &MavlinkOptions) -> Result<MavlinkDrive,
             armed: false,
             nav: Nav::Manual,
             responsive: false,
+            position_known: false,
+            why: Why::Nothing,
         },
         events: Vec::new(),
         started_at: None,
@@ -696,6 +741,11 @@ pub fn connect(endpoint: &str, options: &MavlinkOptions) -> Result<MavlinkDrive,
         was_guided: false,
         streams: [Stream::new(30), Stream::new(32)],
         reported: Vec::new(),
+        position_at: None,
+        arm_result: None,
+        mode_result: None,
+        mode_text: None,
+        refusals_said: [None, None],
         send_error: None,
     })
 }
@@ -938,6 +988,65 @@ impl MavlinkDrive {
         }));
     }
 
+    /// What stands in the way of the demand: [`DriveState::why`], and a
+    /// [`DriveEvent::Refused`] when an arm or mode refusal begins or its story grows.
+    fn refusals(&mut self) {
+        if self.arm.met {
+            self.arm_result = None;
+        }
+        if self.mode.met {
+            self.mode_result = None;
+            self.mode_text = None;
+        }
+        let arm = self.arm_result.map(|result| {
+            let what = if self.arm.wanted == Some(true) {
+                "arm"
+            } else {
+                "disarm"
+            };
+            format!("{what} refused: {result:?}")
+        });
+        let mode = (self.mode_result.is_some() || self.mode_text.is_some()).then(|| {
+            let name = self
+                .mode
+                .wanted
+                .map_or_else(String::new, |m| format!("{} ({m}) ", ardusub_mode_name(m)));
+            let parts: Vec<String> = self
+                .mode_result
+                .map(|r| format!("{r:?}"))
+                .into_iter()
+                .chain(self.mode_text.clone())
+                .collect();
+            format!("mode {name}refused: {}", parts.join("; "))
+        });
+        for (k, (reason, why)) in [
+            (arm.clone(), Why::ArmRefused),
+            (mode.clone(), Why::ModeRefused),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            if reason != self.refusals_said[k] {
+                if let Some(reason) = &reason {
+                    self.events.push(DriveEvent::Refused {
+                        why,
+                        reason: reason.clone(),
+                    });
+                }
+                self.refusals_said[k] = reason;
+            }
+        }
+        self.state.why = if !self.state.responsive {
+            Why::VehicleSilent
+        } else if arm.is_some() {
+            Why::ArmRefused
+        } else if mode.is_some() {
+            Why::ModeRefused
+        } else {
+            Why::Nothing
+        };
+    }
+
     /// Forgets the result reported for `command`: a new request's answer is news.
     fn forget_result(&mut self, command: MavCmd) {
         self.reported.retain(|(c, _)| *c != command);
@@ -958,6 +1067,11 @@ impl MavlinkDrive {
                 std::mem::take(&mut inbox.notes),
             )
         };
+        for note in &notes {
+            if note.contains("Mode change failed") && !self.mode.met {
+                self.mode_text = Some(note.clone());
+            }
+        }
         self.events.extend(notes.into_iter().map(DriveEvent::Note));
         if autopilot != self.target {
             self.target = autopilot;
@@ -1003,6 +1117,12 @@ impl MavlinkDrive {
             self.state.heading_deg = yaw.to_degrees().rem_euclid(360.0);
             self.state.velocity[3] = yaw_rate.to_degrees();
         }
+        if counts[1] != self.streams[1].count {
+            self.position_at = Some(now);
+        }
+        self.state.position_known = self
+            .position_at
+            .is_some_and(|at| now < at.after_secs(POSITION_STALE_S));
         if let Some([x, y, z, vn, ve, vd]) = position {
             self.state.position_m = [x, y, z];
             let psi = self.state.heading_deg.to_radians();
@@ -1011,6 +1131,16 @@ impl MavlinkDrive {
             self.state.velocity[2] = vd;
         }
         for (command, result) in acks {
+            let accepted = matches!(
+                result,
+                MavResult::MAV_RESULT_ACCEPTED | MavResult::MAV_RESULT_IN_PROGRESS
+            );
+            if !accepted && command == MavCmd::MAV_CMD_COMPONENT_ARM_DISARM && !self.arm.met {
+                self.arm_result = Some(result);
+            }
+            if !accepted && command == MavCmd::MAV_CMD_DO_SET_MODE && !self.mode.met {
+                self.mode_result = Some(result);
+            }
             if self.reported.contains(&(command, result)) {
                 continue;
             }
@@ -1090,6 +1220,7 @@ impl Drive for MavlinkDrive {
         };
         self.state.commanded_velocity = [0, 1, 2, 3].map(|k| thrust[k] / 100.0 * NOMINAL_FULL[k]);
         let Some(target) = self.target else {
+            self.refusals();
             return; // Nothing to address yet.
         };
         if self.manual.due(now, slack_s) {
@@ -1113,6 +1244,7 @@ impl Drive for MavlinkDrive {
             Ask::Send(fresh) => {
                 if fresh {
                     self.forget_result(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM);
+                    self.arm_result = None;
                 }
                 self.arm.sent_at = Some(now);
                 let param1 = if demand.arm { 1.0 } else { 0.0 };
@@ -1123,17 +1255,25 @@ impl Drive for MavlinkDrive {
                 );
             }
         }
+        // A GoTo needs a position: without one the vehicle holds its depth (the ROV engine
+        // refuses such GoTos; this covers a drive stepped by other callers).
+        let position_known = self.state.position_known;
+        let goto = goto.filter(|_| position_known);
         let nav = if goto.is_some() {
             Nav::Guided
+        } else if demand.nav == Nav::Guided && !position_known {
+            Nav::DepthHold
         } else {
             demand.nav
         };
-        if let Some(mode) = custom_mode_of(nav) {
+        if let Some(mode) = demanded_mode(nav, position_known) {
             match self.mode.ask(mode, self.custom_mode, now) {
                 Ask::Nothing => {}
                 Ask::Send(fresh) => {
                     if fresh {
                         self.forget_result(MavCmd::MAV_CMD_DO_SET_MODE);
+                        self.mode_result = None;
+                        self.mode_text = None;
                     }
                     self.mode.sent_at = Some(now);
                     let custom = f32::from(MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.bits());
@@ -1145,7 +1285,8 @@ impl Drive for MavlinkDrive {
                 }
             }
         }
-        let guided = self.custom_mode == custom_mode_of(Nav::Guided);
+        self.refusals();
+        let guided = self.custom_mode == Some(GUIDED);
         let became_guided = guided && !self.was_guided;
         self.was_guided = guided;
         match goto {
@@ -1202,6 +1343,12 @@ impl Drive for MavlinkDrive {
 
     fn take_events(&mut self) -> Vec<DriveEvent> {
         std::mem::take(&mut self.events)
+    }
+
+    fn needs_hold(&self) -> bool {
+        // ArduSub in a stick mode with neutral sticks keeps its depth (ALT_HOLD) but not its
+        // place: the hold is GUIDED at the setpoint.
+        true
     }
 }
 

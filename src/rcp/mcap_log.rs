@@ -260,6 +260,8 @@ pub struct ViewMessage {
 pub struct View {
     clock: Clock,
     link_up: Option<bool>,
+    /// WHY and NP of the last status told (a change is a line on the log).
+    status_reason: std::cell::Cell<Option<(crate::wire::rov::Why, bool)>>,
     wanted: [bool; Topic::ALL.len()],
     /// The body frame's name on `/tf`.
     body_frame: String,
@@ -271,6 +273,7 @@ impl View {
         View {
             clock,
             link_up: None,
+            status_reason: std::cell::Cell::new(None),
             wanted: [true; Topic::ALL.len()],
             body_frame: BODY_FRAME.to_string(),
         }
@@ -473,6 +476,42 @@ impl View {
         out
     }
 
+    /// A line when the WHY or NP of the statuses changes (ST = 1, wire.md's status version 1):
+    /// a WARNING for a reason or a missing position, INFO when they clear.
+    fn status_reason_line(
+        &self,
+        repr: &crate::wire::MessageRepr,
+        events: &dyn Fn(u8, &str) -> Vec<ViewMessage>,
+    ) -> Vec<ViewMessage> {
+        let crate::wire::Message::Rov(crate::wire::rov::Repr {
+            status: crate::wire::rov::Status::Basic(status),
+            ..
+        }) = &repr.message
+        else {
+            return Vec::new();
+        };
+        let now = (status.why(), status.position_known());
+        let before = self.status_reason.replace(Some(now));
+        if before == Some(now)
+            || (before.is_none() && now == (crate::wire::rov::Why::Nothing, true))
+        {
+            return Vec::new();
+        }
+        match now {
+            (crate::wire::rov::Why::Nothing, true) => events(
+                INFO,
+                "ROV status: nothing stands in the way, position known",
+            ),
+            (why, known) => events(
+                WARNING,
+                &format!(
+                    "ROV status: why {why}{}",
+                    if known { "" } else { "; no position estimate" }
+                ),
+            ),
+        }
+    }
+
     /// What happened at `end`: a line on `/session/log` (the operator's lost and recovered
     /// answers on `/link/log`), the image in progress on `/camera/preview`. Statuses,
     /// completed images and the ROV's link changes are told through [`View::pose`] and
@@ -516,16 +555,17 @@ impl View {
                     if *accepted { INFO } else { WARNING },
                     &format!("autopilot answered {command}: {result}"),
                 ),
+                super::drive::DriveEvent::Refused { why, reason } => {
+                    events(WARNING, &format!("vehicle refused ({why}): {reason}"))
+                }
                 super::drive::DriveEvent::Note(note) => events(INFO, &format!("vehicle: {note}")),
             },
             Event::CameraFailed(why) => events(WARNING, &format!("camera: {why}")),
             Event::AnswersLost => line(Topic::Log, WARNING, "answers lost: no ROV frame for 5 s"),
             Event::AnswersBack => line(Topic::Log, INFO, "answers back: ROV frames again"),
             Event::ImageProgress { prefix, .. } => self.preview(t_s, prefix).into_iter().collect(),
-            Event::Status(_)
-            | Event::ImageCompleted(_)
-            | Event::LinkLost
-            | Event::LinkRecovered => Vec::new(),
+            Event::Status(repr) => self.status_reason_line(repr, &events),
+            Event::ImageCompleted(_) | Event::LinkLost | Event::LinkRecovered => Vec::new(),
         }
     }
 }
@@ -819,5 +859,46 @@ mod tests {
         assert_eq!(bad.topic, Topic::Log);
         assert!(bad.json.contains("did not decode"));
         assert!(view.preview(1.0, b"").is_none());
+    }
+
+    #[test]
+    fn a_status_reason_is_a_line_when_it_changes() {
+        use crate::wire::rov::{BasicStatus, Extension, Repr, Status, Why};
+        let view = View::new(Clock::Wall);
+        let status = |extension| {
+            Event::Status(crate::wire::MessageRepr {
+                src: 1,
+                dst: 0,
+                message: crate::wire::Message::Rov(Repr {
+                    ft: false,
+                    lt: false,
+                    isn: false,
+                    ci: false,
+                    itsn: 0,
+                    status: Status::Basic(BasicStatus {
+                        extension,
+                        ..BasicStatus::default()
+                    }),
+                    trunk: Vec::new(),
+                }),
+            })
+        };
+        let refused = Some(Extension {
+            no_position: true,
+            why: Why::NoPosition,
+        });
+        assert!(view.event(Role::Operator, 1.0, &status(None)).is_empty());
+        let said = view.event(Role::Operator, 2.0, &status(refused));
+        assert_eq!(topics(&said), [Topic::Events]);
+        let json: serde_json::Value = serde_json::from_str(&said[0].json).unwrap();
+        assert_eq!(json["level"], WARNING);
+        assert_eq!(
+            json["message"],
+            "ROV status: why no_position; no position estimate"
+        );
+        assert!(view.event(Role::Operator, 3.0, &status(refused)).is_empty());
+        let cleared = view.event(Role::Operator, 4.0, &status(None));
+        let json: serde_json::Value = serde_json::from_str(&cleared[0].json).unwrap();
+        assert_eq!(json["level"], INFO);
     }
 }

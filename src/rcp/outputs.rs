@@ -668,6 +668,13 @@ impl Telemetry {
                 ];
                 self.state("vehicle", t_s, end, "command_ack", fields)
             }
+            DriveEvent::Refused { why, reason } => {
+                let fields = [
+                    ("why", why.to_string().into()),
+                    ("reason", reason.as_str().into()),
+                ];
+                self.state("vehicle", t_s, end, "refused", fields)
+            }
             DriveEvent::Note(text) => self.state(
                 "vehicle",
                 t_s,

@@ -60,6 +60,14 @@ pub struct Metrics {
     pub link_losses: u64,
     /// Times it came back.
     pub link_recoveries: u64,
+    /// Orders or demands that could not run (absent when none): the ROV counts each refusal
+    /// it reported (a GoTo or backtracking without a position estimate, an arm or a mode the
+    /// vehicle refused); the operator counts each status whose WHY turned to a reason.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub refusals: u64,
+    /// Operator: statuses that said the vehicle has no position estimate (absent when none).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub statuses_without_position: u64,
     /// Real time, operator: mean time from a slot's frame to the ROV's answer, ms.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub round_trip_ms: Option<f64>,
@@ -71,6 +79,10 @@ pub struct Metrics {
     /// Why the run ended early (e.g. `SIGTERM`); absent when it ran its whole duration.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub interrupted: Option<String>,
+}
+
+fn is_zero(value: &u64) -> bool {
+    *value == 0
 }
 
 /// What a driver ([`super::session::run`], [`super::network::run`]) says when `stop` ended it,

@@ -10,10 +10,25 @@
 //! first, until a heartbeat arrives. A GoTo in execution when the link is lost is abandoned (it
 //! is what took the ROV out of range; resuming it would oscillate at the range's edge): after
 //! recovery the ROV holds position under the joystick until the operator orders again.
+//!
+//! Holding: on a vehicle that does not stay put when idle ([`Drive::needs_hold`]: a buoyant
+//! vehicle on an autopilot), what a GoTo reached, and where recovery's backtracking was going
+//! when the link came back, is held (the drive is still asked to go there: an autopilot stays
+//! in GUIDED at the setpoint) until the operator's next order: a Velocity order that differs from the one in
+//! force when the hold began (stick input, arm, disarm, another mode), or a GoTo or
+//! HoldHeading. The status says RD 1 meanwhile: no order is in execution.
+//!
+//! Refusals: a vehicle without a position estimate ([`DriveState::position_known`] false)
+//! cannot run a GoTo nor backtrack: the GoTo is refused at once (EOID toggles, nothing is
+//! executed, the vehicle keeps the sticks' mode) and the status says why (ST = 1, WHY
+//! no_position, until the operator's next order); backtracking is skipped (the vehicle holds
+//! its depth with neutral sticks). The drive's own reasons (an arm or a mode the autopilot
+//! refused, silence) go into the same field while they last; NP says the pose is unknown.
 
 use std::collections::VecDeque;
 
 use super::camera::{Camera, Cycle};
+use super::drive::DriveEvent;
 use super::drive::{Demand, Drive, DriveState, SimDrive};
 use super::{Event, ImageSettings, PoseSample, emit, trunks_of};
 use crate::debt;
@@ -21,7 +36,7 @@ use crate::link::SimTime;
 use crate::vehicle::Command;
 use crate::wire::frame::{ADDR_OPERATOR, Frame};
 use crate::wire::operator::Order;
-use crate::wire::rov::{BasicStatus, Status};
+use crate::wire::rov::{BasicStatus, Extension, Status, Why};
 use crate::wire::{Message, MessageRepr, Nav, rov};
 
 /// The ROV's fixed figures.
@@ -60,6 +75,19 @@ enum Executing {
     GoTo([f64; 3], f64),
 }
 
+/// A Velocity order's fields: vx, vy, vz, vyaw, arm, disarm, nav.
+type VelocityOrder = ([i8; 4], bool, bool, Nav);
+
+/// A point held after a GoTo or backtracking, until the operator orders otherwise.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Hold {
+    /// Where, NED m, and the heading, degrees.
+    target_m: [f64; 3],
+    heading_deg: f64,
+    /// The Velocity order in force when the hold began: a different one ends the hold.
+    order: Option<VelocityOrder>,
+}
+
 /// An image being sent.
 struct Outgoing {
     trunks: Vec<Vec<u8>>,
@@ -79,6 +107,13 @@ pub struct Rov {
     eoid: bool,
     loc: bool,
     executing: Option<Executing>,
+    hold: Option<Hold>,
+    /// The last Velocity order received.
+    velocity: Option<VelocityOrder>,
+    /// A refusal of the engine's own (a GoTo without position), reported until the next order.
+    refused: Option<Why>,
+    /// True while backtracking is skipped for want of a position (reported once per loss).
+    backtrack_refused: bool,
     arm: bool,
     nav: Nav,
     joystick: [f64; 4],
@@ -114,6 +149,10 @@ impl Rov {
             eoid: false,
             loc: false,
             executing: None,
+            hold: None,
+            velocity: None,
+            refused: None,
+            backtrack_refused: false,
             arm: false,
             nav: Nav::Manual,
             joystick: [0.0; 4],
@@ -185,7 +224,19 @@ impl Rov {
             // The order in execution led out of range: it is abandoned, so that once the link
             // is back the ROV holds where it regained it instead of driving out again.
             self.executing = None;
+            self.hold = None;
             self.events.push(Event::LinkLost);
+        }
+        let position_known = self.drive.state().position_known;
+        if !position_known {
+            if let Some(Executing::GoTo(..)) = self.executing.take() {
+                self.refuse(
+                    Why::NoPosition,
+                    "the GoTo in execution was abandoned: the vehicle lost its position estimate"
+                        .to_string(),
+                );
+            }
+            self.hold = None;
         }
         if self.link_up && now >= self.next_push {
             if self.stack.len() == self.cfg.stack_depth {
@@ -194,7 +245,17 @@ impl Rov {
             self.stack.push_back(self.drive.state().position_m);
             self.next_push = now.after_secs(self.cfg.stack_period_s);
         }
-        let command = if !self.link_up {
+        let command = if !self.link_up && !position_known {
+            // No position: nothing to backtrack to; neutral sticks (a depth-holding mode).
+            if !self.backtrack_refused {
+                self.backtrack_refused = true;
+                self.events.push(Event::Vehicle(DriveEvent::Refused {
+                    why: Why::NoPosition,
+                    reason: "link lost: no backtracking, the vehicle has no position estimate; it holds its depth with neutral sticks".to_string(),
+                }));
+            }
+            idle()
+        } else if !self.link_up {
             // Backtracking: drive to the newest stacked position, pop it when reached.
             while let Some(&back) = self.stack.back() {
                 if self.drive.state().distance_to(back) > self.drive.arrival_m()
@@ -217,8 +278,23 @@ impl Rov {
             match self.executing {
                 Some(Executing::GoTo([x, y, z], heading_deg)) => {
                     if self.drive.reached([x, y, z], heading_deg) {
+                        // Done: held there until the operator's next order (by the drive
+                        // itself where it stays put when idle).
                         self.executing = None;
-                        idle()
+                        self.hold = self.drive.needs_hold().then_some(Hold {
+                            target_m: [x, y, z],
+                            heading_deg,
+                            order: self.velocity,
+                        });
+                        match self.hold {
+                            Some(_) => Command::GoTo {
+                                x,
+                                y,
+                                z,
+                                heading_deg,
+                            },
+                            None => self.sticks(),
+                        }
                     } else {
                         Command::GoTo {
                             x,
@@ -228,13 +304,18 @@ impl Rov {
                         }
                     }
                 }
-                None if self.arm => Command::Thrust {
-                    surge: self.joystick[0],
-                    sway: self.joystick[1],
-                    heave: self.joystick[2],
-                    yaw: self.joystick[3],
+                None => match self.hold {
+                    Some(hold) => {
+                        let [x, y, z] = hold.target_m;
+                        Command::GoTo {
+                            x,
+                            y,
+                            z,
+                            heading_deg: hold.heading_deg,
+                        }
+                    }
+                    None => self.sticks(),
                 },
-                None => idle(),
             }
         };
         let demand = Demand {
@@ -266,6 +347,17 @@ impl Rov {
         self.last_heartbeat = now;
         if !self.link_up {
             self.link_up = true;
+            self.backtrack_refused = false;
+            // Where backtracking was going is held until the operator orders otherwise.
+            let state = self.drive.state();
+            let hold = state.position_known && self.drive.needs_hold();
+            if let (Some(&target_m), true) = (self.stack.back(), hold) {
+                self.hold = Some(Hold {
+                    target_m,
+                    heading_deg: state.heading_deg,
+                    order: self.velocity,
+                });
+            }
             self.events.push(Event::LinkRecovered);
         }
 
@@ -284,6 +376,17 @@ impl Rov {
                 disarm,
                 nav,
             } => {
+                let order = ([vx, vy, vz, vyaw], arm, disarm, nav);
+                if self.velocity != Some(order) {
+                    // The operator's next order: a hold or a refusal of the last ends here.
+                    if self.hold.is_some_and(|h| h.order != Some(order)) {
+                        self.hold = None;
+                    }
+                    if self.velocity.is_some() {
+                        self.refused = None;
+                    }
+                    self.velocity = Some(order);
+                }
                 self.joystick = [vx, vy, vz, vyaw].map(super::operator::thrust_percent);
                 if arm {
                     self.arm = true;
@@ -299,8 +402,18 @@ impl Rov {
                 if msg.oid == self.eoid {
                     self.eoid = !self.eoid;
                     self.loc = false;
-                    self.execute(order);
-                    self.events.push(Event::OrderExecuted(order));
+                    self.refused = None;
+                    if matches!(order, Order::GoTo { .. }) && !self.drive.state().position_known {
+                        // Refused at once, and said so: the order is taken (EOID toggles)
+                        // but nothing runs.
+                        self.refuse(
+                            Why::NoPosition,
+                            format!("{order:?} refused: the vehicle has no position estimate"),
+                        );
+                    } else {
+                        self.execute(order);
+                        self.events.push(Event::OrderExecuted(order));
+                    }
                 }
             }
             Order::Unknown { .. } => {}
@@ -321,7 +434,32 @@ impl Rov {
         Some(self.reply(msg.rit))
     }
 
+    /// The joystick's thrust while armed, idle otherwise.
+    fn sticks(&self) -> Command {
+        if self.arm {
+            Command::Thrust {
+                surge: self.joystick[0],
+                sway: self.joystick[1],
+                heave: self.joystick[2],
+                yaw: self.joystick[3],
+            }
+        } else {
+            idle()
+        }
+    }
+
+    /// Reports a refusal of the engine's own: an event now, WHY in the status until the next
+    /// order.
+    fn refuse(&mut self, why: Why, reason: String) {
+        self.refused = Some(why);
+        self.events
+            .push(Event::Vehicle(DriveEvent::Refused { why, reason }));
+    }
+
     fn execute(&mut self, order: Order) {
+        if !matches!(order, Order::ImageSettings { .. }) {
+            self.hold = None;
+        }
         match order {
             Order::GoTo {
                 x_cm,
@@ -419,6 +557,23 @@ impl Rov {
             roll_deg: degrees(state.roll_deg),
             pitch_deg: degrees(state.pitch_deg),
             yaw_deg: degrees(state.heading_deg),
+            extension: None,
+        };
+        let why = self.refused.unwrap_or(state.why);
+        let status = if !state.position_known || why != Why::Nothing {
+            BasicStatus {
+                // Without a position, X, Y, Z are not one: 0 rather than a stale value.
+                x_cm: if state.position_known { x_cm } else { 0 },
+                y_cm: if state.position_known { y_cm } else { 0 },
+                z_cm: if state.position_known { z_cm } else { 0 },
+                extension: Some(Extension {
+                    no_position: !state.position_known,
+                    why,
+                }),
+                ..status
+            }
+        } else {
+            status
         };
         let (mut ft, mut lt, mut itsn, mut trunk) = (false, false, 0u8, Vec::new());
         if let (false, Some(image)) = (
@@ -439,6 +594,16 @@ impl Rov {
             itsn = k as u8;
             trunk = image.trunks[k].clone();
         }
+        // A trunk of the largest size leaves no room for the extension byte: that frame goes
+        // as ST = 0 (the next one without such a trunk says it again).
+        let status = if trunk.len() > rov::MAX_EXTENDED_TRUNK_BYTES {
+            BasicStatus {
+                extension: None,
+                ..status
+            }
+        } else {
+            status
+        };
         let message = Message::Rov(rov::Repr {
             ft,
             lt,
@@ -484,5 +649,148 @@ mod tests {
                 .iter()
                 .any(|e| matches!(e, Event::ImageStarted { .. }))
         );
+    }
+
+    /// Runs `slots` operator slots of 0.64 s between `operator` and `rov`; returns the ROV's
+    /// last status and its events.
+    fn slots(
+        operator: &mut Operator,
+        rov: &mut Rov,
+        from: u64,
+        slots: u64,
+    ) -> (BasicStatus, Vec<Event>) {
+        let mut events = Vec::new();
+        let mut last = None;
+        for slot in from..from + slots {
+            let t = SimTime(slot * 640_000_000);
+            rov.poll(t);
+            let (frame, _) = operator.poll(t);
+            let reply = rov.receive(t, &frame).expect("a reply to every slot");
+            operator.receive(t, &reply);
+            events.extend(rov.take_events());
+            last = operator.last_status;
+        }
+        (last.expect("a status"), events)
+    }
+
+    const GOTO: Order = Order::GoTo {
+        x_cm: 100,
+        y_cm: 0,
+        z_cm: 0,
+        heading_deg: 0,
+    };
+
+    /// The built-in model, as a vehicle that needs an explicit hold.
+    struct Drifting(SimDrive);
+
+    impl Drive for Drifting {
+        fn step(&mut self, now: SimTime, dt_s: f64, demand: &Demand) {
+            self.0.step(now, dt_s, demand);
+        }
+        fn state(&self) -> DriveState {
+            self.0.state()
+        }
+        fn needs_hold(&self) -> bool {
+            true
+        }
+    }
+
+    #[test]
+    fn what_a_goto_reached_is_held_until_the_next_order() {
+        let mut rov = Rov::with(
+            RovConfig::default(),
+            Box::new(Drifting(SimDrive::new([0.0; 3]))),
+            Box::new(Cycle::new(Vec::new())),
+        );
+        let mut operator = Operator::new(1, 640_000_000);
+        operator.set_modes(true, false, Nav::Stabilize);
+        slots(&mut operator, &mut rov, 0, 2);
+        operator.push_order(GOTO);
+        let (status, events) = slots(&mut operator, &mut rov, 2, 30);
+        assert!(events.contains(&Event::OrderExecuted(GOTO)), "{events:?}");
+        // Reached and held: RD 1 (nothing in execution), still guided at the target.
+        assert!(status.rd && status.nav == Nav::Guided, "{status:?}");
+        assert_eq!(status.extension, None);
+        assert!((rov.state().position_m[0] - 1.0).abs() < 0.1);
+        let (status, _) = slots(&mut operator, &mut rov, 32, 5);
+        assert_eq!(
+            status.nav,
+            Nav::Guided,
+            "the same Velocity order keeps the hold"
+        );
+        // Stick input ends it: back to the operator's mode, the sticks drive.
+        operator.set_joystick(crate::rcp::operator::Joystick {
+            vx: 50.0,
+            ..Default::default()
+        });
+        let (status, _) = slots(&mut operator, &mut rov, 37, 5);
+        assert_eq!(status.nav, Nav::Stabilize, "{status:?}");
+        assert!(rov.state().position_m[0] > 1.2);
+        // The built-in model stays put by itself: no hold, the operator's mode at once.
+        let mut sim = Rov::new(RovConfig::default(), [0.0; 3], Vec::new());
+        let mut operator = Operator::new(1, 640_000_000);
+        operator.set_modes(true, false, Nav::Stabilize);
+        slots(&mut operator, &mut sim, 0, 2);
+        operator.push_order(GOTO);
+        let (status, _) = slots(&mut operator, &mut sim, 2, 30);
+        assert!(status.rd && status.nav == Nav::Stabilize, "{status:?}");
+        let at = sim.state().position_m;
+        assert!((at[0] - 1.0).abs() <= crate::vehicle::ARRIVAL_M, "{at:?}");
+    }
+
+    /// The built-in model without a position estimate.
+    struct Blind(SimDrive);
+
+    impl Drive for Blind {
+        fn step(&mut self, now: SimTime, dt_s: f64, demand: &Demand) {
+            self.0.step(now, dt_s, demand);
+        }
+        fn state(&self) -> DriveState {
+            DriveState {
+                position_known: false,
+                ..self.0.state()
+            }
+        }
+    }
+
+    #[test]
+    fn without_a_position_a_goto_is_refused_at_once_and_said_until_the_next_order() {
+        let mut rov = Rov::with(
+            RovConfig::default(),
+            Box::new(Blind(SimDrive::new([2.0, 3.0, 4.0]))),
+            Box::new(Cycle::new(Vec::new())),
+        );
+        let mut operator = Operator::new(1, 640_000_000);
+        operator.set_modes(true, false, Nav::Stabilize);
+        let (status, _) = slots(&mut operator, &mut rov, 0, 2);
+        // No position: NP, and X, Y, Z are not the model's stale 2, 3, 4.
+        assert_eq!(
+            status.extension,
+            Some(Extension {
+                no_position: true,
+                why: Why::Nothing
+            })
+        );
+        assert_eq!([status.x_cm, status.y_cm, status.z_cm], [0; 3]);
+        let index = operator.push_order(GOTO);
+        let (status, events) = slots(&mut operator, &mut rov, 2, 4);
+        assert!(!events.contains(&Event::OrderExecuted(GOTO)), "{events:?}");
+        assert!(
+            events.iter().any(|e| matches!(e, Event::Vehicle(DriveEvent::Refused { why: Why::NoPosition, reason }) if reason.contains("no position estimate"))),
+            "{events:?}"
+        );
+        assert_eq!(status.why(), Why::NoPosition);
+        assert!(status.rd, "nothing left pending");
+        assert_eq!(status.nav, Nav::Stabilize);
+        assert!(
+            operator
+                .take_events()
+                .contains(&Event::OrderAcknowledged(index))
+        );
+        // The next order clears the reason.
+        operator.set_modes(true, false, Nav::DepthHold);
+        let (status, _) = slots(&mut operator, &mut rov, 6, 3);
+        assert_eq!(status.why(), Why::Nothing);
+        assert!(!status.position_known());
     }
 }

@@ -130,6 +130,20 @@ impl<'a> Fields<'a> {
         nav.ok_or_else(|| self.bad(key, expected, v))
     }
 
+    fn why(&self, key: &str) -> Result<rov::Why, JsonError> {
+        let v = self.get(key)?;
+        let expected = "none, arm_refused, mode_refused, no_position, vehicle_silent, or 5..=31";
+        let why = match v {
+            Value::String(s) => rov::Why::from_name(s),
+            Value::Number(n) => match n.as_u64() {
+                Some(k @ 5..=31) => Some(rov::Why::Unknown(k as u8)),
+                _ => None,
+            },
+            _ => None,
+        };
+        why.ok_or_else(|| self.bad(key, expected, v))
+    }
+
     fn object(&self, key: &str) -> Result<Map<String, Value>, JsonError> {
         let v = self.get(key)?;
         v.as_object()
@@ -195,7 +209,31 @@ pub fn parse_object(map: &Map<String, Value>) -> Result<MessageRepr, JsonError> 
 
 fn parse_rov(f: &Fields<'_>) -> Result<rov::Repr, JsonError> {
     let st = f.int("st", 0, 63)? as u8;
-    let (status, trunk) = if st == rov::ST_BASIC {
+    let (status, trunk) = if st <= rov::ST_EXTENDED {
+        let extension = if st == rov::ST_EXTENDED {
+            Some(rov::Extension {
+                no_position: !f.bool("position_known")?,
+                why: f.why("why")?,
+            })
+        } else {
+            for key in ["position_known", "why"] {
+                if let Some(value) = f.map.get(key) {
+                    let default = if key == "why" {
+                        Value::from("none")
+                    } else {
+                        Value::from(true)
+                    };
+                    if *value != default {
+                        return Err(f.bad(
+                            key,
+                            "st 1 for a status with position_known false or a why (st 0 has neither)",
+                            value,
+                        ));
+                    }
+                }
+            }
+            None
+        };
         let status = BasicStatus {
             rd: f.bool("rd")?,
             eoid: f.bit("eoid")?,
@@ -209,6 +247,7 @@ fn parse_rov(f: &Fields<'_>) -> Result<rov::Repr, JsonError> {
             roll_deg: f.int("roll_deg", 0, 359)? as u16,
             pitch_deg: f.int("pitch_deg", 0, 359)? as u16,
             yaw_deg: f.int("yaw_deg", 0, 359)? as u16,
+            extension,
         };
         (Status::Basic(status), f.hex("trunk")?)
     } else {
@@ -329,6 +368,13 @@ fn order_fields(o: &Fields<'_>) -> Result<Order, JsonError> {
     Ok(order)
 }
 
+fn why_value(why: rov::Why) -> Value {
+    match why.name() {
+        Some(name) => Value::from(name),
+        None => Value::from(why.bits()),
+    }
+}
+
 fn nav_value(nav: Nav) -> Value {
     match nav.name() {
         Some(name) => Value::from(name),
@@ -364,6 +410,10 @@ pub fn write_fields(repr: &MessageRepr, out: &mut Map<String, Value>) {
                     out.insert("roll_deg".into(), s.roll_deg.into());
                     out.insert("pitch_deg".into(), s.pitch_deg.into());
                     out.insert("yaw_deg".into(), s.yaw_deg.into());
+                    if s.extension.is_some() {
+                        out.insert("position_known".into(), s.position_known().into());
+                        out.insert("why".into(), why_value(s.why()));
+                    }
                     out.insert("trunk".into(), encode_hex(&r.trunk).into());
                 }
                 Status::Unknown { raw, .. } => {

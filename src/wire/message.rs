@@ -188,6 +188,10 @@ impl core::fmt::Display for MessageRepr {
                         flag(f, s.loc, "LOC")?;
                         flag(f, s.hh, "HH")?;
                         flag(f, s.arm, "ARM")?;
+                        flag(f, !s.position_known(), "NP")?;
+                        if s.why() != rov::Why::Nothing {
+                            write!(f, " why={}", s.why())?;
+                        }
                         write!(
                             f,
                             " ned=({:.2},{:.2},{:.2})m rpy=({},{},{})deg | trunk {} B",

@@ -4,15 +4,20 @@
 //! offset  field
 //! 0       FT:1 LT:1 ST:6
 //! 1       ISN:1 CI:1 ITSN:6
-//! 2..=12  status block of type ST (ST = 0, 11 bytes):
+//! 2..=12  status block of type ST (ST = 0, 11 bytes; ST = 1, 12 bytes):
 //!   2       RD:1 EOID:1 LOC:1 HH:1 ARM:1 NAV:3
 //!   3..=8   X, Y, Z: i16 NED position in centimetres
 //!   9..=12  orientation u32: roll bits 8..0, pitch 17..9, yaw 26..18, bits 31..27 zero
-//! 13..    IT: image trunk, 0..=242 bytes
+//!   13      ST = 1 only: NP:1 reserved:2 (zero) WHY:5
+//! 13.. (ST = 0) or 14.. (ST = 1)  IT: image trunk, 0..=242 (0..=241) bytes
 //! ```
 //!
-//! Status types other than 0 are reserved: [`Repr::parse`] keeps them as
-//! [`Status::Unknown`] with every byte after the header, since their length is not known.
+//! ST = 1 (wire.md's status version 1) is ST = 0 and one byte more, sent only when there is
+//! something to say: NP, the vehicle has no position estimate (X, Y, Z are not a position),
+//! and WHY, why an order cannot run ([`Why`]). A status without either goes as ST = 0, so a
+//! session without trouble sends exactly the paper's frames and an ST = 0 frame decodes as
+//! before. Status types 2..=63 are reserved: [`Repr::parse`] keeps them as [`Status::Unknown`]
+//! with every byte after the header, since their length is not known.
 //!
 //! No-panic contract: after [`Packet::new_checked`] the header getters and `trunk`, and for
 //! ST = 0 the status getters, stay in bounds (the status getters of a short message of a
@@ -32,8 +37,14 @@ pub const FIXED_BYTES: usize = HEADER_BYTES + STATUS_BYTES;
 pub const MAX_TRUNK_BYTES: usize = super::frame::MAX_PAYLOAD_BYTES - FIXED_BYTES;
 /// Most trunks an image may have (ITSN is 6 bits).
 pub const MAX_TRUNKS: usize = 64;
-/// The status type this version defines.
+/// The status type of the basic block.
 pub const ST_BASIC: u8 = 0;
+/// The status type of the basic block with its extension byte (status version 1).
+pub const ST_EXTENDED: u8 = 1;
+/// Bytes the extension adds to the status block.
+pub const EXTENSION_BYTES: usize = 1;
+/// The longest trunk a frame with an ST = 1 status can carry.
+pub const MAX_EXTENDED_TRUNK_BYTES: usize = MAX_TRUNK_BYTES - EXTENSION_BYTES;
 
 /// Byte ranges and bit positions of the ROV message.
 mod field {
@@ -63,6 +74,10 @@ mod field {
     pub const ANGLE_MASK: u32 = 0x1ff;
     pub const ORIENTATION_RESERVED: u32 = 0xf800_0000;
     pub const TRUNK_START: usize = 13;
+    pub const EXTENSION: usize = 13;
+    pub const NP_BIT: u8 = 7;
+    pub const EXTENSION_RESERVED: u8 = 0x60;
+    pub const WHY_MASK: u8 = 0x1f;
 }
 
 /// A read/write view of a ROV message.
@@ -84,7 +99,7 @@ impl<T: AsRef<[u8]>> Packet<T> {
         Ok(packet)
     }
 
-    /// Checks that the header is there and, for ST = 0, the whole status block.
+    /// Checks that the header is there and, for ST = 0 and 1, the whole status block.
     pub fn check_len(&self) -> Result<()> {
         let len = self.buffer.as_ref().len();
         if len < HEADER_BYTES {
@@ -94,10 +109,11 @@ impl<T: AsRef<[u8]>> Packet<T> {
                 found: len,
             });
         }
-        if self.st() == ST_BASIC && len < FIXED_BYTES {
+        let needed = self.trunk_start();
+        if self.st() <= ST_EXTENDED && len < needed {
             return Err(Error::Truncated {
                 what: "rov message status",
-                expected: FIXED_BYTES,
+                expected: needed,
                 found: len,
             });
         }
@@ -193,6 +209,30 @@ impl<T: AsRef<[u8]>> Packet<T> {
         self.i16_at(field::Z)
     }
 
+    /// Where the trunk starts: after the status block of ST = 0, one byte later for ST = 1.
+    fn trunk_start(&self) -> usize {
+        if self.st() == ST_EXTENDED {
+            field::TRUNK_START + EXTENSION_BYTES
+        } else {
+            field::TRUNK_START
+        }
+    }
+
+    /// NP (ST = 1): the vehicle has no position estimate; X, Y, Z are not a position.
+    pub fn np(&self) -> bool {
+        get_bit(self.byte(field::EXTENSION), field::NP_BIT)
+    }
+
+    /// WHY (ST = 1): why an order cannot run, 5 bits.
+    pub fn why(&self) -> Why {
+        Why::from_bits(self.byte(field::EXTENSION) & field::WHY_MASK)
+    }
+
+    /// The extension byte's reserved bits (ST = 1; zero when valid).
+    pub fn extension_reserved(&self) -> u8 {
+        self.byte(field::EXTENSION) & field::EXTENSION_RESERVED
+    }
+
     /// The raw orientation word (roll, pitch, yaw packed).
     pub fn orientation(&self) -> u32 {
         let b = &self.buffer.as_ref()[field::ORIENTATION];
@@ -214,12 +254,12 @@ impl<T: AsRef<[u8]>> Packet<T> {
         ((self.orientation() >> field::YAW_SHIFT) & field::ANGLE_MASK) as u16
     }
 
-    /// The image trunk (ST = 0): every byte after the status block (empty when the buffer ends
-    /// before it, as a short message of a reserved status type may).
+    /// The image trunk (ST = 0 and 1): every byte after the status block (empty when the
+    /// buffer ends before it, as a short message of a reserved status type may).
     pub fn trunk(&self) -> &[u8] {
         self.buffer
             .as_ref()
-            .get(field::TRUNK_START..)
+            .get(self.trunk_start()..)
             .unwrap_or(&[])
     }
 
@@ -341,9 +381,27 @@ impl<T: AsRef<[u8]> + AsMut<[u8]>> Packet<T> {
         self.set_angle(field::YAW_SHIFT, value);
     }
 
-    /// The trunk bytes, writable.
+    /// Sets NP (ST = 1).
+    pub fn set_np(&mut self, value: bool) {
+        self.update(field::EXTENSION, |b| with_bit(b, field::NP_BIT, value));
+    }
+
+    /// Sets WHY (ST = 1) and clears the extension's reserved bits.
+    pub fn set_why(&mut self, value: Why) {
+        self.update(field::EXTENSION, |b| {
+            with_bits(
+                b & !field::EXTENSION_RESERVED,
+                field::WHY_MASK,
+                0,
+                value.bits(),
+            )
+        });
+    }
+
+    /// The trunk bytes (after the status block of the packet's ST), writable.
     pub fn trunk_mut(&mut self) -> &mut [u8] {
-        &mut self.buffer.as_mut()[field::TRUNK_START..]
+        let start = self.trunk_start();
+        &mut self.buffer.as_mut()[start..]
     }
 
     /// Every byte after the header, writable.
@@ -379,6 +437,100 @@ pub struct BasicStatus {
     pub pitch_deg: u16,
     /// Yaw, whole degrees 0..=359.
     pub yaw_deg: u16,
+    /// The extension byte: `Some` makes the block ST = 1, `None` ST = 0.
+    pub extension: Option<Extension>,
+}
+
+/// Why an order cannot run (WHY, 5 bits, in an ST = 1 status). Values 5..=31 are reserved;
+/// they are kept, not rejected.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Why {
+    /// 0: nothing stands in the way.
+    Nothing,
+    /// 1: the vehicle refused to arm (e.g. ArduSub's pre-arm checks).
+    ArmRefused,
+    /// 2: the vehicle refused the navigation mode asked for.
+    ModeRefused,
+    /// 3: a GoTo (or recovery's backtracking) was refused: the vehicle has no position
+    /// estimate.
+    NoPosition,
+    /// 4: the vehicle (its autopilot) does not answer.
+    VehicleSilent,
+    /// 5..=31: reserved values, kept as they came.
+    Unknown(u8),
+}
+
+impl Why {
+    /// Decodes the 5-bit field (bits above the fifth are ignored).
+    pub const fn from_bits(bits: u8) -> Why {
+        match bits & 0x1f {
+            0 => Why::Nothing,
+            1 => Why::ArmRefused,
+            2 => Why::ModeRefused,
+            3 => Why::NoPosition,
+            4 => Why::VehicleSilent,
+            other => Why::Unknown(other),
+        }
+    }
+
+    /// Encodes the reason as its 5-bit value.
+    pub const fn bits(self) -> u8 {
+        match self {
+            Why::Nothing => 0,
+            Why::ArmRefused => 1,
+            Why::ModeRefused => 2,
+            Why::NoPosition => 3,
+            Why::VehicleSilent => 4,
+            Why::Unknown(v) => v & 0x1f,
+        }
+    }
+
+    /// The name used in the JSON form, or `None` for a reserved value (written as its number).
+    pub const fn name(self) -> Option<&'static str> {
+        match self {
+            Why::Nothing => Some("none"),
+            Why::ArmRefused => Some("arm_refused"),
+            Why::ModeRefused => Some("mode_refused"),
+            Why::NoPosition => Some("no_position"),
+            Why::VehicleSilent => Some("vehicle_silent"),
+            Why::Unknown(_) => None,
+        }
+    }
+
+    /// Looks a reason up by its JSON name.
+    pub fn from_name(name: &str) -> Option<Why> {
+        (0..5).map(Why::from_bits).find(|w| w.name() == Some(name))
+    }
+}
+
+impl core::fmt::Display for Why {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self.name() {
+            Some(name) => f.write_str(name),
+            None => write!(f, "{}", self.bits()),
+        }
+    }
+}
+
+/// The ST = 1 extension byte as a value.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Extension {
+    /// NP: no position estimate (X, Y, Z are not a position).
+    pub no_position: bool,
+    /// WHY: why an order cannot run.
+    pub why: Why,
+}
+
+impl BasicStatus {
+    /// False when an ST = 1 block says the vehicle has no position estimate.
+    pub fn position_known(&self) -> bool {
+        !self.extension.is_some_and(|e| e.no_position)
+    }
+
+    /// WHY of an ST = 1 block ([`Why::Nothing`] for ST = 0).
+    pub fn why(&self) -> Why {
+        self.extension.map_or(Why::Nothing, |e| e.why)
+    }
 }
 
 impl Default for BasicStatus {
@@ -396,6 +548,7 @@ impl Default for BasicStatus {
             roll_deg: 0,
             pitch_deg: 0,
             yaw_deg: 0,
+            extension: None,
         }
     }
 }
@@ -403,9 +556,9 @@ impl Default for BasicStatus {
 /// The status block of a ROV message.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 pub enum Status {
-    /// ST = 0: state bits, position and orientation.
+    /// ST = 0: state bits, position and orientation; ST = 1: the same and the extension byte.
     Basic(BasicStatus),
-    /// A reserved status type, kept with every byte after the header (the block's length is not
+    /// A reserved status type (2..=63), kept with every byte after the header (the block's length is not
     /// known, so no trunk is split off).
     Unknown {
         /// The ST value, 1..=63.
@@ -419,6 +572,7 @@ impl Status {
     /// The ST code of this block.
     pub fn st(&self) -> u8 {
         match self {
+            Status::Basic(s) if s.extension.is_some() => ST_EXTENDED,
             Status::Basic(_) => ST_BASIC,
             Status::Unknown { st, .. } => *st,
         }
@@ -460,7 +614,7 @@ impl Repr {
                 found: len,
             });
         }
-        let (status, trunk) = if packet.st() == ST_BASIC {
+        let (status, trunk) = if packet.st() <= ST_EXTENDED {
             let reserved = packet.orientation() & field::ORIENTATION_RESERVED;
             if reserved != 0 {
                 return Err(Error::BadField {
@@ -482,6 +636,26 @@ impl Repr {
                 roll_deg: packet.roll_deg(),
                 pitch_deg: packet.pitch_deg(),
                 yaw_deg: packet.yaw_deg(),
+                extension: None,
+            };
+            let status = if packet.st() == ST_EXTENDED {
+                let reserved = packet.extension_reserved();
+                if reserved != 0 {
+                    return Err(Error::BadField {
+                        field: "status extension bits 6..5",
+                        expected: "0",
+                        found: i64::from(reserved >> 5),
+                    });
+                }
+                BasicStatus {
+                    extension: Some(Extension {
+                        no_position: packet.np(),
+                        why: packet.why(),
+                    }),
+                    ..status
+                }
+            } else {
+                status
             };
             check_angle("roll_deg", status.roll_deg)?;
             check_angle("pitch_deg", status.pitch_deg)?;
@@ -519,9 +693,16 @@ impl Repr {
                 check_angle("roll_deg", s.roll_deg)?;
                 check_angle("pitch_deg", s.pitch_deg)?;
                 check_angle("yaw_deg", s.yaw_deg)?;
+                if let Some(Extension {
+                    why: Why::Unknown(v),
+                    ..
+                }) = s.extension
+                {
+                    check_range("why", v.into(), 5, 31, "a reason name or 5..=31")?;
+                }
             }
             Status::Unknown { st, .. } => {
-                check_range("st", (*st).into(), 1, 63, "1..=63 for an unknown status")?;
+                check_range("st", (*st).into(), 2, 63, "2..=63 for an unknown status")?;
                 if !self.trunk.is_empty() {
                     return Err(Error::BadLength {
                         what: "trunk of an unknown status type",
@@ -535,7 +716,7 @@ impl Repr {
         if len > super::frame::MAX_PAYLOAD_BYTES {
             return Err(Error::BadLength {
                 what: "rov message",
-                expected: "at most 255 bytes (a trunk of at most 242)",
+                expected: "at most 255 bytes (a trunk of at most 242, 241 with ST 1)",
                 found: len,
             });
         }
@@ -545,6 +726,9 @@ impl Repr {
     /// Bytes the message takes.
     pub fn buffer_len(&self) -> usize {
         match &self.status {
+            Status::Basic(s) if s.extension.is_some() => {
+                FIXED_BYTES + EXTENSION_BYTES + self.trunk.len()
+            }
             Status::Basic(_) => FIXED_BYTES + self.trunk.len(),
             Status::Unknown { raw, .. } => HEADER_BYTES + raw.len(),
         }
@@ -574,6 +758,10 @@ impl Repr {
                 packet.set_roll_deg(s.roll_deg);
                 packet.set_pitch_deg(s.pitch_deg);
                 packet.set_yaw_deg(s.yaw_deg);
+                if let Some(extension) = s.extension {
+                    packet.set_np(extension.no_position);
+                    packet.set_why(extension.why);
+                }
                 packet.trunk_mut().copy_from_slice(&self.trunk);
             }
             Status::Unknown { raw, .. } => packet.after_header_mut().copy_from_slice(raw),
@@ -622,8 +810,70 @@ mod tests {
                 roll_deg: 359,
                 pitch_deg: 1,
                 yaw_deg: 180,
+                extension: None,
             }),
             trunk: vec![0, 1, 2, 3],
+        }
+    }
+
+    #[test]
+    fn extended_status_carries_np_and_why_before_the_trunk() {
+        let mut repr = vector_repr();
+        let Status::Basic(ref mut status) = repr.status else {
+            unreachable!()
+        };
+        status.extension = Some(Extension {
+            no_position: true,
+            why: Why::NoPosition,
+        });
+        assert_eq!(repr.status.st(), ST_EXTENDED);
+        let mut bytes = vec![0xa5u8; repr.buffer_len()];
+        repr.emit(&mut Packet::new_unchecked(&mut bytes[..]));
+        // ST 1 in byte 0; bytes 2..=12 as ST 0; byte 13: NP 1, reserved 0, WHY 3; the trunk.
+        let mut expected = VECTOR.to_vec();
+        expected[0] = 0x81;
+        expected.insert(13, 0x83);
+        assert_eq!(bytes, expected);
+        let parsed = Repr::parse(&Packet::new_checked(&bytes[..]).unwrap()).unwrap();
+        assert_eq!(parsed, repr);
+        let Status::Basic(status) = parsed.status else {
+            unreachable!()
+        };
+        assert!(!status.position_known());
+        assert_eq!(status.why(), Why::NoPosition);
+        // Reserved bits of the extension are refused; a short ST 1 block is truncated.
+        let mut bad = expected.clone();
+        bad[13] |= 0x20;
+        assert!(matches!(
+            Repr::parse(&Packet::new_checked(&bad[..]).unwrap()),
+            Err(Error::BadField {
+                field: "status extension bits 6..5",
+                ..
+            })
+        ));
+        assert_eq!(
+            Packet::new_checked(&expected[..13]).unwrap_err(),
+            Error::Truncated {
+                what: "rov message status",
+                expected: 14,
+                found: 13
+            }
+        );
+        // A reserved reason is kept.
+        let mut reserved = expected.clone();
+        reserved[13] = 0x1f;
+        let parsed = Repr::parse(&Packet::new_checked(&reserved[..]).unwrap()).unwrap();
+        let Status::Basic(status) = parsed.status else {
+            unreachable!()
+        };
+        assert_eq!(status.why(), Why::Unknown(31));
+        assert!(status.position_known());
+        for k in 0..32 {
+            let why = Why::from_bits(k);
+            assert_eq!(why.bits(), k);
+            if let Some(name) = why.name() {
+                assert_eq!(Why::from_name(name), Some(why));
+            }
         }
     }
 

@@ -7,6 +7,14 @@
 //! it goes to the last SET_POSITION_TARGET_LOCAL_NED at 0.5 m/s and turns to its yaw. Like
 //! ArduSub it takes MANUAL_CONTROL and commands only when they are addressed to it, and setpoints
 //! only in GUIDED. Everything it saw is kept in [`Seen`].
+//!
+//! What the real ArduSub SITL showed, it does too: no LOCAL_POSITION_NED and GUIDED and
+//! POSHOLD refused (MAV_RESULT_FAILED and STATUSTEXT "Mode change failed: GUIDED requires
+//! position") until it has a position ([`Config::position_after_s`], never without a position
+//! source); positive buoyancy (it rises at [`BUOYANT_RISE_MPS`] with neutral sticks unless a
+//! depth-holding mode holds it: ALT_HOLD, POSHOLD, GUIDED); and the GCS failsafe (armed, a GCS
+//! once heard, then neither its HEARTBEAT nor its MANUAL_CONTROL for [`GCS_FAILSAFE_S`]:
+//! disarmed).
 #![allow(dead_code)]
 
 use std::io::Write;
@@ -19,7 +27,7 @@ use std::time::{Duration, Instant};
 
 use mavlink::dialects::ardupilotmega::{
     ATTITUDE_DATA, COMMAND_ACK_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavCmd,
-    MavFrame, MavMessage, MavModeFlag, MavResult, MavState, MavType,
+    MavFrame, MavMessage, MavModeFlag, MavResult, MavSeverity, MavState, MavType, STATUSTEXT_DATA,
 };
 use mavlink::{MavConnection, MavHeader, MavlinkReader, MavlinkVersion};
 
@@ -34,6 +42,13 @@ pub const POSHOLD: u32 = 16;
 /// GUIDED.
 pub const GUIDED: u32 = 4;
 
+/// How fast the buoyant vehicle rises where nothing holds its depth, m/s (SITL: 0.89 m to
+/// 0.09 m in 10 s in STABILIZE with neutral sticks).
+pub const BUOYANT_RISE_MPS: f64 = 0.08;
+
+/// How long without its GCS's HEARTBEAT and MANUAL_CONTROL before an armed ArduSub disarms, s.
+pub const GCS_FAILSAFE_S: f64 = 5.0;
+
 /// How the stand-in behaves.
 #[derive(Debug, Clone)]
 pub struct Config {
@@ -46,6 +61,11 @@ pub struct Config {
     pub camera_too: bool,
     /// Where it starts, NED m.
     pub start_m: [f64; 3],
+    /// When its EKF has a position, s after it starts (`None`: never, no position source).
+    pub position_after_s: Option<f64>,
+    /// Until this long after it starts, ALT_HOLD and POSHOLD are refused ("Mode change
+    /// failed: ALT_HOLD need alt estimate", as SITL at boot), s.
+    pub depth_after_s: f64,
 }
 
 impl Default for Config {
@@ -55,6 +75,8 @@ impl Default for Config {
             deny_arm: false,
             camera_too: false,
             start_m: [0.0; 3],
+            position_after_s: Some(0.0),
+            depth_after_s: 0.0,
         }
     }
 }
@@ -88,6 +110,10 @@ pub struct Seen {
     pub position_m: [f64; 3],
     /// Heading, degrees 0..360.
     pub heading_deg: f64,
+    /// Mode changes refused for want of a position.
+    pub modes_refused: u32,
+    /// Times the GCS failsafe disarmed it.
+    pub failsafes: u32,
 }
 
 /// A running stand-in.
@@ -234,6 +260,13 @@ fn simulate(
     let mut sticks: Option<([i16; 4], Instant)> = None;
     let mut target: Option<[f32; 4]> = None;
     let mut yaw = 0.0f64;
+    let mut gcs_heard: Option<Instant> = None;
+    let mut texts: Vec<String> = Vec::new();
+    let has_position = |now: Instant| {
+        config
+            .position_after_s
+            .is_some_and(|after| now.duration_since(started).as_secs_f64() >= after)
+    };
     while !stop.load(Ordering::Relaxed) {
         let wait = next_tick.saturating_duration_since(Instant::now());
         match from_link.recv_timeout(wait) {
@@ -242,10 +275,12 @@ fn simulate(
                 let addressed = |system: u8| system == config.system_id;
                 match message {
                     MavMessage::HEARTBEAT(h) if h.mavtype == MavType::MAV_TYPE_GCS => {
+                        gcs_heard = Some(Instant::now());
                         s.gcs_heartbeats += 1;
                         s.gcs = Some((header.system_id, header.component_id));
                     }
                     MavMessage::MANUAL_CONTROL(m) if addressed(m.target) => {
+                        gcs_heard = Some(Instant::now());
                         s.manual_controls += 1;
                         s.max_manual_x = s.max_manual_x.max(m.x);
                         s.last_manual = Some([m.x, m.y, m.z, m.r]);
@@ -271,7 +306,31 @@ fn simulate(
                             }
                             MavCmd::MAV_CMD_DO_SET_MODE => {
                                 let mode = c.param2 as u32;
-                                if [MANUAL, STABILIZE, ALT_HOLD, POSHOLD, GUIDED].contains(&mode) {
+                                let needs_position = [POSHOLD, GUIDED].contains(&mode);
+                                let needs_depth = [ALT_HOLD, POSHOLD].contains(&mode);
+                                if needs_depth
+                                    && started.elapsed().as_secs_f64() < config.depth_after_s
+                                {
+                                    s.modes_refused += 1;
+                                    let name = if mode == ALT_HOLD {
+                                        "ALT_HOLD"
+                                    } else {
+                                        "POSHOLD"
+                                    };
+                                    texts.push(format!(
+                                        "Mode change failed: {name} need alt estimate"
+                                    ));
+                                    MavResult::MAV_RESULT_FAILED
+                                } else if needs_position && !has_position(Instant::now()) {
+                                    s.modes_refused += 1;
+                                    let name = if mode == GUIDED { "GUIDED" } else { "POSHOLD" };
+                                    texts.push(format!(
+                                        "Mode change failed: {name} requires position"
+                                    ));
+                                    MavResult::MAV_RESULT_FAILED
+                                } else if [MANUAL, STABILIZE, ALT_HOLD, POSHOLD, GUIDED]
+                                    .contains(&mode)
+                                {
                                     if s.mode != mode {
                                         s.modes.push(mode);
                                         target = None;
@@ -286,6 +345,17 @@ fn simulate(
                             _ => MavResult::MAV_RESULT_UNSUPPORTED,
                         };
                         if !silent.load(Ordering::Relaxed) {
+                            for text in texts.drain(..) {
+                                let mut bytes = [0u8; 50];
+                                bytes[..text.len()].copy_from_slice(text.as_bytes());
+                                send(
+                                    &me,
+                                    &MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+                                        severity: MavSeverity::MAV_SEVERITY_WARNING,
+                                        text: bytes.into(),
+                                    }),
+                                );
+                            }
                             send(
                                 &me,
                                 &MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
@@ -306,6 +376,11 @@ fn simulate(
         let dt = 0.1;
         next_tick += Duration::from_millis(100);
         let mut s = seen.lock().unwrap();
+        if s.armed && gcs_heard.is_some_and(|at| at.elapsed().as_secs_f64() >= GCS_FAILSAFE_S) {
+            s.armed = false;
+            s.failsafes += 1;
+            gcs_heard = None;
+        }
         let fresh = sticks.filter(|(_, at)| at.elapsed() < Duration::from_secs(1));
         let mut velocity_ned = [0.0f64; 3];
         let mut yaw_rate = 0.0f64;
@@ -333,9 +408,19 @@ fn simulate(
             ];
             yaw_rate = f64::from(r) / 1000.0 * 30f64.to_radians();
         }
+        let depth_held = s.armed && [ALT_HOLD, POSHOLD, GUIDED].contains(&s.mode);
+        if depth_held && s.mode != GUIDED {
+            // The throttle stick climbs or dives; centred, the depth stays.
+            velocity_ned[2] =
+                fresh.map_or(0.0, |([.., z, _], _)| (500.0 - f64::from(z)) / 500.0 * 0.5);
+        } else if !depth_held {
+            velocity_ned[2] -= BUOYANT_RISE_MPS;
+        }
         for (p, v) in s.position_m.iter_mut().zip(velocity_ned) {
             *p += v * dt;
         }
+        // Buoyant: no higher than the surface.
+        s.position_m[2] = s.position_m[2].max(0.0);
         yaw = wrap_pi(yaw + yaw_rate * dt);
         s.heading_deg = yaw.to_degrees().rem_euclid(360.0);
         let (armed, mode, position) = (s.armed, s.mode, s.position_m);
@@ -387,18 +472,20 @@ fn simulate(
                 }),
             );
         }
-        send(
-            &me,
-            &MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
-                time_boot_ms: boot_ms,
-                x: position[0] as f32,
-                y: position[1] as f32,
-                z: position[2] as f32,
-                vx: velocity_ned[0] as f32,
-                vy: velocity_ned[1] as f32,
-                vz: velocity_ned[2] as f32,
-            }),
-        );
+        if has_position(Instant::now()) {
+            send(
+                &me,
+                &MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
+                    time_boot_ms: boot_ms,
+                    x: position[0] as f32,
+                    y: position[1] as f32,
+                    z: position[2] as f32,
+                    vx: velocity_ned[0] as f32,
+                    vy: velocity_ned[1] as f32,
+                    vz: velocity_ned[2] as f32,
+                }),
+            );
+        }
         send(
             &me,
             &MavMessage::ATTITUDE(ATTITUDE_DATA {

@@ -10,7 +10,11 @@ MAV_AUTOPILOT_ARDUPILOTMEGA, and simulates motion simply:
   velocities and z is ArduSub's throttle (0..1000, 500 neutral, up positive: 0 = 0.5 m/s down);
 - armed in GUIDED: goes to the last SET_POSITION_TARGET_LOCAL_NED at 0.5 m/s, turns to its yaw.
 As ArduSub does, it takes MANUAL_CONTROL and commands only when addressed to it, setpoints only
-in GUIDED.
+in GUIDED. And as the real ArduSub SITL showed: no LOCAL_POSITION_NED, and GUIDED and POSHOLD
+refused (MAV_RESULT_FAILED, STATUSTEXT "Mode change failed: GUIDED requires position"), until it
+has a position (--position-after S; --no-position: never, like GPS1_TYPE 0); positively buoyant
+(rises at 0.08 m/s to the surface unless ALT_HOLD, POSHOLD or GUIDED holds its depth); the GCS
+failsafe (armed, a GCS once heard, then 5 s without its HEARTBEAT and MANUAL_CONTROL: disarmed).
 
 At exit (after --seconds, or on SIGTERM/SIGINT) it writes what it saw as JSON to --report:
 armed (ever), armed_now, modes (every mode switched to), max_manual_x, manual_controls,
@@ -19,6 +23,7 @@ component] of the GCS heartbeats), gcs_heartbeats, position ([x, y, z] NED m), h
 
 Usage: ardusub.py (--connect udpout:HOST:PORT | --listen udpin:HOST:PORT | tcp:HOST:PORT ...)
                   --report FILE [--seconds N] [--deny-arm] [--start X,Y,Z]
+                  [--position-after S | --no-position]
 """
 
 import argparse
@@ -34,6 +39,9 @@ from pymavlink import mavutil  # noqa: E402
 
 MANUAL, STABILIZE, ALT_HOLD, POSHOLD, GUIDED = 19, 0, 2, 16, 4
 MODES = {MANUAL, STABILIZE, ALT_HOLD, POSHOLD, GUIDED}
+DEPTH_HOLDING = {ALT_HOLD, POSHOLD, GUIDED}
+BUOYANT_RISE_MPS = 0.08
+GCS_FAILSAFE_S = 5.0
 
 
 def wrap_pi(angle):
@@ -41,7 +49,7 @@ def wrap_pi(angle):
 
 
 class Sub:
-    def __init__(self, conn, deny_arm, start):
+    def __init__(self, conn, deny_arm, start, position_after=0.0):
         self.conn = conn
         self.mav = conn.mav
         self.deny_arm = deny_arm
@@ -64,6 +72,13 @@ class Sub:
         self.gcs = None
         self.gcs_heartbeats = 0
         self.started = time.monotonic()
+        self.position_after = position_after
+        self.gcs_heard = None
+        self.failsafes = 0
+        self.modes_refused = 0
+
+    def has_position(self):
+        return self.position_after is not None and time.monotonic() - self.started >= self.position_after
 
     def boot_ms(self):
         return int((time.monotonic() - self.started) * 1000) & 0xFFFFFFFF
@@ -73,9 +88,11 @@ class Sub:
         me = self.mav.srcSystem
         if kind == "HEARTBEAT" and msg.type == mavutil.mavlink.MAV_TYPE_GCS:
             self.gcs_heartbeats += 1
+            self.gcs_heard = time.monotonic()
             self.gcs = [msg.get_srcSystem(), msg.get_srcComponent()]
         elif kind == "MANUAL_CONTROL" and msg.target == me:
             self.manual_controls += 1
+            self.gcs_heard = time.monotonic()
             self.max_manual_x = msg.x if self.max_manual_x is None else max(self.max_manual_x, msg.x)
             self.last_manual = [msg.x, msg.y, msg.z, msg.r]
             self.sticks = (msg.x, msg.y, msg.z, msg.r, time.monotonic())
@@ -97,7 +114,13 @@ class Sub:
                     result = mavutil.mavlink.MAV_RESULT_ACCEPTED
             elif msg.command == mavutil.mavlink.MAV_CMD_DO_SET_MODE:
                 mode = int(msg.param2)
-                if mode in MODES:
+                if mode in (GUIDED, POSHOLD) and not self.has_position():
+                    self.modes_refused += 1
+                    name = "GUIDED" if mode == GUIDED else "POSHOLD"
+                    text = ("Mode change failed: %s requires position" % name).encode()
+                    self.mav.statustext_send(mavutil.mavlink.MAV_SEVERITY_WARNING, text)
+                    result = mavutil.mavlink.MAV_RESULT_FAILED
+                elif mode in MODES:
                     if mode != self.mode:
                         self.modes.append(mode)
                         self.target = None
@@ -112,6 +135,10 @@ class Sub:
     def tick(self, dt):
         self.velocity = [0.0, 0.0, 0.0]
         self.yaw_rate = 0.0
+        if self.armed and self.gcs_heard is not None and time.monotonic() - self.gcs_heard >= GCS_FAILSAFE_S:
+            self.armed = False
+            self.failsafes += 1
+            self.gcs_heard = None
         if self.armed and self.mode == GUIDED and self.target is not None:
             x, y, z, yaw = self.target
             error = [x - self.position[0], y - self.position[1], z - self.position[2]]
@@ -127,8 +154,11 @@ class Sub:
             c, s = math.cos(self.yaw), math.sin(self.yaw)
             self.velocity = [surge * c - sway * s, surge * s + sway * c, (500 - z) / 500.0 * 0.5]
             self.yaw_rate = r / 1000.0 * math.radians(30)
+        if not (self.armed and self.mode in DEPTH_HOLDING):
+            self.velocity[2] -= BUOYANT_RISE_MPS
         for k in range(3):
             self.position[k] += self.velocity[k] * dt
+        self.position[2] = max(0.0, self.position[2])
         self.yaw = wrap_pi(self.yaw + self.yaw_rate * dt)
 
     def send_heartbeat(self):
@@ -146,7 +176,8 @@ class Sub:
     def send_state(self):
         x, y, z = self.position
         vx, vy, vz = self.velocity
-        self.mav.local_position_ned_send(self.boot_ms(), x, y, z, vx, vy, vz)
+        if self.has_position():
+            self.mav.local_position_ned_send(self.boot_ms(), x, y, z, vx, vy, vz)
         self.mav.attitude_send(self.boot_ms(), 0.0, 0.0, self.yaw, 0.0, 0.0, self.yaw_rate)
 
     def report(self):
@@ -165,6 +196,8 @@ class Sub:
             "gcs_heartbeats": self.gcs_heartbeats,
             "position": self.position,
             "heading_deg": math.degrees(self.yaw) % 360.0,
+            "modes_refused": self.modes_refused,
+            "failsafes": self.failsafes,
         }
 
 
@@ -177,6 +210,9 @@ def main():
     parser.add_argument("--seconds", type=float, default=3600.0, help="run this long, then exit")
     parser.add_argument("--deny-arm", action="store_true", help="answer arm requests with DENIED")
     parser.add_argument("--start", default="0,0,0", help="start position X,Y,Z (NED m)")
+    fix = parser.add_mutually_exclusive_group()
+    fix.add_argument("--position-after", type=float, default=0.0, help="a position this many s after start")
+    fix.add_argument("--no-position", action="store_true", help="never a position (GPS1_TYPE 0)")
     args = parser.parse_args()
     start = [float(v) for v in args.start.split(",")]
     if len(start) != 3:
@@ -189,7 +225,7 @@ def main():
         dialect="ardupilotmega",
         autoreconnect=True,
     )
-    sub = Sub(conn, args.deny_arm, start)
+    sub = Sub(conn, args.deny_arm, start, None if args.no_position else args.position_after)
     stopping = []
     signal.signal(signal.SIGTERM, lambda *_: stopping.append(1))
     signal.signal(signal.SIGINT, lambda *_: stopping.append(1))
