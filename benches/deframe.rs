@@ -68,7 +68,7 @@ fn operator_frame(rng: &mut Lcg) -> Vec<u8> {
             eisn: true,
             ic: false,
             rit: (rng.next() % 64) as u8,
-            order: operator::Order::Velocity {
+            order: operator::Order::Velocity(operator::Velocity {
                 vx: (rng.next() % 255) as i16 as i8 / 2,
                 vy: (rng.next() % 255) as i16 as i8 / 2,
                 vz: 0,
@@ -76,7 +76,7 @@ fn operator_frame(rng: &mut Lcg) -> Vec<u8> {
                 arm: true,
                 disarm: false,
                 nav: Nav::Stabilize,
-            },
+            }),
         }),
     };
     let mut out = Vec::new();

@@ -5,7 +5,7 @@
 
 use proptest::prelude::*;
 use rovlink::wire::frame::{self, Frame};
-use rovlink::wire::operator::{self, Order, Roi};
+use rovlink::wire::operator::{self, Order, Roi, Velocity};
 use rovlink::wire::rov::{self, BasicStatus, Status};
 use rovlink::wire::{DeframeEvent, Deframer, Message, MessageRepr, Nav, json};
 
@@ -103,15 +103,17 @@ fn order() -> impl Strategy<Value = Order> {
             any::<bool>(),
             nav()
         )
-            .prop_map(|(vx, vy, vz, vyaw, arm, disarm, nav)| Order::Velocity {
-                vx,
-                vy,
-                vz,
-                vyaw,
-                arm,
-                disarm,
-                nav
-            }),
+            .prop_map(
+                |(vx, vy, vz, vyaw, arm, disarm, nav)| Order::Velocity(Velocity {
+                    vx,
+                    vy,
+                    vz,
+                    vyaw,
+                    arm,
+                    disarm,
+                    nav
+                })
+            ),
         (any::<i16>(), any::<i16>(), any::<i16>(), 0u16..360).prop_map(
             |(x_cm, y_cm, z_cm, heading_deg)| Order::GoTo {
                 x_cm,
@@ -245,22 +247,14 @@ fn reference_payload(message: &Message) -> Vec<u8> {
             w.flag(o.ic);
             w.push(o.rit.into(), 6);
             match o.order {
-                Order::Velocity {
-                    vx,
-                    vy,
-                    vz,
-                    vyaw,
-                    arm,
-                    disarm,
-                    nav,
-                } => {
-                    for v in [vx, vy, vz, vyaw] {
+                Order::Velocity(velocity) => {
+                    for v in velocity.axes() {
                         w.push(u64::from(v as u8), 8);
                     }
-                    w.flag(arm);
-                    w.flag(disarm);
+                    w.flag(velocity.arm);
+                    w.flag(velocity.disarm);
                     w.push(0, 3);
-                    w.push(nav.bits().into(), 3);
+                    w.push(velocity.nav.bits().into(), 3);
                 }
                 Order::GoTo {
                     x_cm,

@@ -31,7 +31,7 @@ fuzz_target!(|data: &[u8]| {
     }
     if let Ok(Live::Order(order)) = ClientTopic::Orders.parse(data) {
         assert!(
-            !matches!(order, Order::Unknown { .. } | Order::Velocity { .. }),
+            !matches!(order, Order::Unknown { .. } | Order::Velocity(_)),
             "{order:?}"
         );
     }

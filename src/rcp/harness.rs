@@ -328,7 +328,7 @@ impl RovEnd {
         let Message::Operator(msg) = repr.message else {
             return None;
         };
-        if matches!(msg.order, Order::Velocity { .. } | Order::Unknown { .. }) {
+        if matches!(msg.order, Order::Velocity(_) | Order::Unknown { .. }) {
             self.last_order = None;
             return None;
         }
@@ -427,7 +427,7 @@ mod tests {
     #[test]
     fn the_rov_numbers_a_resent_order_as_the_same_and_the_next_as_new() {
         let mut rov = RovEnd::new(Rov::new(Default::default(), [0.0; 3], Vec::new()));
-        let velocity = Order::Velocity {
+        let velocity = Order::Velocity(operator::Velocity {
             vx: 0,
             vy: 0,
             vz: 0,
@@ -435,7 +435,7 @@ mod tests {
             arm: true,
             disarm: false,
             nav: Nav::Manual,
-        };
+        });
         assert_eq!(rov.number(&frame(false, GOTO)), Some(1));
         assert_eq!(rov.number(&frame(false, GOTO)), Some(1));
         // The next order (same content, the toggled OID) is another order.

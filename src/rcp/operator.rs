@@ -10,7 +10,7 @@ use std::collections::VecDeque;
 use super::{Event, emit};
 use crate::link::SimTime;
 use crate::wire::frame::{ADDR_OPERATOR, Frame};
-use crate::wire::operator::{self, Order};
+use crate::wire::operator::{self, Order, Velocity};
 use crate::wire::rov::Status;
 use crate::wire::{Message, MessageRepr, Nav};
 
@@ -156,7 +156,7 @@ impl Operator {
                 (order, oid, SlotContent::Order(index))
             }
             None => {
-                let order = Order::Velocity {
+                let order = Order::Velocity(Velocity {
                     vx: thrust_axis(self.joystick.vx),
                     vy: thrust_axis(self.joystick.vy),
                     vz: thrust_axis(self.joystick.vz),
@@ -164,7 +164,7 @@ impl Operator {
                     arm: self.modes.0,
                     disarm: self.modes.1,
                     nav: self.modes.2,
-                };
+                });
                 // OID is ignored for Velocity, except with CLO: the ROV cancels only when OID
                 // is its last announced EOID (so a CLO can never cancel a newer order).
                 (order, self.last_eoid, SlotContent::Velocity)

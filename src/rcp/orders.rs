@@ -80,25 +80,15 @@ impl Live {
             }
         }
         match crate::wire::json::parse_order(map)? {
-            Order::Velocity {
-                vx,
-                vy,
-                vz,
-                vyaw,
-                arm,
-                disarm,
-                nav,
-            } => Ok(Live::Joystick {
-                joystick: Joystick {
-                    vx: super::operator::thrust_percent(vx),
-                    vy: super::operator::thrust_percent(vy),
-                    vz: super::operator::thrust_percent(vz),
-                    vyaw: super::operator::thrust_percent(vyaw),
-                },
-                arm,
-                disarm,
-                nav,
-            }),
+            Order::Velocity(v) => {
+                let [vx, vy, vz, vyaw] = v.axes().map(super::operator::thrust_percent);
+                Ok(Live::Joystick {
+                    joystick: Joystick { vx, vy, vz, vyaw },
+                    arm: v.arm,
+                    disarm: v.disarm,
+                    nav: v.nav,
+                })
+            }
             Order::Unknown { .. } => Err(LiveError::Kind("\"unknown\"".into())),
             order => Ok(Live::Order(order)),
         }

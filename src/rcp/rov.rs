@@ -35,7 +35,7 @@ use crate::debt;
 use crate::link::SimTime;
 use crate::vehicle::Command;
 use crate::wire::frame::{ADDR_OPERATOR, Frame};
-use crate::wire::operator::Order;
+use crate::wire::operator::{Order, Velocity};
 use crate::wire::rov::{BasicStatus, Extension, Status, Why};
 use crate::wire::{Message, MessageRepr, Nav, rov};
 
@@ -75,9 +75,6 @@ enum Executing {
     GoTo([f64; 3], f64),
 }
 
-/// A Velocity order's fields: vx, vy, vz, vyaw, arm, disarm, nav.
-type VelocityOrder = ([i8; 4], bool, bool, Nav);
-
 /// A point held after a GoTo or backtracking, until the operator orders otherwise.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Hold {
@@ -85,7 +82,7 @@ struct Hold {
     target_m: [f64; 3],
     heading_deg: f64,
     /// The Velocity order in force when the hold began: a different one ends the hold.
-    order: Option<VelocityOrder>,
+    order: Option<Velocity>,
 }
 
 /// An image being sent.
@@ -109,7 +106,7 @@ pub struct Rov {
     executing: Option<Executing>,
     hold: Option<Hold>,
     /// The last Velocity order received.
-    velocity: Option<VelocityOrder>,
+    velocity: Option<Velocity>,
     /// A refusal of the engine's own (a GoTo without position), reported until the next order.
     refused: Option<Why>,
     /// True while backtracking is skipped for want of a position (reported once per loss).
@@ -367,16 +364,7 @@ impl Rov {
             self.events.push(Event::OrderCancelled);
         }
         match msg.order {
-            Order::Velocity {
-                vx,
-                vy,
-                vz,
-                vyaw,
-                arm,
-                disarm,
-                nav,
-            } => {
-                let order = ([vx, vy, vz, vyaw], arm, disarm, nav);
+            Order::Velocity(order) => {
                 if self.velocity != Some(order) {
                     // The operator's next order: a hold or a refusal of the last ends here.
                     if self.hold.is_some_and(|h| h.order != Some(order)) {
@@ -387,14 +375,14 @@ impl Rov {
                     }
                     self.velocity = Some(order);
                 }
-                self.joystick = [vx, vy, vz, vyaw].map(super::operator::thrust_percent);
-                if arm {
+                self.joystick = order.axes().map(super::operator::thrust_percent);
+                if order.arm {
                     self.arm = true;
                 }
-                if disarm {
+                if order.disarm {
                     self.arm = false;
                 }
-                self.nav = nav;
+                self.nav = order.nav;
             }
             order @ (Order::GoTo { .. }
             | Order::ImageSettings { .. }
@@ -500,7 +488,7 @@ impl Rov {
                     self.events.push(Event::ImageCancelled);
                 }
             }
-            Order::Velocity { .. } | Order::Unknown { .. } => {}
+            Order::Velocity(_) | Order::Unknown { .. } => {}
         }
     }
 

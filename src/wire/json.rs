@@ -17,7 +17,7 @@
 use serde_json::{Map, Value};
 
 use super::message::{Message, MessageRepr};
-use super::operator::{self, Order, Roi};
+use super::operator::{self, Order, Roi, Velocity};
 use super::rov::{self, BasicStatus, Status};
 use super::{Error, Nav};
 
@@ -304,7 +304,7 @@ fn parse_operator(f: &Fields<'_>) -> Result<operator::Repr, JsonError> {
 
 fn order_fields(o: &Fields<'_>) -> Result<Order, JsonError> {
     let order = match o.str("type")? {
-        "velocity" => Order::Velocity {
+        "velocity" => Order::Velocity(Velocity {
             vx: thrust(o, "vx")?,
             vy: thrust(o, "vy")?,
             vz: thrust(o, "vz")?,
@@ -312,7 +312,7 @@ fn order_fields(o: &Fields<'_>) -> Result<Order, JsonError> {
             arm: o.bool("arm")?,
             disarm: o.bool("disarm")?,
             nav: o.nav("nav")?,
-        },
+        }),
         "goto" => Order::GoTo {
             x_cm: o.int("x_cm", i16::MIN.into(), i16::MAX.into())? as i16,
             y_cm: o.int("y_cm", i16::MIN.into(), i16::MAX.into())? as i16,
@@ -439,22 +439,13 @@ fn order_object(order: &Order) -> Map<String, Value> {
     let mut m = Map::new();
     m.insert("type".into(), order.name().into());
     match *order {
-        Order::Velocity {
-            vx,
-            vy,
-            vz,
-            vyaw,
-            arm,
-            disarm,
-            nav,
-        } => {
-            m.insert("vx".into(), vx.into());
-            m.insert("vy".into(), vy.into());
-            m.insert("vz".into(), vz.into());
-            m.insert("vyaw".into(), vyaw.into());
-            m.insert("arm".into(), arm.into());
-            m.insert("disarm".into(), disarm.into());
-            m.insert("nav".into(), nav_value(nav));
+        Order::Velocity(v) => {
+            for (name, axis) in ["vx", "vy", "vz", "vyaw"].into_iter().zip(v.axes()) {
+                m.insert(name.into(), axis.into());
+            }
+            m.insert("arm".into(), v.arm.into());
+            m.insert("disarm".into(), v.disarm.into());
+            m.insert("nav".into(), nav_value(v.nav));
         }
         Order::GoTo {
             x_cm,

@@ -221,18 +221,11 @@ impl core::fmt::Display for MessageRepr {
                 flag(f, o.ic, "IC")?;
                 write!(f, " | {}", o.order.name())?;
                 match o.order {
-                    operator::Order::Velocity {
-                        vx,
-                        vy,
-                        vz,
-                        vyaw,
-                        arm,
-                        disarm,
-                        nav,
-                    } => {
-                        write!(f, " vx={vx} vy={vy} vz={vz} vyaw={vyaw} nav={nav}")?;
-                        flag(f, arm, "ARM")?;
-                        flag(f, disarm, "DISARM")
+                    operator::Order::Velocity(v) => {
+                        let [vx, vy, vz, vyaw] = v.axes();
+                        write!(f, " vx={vx} vy={vy} vz={vz} vyaw={vyaw} nav={}", v.nav)?;
+                        flag(f, v.arm, "ARM")?;
+                        flag(f, v.disarm, "DISARM")
                     }
                     operator::Order::GoTo {
                         x_cm,

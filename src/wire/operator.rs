@@ -470,26 +470,37 @@ impl<T: AsRef<[u8]> + AsMut<[u8]>> Packet<T> {
     }
 }
 
+/// A Velocity order: the joystick's four axes and the arm and navigation demands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Velocity {
+    /// Surge, -127..=127 (= -100..=100 % of full thrust).
+    pub vx: i8,
+    /// Sway, -127..=127.
+    pub vy: i8,
+    /// Heave, -127..=127.
+    pub vz: i8,
+    /// Yaw, -127..=127.
+    pub vyaw: i8,
+    /// Arm the thrusters.
+    pub arm: bool,
+    /// Disarm the thrusters.
+    pub disarm: bool,
+    /// Requested navigation mode.
+    pub nav: Nav,
+}
+
+impl Velocity {
+    /// The four axes: surge, sway, heave, yaw.
+    pub const fn axes(&self) -> [i8; 4] {
+        [self.vx, self.vy, self.vz, self.vyaw]
+    }
+}
+
 /// One order, the body of an operator message.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Order {
     /// Low-level joystick state; sent in every slot that carries no high-level order.
-    Velocity {
-        /// Surge, -127..=127 (= -100..=100 % of full thrust).
-        vx: i8,
-        /// Sway, -127..=127.
-        vy: i8,
-        /// Heave, -127..=127.
-        vz: i8,
-        /// Yaw, -127..=127.
-        vyaw: i8,
-        /// Arm the thrusters.
-        arm: bool,
-        /// Disarm the thrusters.
-        disarm: bool,
-        /// Requested navigation mode.
-        nav: Nav,
-    },
+    Velocity(Velocity),
     /// Go to a NED position and heading.
     GoTo {
         /// North, centimetres.
@@ -536,7 +547,7 @@ impl Order {
     /// The OT code of this order.
     pub const fn ot(&self) -> u8 {
         match self {
-            Order::Velocity { .. } => order_type::VELOCITY,
+            Order::Velocity(_) => order_type::VELOCITY,
             Order::GoTo { .. } => order_type::GOTO,
             Order::ImageSettings { .. } => order_type::IMAGE_SETTINGS,
             Order::HoldHeading { .. } => order_type::HOLD_HEADING,
@@ -546,13 +557,13 @@ impl Order {
 
     /// True for orders the ROV acknowledges through EOID (everything but Velocity).
     pub const fn is_high_level(&self) -> bool {
-        !matches!(self, Order::Velocity { .. })
+        !matches!(self, Order::Velocity(_))
     }
 
     /// The name used in the JSON form.
     pub const fn name(&self) -> &'static str {
         match self {
-            Order::Velocity { .. } => "velocity",
+            Order::Velocity(_) => "velocity",
             Order::GoTo { .. } => "goto",
             Order::ImageSettings { .. } => "image_settings",
             Order::HoldHeading { .. } => "hold_heading",
@@ -563,7 +574,7 @@ impl Order {
     /// Offset (absolute, in the message) where the order's own fields end and padding begins.
     const fn fields_end(&self) -> usize {
         match self {
-            Order::Velocity { .. } => field::VEL_END,
+            Order::Velocity(_) => field::VEL_END,
             Order::GoTo { .. } => field::GOTO_END,
             Order::ImageSettings { .. } => field::IMG_END,
             Order::HoldHeading { .. } => field::HH_END,
@@ -610,7 +621,7 @@ impl Repr {
             order_type::VELOCITY => {
                 let mode = packet.byte(field::VEL_MODE);
                 check_reserved("velocity reserved bits", mode & field::VEL_MODE_RESERVED)?;
-                Order::Velocity {
+                Order::Velocity(Velocity {
                     vx: packet.velocity_vx(),
                     vy: packet.velocity_vy(),
                     vz: packet.velocity_vz(),
@@ -618,7 +629,7 @@ impl Repr {
                     arm: packet.velocity_arm(),
                     disarm: packet.velocity_disarm(),
                     nav: packet.velocity_nav(),
-                }
+                })
             }
             order_type::GOTO => Order::GoTo {
                 x_cm: packet.goto_x_cm(),
@@ -679,19 +690,11 @@ impl Repr {
     pub fn validate(&self) -> Result<()> {
         check_range("rit", self.rit.into(), 0, 63, "0..=63")?;
         match self.order {
-            Order::Velocity {
-                vx,
-                vy,
-                vz,
-                vyaw,
-                nav,
-                ..
-            } => {
-                check_thrust("vx", vx)?;
-                check_thrust("vy", vy)?;
-                check_thrust("vz", vz)?;
-                check_thrust("vyaw", vyaw)?;
-                if let Nav::Unknown(v) = nav {
+            Order::Velocity(velocity) => {
+                for (name, axis) in ["vx", "vy", "vz", "vyaw"].into_iter().zip(velocity.axes()) {
+                    check_thrust(name, axis)?;
+                }
+                if let Nav::Unknown(v) = velocity.nav {
                     check_range("nav", v.into(), 5, 7, "a mode name or 5..=7")?;
                 }
             }
@@ -733,22 +736,14 @@ impl Repr {
         packet.set_rit(self.rit);
         packet.body_mut().fill(0);
         match self.order {
-            Order::Velocity {
-                vx,
-                vy,
-                vz,
-                vyaw,
-                arm,
-                disarm,
-                nav,
-            } => {
-                packet.set_velocity_vx(vx);
-                packet.set_velocity_vy(vy);
-                packet.set_velocity_vz(vz);
-                packet.set_velocity_vyaw(vyaw);
-                packet.set_velocity_arm(arm);
-                packet.set_velocity_disarm(disarm);
-                packet.set_velocity_nav(nav);
+            Order::Velocity(v) => {
+                packet.set_velocity_vx(v.vx);
+                packet.set_velocity_vy(v.vy);
+                packet.set_velocity_vz(v.vz);
+                packet.set_velocity_vyaw(v.vyaw);
+                packet.set_velocity_arm(v.arm);
+                packet.set_velocity_disarm(v.disarm);
+                packet.set_velocity_nav(v.nav);
             }
             Order::GoTo {
                 x_cm,
@@ -813,7 +808,7 @@ mod tests {
                     eisn: false,
                     ic: false,
                     rit: 5,
-                    order: Order::Velocity {
+                    order: Order::Velocity(Velocity {
                         vx: 100,
                         vy: -20,
                         vz: 0,
@@ -821,7 +816,7 @@ mod tests {
                         arm: true,
                         disarm: false,
                         nav: Nav::Stabilize,
-                    },
+                    }),
                 },
             ),
             (
