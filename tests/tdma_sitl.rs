@@ -423,24 +423,33 @@ fn a_goto_on_the_real_ardusub_is_reached_and_held_and_the_pose_is_the_autopilots
         to["n"].as_f64().unwrap() - from["n"].as_f64().unwrap(),
         to["e"].as_f64().unwrap() - from["e"].as_f64().unwrap(),
     ];
-    // The heading from ATTITUDE (SIMSTATE's yaw is not in the unit its definition says).
-    let heading = s
+    // The heading from ATTITUDE (SIMSTATE's yaw is not in the unit its definition says): its
+    // mean over the same stretch (the vehicle may turn a little while it goes), as the mean of
+    // the unit vectors.
+    let (from_t, to_t) = (from["t"].as_f64().unwrap(), to["t"].as_f64().unwrap());
+    let (sum_cos, sum_sin) = s
         .watched("att")
         .iter()
-        .rfind(|l| l["t"].as_f64().unwrap() <= stick_from + 3.0)
-        .unwrap_or_else(|| panic!("no ATTITUDE\n{}", s.story()))["yaw_deg"]
-        .as_f64()
-        .unwrap()
-        .to_radians();
+        .filter(|l| (from_t..=to_t).contains(&l["t"].as_f64().unwrap()))
+        .map(|l| l["yaw_deg"].as_f64().unwrap().to_radians())
+        .fold((0.0, 0.0), |(c, n), yaw| (c + yaw.cos(), n + yaw.sin()));
+    assert!(
+        sum_cos != 0.0 || sum_sin != 0.0,
+        "no ATTITUDE while the stick was held\n{}",
+        s.story()
+    );
+    let heading = sum_sin.atan2(sum_cos);
     let along = moved[0] * heading.cos() + moved[1] * heading.sin();
     let across = -moved[0] * heading.sin() + moved[1] * heading.cos();
     let dt_s = to["t"].as_f64().unwrap() - from["t"].as_f64().unwrap();
     let forward_mps = along / dt_s;
-    // Within 25 degrees of the heading: before the EKF has a GPS position it knows no
+    // Within 35 degrees of the heading: before the EKF has a GPS position it knows no
     // magnetic declination (about 12 degrees east at SITL's home near Los Angeles), so
-    // ATTITUDE's heading and SITL's true track differ by about that much.
+    // ATTITUDE's heading and SITL's true track differ by about that much, and more while the
+    // yaw estimate settles (3-13 degrees seen, once 29.5 on a loaded machine). Sideways or
+    // backwards (90 degrees and more) still fails.
     assert!(
-        along > 1.0 && across.abs() < 25f64.to_radians().tan() * along,
+        along > 1.0 && across.abs() < 35f64.to_radians().tan() * along,
         "the forward stick moved it {moved:?} m (along its heading {along:.2}, across {across:.2})\n{}",
         s.story()
     );
