@@ -315,9 +315,9 @@ fn read_exactly(file: &mut std::fs::File, n: usize, limit: Duration) -> Vec<u8> 
 
 /// Ends a real-time link-sim with SIGTERM (once it catches it): it must exit 0; returns what it
 /// said on stderr.
-fn terminate(mut child: std::process::Child) -> String {
-    signal_once(&mut child, Signal::SIGTERM, &|| true, EXIT_LIMIT);
-    let status = common::wait_for_exit(&mut child, EXIT_LIMIT);
+fn terminate(child: &mut std::process::Child) -> String {
+    signal_once(child, Signal::SIGTERM, &|| true, EXIT_LIMIT);
+    let status = common::wait_for_exit(child, EXIT_LIMIT);
     let mut stderr = String::new();
     child
         .stderr
@@ -330,7 +330,7 @@ fn terminate(mut child: std::process::Child) -> String {
 }
 
 /// Starts link-sim in --pty mode with `args` and opens both sides raw: (child, A, B).
-fn start_pty(args: &[&str]) -> (std::process::Child, std::fs::File, std::fs::File) {
+fn start_pty(args: &[&str]) -> (common::Reaped, std::fs::File, std::fs::File) {
     let (child, a_path, b_path) = common::link_sim_pty(args);
     (child, open_rw(&a_path), open_rw(&b_path))
 }
@@ -340,7 +340,7 @@ fn pty_mode_forwards_frames_in_real_time_both_ways() {
     let dir = tempfile::tempdir().unwrap();
     let stats = dir.path().join("stats.json");
     let stats_path = stats.to_str().unwrap();
-    let (child, mut a, mut b) = start_pty(&[
+    let (mut child, mut a, mut b) = start_pty(&[
         "--model",
         "s100",
         "--jitter-distribution",
@@ -365,7 +365,7 @@ fn pty_mode_forwards_frames_in_real_time_both_ways() {
     b.write_all(&frame_b).unwrap();
     assert_eq!(read_exactly(&mut a, 16, READ_LIMIT), frame_b);
 
-    let stderr = terminate(child);
+    let stderr = terminate(&mut child);
     assert!(
         stderr.contains("A->B: 1 frames offered, 1 delivered"),
         "{stderr}"
@@ -544,7 +544,7 @@ fn start_medium(ports: usize, args: &[&str]) -> (std::process::Child, Vec<std::f
 fn pty_3_is_one_medium_the_middle_hears_both_ends_and_the_ends_never_each_other() {
     let dir = tempfile::tempdir().unwrap();
     let stats = dir.path().join("stats.json");
-    let (child, mut ports) = start_medium(
+    let (mut child, mut ports) = start_medium(
         3,
         &[
             "--model",
@@ -579,7 +579,7 @@ fn pty_3_is_one_medium_the_middle_hears_both_ends_and_the_ends_never_each_other(
     // wrongly; the stats below count the frame as dropped for range, whatever the timing).
     assert!(read_exactly(&mut ports[2], 1, Duration::from_millis(700)).is_empty());
 
-    let stderr = terminate(child);
+    let stderr = terminate(&mut child);
     for line in [
         "2->1: 1 frames offered, 1 delivered",
         "2->3: 1 frames offered, 1 delivered",

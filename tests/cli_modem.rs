@@ -149,14 +149,14 @@ const PROBE_TIMEOUT: &str = "10";
 const EXIT_LIMIT: Duration = Duration::from_secs(30);
 
 /// Ends a link-sim with SIGTERM, once it catches it.
-fn stop(mut child: Child) {
-    signal_once(&mut child, Signal::SIGTERM, &|| true, EXIT_LIMIT);
-    common::wait_for_exit(&mut child, EXIT_LIMIT);
+fn stop(child: &mut Child) {
+    signal_once(child, Signal::SIGTERM, &|| true, EXIT_LIMIT);
+    common::wait_for_exit(child, EXIT_LIMIT);
 }
 
 #[test]
 fn real_time_through_link_sim_measures_its_model() {
-    let (sim, a, b) = common::link_sim_pty(&["--model", "s100", "--jitter-ms", "0"]);
+    let (mut sim, a, b) = common::link_sim_pty(&["--model", "s100", "--jitter-ms", "0"]);
     let out = run(
         MODEM_BENCH,
         &[
@@ -175,7 +175,7 @@ fn real_time_through_link_sim_measures_its_model() {
         ],
         b"",
     );
-    stop(sim);
+    stop(&mut sim);
     assert_eq!(out.code, 0, "{}", out.stderr);
     let rows = rows(&out.stdout_text());
     assert_eq!(rows.len(), 6);
@@ -194,7 +194,7 @@ fn real_time_through_link_sim_measures_its_model() {
 
 #[test]
 fn the_evologics_dialect_works_end_to_end() {
-    let (sim, a, b) = common::link_sim_pty(&[
+    let (mut sim, a, b) = common::link_sim_pty(&[
         "--model",
         "s2cr-burst",
         "--jitter-ms",
@@ -222,7 +222,7 @@ fn the_evologics_dialect_works_end_to_end() {
         ],
         b"",
     );
-    stop(sim);
+    stop(&mut sim);
     assert_eq!(out.code, 0, "{}", out.stderr);
     let rows = rows(&out.stdout_text());
     assert_eq!(rows.len(), 4);
@@ -377,7 +377,7 @@ fn udp_endpoints_through_link_sim() {
         ],
         b"",
     );
-    stop(sim);
+    stop(&mut sim);
     assert_eq!(out.code, 0, "{}", out.stderr);
     let rows = rows(&out.stdout_text());
     assert_eq!(rows.len(), 3);
@@ -392,7 +392,7 @@ fn udp_endpoints_through_link_sim() {
 fn ctrl_c_keeps_the_rows_and_writes_the_summary() {
     let dir = tempfile::tempdir().unwrap();
     let (csv, summary) = (dir.path().join("p.csv"), dir.path().join("s.json"));
-    let (sim, a, b) = common::link_sim_pty(&["--model", "s100", "--jitter-ms", "0"]);
+    let (mut sim, a, b) = common::link_sim_pty(&["--model", "s100", "--jitter-ms", "0"]);
     let mut child = Command::new(MODEM_BENCH)
         .args(["--tx", &a, "--rx", &b, "--size", "20", "--count", "1000"])
         .args(["--interval", "100", "-o"])
@@ -412,7 +412,7 @@ fn ctrl_c_keeps_the_rows_and_writes_the_summary() {
         Duration::from_secs(60),
     );
     let status = common::wait_for_exit(&mut child, EXIT_LIMIT);
-    stop(sim);
+    stop(&mut sim);
     let mut stderr = String::new();
     child
         .stderr

@@ -61,7 +61,7 @@ fn three_nodes(text: &str, duration_s: f64) -> Vec<(serde_json::Value, String)> 
     let dir = tempfile::tempdir().unwrap();
     let routes = dir.path().join("three.json");
     std::fs::write(&routes, text).unwrap();
-    let (link, ports) = shared_medium();
+    let (mut link, ports) = shared_medium();
     let vehicles_s = duration_s + 2.0;
     let far = node(dir.path(), &routes, "rov", 2, &[&ports[2]], vehicles_s, &[]);
     let relay = node(dir.path(), &routes, "rov", 1, &[&ports[1]], vehicles_s, &[]);
@@ -82,7 +82,7 @@ fn three_nodes(text: &str, duration_s: f64) -> Vec<(serde_json::Value, String)> 
         relay.finish(limit),
         far.finish(limit),
     ];
-    end(link);
+    end(&mut link);
     runs
 }
 
@@ -241,7 +241,7 @@ fn count(v: &serde_json::Value) -> u64 {
 }
 
 /// Ends a link-sim the test started.
-fn end(mut link: Child) {
+fn end(link: &mut Child) {
     let _ = link.kill();
     let _ = link.wait();
 }
@@ -251,8 +251,8 @@ fn a_relay_on_two_media_carries_the_far_vehicle_both_ways() {
     let dir = tempfile::tempdir().unwrap();
     let routes = dir.path().join("mixed.json");
     std::fs::write(&routes, MIXED).unwrap();
-    let (acoustic, op_port, relay_down) = common::link_sim_pty(&common::TEST_S100);
-    let (rf, relay_up, far_port) = common::link_sim_pty(&common::TEST_S100);
+    let (mut acoustic, op_port, relay_down) = common::link_sim_pty(&common::TEST_S100);
+    let (mut rf, relay_up, far_port) = common::link_sim_pty(&common::TEST_S100);
     let far = node(dir.path(), &routes, "rov", 2, &[&far_port], 14.0, &[]);
     let relay = node(
         dir.path(),
@@ -281,8 +281,8 @@ fn a_relay_on_two_media_carries_the_far_vehicle_both_ways() {
     let (o, o_events) = operator.finish(Duration::from_secs(25));
     let (r, _) = relay.finish(Duration::from_secs(10));
     let (f, f_events) = far.finish(Duration::from_secs(10));
-    end(acoustic);
-    end(rf);
+    end(&mut acoustic);
+    end(&mut rf);
 
     assert_eq!(o["measured_by"], "operator");
     for v in ["1", "2"] {

@@ -19,6 +19,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
+use common::Reaped as Guard;
 use serde_json::Value;
 
 const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
@@ -109,16 +110,6 @@ impl Drop for Sitl {
     }
 }
 
-/// A child process killed and reaped when dropped.
-struct Guard(Child);
-
-impl Drop for Guard {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 /// The JSON lines of `path` so far (a line being written is left for the next read).
 fn lines(path: &Path) -> Vec<Value> {
     std::fs::read_to_string(path)
@@ -193,7 +184,6 @@ impl Session {
                 .expect("python3 runs"),
         );
         let (link, a, b) = common::link_sim_pty(&common::TEST_S100);
-        let link = Guard(link);
         let mut rov = Command::new(TDMA_RUN)
             .args(["--role", "rov", "--port", &b, "--duration", "600"])
             .args([

@@ -148,7 +148,7 @@ pub const TEST_S100: [&str; 10] = [
 ];
 
 /// Starts `link-sim --pty` with `args`; returns it and the paths of its sides A and B.
-pub fn link_sim_pty(args: &[&str]) -> (std::process::Child, String, String) {
+pub fn link_sim_pty(args: &[&str]) -> (Reaped, String, String) {
     use std::io::BufRead;
     let mut child = Command::new(env!("CARGO_BIN_EXE_link-sim"))
         .arg("--pty")
@@ -161,7 +161,31 @@ pub fn link_sim_pty(args: &[&str]) -> (std::process::Child, String, String) {
     let (mut a, mut b) = (String::new(), String::new());
     stdout.read_line(&mut a).expect("side A's path");
     stdout.read_line(&mut b).expect("side B's path");
-    (child, a.trim().to_string(), b.trim().to_string())
+    (Reaped(child), a.trim().to_string(), b.trim().to_string())
+}
+
+/// A child process killed and reaped when dropped, so that a test that fails (panics) leaves
+/// no process of its own running; otherwise a [`std::process::Child`] (by deref).
+pub struct Reaped(pub std::process::Child);
+
+impl std::ops::Deref for Reaped {
+    type Target = std::process::Child;
+    fn deref(&self) -> &std::process::Child {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for Reaped {
+    fn deref_mut(&mut self) -> &mut std::process::Child {
+        &mut self.0
+    }
+}
+
+impl Drop for Reaped {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
 }
 
 /// A free port on 127.0.0.1 (bound and released: another process could take it first, which
