@@ -569,33 +569,6 @@ fn stopping_is_prompt_and_tells_the_clients() {
     drop(again);
 }
 
-/// Reads `child`'s standard error until a line holds `text` (failing if it ends first or
-/// says nothing of the kind within 30 s); the rest is read aside and comes with the handle.
-fn said_until(child: &mut Child, text: &str) -> std::thread::JoinHandle<String> {
-    use std::io::BufRead;
-    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
-    let (tx, rx) = std::sync::mpsc::channel();
-    let wanted = text.to_string();
-    let reader = std::thread::spawn(move || {
-        let mut said = String::new();
-        let mut line = String::new();
-        let mut told = false;
-        while stderr.read_line(&mut line).is_ok_and(|n| n > 0) {
-            said.push_str(&line);
-            if !told && line.contains(&wanted) {
-                told = tx.send(()).is_ok();
-            }
-            line.clear();
-        }
-        said
-    });
-    if rx.recv_timeout(Duration::from_secs(30)).is_err() {
-        let _ = child.kill();
-        panic!("nothing said {text:?}: {}", reader.join().unwrap());
-    }
-    reader
-}
-
 #[test]
 fn an_operator_driven_from_foxglove_over_link_sim() {
     const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
@@ -610,7 +583,11 @@ fn an_operator_driven_from_foxglove_over_link_sim() {
         .spawn()
         .unwrap();
     // The operator starts once the ROV listens on its port (it says so), not after a guess.
-    let rov_said = said_until(&mut rov, "ROV: answering every slot");
+    let rov_said = common::said_until(
+        &mut rov,
+        "ROV: answering every slot",
+        Duration::from_secs(30),
+    );
     let port = common::free_port().to_string();
     let address = format!("127.0.0.1:{port}");
     let mut operator = Command::new(TDMA_RUN)

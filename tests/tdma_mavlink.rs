@@ -543,56 +543,6 @@ fn last_track_position(track: &std::path::Path) -> [f64; 3] {
     [fields[0], fields[1], fields[2]]
 }
 
-/// Reads `child`'s standard error until a line holds `text` (failing if it ends first or
-/// says nothing of the kind within LIMIT); the rest is read aside and comes with the handle.
-fn said_until(child: &mut Child, text: &str) -> std::thread::JoinHandle<String> {
-    use std::io::BufRead;
-    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
-    let (tx, rx) = std::sync::mpsc::channel();
-    let wanted = text.to_string();
-    let reader = std::thread::spawn(move || {
-        let mut said = String::new();
-        let mut line = String::new();
-        let mut told = false;
-        while stderr.read_line(&mut line).is_ok_and(|n| n > 0) {
-            said.push_str(&line);
-            if !told && line.contains(&wanted) {
-                told = tx.send(()).is_ok();
-            }
-            line.clear();
-        }
-        said
-    });
-    if rx.recv_timeout(LIMIT).is_err() {
-        let _ = child.kill();
-        panic!("nothing said {text:?}: {}", reader.join().unwrap());
-    }
-    reader
-}
-
-/// Opens the FIFO at `path` for writing once `reader` has opened it for reading (without
-/// blocking: a reader that failed fails the test instead of hanging it).
-fn fifo_writer(path: &str, reader: &mut Child) -> std::fs::File {
-    use std::os::unix::fs::OpenOptionsExt;
-    let started = Instant::now();
-    loop {
-        match std::fs::OpenOptions::new()
-            .write(true)
-            .custom_flags(nix::fcntl::OFlag::O_NONBLOCK.bits())
-            .open(path)
-        {
-            Ok(file) => return file,
-            Err(e) if e.raw_os_error() == Some(nix::libc::ENXIO) => {}
-            Err(e) => panic!("{path}: {e}"),
-        }
-        if let Some(status) = reader.try_wait().unwrap() {
-            panic!("ended ({status}) before opening {path}");
-        }
-        assert!(started.elapsed() < LIMIT, "{path} was not opened");
-        std::thread::sleep(Duration::from_millis(5));
-    }
-}
-
 #[test]
 fn tdma_run_drives_the_standin_through_link_sim_with_live_orders() {
     let dir = tempfile::tempdir().unwrap();
@@ -614,7 +564,7 @@ fn tdma_run_drives_the_standin_through_link_sim_with_live_orders() {
         .unwrap();
     // The stand-in and the operator start once the ROV listens (on the vehicle's port and the
     // link's: it says so), not after a guess.
-    let rov_said = said_until(&mut rov, "ROV: answering every slot");
+    let rov_said = common::said_until(&mut rov, "ROV: answering every slot", LIMIT);
     let standin = StandIn::start(&format!("udpout:127.0.0.1:{port}"), Config::default());
     let mut operator = Process::new(TDMA_RUN)
         .args(["--role", "operator", "--port", &a, "--duration", "15"])
@@ -628,7 +578,7 @@ fn tdma_run_drives_the_standin_through_link_sim_with_live_orders() {
     let op_said = std::thread::spawn(move || std::io::read_to_string(op_stderr).unwrap());
     // Half stick forward until the autopilot has it, then stop and go to a point; the FIFO
     // stays open until the operator ends.
-    let mut fifo = fifo_writer(&path("orders"), &mut operator);
+    let mut fifo = common::fifo_writer(path("orders"), &mut operator, LIMIT);
     let mut type_order = |line: &str| {
         use std::io::Write;
         writeln!(fifo, "{line}").unwrap();

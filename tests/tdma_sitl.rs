@@ -16,7 +16,7 @@ mod common;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use common::Reaped as Guard;
@@ -232,7 +232,7 @@ impl Session {
             .stderr(std::fs::File::create(path("op.err")).unwrap())
             .spawn()
             .unwrap();
-        let fifo = fifo_writer(&path("orders"), &mut operator);
+        let fifo = common::fifo_writer(path("orders"), &mut operator, LIMIT);
         // The operator's clock: its telemetry's t_s against the wall clock, from the line
         // that appears first (read every 20 ms, so within a few tens of milliseconds).
         let until = Instant::now() + LIMIT;
@@ -329,29 +329,6 @@ impl Session {
             serde_json::from_str(&text).unwrap()
         };
         (read("op.json"), read("rov.json"))
-    }
-}
-
-/// Opens the FIFO for writing once `reader` has opened it (without blocking on a reader that
-/// failed).
-fn fifo_writer(path: &Path, reader: &mut Child) -> std::fs::File {
-    use std::os::unix::fs::OpenOptionsExt;
-    let started = Instant::now();
-    loop {
-        match std::fs::OpenOptions::new()
-            .write(true)
-            .custom_flags(nix::fcntl::OFlag::O_NONBLOCK.bits())
-            .open(path)
-        {
-            Ok(file) => return file,
-            Err(e) if e.raw_os_error() == Some(nix::libc::ENXIO) => {}
-            Err(e) => panic!("{}: {e}", path.display()),
-        }
-        if let Some(status) = reader.try_wait().unwrap() {
-            panic!("the operator ended ({status}) before opening its orders");
-        }
-        assert!(started.elapsed() < LIMIT, "the orders FIFO was not opened");
-        std::thread::sleep(Duration::from_millis(5));
     }
 }
 

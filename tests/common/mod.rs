@@ -223,3 +223,68 @@ pub fn stock_client(args: &[&str]) -> serde_json::Value {
     );
     serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap()
 }
+
+/// Reads `child`'s standard error until a line holds `text` (failing, and killing the child,
+/// if it ends first or says nothing of the kind within `limit`); the rest is read aside and
+/// comes with the handle.
+pub fn said_until(
+    child: &mut std::process::Child,
+    text: &str,
+    limit: std::time::Duration,
+) -> std::thread::JoinHandle<String> {
+    use std::io::BufRead;
+    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
+    let (tx, rx) = std::sync::mpsc::channel();
+    let wanted = text.to_string();
+    let reader = std::thread::spawn(move || {
+        let mut said = String::new();
+        let mut line = String::new();
+        let mut told = false;
+        while stderr.read_line(&mut line).is_ok_and(|n| n > 0) {
+            said.push_str(&line);
+            if !told && line.contains(&wanted) {
+                told = tx.send(()).is_ok();
+            }
+            line.clear();
+        }
+        said
+    });
+    if rx.recv_timeout(limit).is_err() {
+        let _ = child.kill();
+        panic!("nothing said {text:?}: {}", reader.join().unwrap());
+    }
+    reader
+}
+
+/// Opens the FIFO at `path` for writing once `reader` has opened it for reading (without
+/// blocking: a reader that ended first, or did not open it within `limit`, fails the test
+/// instead of hanging it).
+pub fn fifo_writer(
+    path: impl AsRef<Path>,
+    reader: &mut std::process::Child,
+    limit: std::time::Duration,
+) -> std::fs::File {
+    use std::os::unix::fs::OpenOptionsExt;
+    let path = path.as_ref();
+    let started = std::time::Instant::now();
+    loop {
+        match std::fs::OpenOptions::new()
+            .write(true)
+            .custom_flags(OFlag::O_NONBLOCK.bits())
+            .open(path)
+        {
+            Ok(file) => return file,
+            Err(e) if e.raw_os_error() == Some(nix::libc::ENXIO) => {}
+            Err(e) => panic!("{}: {e}", path.display()),
+        }
+        if let Some(status) = reader.try_wait().unwrap() {
+            panic!("ended ({status}) before opening {}", path.display());
+        }
+        assert!(
+            started.elapsed() < limit,
+            "{} was not opened",
+            path.display()
+        );
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}
