@@ -117,12 +117,18 @@ fn a_session_writes_metrics_and_one_event_per_frame() {
     let mut lines = csv.lines();
     assert_eq!(
         lines.next(),
-        Some("direction,kind,bytes,t_sent_s,t_received_s,fate")
+        Some("direction,kind,bytes,t_sent_s,t_received_s,fate,medium,src,dst,tx,rx,action")
     );
     let rows: Vec<&str> = lines.collect();
+    // A frame counts as sent when it goes out; its row comes with its fate, so the frames
+    // still in flight at the end (one slot's exchange at most) have none.
     let sent = m["rov_to_operator"]["frames_sent"].as_u64().unwrap()
         + m["operator_to_rov"]["frames_sent"].as_u64().unwrap();
-    assert_eq!(rows.len() as u64, sent);
+    assert!(
+        rows.len() as u64 <= sent && sent - rows.len() as u64 <= 2,
+        "{} rows, {sent} sent",
+        rows.len()
+    );
     assert!(rows.iter().any(|r| r.contains(",ber")));
     assert!(
         rows.iter()

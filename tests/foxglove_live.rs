@@ -161,12 +161,13 @@ fn a_client_receives_poses_and_images_as_they_are_published() {
         );
         let t_s = f64::from(k) * 0.05;
         let call = Instant::now();
-        view.pose(&pose(t_s, [f64::from(k) * 0.1, -1.0, 2.0], 10.0));
+        view.pose(1, &pose(t_s, [f64::from(k) * 0.1, -1.0, 2.0], 10.0));
         slowest_pose = slowest_pose.max(call.elapsed());
         if k.is_multiple_of(10) {
             // A trunk more each time: a preview is sent only when new trunks changed it.
             let n = (8 + k as usize / 10).min(trunks.len());
             view.event(
+                1,
                 Role::Operator,
                 t_s,
                 &Event::ImageProgress {
@@ -175,8 +176,8 @@ fn a_client_receives_poses_and_images_as_they_are_published() {
                     prefix: trunks[..n].concat(),
                 },
             );
-            view.image(t_s, &stream);
-            view.event(Role::Operator, t_s, &Event::OrderAcknowledged(k.into()));
+            view.image(1, t_s, &stream);
+            view.event(1, Role::Operator, t_s, &Event::OrderAcknowledged(k.into()));
         }
         std::thread::sleep(Duration::from_millis(50));
     }
@@ -191,9 +192,9 @@ fn a_client_receives_poses_and_images_as_they_are_published() {
         Duration::from_secs(30),
         || {
             let call = Instant::now();
-            view.pose(&last_pose);
+            view.pose(1, &last_pose);
             slowest_pose = slowest_pose.max(call.elapsed());
-            view.event(Role::Operator, 99.0, &Event::AnswersLost);
+            view.event(1, Role::Operator, 99.0, &Event::AnswersLost);
             repeats += 1;
         },
     );
@@ -386,11 +387,11 @@ fn garbage_cut_connections_and_stuck_clients_break_nothing() {
             "client.py still running"
         );
         let call = Instant::now();
-        view.pose(&pose(f64::from(k), [1.0, 2.0, 3.0], 0.0));
+        view.pose(1, &pose(f64::from(k), [1.0, 2.0, 3.0], 0.0));
         slowest_pose = slowest_pose.max(call.elapsed());
         if k.is_multiple_of(20) {
             let call = Instant::now();
-            view.image(f64::from(k), &stream);
+            view.image(1, f64::from(k), &stream);
             slowest_image = slowest_image.max(call.elapsed());
         }
         k += 1;
@@ -471,7 +472,7 @@ fn garbage_cut_connections_and_stuck_clients_break_nothing() {
         Duration::from_millis(25),
         Duration::from_secs(30),
         || {
-            view.pose(&pose(f64::from(k), [4.0, 5.0, 6.0], 0.0));
+            view.pose(1, &pose(f64::from(k), [4.0, 5.0, 6.0], 0.0));
             k += 1;
         },
     );

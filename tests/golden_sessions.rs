@@ -134,3 +134,86 @@ fn simulated_sessions_give_their_recorded_bytes() {
     }
     common::golden("sessions.txt", &report);
 }
+
+/// A one-vehicle network read from a scenario file: the single session of the same settings.
+const ONE_VEHICLE: &str = r#"{"duration_s":120,"seed":3,
+ "nodes":[{"address":0,"role":"operator","position":[0,0,0]},
+          {"address":1,"role":"rov","start":[1,0,0],"waypoints":[[20,2,1,1,90]]}],
+ "media":[{"name":"link","model":"s100","nodes":[0,1]}]}"#;
+
+/// Runs tdma-run with `args` and `--events`, `--track`, `--metrics` into `dir` as `tag`-*;
+/// the three files' text.
+fn outputs(args: &[&str], dir: &Path, tag: &str) -> [String; 3] {
+    let path = |what: &str| dir.join(format!("{tag}-{what}"));
+    let out = Command::new(TDMA_RUN)
+        .args(args)
+        .arg("--events")
+        .arg(path("events.csv"))
+        .arg("--track")
+        .arg(path("track.csv"))
+        .arg("--metrics")
+        .arg(path("metrics.json"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    ["events.csv", "track.csv", "metrics.json"].map(|f| std::fs::read_to_string(path(f)).unwrap())
+}
+
+#[test]
+fn a_one_vehicle_network_is_the_single_session_event_for_event() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = dir.path().join("one.json");
+    std::fs::write(&scenario, ONE_VEHICLE).unwrap();
+    let waypoints = dir.path().join("waypoints.csv");
+    std::fs::write(&waypoints, "t_s,x_m,y_m,z_m,heading_deg\n20,2,1,1,90\n").unwrap();
+    for link in [&[][..], &["--ber", "7e-4"][..]] {
+        let mut network = vec!["--scenario", scenario.to_str().unwrap()];
+        network.extend(link);
+        let mut single = vec![
+            "--sim",
+            "--model",
+            "s100",
+            "--buoy",
+            "0,0,0",
+            "--start",
+            "1,0,0",
+            "--duration",
+            "120",
+            "--seed",
+            "3",
+            "--waypoints",
+            waypoints.to_str().unwrap(),
+        ];
+        single.extend(link);
+        let [n_events, n_track, n_metrics] = outputs(&network, dir.path(), "network");
+        let [s_events, s_track, s_metrics] = outputs(&single, dir.path(), "single");
+        assert!(n_events.lines().count() > 300, "{link:?}");
+        assert_eq!(n_events, s_events, "{link:?}: --events differ");
+        // The network's track is the single one's position and heading, after the address.
+        let columns = |text: &str, skip: usize| -> Vec<String> {
+            text.lines()
+                .skip(1)
+                .map(|l| {
+                    l.split(',')
+                        .skip(skip)
+                        .take(5)
+                        .collect::<Vec<_>>()
+                        .join(",")
+                })
+                .collect()
+        };
+        assert_eq!(columns(&n_track, 1), columns(&s_track, 0), "{link:?}");
+        let n: serde_json::Value = serde_json::from_str(&n_metrics).unwrap();
+        let s: serde_json::Value = serde_json::from_str(&s_metrics).unwrap();
+        let vehicle = n["vehicles"]["1"].as_object().unwrap();
+        for (key, value) in vehicle {
+            assert_eq!(Some(value), s.get(key), "{link:?}: {key}");
+        }
+        assert!(vehicle["images_completed"].as_u64().unwrap() >= 1);
+        assert_eq!(vehicle["orders_executed"], 1, "{link:?}");
+    }
+}

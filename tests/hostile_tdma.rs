@@ -344,10 +344,12 @@ fn interrupted(signal: Signal, code: i32) {
     let events = std::fs::read_to_string(dir.path().join("e.csv")).unwrap();
     let sent = metrics["rov_to_operator"]["frames_sent"].as_u64().unwrap()
         + metrics["operator_to_rov"]["frames_sent"].as_u64().unwrap();
-    assert_eq!(
-        events.lines().count() as u64,
-        sent + 1,
-        "one row per frame sent"
+    // One row per frame whose fate is known: the header, and every frame sent but those
+    // still in flight when the signal came (one slot's exchange at most).
+    let rows = events.lines().count() as u64 - 1;
+    assert!(
+        rows <= sent && sent - rows <= 2,
+        "{rows} rows for {sent} frames sent"
     );
     let mcap = std::fs::read(dir.path().join("s.mcap")).unwrap();
     let summary = mcap::Summary::read(&mcap)

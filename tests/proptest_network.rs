@@ -8,7 +8,8 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
 use proptest::prelude::*;
-use rovlink::rcp::network::{self, QuietNet};
+use rovlink::rcp::network;
+use rovlink::rcp::report::Quiet;
 use rovlink::rcp::scenario::Scenario;
 use rovlink::rcp::test_image;
 
@@ -63,7 +64,7 @@ proptest! {
     ) {
         let s = scenario(seed, &near, &far, duplicate_percent, ber);
         let images = [test_image(96, 64, seed)];
-        let m = network::run(&s, &images, &mut QuietNet, &AtomicBool::new(false)).unwrap();
+        let m = network::run(&s, &images, &mut Quiet, &AtomicBool::new(false)).unwrap();
         for (address, v) in &m.vehicles {
             prop_assert_eq!(v.orders_executed_twice, 0, "vehicle {}: {:?}", address, v);
             prop_assert_eq!(v.orders_acknowledged_unexecuted, 0, "vehicle {}: {:?}", address, v);

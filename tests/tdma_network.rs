@@ -68,23 +68,23 @@ fn the_relay_scenario_reaches_the_far_vehicle_and_writes_per_vehicle_outputs() {
     let mut lines = events.lines();
     assert_eq!(
         lines.next(),
-        Some("medium,src,dst,tx,rx,kind,bytes,t_sent_s,t_received_s,fate,action")
+        Some("direction,kind,bytes,t_sent_s,t_received_s,fate,medium,src,dst,tx,rx,action")
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     // The relay forwards the operator's polls of vehicle 2, which takes them from the relay.
     assert!(
         rows.iter()
-            .any(|r| r[1..5] == ["0", "2", "0", "1"] && r[10] == "forwarded")
+            .any(|r| r[7..11] == ["0", "2", "0", "1"] && r[11] == "forwarded")
     );
     assert!(
         rows.iter()
-            .any(|r| r[1..5] == ["0", "2", "1", "2"] && r[10] == "delivered")
+            .any(|r| r[7..11] == ["0", "2", "1", "2"] && r[11] == "delivered")
     );
     // The operator never hears vehicle 2 itself.
     assert!(
         rows.iter()
-            .filter(|r| r[3] == "2" && r[4] == "0")
-            .all(|r| r[9] == "range")
+            .filter(|r| r[9] == "2" && r[10] == "0")
+            .all(|r| r[5] == "range")
     );
     let track = std::fs::read_to_string(&track).unwrap();
     assert!(track.starts_with("vehicle,t_s,x_m,y_m,z_m,heading_deg,link_up\n"));

@@ -117,7 +117,7 @@ fn three_nodes_on_one_medium_reach_the_far_vehicle_only_through_the_relay() {
             .lines()
             .filter(|l| {
                 l.starts_with("rov_to_operator,image_trunk,")
-                    && l.contains(&format!(",received,{v},0,"))
+                    && l.contains(&format!(",received,rf,{v},0,"))
             })
             .count();
         assert!(trunks >= 5, "vehicle {v}: {trunks} trunks");
@@ -134,7 +134,9 @@ fn three_nodes_on_one_medium_reach_the_far_vehicle_only_through_the_relay() {
     // Copies the far vehicle overhears of its own answers, relayed, are dropped as its own.
     assert!(count(&f["nodes"]["2"]["own_dropped"]) >= 5, "{f:#}");
     assert!(
-        f_events.lines().any(|l| l.ends_with(",received,0,2,rf")),
+        f_events
+            .lines()
+            .any(|l| l.ends_with(",received,rf,0,2,,2,delivered")),
         "{f_events}"
     );
     let rtt = |v: &str| o["vehicles"][v]["round_trip_ms"].as_f64().unwrap();
@@ -303,17 +305,21 @@ fn a_relay_on_two_media_carries_the_far_vehicle_both_ways() {
     assert!(rtt("2") > rtt("1") + 50.0, "{} vs {}", rtt("2"), rtt("1"));
     // The events name each frame's addresses and medium.
     assert!(
-        o_events.starts_with("direction,kind,bytes,t_sent_s,t_received_s,fate,src,dst,medium\n"),
+        o_events.starts_with(
+            "direction,kind,bytes,t_sent_s,t_received_s,fate,medium,src,dst,tx,rx,action\n"
+        ),
         "{o_events}"
     );
     assert!(
         o_events
             .lines()
-            .any(|l| l.ends_with(",received,2,0,acoustic")),
+            .any(|l| l.ends_with(",received,acoustic,2,0,,0,delivered")),
         "{o_events}"
     );
     assert!(
-        f_events.lines().any(|l| l.ends_with(",received,0,2,rf")),
+        f_events
+            .lines()
+            .any(|l| l.ends_with(",received,rf,0,2,,2,delivered")),
         "{f_events}"
     );
     let images = dir.path().join("images");

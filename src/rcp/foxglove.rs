@@ -42,7 +42,6 @@ use foxglove::{Context, PartialMetadata, RawChannel, Schema, WebSocketServerHand
 
 use super::foxglove_gate::{Gate, Reports};
 use super::mcap_log::{Clock, Topic, View, ViewMessage};
-use super::network::{HopEvent, NetObserver};
 use super::operator::Joystick;
 use super::orders::{Live, OrderSource};
 use super::report::{FrameEvent, Observer};
@@ -442,8 +441,8 @@ impl OrderSource for LiveOrders {
     }
 }
 
-/// The live view: an [`Observer`] (a single session) or a [`NetObserver`] (a network, one lane
-/// per vehicle under `/vehicle/N/`) publishing the session on the server's channels.
+/// The live view: an [`Observer`] of a single session or of a network (one lane per vehicle
+/// under `/vehicle/N/`) publishing the session on the server's channels.
 pub struct LiveView {
     /// The handshake layer on the address given (dropped first: no new connections).
     gate: Option<Gate>,
@@ -456,6 +455,8 @@ pub struct LiveView {
     lanes: Vec<Lane>,
     /// A real-time network node's view of its own frames (its `/link/frames`).
     node: Option<View>,
+    /// What its frames are: a single session's link, a network's hops, a node's own.
+    extra: Extra,
     addr: String,
 }
 
@@ -520,7 +521,7 @@ pub fn start_network(addr: &str, vehicles: &[u8]) -> Result<LiveView, FoxgloveEr
 /// under `/vehicle/N/` as [`start_network`] has them, and `/link/frames`, the frames this node
 /// sent and received (`rovlink.LinkFrame`, as a single session's link: a received frame's send
 /// time is the far node's, so it has no `t_sent_s` or `delay_ms`), fed by
-/// [`NetObserver::node_frame`]. Clients cannot publish: a node's orders come from its flags.
+/// [`Observer::frame`]. Clients cannot publish: a node's orders come from its flags.
 pub fn start_node(addr: &str, role: Role, vehicles: &[u8]) -> Result<LiveView, FoxgloveError> {
     let lanes: Vec<Option<u8>> = vehicles.iter().map(|&v| Some(v)).collect();
     let name = format!("tdma-run {} (network node)", role.name());
@@ -641,6 +642,7 @@ fn serve(
         _context: context,
         lanes,
         node: (extra == Extra::NodeFrames).then(|| View::new(Clock::Wall)),
+        extra,
         addr: addr.to_string(),
     };
     let reports = view.gate.as_ref().map(Gate::reports);
@@ -675,10 +677,10 @@ impl LiveView {
     }
 
     /// The lane of `vehicle` (the only one in a single session).
-    fn lane_of(&self, vehicle: Option<u8>) -> Option<usize> {
-        match vehicle {
-            None => (!self.lanes.is_empty()).then_some(0),
-            Some(v) => self.lanes.iter().position(|l| l.vehicle == Some(v)),
+    fn lane_of(&self, vehicle: u8) -> Option<usize> {
+        match self.extra {
+            Extra::Nothing => (!self.lanes.is_empty()).then_some(0),
+            _ => self.lanes.iter().position(|l| l.vehicle == Some(vehicle)),
         }
     }
 
@@ -739,7 +741,7 @@ impl LiveView {
         }
     }
 
-    fn lane_frame(&mut self, lane: usize, e: &FrameEvent) {
+    fn lane_frame(&mut self, lane: usize, e: &FrameEvent<'_>) {
         self.follow_subscriptions(lane);
         let Some(l) = self.lanes.get(lane) else {
             return;
@@ -808,30 +810,41 @@ impl Drop for LiveView {
 }
 
 impl Observer for LiveView {
-    fn frame(&mut self, e: &FrameEvent) {
-        self.lane_frame(0, e);
+    fn frame(&mut self, e: &FrameEvent<'_>) {
+        match self.extra {
+            Extra::Nothing => self.lane_frame(0, e),
+            Extra::NetworkFrames => self.network_frame(e),
+            Extra::NodeFrames => self.node_frame(e),
+        }
     }
 
-    fn image(&mut self, t_s: f64, stream: &[u8]) {
-        self.lane_image(0, t_s, stream);
+    fn image(&mut self, vehicle: u8, t_s: f64, stream: &[u8]) {
+        if let Some(lane) = self.lane_of(vehicle) {
+            self.lane_image(lane, t_s, stream);
+        }
     }
 
-    fn pose(&mut self, pose: &PoseSample) {
-        self.lane_pose(0, pose);
+    fn pose(&mut self, vehicle: u8, pose: &PoseSample) {
+        if let Some(lane) = self.lane_of(vehicle) {
+            self.lane_pose(lane, pose);
+        }
     }
 
-    fn event(&mut self, end: Role, t_s: f64, event: &Event) {
-        self.lane_event(0, end, t_s, event);
+    fn event(&mut self, vehicle: u8, end: Role, t_s: f64, event: &Event) {
+        if let Some(lane) = self.lane_of(vehicle) {
+            self.lane_event(lane, end, t_s, event);
+        }
     }
 }
 
-impl NetObserver for LiveView {
-    fn hop(&mut self, e: &HopEvent) {
+impl LiveView {
+    /// A simulated network's frame at one receiver, on `/network/frames`.
+    fn network_frame(&mut self, e: &FrameEvent<'_>) {
         let index = self.lanes.len() * Topic::ALL.len();
         let Some(channel) = self.latest.channel(index) else {
             return;
         };
-        if self.node.is_none() && channel.has_sinks() {
+        if channel.has_sinks() {
             let now_ns = super::mcap_log::wall_clock_ns();
             let json = super::net_mcap::hop_json(e, now_ns);
             channel.log_with_meta(
@@ -843,29 +856,12 @@ impl NetObserver for LiveView {
         }
         // A still vehicle's pose is republished on the network's ticks too.
         for lane in 0..self.lanes.len() {
-            self.republish_still(lane, e.t_received_s.or(Some(e.t_sent_s)));
+            self.republish_still(lane, e.t_received_s.or(e.t_sent_s));
         }
     }
 
-    fn image(&mut self, vehicle: u8, t_s: f64, stream: &[u8]) {
-        if let Some(lane) = self.lane_of(Some(vehicle)) {
-            self.lane_image(lane, t_s, stream);
-        }
-    }
-
-    fn pose(&mut self, vehicle: u8, pose: &PoseSample) {
-        if let Some(lane) = self.lane_of(Some(vehicle)) {
-            self.lane_pose(lane, pose);
-        }
-    }
-
-    fn event(&mut self, vehicle: u8, end: Role, t_s: f64, event: &Event) {
-        if let Some(lane) = self.lane_of(Some(vehicle)) {
-            self.lane_event(lane, end, t_s, event);
-        }
-    }
-
-    fn node_frame(&mut self, e: &FrameEvent) {
+    /// A frame a real-time node sent or heard, on its `/link/frames`.
+    fn node_frame(&mut self, e: &FrameEvent<'_>) {
         let index = self.lanes.len() * Topic::ALL.len();
         if let Some(node) = self.node.as_mut() {
             let subscribed = self.latest.channel(index).is_some_and(|c| c.has_sinks());

@@ -1,5 +1,5 @@
-//! The two ends of a session as harnesses around the engines: what the virtual-time driver
-//! ([`super::session`]) and the real-time driver ([`super::realtime`]) both run.
+//! The two ends of a session as harnesses around the engines: what the one driver
+//! ([`super::driver`]) runs, in virtual time and in real time.
 //!
 //! An end is given the time by its driver (virtual or the host's monotonic clock) and the
 //! frames that arrived; it returns the frames to send. Everything between the link and the
@@ -115,12 +115,14 @@ impl Tally {
     }
 }
 
-/// Where an end's events go: counted, then shown.
+/// Where an end's events go: counted, then shown as `vehicle`'s.
 pub struct Out<'a> {
     /// The counters.
     pub tally: &'a mut Tally,
     /// The outputs.
     pub observer: &'a mut dyn Observer,
+    /// The vehicle whose session this is.
+    pub vehicle: u8,
 }
 
 impl Out<'_> {
@@ -129,10 +131,15 @@ impl Out<'_> {
     pub fn record(&mut self, end: Role, t: SimTime, event: &Event, order: Option<u64>) {
         let t_s = t.as_secs_f64();
         self.tally.record(end, t_s, event, order);
-        self.observer.event(end, t_s, event);
+        self.observer.event(self.vehicle, end, t_s, event);
         if let Event::ImageCompleted(stream) = event {
-            self.observer.image(t_s, stream);
+            self.observer.image(self.vehicle, t_s, stream);
         }
+    }
+
+    /// Shows the vehicle's pose.
+    pub fn pose(&mut self, pose: &PoseSample) {
+        self.observer.pose(self.vehicle, pose);
     }
 }
 
@@ -243,7 +250,7 @@ impl OperatorEnd {
         if self.engine.last_status != self.last_status {
             self.last_status = self.engine.last_status;
             if let (Some(status), true) = (&self.last_status, self.status_poses) {
-                out.observer.pose(&status_pose(t, status));
+                out.pose(&status_pose(t, status));
             }
         }
     }
@@ -299,7 +306,7 @@ impl RovEnd {
             let step = self.engine.poll_at();
             self.engine.poll(step);
             self.flush(step, None, out);
-            out.observer.pose(&self.engine.pose(step.as_secs_f64()));
+            out.pose(&self.engine.pose(step.as_secs_f64()));
         }
     }
 
@@ -347,35 +354,6 @@ impl RovEnd {
         for event in self.engine.take_events() {
             out.record(Role::Rov, t, &event, order);
         }
-    }
-}
-
-/// Several observers as one: each sees everything, in turn; it has failed when one has.
-pub struct Tee<'a>(pub Vec<&'a mut dyn Observer>);
-
-impl Observer for Tee<'_> {
-    fn frame(&mut self, event: &super::report::FrameEvent) {
-        self.0.iter_mut().for_each(|o| o.frame(event));
-    }
-
-    fn image(&mut self, t_s: f64, stream: &[u8]) {
-        self.0.iter_mut().for_each(|o| o.image(t_s, stream));
-    }
-
-    fn pose(&mut self, pose: &PoseSample) {
-        self.0.iter_mut().for_each(|o| o.pose(pose));
-    }
-
-    fn event(&mut self, end: Role, t_s: f64, event: &Event) {
-        self.0.iter_mut().for_each(|o| o.event(end, t_s, event));
-    }
-
-    fn warning(&mut self, t_s: f64, text: &str) {
-        self.0.iter_mut().for_each(|o| o.warning(t_s, text));
-    }
-
-    fn failed(&self) -> bool {
-        self.0.iter().any(|o| o.failed())
     }
 }
 
@@ -453,11 +431,12 @@ mod tests {
         let mut out = Out {
             tally: &mut tally,
             observer: &mut observer,
+            vehicle: 1,
         };
         let mut events = Vec::new();
         struct Seen<'a>(&'a mut Vec<Event>);
         impl Observer for Seen<'_> {
-            fn event(&mut self, _end: Role, _t_s: f64, event: &Event) {
+            fn event(&mut self, _vehicle: u8, _end: Role, _t_s: f64, event: &Event) {
                 self.0.push(event.clone());
             }
         }

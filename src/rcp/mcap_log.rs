@@ -31,7 +31,7 @@ use serde_json::json;
 
 use mcap::write::NoSeek;
 
-use super::report::{FrameEvent, Observer};
+use super::report::FrameEvent;
 use super::{Event, PoseSample, Role};
 use crate::cli::output::Dest;
 use crate::io::{IoError, Output};
@@ -709,24 +709,28 @@ fn velocity_json(timestamp: &serde_json::Value, v: [f64; 4]) -> serde_json::Valu
            "yaw_rate_dps": v[3]})
 }
 
-impl Observer for McapLog {
+/// What the session's outputs hand the log (a single session's: one vehicle).
+impl McapLog {
     /// True once a write failed: later messages are dropped, [`McapLog::finish`] reports it.
-    fn failed(&self) -> bool {
+    pub fn failed(&self) -> bool {
         self.error.is_some()
     }
 
-    fn frame(&mut self, e: &FrameEvent) {
+    /// A frame's fate.
+    pub fn frame(&mut self, e: &FrameEvent<'_>) {
         let messages = self.view.frame(e);
         self.write_all(&messages);
     }
 
-    fn image(&mut self, t_s: f64, stream: &[u8]) {
+    /// A completed image.
+    pub fn image(&mut self, t_s: f64, stream: &[u8]) {
         if let Some(message) = self.view.image(t_s, stream) {
             self.write(&message);
         }
     }
 
-    fn pose(&mut self, pose: &PoseSample) {
+    /// The vehicle after a step.
+    pub fn pose(&mut self, pose: &PoseSample) {
         let messages = self.view.pose(pose);
         self.write_all(&messages);
     }

@@ -12,8 +12,10 @@
 //! takes orders from Foxglove.
 
 pub mod camera;
+pub mod config;
 pub mod console;
 pub mod drive;
+pub mod driver;
 pub mod foxglove;
 pub mod foxglove_gate;
 pub mod harness;

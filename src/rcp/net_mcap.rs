@@ -18,7 +18,7 @@ use mcap::write::NoSeek;
 use serde_json::json;
 
 use super::mcap_log::{Clock, McapLogError, Topic, View, ViewMessage, without_nulls};
-use super::network::HopEvent;
+use super::report::FrameEvent;
 use super::{PoseSample, Role};
 use crate::cli::output::Dest;
 use crate::io::Output;
@@ -30,9 +30,9 @@ pub const HOP_FRAME: &str = r#"{"title":"rovlink.HopFrame","type":"object","prop
 pub const NETWORK_FRAMES_TOPIC: &str = "/network/frames";
 
 /// A frame's fate at one receiver as a `/network/frames` message, stamped `timestamp_ns`.
-pub fn hop_json(e: &HopEvent, timestamp_ns: u64) -> String {
+pub fn hop_json(e: &FrameEvent<'_>, timestamp_ns: u64) -> String {
     let ns = timestamp_ns;
-    let delay_ms = e.t_received_s.map(|r| (r - e.t_sent_s) * 1e3);
+    let delay_ms = e.t_received_s.zip(e.t_sent_s).map(|(r, s)| (r - s) * 1e3);
     let json = json!({
         "timestamp": {"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000},
         "medium": e.medium, "src": e.src, "dst": e.dst, "tx": e.tx, "rx": e.rx,
@@ -165,8 +165,8 @@ impl NetMcapLog {
     }
 
     /// A frame's fate at one receiver.
-    pub fn hop(&mut self, e: &HopEvent) {
-        let t_s = e.t_received_s.unwrap_or(e.t_sent_s);
+    pub fn hop(&mut self, e: &FrameEvent<'_>) {
+        let t_s = e.t_received_s.or(e.t_sent_s).unwrap_or(0.0);
         let ns = (t_s.max(0.0) * 1e9).round() as u64;
         self.write(self.frames, ns, &hop_json(e, ns));
     }

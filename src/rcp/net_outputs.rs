@@ -1,7 +1,7 @@
 //! What a multi-vehicle scenario writes as it goes: tdma-run `--scenario`'s outputs as one
-//! [`NetObserver`].
+//! [`Observer`].
 //!
-//! - `--events`: one CSV row per frame and receiver ([`NET_EVENTS_HEADER`]): the medium, the
+//! - `--events`: one CSV row per frame and receiver ([`EVENTS_HEADER`]): the medium, the
 //!   frame's SRC and DST, the node that transmitted this copy and the node that heard it, the
 //!   medium's fate there and what that node's router did (delivered, forwarded, or why it
 //!   dropped it);
@@ -12,31 +12,16 @@
 //! - `--mcap`: the [`NetMcapLog`] (each vehicle's channels, every frame at every receiver).
 //!
 //! Rows are whole lines, flushed as they go; the first write error is kept, from then on
-//! [`NetObserver::failed`] is true and [`NetRecorder::finish`] returns it.
+//! [`Observer::failed`] is true and [`NetRecorder::finish`] returns it.
 
 use std::path::PathBuf;
 
 use super::net_mcap::NetMcapLog;
-use super::network::{HopEvent, NetObserver};
-use super::outputs::{Telemetry, write_whole};
+use super::outputs::{Telemetry, event_fields, write_whole};
+use super::report::{EVENTS_HEADER, FrameEvent, Observer};
 use super::{Event, PoseSample, Role};
 use crate::cli::output::Dest;
 use crate::cli::rows::{RowFormat, RowWriter};
-
-/// The columns of `--events` in a scenario.
-pub const NET_EVENTS_HEADER: [&str; 11] = [
-    "medium",
-    "src",
-    "dst",
-    "tx",
-    "rx",
-    "kind",
-    "bytes",
-    "t_sent_s",
-    "t_received_s",
-    "fate",
-    "action",
-];
 
 /// The columns of `--track` in a scenario.
 pub const NET_TRACK_HEADER: [&str; 7] = [
@@ -93,7 +78,7 @@ impl NetRecorder {
         Ok(NetRecorder {
             events: dests
                 .events
-                .map(|dest| RowWriter::new(dest, RowFormat::Csv, &NET_EVENTS_HEADER)),
+                .map(|dest| RowWriter::new(dest, RowFormat::Csv, &EVENTS_HEADER)),
             track: dests
                 .track
                 .map(|dest| RowWriter::new(dest, RowFormat::Csv, &NET_TRACK_HEADER)),
@@ -134,13 +119,9 @@ impl NetRecorder {
     }
 }
 
-fn address(a: Option<u8>) -> String {
-    a.map_or(String::new(), |a| a.to_string())
-}
-
-impl NetObserver for NetRecorder {
-    fn hop(&mut self, e: &HopEvent) {
-        let t = e.t_received_s.unwrap_or(e.t_sent_s);
+impl Observer for NetRecorder {
+    fn frame(&mut self, e: &FrameEvent<'_>) {
+        let t = e.t_received_s.or(e.t_sent_s).unwrap_or(0.0);
         self.progress.set_position(t as u64);
         if let Some(log) = self.mcap.as_mut() {
             log.hop(e);
@@ -148,20 +129,7 @@ impl NetObserver for NetRecorder {
         let (Some(out), None) = (self.events.as_mut(), self.error.as_ref()) else {
             return;
         };
-        let row = [
-            e.medium.clone(),
-            address(e.src),
-            address(e.dst),
-            e.tx.to_string(),
-            e.rx.to_string(),
-            e.kind.to_string(),
-            e.bytes.to_string(),
-            format!("{:.6}", e.t_sent_s),
-            e.t_received_s.map_or(String::new(), |t| format!("{t:.6}")),
-            e.fate.to_string(),
-            e.action.to_string(),
-        ];
-        let outcome = out.row(&row);
+        let outcome = out.row(&event_fields(e));
         self.keep(outcome);
     }
 

@@ -34,15 +34,7 @@ use crate::io::{AtomicFile, Output};
 use crate::wire::operator::Order;
 use crate::wire::{Message, MessageRepr};
 
-/// The columns of `--events`.
-pub const EVENTS_HEADER: [&str; 6] = [
-    "direction",
-    "kind",
-    "bytes",
-    "t_sent_s",
-    "t_received_s",
-    "fate",
-];
+pub use super::report::EVENTS_HEADER;
 
 /// The columns of `--track`.
 pub const TRACK_HEADER: [&str; 14] = [
@@ -318,8 +310,9 @@ fn point(p: Option<[f64; 3]>) -> [String; 3] {
 }
 
 /// A frame's `--events` fields ([`EVENTS_HEADER`]).
-pub(crate) fn event_fields(e: &FrameEvent) -> [String; 6] {
+pub(crate) fn event_fields(e: &FrameEvent<'_>) -> [String; 12] {
     let time = |t: Option<f64>| t.map_or(String::new(), |t| format!("{t:.6}"));
+    let address = |a: Option<u8>| a.map_or(String::new(), |a| a.to_string());
     [
         e.direction.to_string(),
         e.kind.to_string(),
@@ -327,11 +320,17 @@ pub(crate) fn event_fields(e: &FrameEvent) -> [String; 6] {
         time(e.t_sent_s),
         time(e.t_received_s),
         e.fate.to_string(),
+        e.medium.to_string(),
+        address(e.src),
+        address(e.dst),
+        address(e.tx),
+        address(e.rx),
+        e.action.to_string(),
     ]
 }
 
 impl Observer for Recorder {
-    fn frame(&mut self, e: &FrameEvent) {
+    fn frame(&mut self, e: &FrameEvent<'_>) {
         let t = e.t_received_s.or(e.t_sent_s).unwrap_or(0.0);
         self.progress.set_position(t as u64);
         if let Some(log) = self.mcap.as_mut() {
@@ -346,7 +345,7 @@ impl Observer for Recorder {
         }
     }
 
-    fn image(&mut self, t_s: f64, stream: &[u8]) {
+    fn image(&mut self, _vehicle: u8, t_s: f64, stream: &[u8]) {
         self.images += 1;
         self.previewed = None;
         if let Some(previewer) = &self.preview {
@@ -367,7 +366,7 @@ impl Observer for Recorder {
         }
     }
 
-    fn event(&mut self, end: Role, t_s: f64, event: &Event) {
+    fn event(&mut self, _vehicle: u8, end: Role, t_s: f64, event: &Event) {
         let file = match event {
             Event::ImageProgress { prefix, .. } => self.write_preview(prefix),
             _ => None,
@@ -387,7 +386,7 @@ impl Observer for Recorder {
         }
     }
 
-    fn pose(&mut self, pose: &PoseSample) {
+    fn pose(&mut self, _vehicle: u8, pose: &PoseSample) {
         if let Some(log) = self.mcap.as_mut() {
             log.pose(pose);
         }
@@ -421,7 +420,7 @@ impl Observer for Recorder {
 
     fn failed(&self) -> bool {
         self.error.is_some()
-            || self.mcap.as_ref().is_some_and(Observer::failed)
+            || self.mcap.as_ref().is_some_and(McapLog::failed)
             || self.preview.as_ref().is_some_and(Previewer::failed)
     }
 }
@@ -922,10 +921,11 @@ mod tests {
         });
         let (op, rov) = (Role::Operator, Role::Rov);
         let status = crate::wire::json::parse_line(STATUS).unwrap();
-        rec.event(op, 1.5, &Event::Status(status));
+        rec.event(1, op, 1.5, &Event::Status(status));
         // Each line is in the file as soon as it happened.
         assert_eq!(lines(&path).len(), 1);
         rec.event(
+            1,
             op,
             2.0,
             &Event::OrderSent {
@@ -933,22 +933,23 @@ mod tests {
                 order: GOTO,
             },
         );
-        rec.event(op, 2.5, &Event::OrderAcknowledged(3));
-        rec.event(op, 3.0, &Event::CancelConfirmed);
-        rec.event(rov, 3.0, &Event::OrderExecuted(GOTO));
+        rec.event(1, op, 2.5, &Event::OrderAcknowledged(3));
+        rec.event(1, op, 3.0, &Event::CancelConfirmed);
+        rec.event(1, rov, 3.0, &Event::OrderExecuted(GOTO));
         let stream: Vec<u8> = trunks().concat();
         let progress = Event::ImageProgress {
             trunks: 2,
             of: None,
             prefix: stream[..78].to_vec(),
         };
-        rec.event(op, 4.0, &progress);
-        rec.event(op, 5.0, &Event::ImageCompleted(stream.clone()));
-        rec.image(5.0, &stream);
-        rec.event(op, 6.0, &Event::AnswersLost);
-        rec.event(rov, 6.5, &Event::LinkLost);
-        rec.event(rov, 7.0, &Event::LinkRecovered);
+        rec.event(1, op, 4.0, &progress);
+        rec.event(1, op, 5.0, &Event::ImageCompleted(stream.clone()));
+        rec.image(1, 5.0, &stream);
+        rec.event(1, op, 6.0, &Event::AnswersLost);
+        rec.event(1, rov, 6.5, &Event::LinkLost);
+        rec.event(1, rov, 7.0, &Event::LinkRecovered);
         rec.event(
+            1,
             rov,
             7.0,
             &Event::Vehicle(DriveEvent::Silent { silent_s: 3.0 }),
@@ -958,15 +959,16 @@ mod tests {
             result: "MAV_RESULT_DENIED".into(),
             accepted: false,
         };
-        rec.event(rov, 7.5, &Event::Vehicle(ack));
+        rec.event(1, rov, 7.5, &Event::Vehicle(ack));
         for k in 0..5 {
             rec.event(
+                1,
                 rov,
                 8.0 + f64::from(k),
                 &Event::CameraFailed("no picture".into()),
             );
         }
-        rec.event(rov, 18.5, &Event::CameraFailed("no picture".into()));
+        rec.event(1, rov, 18.5, &Event::CameraFailed("no picture".into()));
         rec.warning(19.0, "o.jsonl: line 2: not valid JSON at column 1: x");
         assert!(!rec.failed());
         rec.finish().unwrap();
@@ -1035,27 +1037,27 @@ mod tests {
                 of,
                 prefix: prefix.clone(),
             };
-            rec.event(Role::Operator, k as f64, &event);
+            rec.event(1, Role::Operator, k as f64, &event);
             let expected = png_of(&prefix);
             assert!(wait_for(&first, &expected), "preview {k} not written");
             previews.push(expected);
         }
         // The picture changed as trunks arrived (it sharpened).
         assert!(previews.windows(2).filter(|w| w[0] != w[1]).count() >= previews.len() / 2);
-        rec.image(21.0, &stream);
+        rec.image(1, 21.0, &stream);
         assert_eq!(std::fs::read(&first).unwrap(), png_of(&stream));
         let gap = Event::ImageProgress {
             trunks: 1,
             of: None,
             prefix: Vec::new(),
         };
-        rec.event(Role::Operator, 22.0, &gap);
+        rec.event(1, Role::Operator, 22.0, &gap);
         let next = Event::ImageProgress {
             trunks: 1,
             of: None,
             prefix: trunks[0].clone(),
         };
-        rec.event(Role::Operator, 23.0, &next);
+        rec.event(1, Role::Operator, 23.0, &next);
         rec.finish().unwrap();
         // Finishing writes the preview still pending: the image in flight stays as it was.
         assert_eq!(
@@ -1096,11 +1098,11 @@ mod tests {
                     of: None,
                     prefix: trunks[..k].concat(),
                 };
-                rec.event(Role::Operator, f64::from(n), &event);
+                rec.event(1, Role::Operator, f64::from(n), &event);
             }
             // The writer has taken the last preview and is at work on it.
             std::thread::sleep(std::time::Duration::from_millis(2));
-            rec.image(f64::from(n), &stream);
+            rec.image(1, f64::from(n), &stream);
         }
         rec.finish().unwrap();
         let whole = png_of(&stream);
@@ -1117,7 +1119,7 @@ mod tests {
             telemetry: Some(Dest::File("/dev/full".into())),
             ..Destinations::default()
         });
-        rec.event(Role::Operator, 1.0, &Event::AnswersLost);
+        rec.event(1, Role::Operator, 1.0, &Event::AnswersLost);
         assert!(rec.failed());
         let error = rec.finish().unwrap_err().to_string();
         assert!(error.starts_with("/dev/full"), "{error}");

@@ -10,7 +10,6 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use super::network::{HopEvent, NetObserver};
 use super::report::{FrameEvent, Observer};
 use super::{Event, PoseSample, Role};
 
@@ -57,22 +56,8 @@ impl<'a> Pacer<'a> {
 }
 
 impl Observer for Pacer<'_> {
-    fn frame(&mut self, e: &FrameEvent) {
+    fn frame(&mut self, e: &FrameEvent<'_>) {
         self.wait_for(e.t_received_s.or(e.t_sent_s).unwrap_or(0.0));
-    }
-
-    fn pose(&mut self, pose: &PoseSample) {
-        self.wait_for(pose.t_s);
-    }
-
-    fn event(&mut self, _end: Role, t_s: f64, _event: &Event) {
-        self.wait_for(t_s);
-    }
-}
-
-impl NetObserver for Pacer<'_> {
-    fn hop(&mut self, e: &HopEvent) {
-        self.wait_for(e.t_received_s.unwrap_or(e.t_sent_s));
     }
 
     fn pose(&mut self, _vehicle: u8, pose: &PoseSample) {

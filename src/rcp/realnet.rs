@@ -20,13 +20,14 @@
 //! - A vehicle ([`Role::Rov`]) runs its [`RovEnd`] at its address with a heartbeat timeout of
 //!   max(5 s, 3 cycles); its answers go out on the interface towards the operator.
 //!
-//! Each node knows only its own half, as in [`super::realtime`]: the figures are the
+//! The loop is the one driver's ([`super::driver::run`] over the node's [`PortAir`]). Each
+//! node knows only its own half, as in [`super::realtime`]: the figures are the
 //! simulation's [`NetworkMetrics`] with `measured_by` the node's role, per vehicle (the
 //! operator: every vehicle it polls, with the round trip of its slots; a vehicle: itself;
 //! no one-way delays) and for the node itself (what its router did; `forwarded_back` stays 0:
 //! a node cannot tell which node transmitted the copy it heard). `media` is empty: the medium
-//! is outside (modems, `link-sim`). `--events` rows ([`FrameRows`]) carry SRC, DST and the
-//! medium of every frame the node sent or heard.
+//! is outside (modems, `link-sim`). `--events` rows carry SRC, DST and the medium of every
+//! frame the node sent (fate `sent`) or heard (fate `received`, with what its router did).
 //!
 //! No-panic, no-hang contract: any bytes on any endpoint are routed or dropped, never a panic;
 //! every wait ends at the next slot, the next vehicle step or 0.2 s at most (so a stop is seen
@@ -35,27 +36,17 @@
 
 use std::collections::BTreeMap;
 use std::sync::atomic::AtomicBool;
-use std::time::{Duration, Instant};
 
 use super::Role;
-use super::harness::{OperatorEnd, Out, RovEnd, Tally};
-use super::network::{NetObserver, NetworkMetrics, NodeMetrics, Tagged};
+use super::driver::{self, Ended, PortAir, Setup, VehicleEnds};
+use super::network::NetworkMetrics;
 use super::orders::{OrderSource, Script, split_by_vehicle};
-use super::realtime::{Clock, DRAIN_WAIT, Ended, RoundTrips, is_late, sent_event, wake_at};
-use super::report::{Direction, FrameEvent, Metrics, kind_of};
-use super::routing::{BROADCAST, Decision, Dropped, MAX_VEHICLE, Router};
-use super::rov::{Rov, RovConfig};
+use super::report::Observer;
+use super::routing::{MAX_VEHICLE, Router};
 use super::rules;
 use super::scenario::Scenario;
 use super::session::{Parts, SessionConfig};
-use crate::cli::output::Dest;
-use crate::cli::rows::{RowFormat, RowWriter};
-use crate::gll::{Endpoint, GllError, Received};
-use crate::io::IoError;
-use crate::link::SimTime;
-
-/// The longest a node with two endpoints waits on one before reading the other.
-pub const SLICE: Duration = Duration::from_millis(5);
+use crate::gll::Endpoint;
 
 /// The most interfaces a node has (`--port`, `--port2`).
 pub const MAX_INTERFACES: usize = 2;
@@ -174,100 +165,10 @@ fn list(addresses: &[u8]) -> String {
     names.join(", ")
 }
 
-/// Counts what the router decided for a frame heard (`forwarded_back` needs the copy's
-/// transmitter, which a node in real time does not know: it stays 0).
-fn count(node: &mut NodeMetrics, decision: &Decision) {
-    node.frames_heard += 1;
-    node.frames_delivered += u64::from(decision.deliver);
-    node.frames_forwarded += decision.forward_on.len() as u64;
-    match decision.dropped {
-        Some(Dropped::Own) => node.own_dropped += 1,
-        Some(Dropped::Duplicate) => node.duplicates_dropped += 1,
-        Some(Dropped::OffPath) => node.off_path_dropped += 1,
-        Some(Dropped::Malformed) | None => {}
-    }
-}
-
-/// The columns `--events` has in a network node after the single-vehicle ones
-/// ([`super::outputs::EVENTS_HEADER`]): the frame's SRC and DST, and the medium (interface) it
-/// went out or came in on.
-pub const NODE_EVENTS_EXTRA: [&str; 3] = ["src", "dst", "medium"];
-
-/// A network node's `--events`: one row per frame it sent or heard, with its addresses
-/// ([`super::outputs::EVENTS_HEADER`], then [`NODE_EVENTS_EXTRA`]; fate `sent`, `received`, `forwarded`, or why the router dropped
-/// it: `own`, `duplicate`, `off_path`, `malformed`). The first write error is kept and ends
-/// the run ([`FrameRows::failed`]); [`FrameRows::finish`] returns it.
-pub struct FrameRows {
-    rows: RowWriter,
-    error: Option<IoError>,
-}
-
-impl FrameRows {
-    /// Rows to `dest`, which appears with the first.
-    pub fn new(dest: Dest) -> FrameRows {
-        let header: Vec<&str> = (super::outputs::EVENTS_HEADER.iter())
-            .chain(&NODE_EVENTS_EXTRA)
-            .copied()
-            .collect();
-        FrameRows {
-            rows: RowWriter::new(dest, RowFormat::Csv, &header),
-            error: None,
-        }
-    }
-
-    /// True once a row could not be written.
-    pub fn failed(&self) -> bool {
-        self.error.is_some()
-    }
-
-    /// Completes the output: the first write error, if any.
-    pub fn finish(self) -> Result<(), IoError> {
-        match self.error {
-            Some(error) => Err(error),
-            None => self.rows.finish(),
-        }
-    }
-
-    fn row(&mut self, e: &FrameEvent, addresses: Option<(u8, u8)>, medium: &str) {
-        if self.error.is_some() {
-            return;
-        }
-        let (src, dst) = addresses.map_or((String::new(), String::new()), |(s, d)| {
-            (s.to_string(), d.to_string())
-        });
-        let mut row = super::outputs::event_fields(e).to_vec();
-        row.extend([src, dst, medium.to_string()]);
-        if let Err(error) = self.rows.row(&row) {
-            self.error = Some(error);
-        }
-    }
-}
-
-/// Where a node's outputs go: the per-vehicle outputs and its frame rows.
-pub struct NodeOutputs<'a> {
-    /// Images, poses, events and warnings, by vehicle.
-    pub observer: &'a mut dyn NetObserver,
-    /// `--events`, if asked for.
-    pub frames: Option<&'a mut FrameRows>,
-}
-
-impl NodeOutputs<'_> {
-    fn failed(&self) -> bool {
-        self.observer.failed() || self.frames.as_ref().is_some_and(|f| f.failed())
-    }
-
-    fn frame(&mut self, e: &FrameEvent, addresses: Option<(u8, u8)>, medium: &str) {
-        if let Some(frames) = self.frames.as_mut() {
-            frames.row(e, addresses, medium);
-        }
-        self.observer.node_frame(e);
-    }
-}
-
 /// Runs node `network.address` in `role` over `endpoints` (interface k on `endpoints[k]`)
 /// until `config.duration_s` has passed, `stop` is set or an endpoint fails. As
-/// [`super::realtime::run`], the link model, seed and buoy of `config` are not used; the
-/// operator takes its orders from `config.script`, each vehicle's waypoints of the network
+/// [`super::realtime::run`], the link model, seed and buoy of `config` are not used (its image
+/// settings are); the operator takes its orders from each vehicle's waypoints of the network
 /// and `parts.orders` (split among the vehicles); a vehicle is moved by `parts.drive` and
 /// takes pictures with `parts.camera`.
 pub fn run(
@@ -277,79 +178,47 @@ pub fn run(
     parts: Parts,
     endpoints: &mut [Box<dyn Endpoint>],
     stop: &AtomicBool,
-    outputs: &mut NodeOutputs<'_>,
+    observer: &mut dyn Observer,
 ) -> (NetworkMetrics, Ended) {
-    let clock = Clock::start();
-    let scenario = &network.scenario;
-    let mut node = Node {
-        endpoints,
-        media: scenario
-            .interfaces(network.address)
-            .into_iter()
-            .filter_map(|k| scenario.media.get(k).map(|m| m.name.clone()))
-            .collect(),
-        next_endpoint: 0,
-        router: network.router(),
-        counts: NodeMetrics::default(),
-        clock: &clock,
-        end: SimTime::from_secs_f64(config.duration_s),
-        stop,
+    let mut scenario = network.scenario.clone();
+    scenario.settings = config.settings;
+    let address = network.address;
+    let vehicles = match role {
+        Role::Operator => operator_ends(&scenario, parts),
+        Role::Rov => BTreeMap::from([(
+            address,
+            VehicleEnds {
+                operator: None,
+                rov: Some(driver::rov_end(
+                    &scenario,
+                    address,
+                    parts.drive,
+                    parts.camera,
+                )),
+            },
+        )]),
     };
-    let mut vehicles = Vec::new();
-    let outcome = match role {
-        Role::Operator => {
-            vehicles = operator_ends(network, parts);
-            node.operator(&mut vehicles, outputs)
-        }
-        Role::Rov => {
-            let rov_config = RovConfig {
-                address: network.address,
-                heartbeat_timeout_s: network.timeout_s(),
-                settings: config.settings,
-                ..RovConfig::default()
-            };
-            let rov = RovEnd::new(Rov::with(rov_config, parts.drive, parts.camera));
-            vehicles.push(Polled::new(network.address, None));
-            match vehicles.first_mut() {
-                Some(own) => node.rov(rov, own, outputs),
-                None => Ok(false),
-            }
-        }
-    };
-    let ended = match outcome {
-        Ok(true) => Ended::Done,
-        Ok(false) => Ended::Stopped,
-        Err(error) => Ended::Failed(error),
-    };
-    let duration_s = clock.now().min(node.end).as_secs_f64();
-    let metrics = NetworkMetrics {
+    let endpoints = endpoints
+        .iter_mut()
+        .map(|e| &mut **e as &mut dyn Endpoint)
+        .collect();
+    let mut air = PortAir::new(&scenario, address, endpoints);
+    let setup = Setup {
+        scenario: &scenario,
+        nodes: vec![address],
+        vehicles,
         measured_by: role.name(),
-        duration_s,
-        interrupted: None,
-        seed: scenario.seed,
-        cycle_s: network.cycle_s(),
-        slots_s: scenario
-            .cycle()
-            .iter()
-            .map(|s| (s.address.to_string(), s.length_s))
-            .collect(),
-        vehicles: vehicles
-            .into_iter()
-            .map(|v| (v.address.to_string(), v.finish(role, duration_s)))
-            .collect(),
-        nodes: [(network.address.to_string(), node.counts)].into(),
-        media: BTreeMap::new(),
+        duration_s: config.duration_s,
+        duplicate_window_s: rules::duplicate_window_s(scenario.cycle_s()),
     };
-    (metrics, ended)
+    driver::run(setup, &mut air, stop, observer)
 }
 
-/// The operator's ends, one per vehicle of the network, each at its slot of the cycle.
-fn operator_ends(network: &Network, parts: Parts) -> Vec<Polled> {
-    let scenario = &network.scenario;
+/// The operator's ends, one per vehicle of the network, each at its slot of the cycle, each
+/// showing its vehicle's statuses as poses.
+fn operator_ends(scenario: &Scenario, parts: Parts) -> BTreeMap<u8, VehicleEnds> {
     let vehicles = scenario.vehicles();
     let shared = split_by_vehicle(parts.orders, &vehicles);
-    let cycle_s = network.cycle_s().max(super::session::MIN_IPG_S);
-    let slots = scenario.cycle();
     vehicles
         .iter()
         .zip(shared)
@@ -359,311 +228,15 @@ fn operator_ends(network: &Network, parts: Parts) -> Vec<Polled> {
                 .map_or(&[][..], |n| n.waypoints.as_slice());
             let sources: Vec<Box<dyn OrderSource>> =
                 vec![Box::new(Script::new(&[], waypoints)), tap];
-            let start_s = slots
-                .iter()
-                .find(|s| s.address == address)
-                .map_or(0.0, |s| s.start_s);
-            let mut end = OperatorEnd::new(address, cycle_s, sources)
-                .first_slot_at(SimTime::from_secs_f64(start_s));
-            end.answers_timeout_s = network.timeout_s();
+            let mut end = driver::operator_end(scenario, address, sources);
             end.status_poses = true;
-            Polled::new(address, Some(end))
+            let ends = VehicleEnds {
+                operator: Some(end),
+                rov: None,
+            };
+            (address, ends)
         })
         .collect()
-}
-
-/// One vehicle as this node sees it: its operator end (at the operator), its counters.
-struct Polled {
-    address: u8,
-    end: Option<OperatorEnd>,
-    tally: Tally,
-    /// Operator to ROV, ROV to operator.
-    directions: [Direction; 2],
-    round_trips: RoundTrips,
-}
-
-impl Polled {
-    fn new(address: u8, end: Option<OperatorEnd>) -> Polled {
-        Polled {
-            address,
-            end,
-            tally: Tally::new(false),
-            directions: [Direction::default(), Direction::default()],
-            round_trips: RoundTrips::default(),
-        }
-    }
-
-    fn finish(self, role: Role, duration_s: f64) -> Metrics {
-        let mut metrics = self.tally.finish(role.name(), duration_s);
-        metrics.operator_to_rov = self.directions[0].metrics(duration_s);
-        metrics.rov_to_operator = self.directions[1].metrics(duration_s);
-        self.round_trips.fill(&mut metrics);
-        metrics
-    }
-}
-
-/// Runs `f` with an [`Out`] counting into `tally` and showing on `outputs` as `vehicle`'s.
-fn with_out<R>(
-    vehicle: u8,
-    tally: &mut Tally,
-    outputs: &mut NodeOutputs<'_>,
-    f: impl FnOnce(&mut Out<'_>) -> R,
-) -> R {
-    let mut tagged = Tagged {
-        vehicle,
-        inner: &mut *outputs.observer,
-    };
-    f(&mut Out {
-        tally,
-        observer: &mut tagged,
-    })
-}
-
-/// The direction of a frame from `src` to `dst`: towards the operator or away from it.
-fn direction_of(src: u8, dst: u8) -> &'static str {
-    if dst == 0 && src != 0 {
-        "rov_to_operator"
-    } else {
-        "operator_to_rov"
-    }
-}
-
-/// The event row of a frame heard at `t` and what the router made of it.
-fn heard_event(bytes: &[u8], t: SimTime, decision: &Decision) -> FrameEvent {
-    let (src, dst) = decision.addresses.unwrap_or((BROADCAST, BROADCAST));
-    let fate = match (
-        decision.deliver,
-        decision.forward_on.is_empty(),
-        decision.dropped,
-    ) {
-        (true, _, _) => "received",
-        (false, false, _) => "forwarded",
-        (false, true, Some(dropped)) => dropped.as_str(),
-        (false, true, None) => "dropped",
-    };
-    FrameEvent {
-        direction: direction_of(src, dst),
-        kind: kind_of(bytes),
-        bytes: bytes.len(),
-        t_sent_s: None,
-        t_received_s: Some(t.as_secs_f64()),
-        fate,
-    }
-}
-
-/// One node's endpoints, router and clock.
-struct Node<'a> {
-    endpoints: &'a mut [Box<dyn Endpoint>],
-    /// The medium of each interface, by name.
-    media: Vec<String>,
-    /// The endpoint read first next time (two endpoints are read in turn).
-    next_endpoint: usize,
-    router: Router,
-    counts: NodeMetrics,
-    clock: &'a Clock,
-    end: SimTime,
-    stop: &'a AtomicBool,
-}
-
-impl Node<'_> {
-    fn stopped(&self, outputs: &NodeOutputs<'_>) -> bool {
-        self.stop.load(std::sync::atomic::Ordering::SeqCst) || outputs.failed()
-    }
-
-    fn medium(&self, k: usize) -> &str {
-        self.media.get(k).map_or("", String::as_str)
-    }
-
-    /// Sends a frame this node originates for `dst` at `t`, and shows it.
-    fn originate(
-        &mut self,
-        t: SimTime,
-        dst: u8,
-        frame: &[u8],
-        direction: &'static str,
-        outputs: &mut NodeOutputs<'_>,
-    ) -> Result<(), GllError> {
-        let k = self.router.interface_to(dst);
-        if let Some(endpoint) = self.endpoints.get_mut(k) {
-            endpoint.send(frame)?;
-        }
-        self.router.sent(t, frame);
-        let addresses = Some((self.router.address(), dst));
-        outputs.frame(&sent_event(direction, frame, t), addresses, self.medium(k));
-        Ok(())
-    }
-
-    /// The next frame on any endpoint until `deadline`, with the interface it came on.
-    fn receive(&mut self, deadline: Instant) -> Result<Option<(usize, Received)>, GllError> {
-        let n = self.endpoints.len();
-        if n <= 1 {
-            return match self.endpoints.first_mut() {
-                Some(endpoint) => Ok(endpoint.receive(deadline)?.map(|r| (0, r))),
-                None => {
-                    std::thread::sleep(deadline.saturating_duration_since(Instant::now()));
-                    Ok(None)
-                }
-            };
-        }
-        loop {
-            for _ in 0..n {
-                let k = self.next_endpoint % n;
-                self.next_endpoint = (k + 1) % n;
-                let slice = deadline.min(Instant::now() + SLICE);
-                if let Some(endpoint) = self.endpoints.get_mut(k)
-                    && let Some(received) = endpoint.receive(slice)?
-                {
-                    // The same endpoint first next time: what it still holds comes at once.
-                    self.next_endpoint = k;
-                    return Ok(Some((k, received)));
-                }
-            }
-            if Instant::now() >= deadline {
-                return Ok(None);
-            }
-        }
-    }
-
-    /// Routes a frame heard at `t` on interface `k`: forwards it at once where the router
-    /// says, shows it, and returns the decision.
-    fn route(
-        &mut self,
-        t: SimTime,
-        k: usize,
-        bytes: &[u8],
-        outputs: &mut NodeOutputs<'_>,
-    ) -> Result<Decision, GllError> {
-        let decision = self.router.decide(t, bytes, k);
-        count(&mut self.counts, &decision);
-        for &out in &decision.forward_on {
-            if let Some(endpoint) = self.endpoints.get_mut(out) {
-                endpoint.send(bytes)?;
-            }
-        }
-        let event = heard_event(bytes, t, &decision);
-        outputs.frame(&event, decision.addresses, self.medium(k));
-        Ok(decision)
-    }
-
-    /// The operator's loop over every vehicle's end; `Ok(true)` when the duration ran out,
-    /// `Ok(false)` when stopped.
-    fn operator(
-        &mut self,
-        vehicles: &mut [Polled],
-        outputs: &mut NodeOutputs<'_>,
-    ) -> Result<bool, GllError> {
-        let clock = self.clock;
-        let mut drained = false;
-        loop {
-            if self.stopped(outputs) {
-                return Ok(false);
-            }
-            let now = clock.now();
-            if now >= self.end {
-                return Ok(true);
-            }
-            let mut behind = false;
-            for vehicle in vehicles.iter_mut() {
-                let Some(end) = vehicle.end.as_mut() else {
-                    continue;
-                };
-                let late = is_late(now, end.slot_at());
-                if end.slot_at() <= now && late && !drained {
-                    // Late for the slot: what arrived meanwhile is read first, so a late
-                    // answer is not timed against the new slot's frame.
-                    behind = true;
-                    continue;
-                }
-                let polled = with_out(vehicle.address, &mut vehicle.tally, outputs, |out| {
-                    end.poll(now, out)
-                });
-                if let Some((frame, _)) = polled {
-                    let direction = "operator_to_rov";
-                    self.originate(now, vehicle.address, &frame, direction, outputs)?;
-                    vehicle.directions[0].sent();
-                    vehicle.round_trips.sent(now);
-                }
-            }
-            drained = false;
-            let wake = vehicles
-                .iter()
-                .filter_map(|v| v.end.as_ref().map(OperatorEnd::next_at))
-                .min()
-                .unwrap_or(self.end)
-                .min(self.end);
-            let mut deadline = wake_at(clock, wake);
-            if behind {
-                drained = true;
-                deadline = Instant::now() + DRAIN_WAIT;
-            }
-            let Some((k, received)) = self.receive(deadline)? else {
-                continue;
-            };
-            if received.damaged {
-                continue;
-            }
-            let t = clock.at(received.at);
-            let decision = self.route(t, k, &received.bytes, outputs)?;
-            let Some((src, _)) = decision.addresses.filter(|_| decision.deliver) else {
-                continue;
-            };
-            let Some(vehicle) = vehicles.iter_mut().find(|v| v.address == src) else {
-                continue;
-            };
-            vehicle.directions[1].delivered(t, received.bytes.len(), None);
-            vehicle.round_trips.answered(t);
-            if let Some(end) = vehicle.end.as_mut() {
-                with_out(vehicle.address, &mut vehicle.tally, outputs, |out| {
-                    end.receive(t, &received.bytes, out);
-                });
-            }
-        }
-    }
-
-    /// A vehicle's loop; `Ok(true)` when the duration ran out, `Ok(false)` when stopped.
-    fn rov(
-        &mut self,
-        mut rov: RovEnd,
-        own: &mut Polled,
-        outputs: &mut NodeOutputs<'_>,
-    ) -> Result<bool, GllError> {
-        let clock = self.clock;
-        let mut last = SimTime::ZERO;
-        loop {
-            if self.stopped(outputs) {
-                return Ok(false);
-            }
-            let now = clock.now().max(last);
-            if now >= self.end {
-                return Ok(true);
-            }
-            with_out(own.address, &mut own.tally, outputs, |out| {
-                rov.poll(now, out)
-            });
-            last = now;
-            let deadline = wake_at(clock, rov.next_at().min(self.end));
-            let Some((k, received)) = self.receive(deadline)? else {
-                continue;
-            };
-            if received.damaged {
-                continue;
-            }
-            let t = clock.at(received.at).max(last);
-            let decision = self.route(t, k, &received.bytes, outputs)?;
-            if !decision.deliver {
-                continue;
-            }
-            own.directions[0].delivered(t, received.bytes.len(), None);
-            let reply = with_out(own.address, &mut own.tally, outputs, |out| {
-                rov.receive(t, &received.bytes, None, out)
-            });
-            if let Some(reply) = reply {
-                let sent_at = clock.now().max(t);
-                self.originate(sent_at, 0, &reply, "rov_to_operator", outputs)?;
-                own.directions[1].sent();
-            }
-        }
-    }
 }
 
 #[cfg(test)]
@@ -672,8 +245,11 @@ mod tests {
     use std::sync::mpsc::{Receiver, Sender, channel};
 
     use super::*;
-    use crate::rcp::network::QuietNet;
+    use crate::gll::{GllError, Received};
+    use crate::link::SimTime;
+    use crate::rcp::report::Quiet;
     use crate::rcp::session::Waypoint;
+    use std::time::Instant;
 
     /// The issue's three-node network, with short slots (the in-memory bus has no delay).
     const THREE: &str = r#"{"nodes":[{"address":0,"role":"operator","position":[0,0,0]},
@@ -806,10 +382,6 @@ mod tests {
                     )]);
                     parts.orders.push(Box::new(console));
                     let mut endpoints: Vec<Box<dyn Endpoint>> = vec![Box::new(Bus { rx, peers })];
-                    let mut outputs = NodeOutputs {
-                        observer: &mut QuietNet,
-                        frames: None,
-                    };
                     let (metrics, ended) = run(
                         role,
                         &config,
@@ -817,7 +389,7 @@ mod tests {
                         parts,
                         &mut endpoints,
                         &stop,
-                        &mut outputs,
+                        &mut Quiet,
                     );
                     assert!(matches!(ended, Ended::Done), "{ended:?}");
                     metrics

@@ -1,272 +1,25 @@
-//! A whole teleoperation session in virtual time: operator, link and ROV in one process.
-//!
-//! The operator is side A of a [`Link`], the ROV side B. The loop takes the earliest of: a link
-//! event, the operator's next slot, the ROV's next vehicle step, the next scripted joystick
-//! change or waypoint; the ROV answers a delivered operator frame at the instant it arrives. The
-//! ROV's distance to the buoy (the operator's modem) sets the link's distance at every vehicle
-//! step, so the range model cuts the link when the vehicle strays.
+//! A whole single-vehicle teleoperation session in virtual time: operator, link and ROV in one
+//! process, as a one-vehicle network ([`SessionConfig`] as a [`Scenario`]: the operator at the
+//! buoy, the vehicle at its start, one medium with the session's model, the IPG as the
+//! vehicle's slot) run by the one driver ([`super::driver`]). The vehicle's distance to the
+//! buoy sets the medium's range at every vehicle step, so the range model cuts the link when
+//! the vehicle strays; the ROV answers a delivered operator frame at the instant it arrives.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::collections::BTreeMap;
+use std::sync::atomic::AtomicBool;
 
-use std::collections::HashMap;
+use super::Role;
+use super::driver::{self, VehicleEnds};
+use super::network::{self, NetworkError, NetworkMetrics};
+use super::report::{Metrics, Observer, SINGLE_MEDIUM};
+use super::routing::Routes;
+use super::scenario::{MediumSpec, Node, Scenario};
+use crate::link::ModelError;
 
-use super::ImageSettings;
-use super::harness::{OperatorEnd, Out, RovEnd, Tally};
-use super::operator::{Joystick, SlotContent};
-use super::report::{Direction, FrameEvent, Metrics, Observer, STOPPED, kind_of};
-use super::rov::{Rov, RovConfig};
-use super::rules;
-use crate::debt;
-use crate::link::{Distance, Fate, Link, Model, ModelError, Side, SimTime};
-
-/// A GoTo order sent at a time.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Waypoint {
-    /// When the operator queues it, s.
-    pub t_s: f64,
-    /// Target, NED m.
-    pub position_m: [f64; 3],
-    /// Heading, degrees.
-    pub heading_deg: f64,
-}
-
-/// A joystick change at a time.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct JoystickChange {
-    /// When, s.
-    pub t_s: f64,
-    /// The new state.
-    pub joystick: Joystick,
-}
-
-/// Everything a simulated session needs.
-#[derive(Debug, Clone)]
-pub struct SessionConfig {
-    /// The link model (both directions).
-    pub model: Model,
-    /// Seed of the link's random streams.
-    pub seed: u64,
-    /// Inter-packet gap, s.
-    pub ipg_s: f64,
-    /// Length of the session, s.
-    pub duration_s: f64,
-    /// The operator modem's position, NED m.
-    pub buoy_m: [f64; 3],
-    /// The ROV's initial position, NED m.
-    pub start_m: [f64; 3],
-    /// Joystick changes, sorted by time.
-    pub script: Vec<JoystickChange>,
-    /// GoTo orders, sorted by time.
-    pub waypoints: Vec<Waypoint>,
-    /// Image settings at the start.
-    pub settings: ImageSettings,
-    /// The camera's pictures, cycled.
-    pub images: Vec<debt::Image>,
-}
-
-/// The shortest inter-packet gap, s (a slot shorter than a millisecond carries no frame).
-pub const MIN_IPG_S: f64 = 1e-3;
-/// The longest inter-packet gap, s (10 minutes).
-pub const MAX_IPG_S: f64 = 600.0;
-/// The longest session, s (a week).
-pub const MAX_DURATION_S: f64 = 7.0 * 86_400.0;
-/// The farthest a buoy or a start position may be from the site's origin along any axis, m: no
-/// real site is 100 km across.
-pub const MAX_POSITION_M: f64 = 100_000.0;
-/// The farthest a waypoint may be along any axis, m: what a GoTo order carries (i16 cm).
-pub const MAX_WAYPOINT_M: f64 = 327.67;
-/// The smallest encoded image, bytes.
-pub const MIN_IMAGE_BYTES: u16 = 16;
-
-/// A session setting out of its range: `what`, what it must be, what it is.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{what}: expected {expected}, found {found}")]
-pub struct ConfigError {
-    /// The setting, e.g. `IPG` or `waypoint 3`.
-    pub what: String,
-    /// Its range, with units.
-    pub expected: String,
-    /// The value given, with units.
-    pub found: String,
-}
-
-fn out_of_range(
-    what: impl Into<String>,
-    expected: impl Into<String>,
-    found: String,
-) -> ConfigError {
-    ConfigError {
-        what: what.into(),
-        expected: expected.into(),
-        found,
-    }
-}
-
-/// A number as a user would write it: `1e300`, not 301 digits.
-fn number(v: f64) -> String {
-    if v == 0.0 || !v.is_finite() || (1e-4..1e15).contains(&v.abs()) {
-        format!("{v}")
-    } else {
-        format!("{v:e}")
-    }
-}
-
-/// Checks a position: finite, at most `limit_m` from the origin along each axis.
-fn check_position(
-    what: impl Into<String>,
-    position_m: [f64; 3],
-    limit_m: f64,
-) -> Result<(), ConfigError> {
-    if position_m
-        .iter()
-        .all(|v| v.is_finite() && v.abs() <= limit_m)
-    {
-        return Ok(());
-    }
-    let [x, y, z] = position_m;
-    Err(out_of_range(
-        what,
-        format!("X,Y,Z each in -{limit_m} m ..= {limit_m} m"),
-        format!("{},{},{} m", number(x), number(y), number(z)),
-    ))
-}
-
-/// Checks a scripted time: finite, 0 ..= [`MAX_DURATION_S`], not before the previous one.
-fn check_time(what: impl Into<String>, t_s: f64, previous_s: f64) -> Result<(), ConfigError> {
-    if t_s.is_finite() && (0.0..=MAX_DURATION_S).contains(&t_s) && t_s >= previous_s {
-        return Ok(());
-    }
-    Err(out_of_range(
-        what,
-        format!("a time in {previous_s} s ..= {MAX_DURATION_S} s (sorted)"),
-        format!("{} s", number(t_s)),
-    ))
-}
-
-impl JoystickChange {
-    /// Checks the time (0 ..= a week) and each axis (-100 % ..= 100 %); `what` names it.
-    pub fn check(&self, what: impl Into<String>) -> Result<(), ConfigError> {
-        let what = what.into();
-        check_time(what.clone(), self.t_s, 0.0)?;
-        let j = self.joystick;
-        for v in [j.vx, j.vy, j.vz, j.vyaw] {
-            if !(v.is_finite() && v.abs() <= 100.0) {
-                return Err(out_of_range(
-                    what,
-                    "vx,vy,vz,vyaw each in -100 % ..= 100 % of full thrust",
-                    format!("{} %", number(v)),
-                ));
-            }
-        }
-        Ok(())
-    }
-}
-
-impl Waypoint {
-    /// Checks the time (0 ..= a week), the target (within a GoTo order's
-    /// ±[`MAX_WAYPOINT_M`]) and the heading (finite); `what` names it.
-    pub fn check(&self, what: impl Into<String>) -> Result<(), ConfigError> {
-        let what = what.into();
-        check_time(what.clone(), self.t_s, 0.0)?;
-        check_position(what.clone(), self.position_m, MAX_WAYPOINT_M)?;
-        if !self.heading_deg.is_finite() {
-            return Err(out_of_range(
-                what,
-                "a finite heading in degrees",
-                format!("{} degrees", self.heading_deg),
-            ));
-        }
-        Ok(())
-    }
-}
-
-impl SessionConfig {
-    /// Checks every setting against its range; the first one out of range is the error. The
-    /// model is checked when the link is built.
-    pub fn validate(&self) -> Result<(), ConfigError> {
-        if !(self.duration_s.is_finite()
-            && self.duration_s > 0.0
-            && self.duration_s <= MAX_DURATION_S)
-        {
-            return Err(out_of_range(
-                "duration",
-                format!("more than 0 s, at most {MAX_DURATION_S} s (a week)"),
-                format!("{} s", number(self.duration_s)),
-            ));
-        }
-        check_position("buoy position", self.buoy_m, MAX_POSITION_M)?;
-        check_position("start position", self.start_m, MAX_POSITION_M)?;
-        if !(self.ipg_s.is_finite() && (MIN_IPG_S..=MAX_IPG_S).contains(&self.ipg_s)) {
-            return Err(out_of_range(
-                "IPG",
-                "1 ms ..= 10 min",
-                format!("{} ms", number(self.ipg_s * 1e3)),
-            ));
-        }
-        let mut previous_s = 0.0;
-        for (k, change) in self.script.iter().enumerate() {
-            let what = format!("joystick change {}", k + 1);
-            check_time(what.clone(), change.t_s, previous_s)?;
-            previous_s = change.t_s;
-            change.check(what)?;
-        }
-        let mut previous_s = 0.0;
-        for (k, waypoint) in self.waypoints.iter().enumerate() {
-            let what = format!("waypoint {}", k + 1);
-            check_time(what.clone(), waypoint.t_s, previous_s)?;
-            previous_s = waypoint.t_s;
-            waypoint.check(what)?;
-        }
-        let settings = &self.settings;
-        let max_trunk = crate::wire::rov::MAX_TRUNK_BYTES;
-        if settings.trunk_bytes == 0 || usize::from(settings.trunk_bytes) > max_trunk {
-            return Err(out_of_range(
-                "trunk size",
-                format!("1 ..= {max_trunk} bytes (what a ROV frame carries)"),
-                format!("{} bytes", settings.trunk_bytes),
-            ));
-        }
-        if settings.size_bytes < MIN_IMAGE_BYTES {
-            return Err(out_of_range(
-                "image size",
-                format!("{MIN_IMAGE_BYTES} ..= 65535 bytes"),
-                format!("{} bytes", settings.size_bytes),
-            ));
-        }
-        for (k, image) in self.images.iter().enumerate() {
-            let side = debt::MAX_SIDE;
-            if image.width == 0
-                || image.height == 0
-                || image.width > side
-                || image.height > side
-                || image.data.len() != image.width * image.height * image.channels
-            {
-                return Err(out_of_range(
-                    format!("camera picture {}", k + 1),
-                    format!("1x1 ..= {side}x{side} pixels (what DEBT holds)"),
-                    format!("{}x{} pixels", image.width, image.height),
-                ));
-            }
-        }
-        Ok(())
-    }
-}
-
-/// The IPG wire.md derives from a model for a session, the one-hop case of a network's slot
-/// ([`rules::hop_s`] out, its guard, and back): the operator's frame, the ROV's frame with a
-/// trunk of `settings.trunk_bytes`, at the distance between `start_m` and `buoy_m`.
-pub fn auto_ipg_for(
-    model: &Model,
-    settings: &ImageSettings,
-    start_m: [f64; 3],
-    buoy_m: [f64; 3],
-) -> f64 {
-    let distance_m = crate::geometry::distance_m(start_m, buoy_m);
-    let rov_frame_bytes = rules::rov_frame_bytes(settings.trunk_bytes);
-    rules::hop_s(model, rules::OPERATOR_FRAME_BYTES, distance_m)
-        + rules::guard_s(model)
-        + rules::hop_s(model, rov_frame_bytes, distance_m)
-}
+pub use super::config::{
+    ConfigError, JoystickChange, MAX_DURATION_S, MAX_IPG_S, MAX_POSITION_M, MAX_WAYPOINT_M,
+    MIN_IMAGE_BYTES, MIN_IPG_S, SessionConfig, Waypoint, auto_ipg_for,
+};
 
 /// Why a session could not run.
 #[derive(Debug, thiserror::Error)]
@@ -305,21 +58,68 @@ impl Parts {
         }
     }
 
-    /// The two ends these parts make for `config`.
-    pub(crate) fn ends(self, config: &SessionConfig) -> (OperatorEnd, RovEnd) {
-        let timeout_s = rules::link_timeout_s(config.ipg_s);
-        let rov_config = RovConfig {
-            settings: config.settings,
-            heartbeat_timeout_s: timeout_s,
-            ..RovConfig::default()
-        };
-        let mut operator = OperatorEnd::new(rov_config.address, config.ipg_s, self.orders);
-        operator.answers_timeout_s = timeout_s;
-        (
-            operator,
-            RovEnd::new(Rov::with(rov_config, self.drive, self.camera)),
-        )
+    /// The ends these parts make in `scenario` for `vehicle`: the operator's (unless `role`
+    /// is the ROV's), the vehicle's (unless it is the operator's); both when `role` is none
+    /// (a simulation).
+    pub fn ends(self, scenario: &Scenario, vehicle: u8, role: Option<Role>) -> VehicleEnds {
+        VehicleEnds {
+            operator: (role != Some(Role::Rov))
+                .then(|| driver::operator_end(scenario, vehicle, self.orders)),
+            rov: (role != Some(Role::Operator))
+                .then(|| driver::rov_end(scenario, vehicle, self.drive, self.camera)),
+        }
     }
+}
+
+/// The address of a single session's vehicle.
+pub fn rov_address() -> u8 {
+    super::rov::RovConfig::default().address
+}
+
+/// `config` as a one-vehicle network: the operator at the buoy and the vehicle at its start,
+/// one medium ([`SINGLE_MEDIUM`]) with the session's model, no routes, and the vehicle's slot
+/// the IPG (so the cycle is the IPG).
+pub fn scenario(config: &SessionConfig) -> Scenario {
+    let rov = rov_address();
+    Scenario {
+        duration_s: config.duration_s,
+        seed: config.seed,
+        nodes: vec![
+            Node {
+                address: 0,
+                role: Role::Operator,
+                position_m: config.buoy_m,
+                waypoints: Vec::new(),
+                slot_s: None,
+            },
+            Node {
+                address: rov,
+                role: Role::Rov,
+                position_m: config.start_m,
+                waypoints: Vec::new(),
+                slot_s: Some(config.ipg_s),
+            },
+        ],
+        media: vec![MediumSpec {
+            name: SINGLE_MEDIUM.to_string(),
+            model: config.model.clone(),
+            nodes: vec![0, rov],
+        }],
+        routes: Routes::default(),
+        settings: config.settings,
+    }
+}
+
+/// The single vehicle's figures of a one-vehicle network's.
+pub fn single(mut metrics: NetworkMetrics) -> Metrics {
+    let mut m = metrics
+        .vehicles
+        .remove(&rov_address().to_string())
+        .unwrap_or_default();
+    m.measured_by = metrics.measured_by;
+    m.duration_s = metrics.duration_s;
+    m.interrupted = metrics.interrupted;
+    m
 }
 
 /// Runs a session after [`SessionConfig::validate`] with the config's own [`Parts`];
@@ -334,8 +134,9 @@ pub fn run(
 
 /// Runs a session after [`SessionConfig::validate`]; `observer` sees frames, images, poses and
 /// events as they happen. `stop` is checked at every event: once set, the run ends there, and
-/// the metrics cover the virtual time reached, with `interrupted` set to [`STOPPED`]. The run
-/// also ends early once the observer has [`failed`](Observer::failed).
+/// the metrics cover the virtual time reached, with `interrupted` set to
+/// [`super::report::STOPPED`]. The run also ends early once the observer has
+/// [`failed`](Observer::failed).
 pub fn run_with(
     config: &SessionConfig,
     parts: Parts,
@@ -343,121 +144,25 @@ pub fn run_with(
     stop: &AtomicBool,
 ) -> Result<Metrics, SessionError> {
     config.validate()?;
-    let mut link = Link::symmetric(config.model.clone(), config.seed, Distance::Fixed(1.0))?;
-    let (mut operator, mut rov) = parts.ends(config);
-    link.set_distance(rov.engine.state().distance_to(config.buoy_m));
-    let end = SimTime::from_secs_f64(config.duration_s);
-    let mut directions = [Direction::default(), Direction::default()];
-    let mut slot_orders: HashMap<u64, u64> = HashMap::new();
-    let mut tally = Tally::new(true);
-    // What each frame in flight is, by (sender, link sequence number): a lost frame's report
-    // no longer has its bytes.
-    let mut kinds: HashMap<(Side, u64), &'static str> = HashMap::new();
-    let (mut interrupted_at, mut failed_at) = (None, None);
-
-    loop {
-        let candidates = [
-            link.next_event_time(),
-            Some(operator.next_at()),
-            Some(rov.next_at()),
-        ];
-        let Some(t) = candidates.iter().flatten().min().copied() else {
-            break;
-        };
-        if t > end {
-            break;
-        }
-        if stop.load(Ordering::Relaxed) {
-            interrupted_at = Some(link.now());
-            break;
-        }
-        if observer.failed() {
-            failed_at = Some(link.now());
-            break;
-        }
-        let mut out = Out {
-            tally: &mut tally,
-            observer: &mut *observer,
-        };
-        if link.next_event_time() == Some(t) {
-            link.step();
-            while let Some(report) = link.pop_report() {
-                let from_operator = report.from == Side::A;
-                directions[usize::from(!from_operator)].record(&report);
-                let kind = if report.duplicate {
-                    kinds.get(&(report.from, report.seq)).copied()
-                } else {
-                    kinds.remove(&(report.from, report.seq))
-                };
-                let event = FrameEvent {
-                    direction: if from_operator {
-                        "operator_to_rov"
-                    } else {
-                        "rov_to_operator"
-                    },
-                    kind: kind.unwrap_or("raw"),
-                    bytes: report.len,
-                    t_sent_s: Some(report.t_offered.as_secs_f64()),
-                    t_received_s: report.t_rx.map(SimTime::as_secs_f64),
-                    fate: report.fate.as_str(),
-                };
-                out.observer.frame(&event);
-                // The order a slot carried is forgotten at its first report, whatever its fate
-                // (a lost slot's entry would otherwise stay for the whole session).
-                let order = if from_operator && !report.duplicate {
-                    slot_orders.remove(&report.seq)
-                } else {
-                    None
-                };
-                if report.fate != Fate::Delivered {
-                    continue;
-                }
-                if from_operator {
-                    if let Some(reply) = rov.receive(link.now(), &report.bytes, order, &mut out) {
-                        let kind = kind_of(&reply);
-                        let seq = link.offer(Side::B, reply);
-                        kinds.insert((Side::B, seq), kind);
-                    }
-                } else {
-                    operator.receive(link.now(), &report.bytes, &mut out);
-                }
-            }
-            continue;
-        }
-        link.advance(t);
-        if operator.next_at() == t {
-            if let Some((frame, content)) = operator.poll(t, &mut out) {
-                let kind = kind_of(&frame);
-                let seq = link.offer(Side::A, frame);
-                kinds.insert((Side::A, seq), kind);
-                if let SlotContent::Order(index) = content {
-                    slot_orders.insert(seq, index);
-                }
-            }
-            continue;
-        }
-        if rov.next_at() == t {
-            rov.poll(t, &mut out);
-            link.set_distance(rov.engine.state().distance_to(config.buoy_m));
-        }
+    let scenario = scenario(config);
+    let vehicle = rov_address();
+    let ends = BTreeMap::from([(vehicle, parts.ends(&scenario, vehicle, None))]);
+    match network::simulate(&scenario, ends, observer, stop) {
+        Ok(metrics) => Ok(single(metrics)),
+        Err(NetworkError::Model { error, .. }) => Err(SessionError::Model(error)),
     }
-    let duration_s = interrupted_at
-        .or(failed_at)
-        .map_or(config.duration_s, SimTime::as_secs_f64);
-    let mut metrics = tally.finish("simulation", duration_s);
-    if interrupted_at.is_some() {
-        metrics.interrupted = Some(STOPPED.to_string());
-    }
-    metrics.operator_to_rov = directions[0].metrics(duration_s);
-    metrics.rov_to_operator = directions[1].metrics(duration_s);
-    Ok(metrics)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::link::Model;
     use crate::link::model::JitterDistribution;
+    use crate::rcp::ImageSettings;
+    use crate::rcp::operator::Joystick;
     use crate::rcp::report::Quiet;
+    use crate::rcp::report::{FrameEvent, STOPPED};
+    use std::sync::atomic::Ordering;
 
     fn config(model: Model, duration_s: f64) -> SessionConfig {
         SessionConfig {
@@ -478,7 +183,7 @@ mod tests {
     struct Images(Vec<f64>);
 
     impl Observer for Images {
-        fn image(&mut self, t_s: f64, _stream: &[u8]) {
+        fn image(&mut self, _vehicle: u8, t_s: f64, _stream: &[u8]) {
             self.0.push(t_s);
         }
     }
@@ -581,7 +286,7 @@ mod tests {
     }
 
     impl Observer for StopAfter<'_> {
-        fn frame(&mut self, _event: &FrameEvent) {
+        fn frame(&mut self, _event: &FrameEvent<'_>) {
             self.frames += 1;
             if self.frames == self.after {
                 self.stop.store(true, Ordering::Relaxed);

@@ -15,13 +15,12 @@ use anyhow::Result;
 use rovlink::cli::output::{Kind, Outputs};
 use rovlink::cli::{progress, stop};
 use rovlink::io::{EXIT_CHECK_FAILED, EXIT_OK};
-use rovlink::rcp::harness::Tee;
 use rovlink::rcp::outputs::{
     Destinations, Recorder, check_images_out, summary, wall_clock_ns, write_metrics,
 };
 use rovlink::rcp::pace::Pacer;
 use rovlink::rcp::realtime::{self, Ended, Role};
-use rovlink::rcp::report::Observer;
+use rovlink::rcp::report::{Observer, Tee};
 use rovlink::rcp::session::{self, Parts, SessionConfig};
 use rovlink::rcp::{camera, script};
 use rovlink::say;

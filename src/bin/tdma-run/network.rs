@@ -8,9 +8,10 @@ use rovlink::cli::output::{Kind, Outputs};
 use rovlink::cli::{progress, stop};
 use rovlink::io::EXIT_OK;
 use rovlink::rcp::net_outputs::{NetDestinations, NetRecorder};
-use rovlink::rcp::network::{self, NetObserver, NetTee, NetworkMetrics};
+use rovlink::rcp::network::{self, NetworkMetrics};
 use rovlink::rcp::outputs::{summary, write_metrics};
 use rovlink::rcp::pace::Pacer;
+use rovlink::rcp::report::{FrameEvent, Observer, Tee};
 use rovlink::rcp::scenario::Scenario;
 use rovlink::rcp::{Event, PoseSample, Role, camera};
 use rovlink::say;
@@ -92,7 +93,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     let mut metrics = {
         let mut pacer = args.pace.map(|pace| Pacer::new(pace, stop::flag()));
         let mut both = Both(&mut recorder);
-        let mut observers = NetTee(Vec::new());
+        let mut observers = Tee(Vec::new());
         if let Some(pacer) = pacer.as_mut() {
             observers.0.push(pacer);
         }
@@ -160,9 +161,9 @@ pub(crate) fn network_summary(metrics: &NetworkMetrics) -> Vec<String> {
 /// The recorder, with warnings also on standard error.
 pub(crate) struct Both<'a>(pub(crate) &'a mut NetRecorder);
 
-impl NetObserver for Both<'_> {
-    fn hop(&mut self, event: &network::HopEvent) {
-        self.0.hop(event);
+impl Observer for Both<'_> {
+    fn frame(&mut self, event: &FrameEvent<'_>) {
+        self.0.frame(event);
     }
 
     fn image(&mut self, vehicle: u8, t_s: f64, stream: &[u8]) {

@@ -10,10 +10,10 @@ use rovlink::cli::{progress, stop};
 use rovlink::gll::Endpoint;
 use rovlink::io::EXIT_OK;
 use rovlink::rcp::net_outputs::{NetDestinations, NetRecorder};
-use rovlink::rcp::network::NetTee;
 use rovlink::rcp::outputs::write_metrics;
-use rovlink::rcp::realnet::{self, FrameRows, Network, NodeOutputs};
+use rovlink::rcp::realnet::{self, Network};
 use rovlink::rcp::realtime::Role;
+use rovlink::rcp::report::Tee;
 use rovlink::rcp::scenario::Scenario;
 use rovlink::rcp::session::{MAX_IPG_S, MIN_IPG_S, SessionConfig};
 use rovlink::rcp::{camera, script};
@@ -32,9 +32,8 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     let mut outs = Outputs::new();
     outs.inputs(args.inputs());
     let metrics_dest = outs.claim_opt("--metrics", args.metrics.as_deref(), Kind::Text)?;
-    let events_dest = outs.claim_opt("--events", args.events.as_deref(), Kind::Text)?;
     let dests = NetDestinations {
-        events: None,
+        events: outs.claim_opt("--events", args.events.as_deref(), Kind::Text)?,
         track: outs.claim_opt("--track", args.track.as_deref(), Kind::Text)?,
         images_out: (args.images_out.as_deref())
             .map(|dir| outs.claim_dir("--images-out", dir))
@@ -99,18 +98,13 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
         None => None,
     };
     let mut recorder = NetRecorder::new(dests, &shown, bar)?;
-    let mut frames = events_dest.map(FrameRows::new);
     say!("{}", start_line(&network, role, &ports, config.duration_s));
     let (mut metrics, ended) = {
         let mut both = Both(&mut recorder);
-        let mut observer = NetTee(vec![&mut both]);
+        let mut observer = Tee(vec![&mut both]);
         if let Some(view) = live.as_mut() {
             observer.0.push(view);
         }
-        let mut outputs = NodeOutputs {
-            observer: &mut observer,
-            frames: frames.as_mut(),
-        };
         realnet::run(
             role,
             &config,
@@ -118,7 +112,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
             parts,
             &mut endpoints,
             stop::flag(),
-            &mut outputs,
+            &mut observer,
         )
     };
     if let Some(view) = live.take() {
@@ -131,7 +125,6 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
         write_metrics(out, network.scenario.seed, &metrics)?;
     }
     recorder.finish()?;
-    frames.map(FrameRows::finish).transpose()?;
     metrics_out.map(|out| out.finish()).transpose()?;
     for line in network_summary(&metrics) {
         say!("{line}");
