@@ -33,8 +33,8 @@ use std::io::{self, BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{Receiver, SyncSender, TryRecvError, sync_channel};
 
+use super::config::MAX_DURATION_S;
 use super::orders::{Live, LiveError, OrderSource, Script, object_of};
-use super::session::MAX_DURATION_S;
 use crate::link::SimTime;
 use crate::wire::json::JsonError;
 

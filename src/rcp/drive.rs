@@ -5,7 +5,7 @@
 //! (the joystick's thrust, a GoTo target, the backtracking target while the link is lost, the
 //! arm state and navigation mode the operator asked for, heading hold) and hands it to a
 //! [`Drive`] as a [`Demand`]. The drive is the built-in kinematic [`Vehicle`] in simulation, or a
-//! real autopilot (see [`super::mavlink`]); either way the engine reads the vehicle's state back
+//! real autopilot (`rcp::mavlink`, in the application layer); either way the engine reads the vehicle's state back
 //! from [`Drive::state`] for the status it sends, for GoTo arrival and for the position stack
 //! of the recovery algorithm. Nothing here reads a clock: the time comes with each step.
 

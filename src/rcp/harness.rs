@@ -1,5 +1,5 @@
 //! The two ends of a session as harnesses around the engines: what the one driver
-//! ([`super::driver`]) runs, in virtual time and in real time.
+//! (`rcp::driver`, the layer above) runs, in virtual time and in real time.
 //!
 //! An end is given the time by its driver (virtual or the host's monotonic clock) and the
 //! frames that arrived; it returns the frames to send. Everything between the link and the

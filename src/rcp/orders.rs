@@ -6,8 +6,8 @@
 //! scripted source knows when its next order is due ([`OrderSource::next_at`]), so virtual
 //! time jumps to it; a live one does not, and is drained at every slot.
 
+use super::config::{JoystickChange, Waypoint};
 use super::operator::Joystick;
-use super::session::{JoystickChange, Waypoint};
 use crate::link::SimTime;
 use crate::wire::Nav;
 use crate::wire::operator::Order;

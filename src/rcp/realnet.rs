@@ -39,8 +39,8 @@ use std::sync::atomic::AtomicBool;
 
 use super::Role;
 use super::driver::{self, Ended, PortAir, Setup, VehicleEnds};
-use super::network::NetworkMetrics;
 use super::orders::{OrderSource, Script, split_by_vehicle};
+use super::report::NetworkMetrics;
 use super::report::Observer;
 use super::routing::{MAX_VEHICLE, Router};
 use super::rules;

@@ -146,7 +146,7 @@ fn is_zero(value: &u64) -> bool {
     *value == 0
 }
 
-/// What a driver ([`super::session::run`], [`super::network::run`]) says when `stop` ended it,
+/// What the driver (`rcp::driver::run`, under every kind of session) says when `stop` ended it,
 /// until the caller names the cause.
 pub const STOPPED: &str = "stopped";
 

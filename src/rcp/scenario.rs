@@ -28,11 +28,11 @@ use serde_json::{Map, Value};
 
 use super::ImageSettings;
 use super::Role;
-use super::routing::{MAX_VEHICLE, Routes, RoutesError};
-use super::rules;
-use super::session::{
+use super::config::{
     MAX_DURATION_S, MAX_IPG_S, MAX_POSITION_M, MIN_IMAGE_BYTES, MIN_IPG_S, Waypoint,
 };
+use super::routing::{MAX_VEHICLE, Routes, RoutesError};
+use super::rules;
 use crate::link::{Model, ModelError};
 
 /// Largest scenario file read, bytes.
@@ -776,7 +776,7 @@ mod tests {
         // One hop: the single-vehicle session's automatic IPG.
         let model = Model::preset("s100").unwrap();
         let single =
-            super::super::session::auto_ipg_for(&model, &s.settings, [3.0, 0.0, 1.0], [0.0; 3]);
+            super::super::config::auto_ipg_for(&model, &s.settings, [3.0, 0.0, 1.0], [0.0; 3]);
         assert!(
             (cycle[0].length_s - single).abs() < 1e-9,
             "{cycle:?} vs {single}"

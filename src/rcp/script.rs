@@ -9,8 +9,8 @@
 
 use std::path::{Path, PathBuf};
 
+use super::config::{JoystickChange, Waypoint};
 use super::operator::Joystick;
-use super::session::{JoystickChange, Waypoint};
 
 /// The largest script or waypoint file read, bytes.
 pub const MAX_FILE_BYTES: u64 = 1 << 26;
