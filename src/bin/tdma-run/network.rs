@@ -82,7 +82,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
                 .map_err(|e| UsageError(e.to_string()))?;
             say!(
                 "Foxglove: ws://{}:{} (every vehicle under /vehicle/N/)",
-                crate::host_of(addr),
+                crate::setup::host_of(addr),
                 view.port()
             );
             Some(view)

@@ -43,7 +43,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     };
     let role = args.role.map_or(Role::Operator, RoleArg::role);
     usage(args)?;
-    crate::field_usage(args, Some(role))?;
+    crate::setup::field_usage(args, Some(role))?;
     let file = format!("--routes {}", path.display());
     let mut scenario =
         Scenario::from_file(path).map_err(|e| UsageError(format!("--routes {e}")))?;
@@ -61,8 +61,8 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     let network = Network::new(scenario, &file, role, address, ports.len())
         .map_err(|e| UsageError(e.to_string()))?;
     let config = session_config(args, &network, role)?;
-    let parts = match crate::parts(args, &config) {
-        Err(e) if e.is::<crate::Stopped>() => {
+    let parts = match crate::setup::parts(args, &config) {
+        Err(e) if e.is::<crate::setup::Stopped>() => {
             say!("{e}: nothing was run");
             return Ok(stop::code_or(EXIT_OK));
         }
@@ -90,7 +90,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
             say!(
                 "Foxglove: ws://{}:{} (every vehicle under /vehicle/N/, this node's frames on \
                  /link/frames)",
-                crate::host_of(addr),
+                crate::setup::host_of(addr),
                 view.port()
             );
             Some(view)
@@ -119,7 +119,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
         view.take_refusals().iter().for_each(|line| say!("{line}"));
         view.stop();
     }
-    let code = crate::ended_code(ended, metrics.duration_s);
+    let code = crate::setup::ended_code(ended, metrics.duration_s);
     mark_interrupted(&mut metrics);
     if let Some(out) = metrics_out.as_mut() {
         write_metrics(out, network.scenario.seed, &metrics)?;

@@ -1,0 +1,141 @@
+//! What every tdma-run mode shares: the flags that apply to one end only, the ends' parts
+//! (order sources, the vehicle, the camera), how a real-time run's end is said.
+
+use anyhow::Result;
+use rovlink::cli::stop;
+use rovlink::io::{EXIT_CHECK_FAILED, EXIT_OK};
+use rovlink::rcp::camera;
+use rovlink::rcp::realtime::{Ended, Role};
+use rovlink::rcp::report::Observer;
+use rovlink::rcp::session::{Parts, SessionConfig};
+use rovlink::say;
+
+use crate::TOOL;
+use crate::cli::{Args, Vehicle};
+
+/// The exit code of a real-time run that ended so after `duration_s`, said on stderr.
+pub(crate) fn ended_code(ended: Ended, duration_s: f64) -> u8 {
+    match ended {
+        Ended::Done => EXIT_OK,
+        Ended::Stopped => {
+            say!("stopped after {duration_s:.1} s");
+            EXIT_OK
+        }
+        Ended::Failed(error) => {
+            say!("{error} after {duration_s:.1} s; outputs so far kept");
+            EXIT_CHECK_FAILED
+        }
+    }
+}
+
+/// Warnings of the session (a bad order line) on standard error, as they come.
+pub(crate) struct Stderr;
+
+impl Observer for Stderr {
+    fn warning(&mut self, _t_s: f64, text: &str) {
+        say!("{text}");
+    }
+}
+
+/// The field flags that apply only to one end.
+pub(crate) fn field_usage(args: &Args, role: Option<Role>) -> Result<()> {
+    use rovlink::cli::UsageError;
+    let rov_side = role != Some(Role::Operator);
+    let operator_side = role != Some(Role::Rov);
+    if matches!(args.vehicle, Vehicle::Mavlink(_)) && role != Some(Role::Rov) {
+        return Err(UsageError(
+            "--vehicle mavlink:... drives a real autopilot: it needs --role rov (real time)".into(),
+        )
+        .into());
+    }
+    let checks = [
+        (rov_side, "--camera", args.camera.is_some(), "the ROV end"),
+        (
+            rov_side,
+            "--camera-cmd",
+            args.camera_cmd.is_some(),
+            "the ROV end",
+        ),
+        (
+            operator_side,
+            "--orders",
+            args.orders.is_some(),
+            "the operator end",
+        ),
+        (operator_side, "--preview", args.preview, "the operator end"),
+    ];
+    for (applies, flag, given, end) in checks {
+        if given && !applies {
+            return Err(UsageError(format!("{flag} only applies to {end}")).into());
+        }
+    }
+    Ok(())
+}
+
+/// What the ends run beyond the config: order sources, the vehicle, the camera.
+pub(crate) fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
+    let mut parts = Parts::from_config(config);
+    if let Vehicle::Mavlink(endpoint) = &args.vehicle {
+        let options = rovlink::rcp::mavlink::MavlinkOptions::default();
+        let drive = rovlink::rcp::mavlink::connect(endpoint, &options)
+            .map_err(|e| rovlink::cli::UsageError(format!("--vehicle: {e}")))?;
+        say!("vehicle: ArduSub over MAVLink at {}", drive.endpoint());
+        parts.drive = Box::new(drive);
+    }
+    if let Some(dir) = &args.camera {
+        parts.camera = Box::new(camera::newest_in_dir(dir)?);
+    }
+    if let Some(command) = &args.camera_cmd {
+        // In virtual time a capture waits for the command's run (the session's time stands
+        // still meanwhile); in real time it never waits.
+        parts.camera = Box::new(match args.role {
+            Some(_) => camera::command_camera(command)?,
+            None => camera::command_camera_waiting(command)?.stop_on(stop::flag()),
+        });
+    }
+    if let Some(path) = &args.orders {
+        let live = args.role.is_some();
+        parts.orders.push(Box::new(open_orders(path, live)?));
+    }
+    Ok(parts)
+}
+
+/// A signal came while the run was still starting.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub(crate) struct Stopped(pub(crate) String);
+
+/// Opens `--orders`. In simulation the whole input is read at start, which waits for a
+/// FIFO's writer (or a terminal's end of input): that wait is done aside, so a signal
+/// meanwhile ends the run ([`Stopped`]) instead of being left for later.
+fn open_orders(path: &std::path::Path, live: bool) -> Result<rovlink::rcp::console::JsonOrders> {
+    use std::sync::mpsc::RecvTimeoutError;
+    if live {
+        return Ok(rovlink::rcp::console::open_orders(path, true)?);
+    }
+    let (tx, rx) = std::sync::mpsc::channel();
+    let owned = path.to_path_buf();
+    std::thread::Builder::new()
+        .name("orders-open".into())
+        .spawn(move || {
+            let _ = tx.send(rovlink::rcp::console::open_orders(&owned, false));
+        })?;
+    loop {
+        match rx.recv_timeout(std::time::Duration::from_millis(50)) {
+            Ok(opened) => return Ok(opened?),
+            Err(RecvTimeoutError::Timeout) if !stop::requested() => {}
+            Err(_) => {
+                let what = format!(
+                    "stopped while waiting for the orders of --orders {}",
+                    path.display()
+                );
+                return Err(Stopped(what).into());
+            }
+        }
+    }
+}
+
+/// The host part of HOST:PORT, for the URL said at start.
+pub(crate) fn host_of(addr: &str) -> &str {
+    addr.rsplit_once(':').map_or(addr, |(host, _)| host)
+}
