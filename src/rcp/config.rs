@@ -243,7 +243,7 @@ impl SessionConfig {
 }
 
 /// The IPG wire.md derives from a model for a session, the one-hop case of a network's slot
-/// ([`rules::hop_s`] out, its guard, and back): the operator's frame, the ROV's frame with a
+/// ([`rules::slot_s`] of one hop out and one back): the operator's frame, the ROV's frame with a
 /// trunk of `settings.trunk_bytes`, at the distance between `start_m` and `buoy_m`.
 pub fn auto_ipg_for(
     model: &Model,
@@ -251,9 +251,9 @@ pub fn auto_ipg_for(
     start_m: [f64; 3],
     buoy_m: [f64; 3],
 ) -> f64 {
-    let distance_m = crate::geometry::distance_m(start_m, buoy_m);
-    let rov_frame_bytes = rules::rov_frame_bytes(settings.trunk_bytes);
-    rules::hop_s(model, rules::OPERATOR_FRAME_BYTES, distance_m)
-        + rules::guard_s(model)
-        + rules::hop_s(model, rov_frame_bytes, distance_m)
+    let hop = rules::Hop {
+        model,
+        distance_m: crate::geometry::distance_m(start_m, buoy_m),
+    };
+    rules::slot_s(&[hop], &[hop], settings.trunk_bytes)
 }

@@ -51,6 +51,32 @@ pub fn guard_s(model: &Model) -> f64 {
     3.0 * model.jitter_ms * 1e-3
 }
 
+/// One hop of a slot: its medium's model and its length, m.
+#[derive(Debug, Clone, Copy)]
+pub struct Hop<'a> {
+    /// The model of the medium the hop is on.
+    pub model: &'a Model,
+    /// Its length, m.
+    pub distance_m: f64,
+}
+
+/// The TDMA slot rule, the one place it is written: a vehicle's slot, s, is the operator's
+/// frame ([`OPERATOR_FRAME_BYTES`]) over each hop of `out`, each followed by its [`guard_s`],
+/// then the answer (a status with a trunk of `trunk_bytes`) over each hop of `back`. A single
+/// session's automatic IPG is the one-hop case.
+pub fn slot_s(out: &[Hop<'_>], back: &[Hop<'_>], trunk_bytes: u8) -> f64 {
+    let mut slot_s = 0.0;
+    for hop in out {
+        slot_s += hop_s(hop.model, OPERATOR_FRAME_BYTES, hop.distance_m);
+        slot_s += guard_s(hop.model);
+    }
+    let answer_bytes = rov_frame_bytes(trunk_bytes);
+    for hop in back {
+        slot_s += hop_s(hop.model, answer_bytes, hop.distance_m);
+    }
+    slot_s
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -244,26 +244,21 @@ impl Scenario {
 
     /// The automatic slot of `vehicle`, s (see the module doc).
     pub fn auto_slot_s(&self, vehicle: u8) -> f64 {
-        let rov_frame_bytes = rules::rov_frame_bytes(self.settings.trunk_bytes);
-        let hops = |src: u8, dst: u8| self.routes.path(src, dst).unwrap_or_else(|| vec![src, dst]);
-        let mut slot_s = 0.0;
-        for (out, path) in [(true, hops(0, vehicle)), (false, hops(vehicle, 0))] {
-            for pair in path.windows(2) {
-                let (a, b) = (pair[0], pair[1]);
-                let Some(model) = self.hop_model(a, b) else {
-                    continue;
-                };
-                let bytes = if out {
-                    rules::OPERATOR_FRAME_BYTES
-                } else {
-                    rov_frame_bytes
-                };
-                slot_s += rules::hop_s(model, bytes, self.distance_m(a, b));
-                if out {
-                    slot_s += rules::guard_s(model);
-                }
-            }
-        }
+        let hops = |src: u8, dst: u8| -> Vec<rules::Hop<'_>> {
+            let path = self.routes.path(src, dst).unwrap_or_else(|| vec![src, dst]);
+            path.windows(2)
+                .filter_map(|pair| {
+                    let model = self.hop_model(pair[0], pair[1])?;
+                    let distance_m = self.distance_m(pair[0], pair[1]);
+                    Some(rules::Hop { model, distance_m })
+                })
+                .collect()
+        };
+        let slot_s = rules::slot_s(
+            &hops(0, vehicle),
+            &hops(vehicle, 0),
+            self.settings.trunk_bytes,
+        );
         slot_s.clamp(MIN_IPG_S, MAX_IPG_S)
     }
 
