@@ -13,45 +13,58 @@ use crate::octo::cloud::{self, CloudFormat, McapOptions};
 use crate::octo::recording::{Recording, RecordingOptions};
 use crate::octo::{ParseError, Pose, Scan, graph};
 
-/// An input's format: OctoMap's `.graph` or one of the point-cloud formats of [`cloud`].
+/// An input's format: OctoMap's `.graph`, one of the point-cloud formats of [`cloud`], or a
+/// rosbag2 bag.
+///
+/// The point-cloud formats are [`CloudFormat`]'s, named in one place: their names, file
+/// extensions, sniffing and readers, here and in octo-delta's `--format` (its values, `--help`
+/// and messages), all come from [`CloudFormat::ALL`]. See [`CloudFormat`] for the files a new
+/// point-cloud format touches; nothing here changes for one.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum InputFormat {
     /// OctoMap scan graph (`.graph`): scans with poses, streamed from disk.
     Graph,
-    /// Point Cloud Library `.pcd`.
-    Pcd,
-    /// Polygon File Format `.ply`.
-    Ply,
-    /// Text, one `x y z [r g b]` point per line.
-    Xyz,
-    /// MCAP with ROS 2 `PointCloud2` messages, posed by TF or a pose topic
-    /// ([`recording`](crate::octo::recording)).
-    Mcap,
+    /// A point-cloud file of [`cloud`]; an MCAP file is a robot log, its clouds posed by TF or
+    /// a pose topic ([`recording`](crate::octo::recording)).
+    Cloud(CloudFormat),
     /// A rosbag2 bag: its directory, its `metadata.yaml` or one `.db3` (sqlite3 or mcap storage).
     Rosbag2,
 }
 
 impl InputFormat {
-    /// Every format.
-    pub const ALL: [InputFormat; 6] = [
-        InputFormat::Graph,
-        InputFormat::Pcd,
-        InputFormat::Ply,
-        InputFormat::Xyz,
-        InputFormat::Mcap,
-        InputFormat::Rosbag2,
-    ];
+    /// Every format: `.graph`, the point-cloud formats in [`CloudFormat::ALL`]'s order, rosbag2.
+    pub const ALL: [InputFormat; CloudFormat::ALL.len() + 2] = {
+        let mut all = [InputFormat::Graph; CloudFormat::ALL.len() + 2];
+        let mut i = 0;
+        while i < CloudFormat::ALL.len() {
+            all[i + 1] = InputFormat::Cloud(CloudFormat::ALL[i]);
+            i += 1;
+        }
+        all[CloudFormat::ALL.len() + 1] = InputFormat::Rosbag2;
+        all
+    };
 
-    /// The short name: `graph`, `pcd`, `ply`, `xyz`, `mcap`, `rosbag2`.
+    /// The short name: `graph`, a point-cloud format's ([`CloudFormat::name`]), `rosbag2`.
     pub fn name(self) -> &'static str {
         match self {
             InputFormat::Graph => "graph",
-            InputFormat::Pcd => "pcd",
-            InputFormat::Ply => "ply",
-            InputFormat::Xyz => "xyz",
-            InputFormat::Mcap => "mcap",
+            InputFormat::Cloud(f) => f.name(),
             InputFormat::Rosbag2 => "rosbag2",
         }
+    }
+
+    /// Every name, as messages and `--help` list them: `graph, pcd, ply, xyz, mcap or rosbag2`.
+    pub fn names() -> String {
+        let names = InputFormat::ALL.map(InputFormat::name);
+        let (last, rest) = names.split_last().expect("ALL is not empty");
+        format!("{} or {last}", rest.join(", "))
+    }
+
+    /// The file names [`InputFormat::from_path`] knows, as messages list them: `.graph`, then
+    /// each point-cloud format's first extension (`.graph, .pcd, .ply, .xyz, .mcap`).
+    pub fn extensions() -> String {
+        let clouds = CloudFormat::ALL.map(|f| format!(".{}", f.extensions()[0]));
+        format!(".graph, {}", clouds.join(", "))
     }
 
     /// The format a file name names (`.graph`, `.db3` or `metadata.yaml`, or one of
@@ -65,18 +78,14 @@ impl InputFormat {
         if crate::octo::bag::is_rosbag2_file_name(path) {
             return Some(InputFormat::Rosbag2);
         }
-        CloudFormat::from_path(path).map(InputFormat::from)
+        CloudFormat::from_path(path).map(InputFormat::Cloud)
     }
 
-    /// The point-cloud reader of this format (`None` for `.graph`).
+    /// The point-cloud reader of this format (`None` for `.graph` and rosbag2).
     pub fn cloud(self) -> Option<CloudFormat> {
         match self {
-            InputFormat::Graph => None,
-            InputFormat::Pcd => Some(CloudFormat::Pcd),
-            InputFormat::Ply => Some(CloudFormat::Ply),
-            InputFormat::Xyz => Some(CloudFormat::Xyz),
-            InputFormat::Mcap => Some(CloudFormat::Mcap),
-            InputFormat::Rosbag2 => None,
+            InputFormat::Cloud(f) => Some(f),
+            InputFormat::Graph | InputFormat::Rosbag2 => None,
         }
     }
 
@@ -85,36 +94,34 @@ impl InputFormat {
     pub fn has_poses(self) -> bool {
         matches!(
             self,
-            InputFormat::Graph | InputFormat::Mcap | InputFormat::Rosbag2
+            InputFormat::Graph | InputFormat::Cloud(CloudFormat::Mcap) | InputFormat::Rosbag2
         )
     }
 
     /// Whether inputs of this format are robot logs read by [`Recording`].
     pub fn is_bag(self) -> bool {
-        matches!(self, InputFormat::Mcap | InputFormat::Rosbag2)
+        matches!(
+            self,
+            InputFormat::Cloud(CloudFormat::Mcap) | InputFormat::Rosbag2
+        )
     }
 
     /// Reads every scan of `bytes` in this format.
     pub fn read(self, bytes: &[u8], mcap: &McapOptions) -> Result<Vec<Scan>, ParseError> {
-        match self.cloud() {
-            None if self == InputFormat::Rosbag2 => Err(ParseError::new(
+        match self {
+            InputFormat::Rosbag2 => Err(ParseError::new(
                 0,
                 "rosbag2: expected a bag directory, its metadata.yaml or a .db3 file, found bytes",
             )),
-            None => graph::read_scans(bytes),
-            Some(f) => cloud::read(f, bytes, mcap),
+            InputFormat::Graph => graph::read_scans(bytes),
+            InputFormat::Cloud(f) => cloud::read(f, bytes, mcap),
         }
     }
 }
 
 impl From<CloudFormat> for InputFormat {
     fn from(f: CloudFormat) -> Self {
-        match f {
-            CloudFormat::Pcd => InputFormat::Pcd,
-            CloudFormat::Ply => InputFormat::Ply,
-            CloudFormat::Xyz => InputFormat::Xyz,
-            CloudFormat::Mcap => InputFormat::Mcap,
-        }
+        InputFormat::Cloud(f)
     }
 }
 
@@ -124,7 +131,7 @@ impl std::str::FromStr for InputFormat {
         InputFormat::ALL
             .into_iter()
             .find(|f| f.name().eq_ignore_ascii_case(s))
-            .ok_or_else(|| format!("unknown format {s:?} (graph, pcd, ply, xyz, mcap or rosbag2)"))
+            .ok_or_else(|| format!("unknown format {s:?} ({})", InputFormat::names()))
     }
 }
 
@@ -238,7 +245,7 @@ pub(super) fn open_scans<'a>(
     let format = format
         .or_else(|| cloud::sniff(&bytes).map(InputFormat::from))
         .ok_or_else(|| PipelineError::UnknownFormat { name: name.clone() })?;
-    if format == InputFormat::Mcap {
+    if format == InputFormat::Cloud(CloudFormat::Mcap) {
         let rec = Recording::from_mcap_bytes(&name, bytes, &options, stop)?;
         return Ok(ScanSource::Bag(Box::new(rec)));
     }
@@ -292,8 +299,18 @@ mod tests {
         );
         assert_eq!(
             InputFormat::from_path(Path::new("x.txt")),
-            Some(InputFormat::Xyz)
+            Some(InputFormat::Cloud(CloudFormat::Xyz))
         );
         assert!("obj".parse::<InputFormat>().is_err());
+        // The lists messages and --help give, made from CloudFormat::ALL.
+        assert_eq!(
+            InputFormat::names(),
+            "graph, pcd, ply, xyz, mcap or rosbag2"
+        );
+        assert_eq!(InputFormat::extensions(), ".graph, .pcd, .ply, .xyz, .mcap");
+        assert_eq!(
+            "PLY".parse::<InputFormat>(),
+            Ok(InputFormat::Cloud(CloudFormat::Ply))
+        );
     }
 }

@@ -55,7 +55,8 @@ pub enum PipelineError {
     },
     /// An input whose format neither its name nor its bytes tell.
     #[error(
-        "{name}: unknown input format (expected .graph, .pcd, .ply, .xyz, .mcap, a rosbag2 directory or .db3; or --format)"
+        "{name}: unknown input format (expected {extensions}, a rosbag2 directory or .db3; or --format)",
+        extensions = InputFormat::extensions()
     )]
     UnknownFormat {
         /// The file.
