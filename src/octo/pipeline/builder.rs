@@ -165,6 +165,25 @@ impl Built {
         }
         s
     }
+
+    /// What the build tells its user, in order: a warning per reason clouds were skipped (also
+    /// when `quiet`: the map lacks them), the notes on how robot logs were read (unless
+    /// `quiet`), and the [summary](Built::summary) (unless `quiet`, or when interrupted:
+    /// `interrupted` says by what, else it says `interrupted`).
+    pub fn messages(&self, quiet: bool, interrupted: Option<&str>) -> Vec<String> {
+        let r = &self.report;
+        let skipped = r.skipped.iter();
+        let mut lines: Vec<String> = skipped
+            .map(|(reason, n)| format!("warning: {n} cloud(s) skipped: {reason}"))
+            .collect();
+        if !quiet {
+            lines.extend(r.notes.iter().cloned());
+        }
+        if !quiet || r.interrupted {
+            lines.push(self.summary(interrupted.unwrap_or("interrupted")));
+        }
+        lines
+    }
 }
 
 /// Builds the map from the scans of `inputs` (in order; `-` is standard input) and writes the

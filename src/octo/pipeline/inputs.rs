@@ -4,11 +4,12 @@
 //! streamed from disk, a cloud file read whole, a robot log read cloud by cloud.
 
 use std::io::Read;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
 use super::{BuildConfig, PipelineError};
 use crate::io::{Input, IoError, StopReader};
+use crate::octo::bag::Bag;
 use crate::octo::cloud::{self, CloudFormat, McapOptions};
 use crate::octo::recording::{Recording, RecordingOptions};
 use crate::octo::{ParseError, Pose, Scan, graph};
@@ -168,6 +169,17 @@ pub fn read_input(path: &Path) -> Result<(Vec<u8>, String), PipelineError> {
     let name = input.name.clone();
     let bytes = read_limited(input.reader(), &name, MAX_INPUT_BYTES)?;
     Ok((bytes, name))
+}
+
+/// The files a build of `inputs` reads: the inputs, then the bags' own files (a rosbag2
+/// directory's `.db3` files and `metadata.yaml`) of every input that is a bag by its path or
+/// by `format`.
+pub fn input_files(inputs: &[PathBuf], format: Option<InputFormat>) -> Vec<PathBuf> {
+    let bags = inputs
+        .iter()
+        .filter(|p| Bag::is_bag_path(p) || format.is_some_and(InputFormat::is_bag));
+    let bag_files = bags.flat_map(|p| Bag::files(p));
+    inputs.iter().cloned().chain(bag_files).collect()
 }
 
 /// The scans of one input: a stream of scans (a `.graph` file is streamed from disk, so a large

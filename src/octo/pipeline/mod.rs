@@ -33,7 +33,7 @@ pub use config::{
     RESOLUTION_MAX_M, RESOLUTION_MIN_M, THREADS_MAX, check_range, check_roi, check_scan_period,
     shown, view_spec,
 };
-pub use inputs::{InputFormat, MAX_INPUT_BYTES, read_input, read_limited};
+pub use inputs::{InputFormat, MAX_INPUT_BYTES, input_files, read_input, read_limited};
 
 use super::ParseError;
 use super::recording::RecordingError;
