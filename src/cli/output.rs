@@ -69,6 +69,13 @@ impl Dest {
             Dest::File(path) => Output::open(Some(path), false),
         }
     }
+
+    /// Writes `bytes` as the whole output and commits it: the file whole, or no file.
+    pub fn write_whole(&self, bytes: &[u8]) -> Result<(), IoError> {
+        let mut out = self.open()?;
+        out.write_bytes(bytes)?;
+        out.finish()
+    }
 }
 
 /// The identity of an existing file: device and inode.

@@ -23,6 +23,15 @@ pub fn bar(quiet: bool, total: u64, template: &str) -> ProgressBar {
     bar
 }
 
+/// A progress callback `(done, known)` for runs whose length grows as they go: sets `bar`'s
+/// length to what is known so far and its position to what is done.
+pub fn follow(bar: &ProgressBar) -> impl FnMut(u64, u64) + '_ {
+    move |done, known| {
+        bar.set_length(known);
+        bar.set_position(done);
+    }
+}
+
 /// A spinner for runs of unknown length, with indicatif's `template`.
 pub fn spinner(quiet: bool, template: &str) -> ProgressBar {
     if !visible(quiet) {

@@ -157,6 +157,12 @@ impl RowWriter {
         }
     }
 
+    /// Writes every row of a completed table, then [finishes](Self::finish).
+    pub fn write_all<T: Serialize>(mut self, rows: &[T]) -> Result<(), IoError> {
+        rows.iter().try_for_each(|r| self.row(r))?;
+        self.finish()
+    }
+
     /// Ends a completed run: a CSV with no rows gets its header, so the file exists and reads.
     pub fn finish(mut self) -> Result<(), IoError> {
         if self.rows == 0 && self.format == RowFormat::Csv {

@@ -21,11 +21,14 @@
 //! the prefix property across trunks of different groups, ROI, lossless, scale.
 
 use super::coder::{self, Band, BitCoder, Decoder};
-use super::wavelet::{self, Subband};
-use super::{
-    COMPONENT_MSE_WEIGHTS, FRACTION_BITS, Header, Image, Scratch, class_of, encode_bands,
-    from_components, orientation_code, reconstructed, subband_weights, to_components, transform,
+use super::colour::{COMPONENT_MSE_WEIGHTS, from_components, to_components};
+use super::decode::reconstructed;
+use super::encode::encode_bands;
+use super::transform::{
+    FRACTION_BITS, Scratch, class_of, orientation_code, subband_weights, transform,
 };
+use super::wavelet::{self, Subband};
+use super::{Header, Image};
 
 /// Bytes of the header that a version-3 stream would carry, reserved at the start of trunk 0
 /// and again at the end of the last trunk.

@@ -13,6 +13,8 @@
 //! - [`graph`]: OctoMap's `.graph` scan-graph files, read and written.
 //! - [`ros`]: ROS 2 messages (CDR) read and written, and rigid transforms.
 //! - [`tf`]: the TF buffer and pose tracks that give each scan its pose.
+//! - [`tree`]: the occupancy octree, OctoMap's updates and pruning on an arena of blocks.
+//! - [`math`]: the tree's arithmetic: keys, Morton codes, log-odds, poses, the ray walk.
 //! - [`synth`]: a synthetic seabed survey, scans to test and benchmark with.
 //! - [`pipeline`]: octo-delta's build loop and its other commands as library calls, with the
 //!   configuration checks (ranges with units) and a stop flag.
@@ -28,6 +30,7 @@ pub mod delta;
 pub mod files;
 pub mod graph;
 pub mod hashorder;
+pub mod math;
 pub mod pipeline;
 pub mod recording;
 pub mod ros;

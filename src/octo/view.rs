@@ -767,6 +767,17 @@ pub enum Timing<'a> {
     },
 }
 
+impl<'a> Timing<'a> {
+    /// The timing of an arrivals file (its bytes and name, as [`pipeline::read_input`] gives
+    /// them) when there is one, else one message every `period_s` seconds.
+    pub fn new(arrivals: Option<&'a (Vec<u8>, String)>, period_s: f64) -> Self {
+        match arrivals {
+            Some((text, name)) => Timing::Arrivals { text, name },
+            None => Timing::Period(period_s),
+        }
+    }
+}
+
 /// Why a view could not be written.
 #[derive(Debug, thiserror::Error)]
 pub enum ViewError {

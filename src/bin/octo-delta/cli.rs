@@ -82,6 +82,12 @@ fn input_format(text: &str) -> Result<InputFormat, String> {
     text.parse()
 }
 
+/// `--format`'s help, naming every input format.
+fn format_help() -> String {
+    let names = InputFormat::names();
+    format!("Input format, when the file name does not tell: {names}")
+}
+
 fn dump_format(text: &str) -> Result<DumpFormat, String> {
     text.parse()
 }
@@ -161,8 +167,8 @@ pub struct BuildArgs {
     #[arg(long, value_name = "FILE")]
     pub ot: Option<PathBuf>,
 
-    /// Input format, when the file name does not tell: graph, pcd, ply, xyz, mcap or rosbag2.
-    #[arg(long, value_name = "FORMAT", value_parser = input_format)]
+    /// Input format, when the file name does not tell (its help lists `InputFormat::names()`).
+    #[arg(long, value_name = "FORMAT", value_parser = input_format, help = format_help())]
     pub format: Option<InputFormat>,
 
     /// Sensor origin x,y,z (metres) for inputs without a pose (PLY, XYZ, PCD without VIEWPOINT,

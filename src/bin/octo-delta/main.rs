@@ -15,7 +15,6 @@ use rovlink::cli::output::{Dest, Kind, Outputs};
 use rovlink::cli::rows::{RowFormat, RowWriter};
 use rovlink::cli::{UsageError, progress, stop};
 use rovlink::io::EXIT_OK;
-use rovlink::octo::bag::Bag;
 use rovlink::octo::pipeline::{self, Hooks, SinkError, StatsRow};
 use rovlink::octo::{files, transfer, view};
 use rovlink::say;
@@ -43,28 +42,15 @@ fn claim_and_read(input: &Path, output: &Path, kind: Kind) -> Result<(Dest, Vec<
     Ok((dest, bytes, name))
 }
 
-/// Writes a claimed whole-file output.
-fn write_whole(dest: &Dest, bytes: &[u8]) -> Result<()> {
-    let mut out = dest.open()?;
-    out.write_bytes(bytes)?;
-    Ok(out.finish()?)
-}
-
 fn build(a: &BuildArgs) -> Result<u8> {
     let cfg = a.config();
     cfg.validate()?;
     let link = a.link.as_deref().map(transfer::model_by_name).transpose();
     let link = link.map_err(|e| UsageError(format!("--link: {e}")))?;
     let mut outs = Outputs::new();
-    outs.inputs(a.inputs.iter().map(PathBuf::as_path));
     // A bag's own files (a rosbag2 directory's .db3 files and metadata.yaml) are inputs too.
-    let bag_files: Vec<PathBuf> = a
-        .inputs
-        .iter()
-        .filter(|p| Bag::is_bag_path(p) || a.format.is_some_and(|f| f.is_bag()))
-        .flat_map(|p| Bag::files(p))
-        .collect();
-    outs.inputs(bag_files.iter().map(PathBuf::as_path));
+    let read = pipeline::input_files(&a.inputs, a.format);
+    outs.inputs(read.iter().map(PathBuf::as_path));
     outs.input(a.link.as_deref().map(Path::new));
     let stream = outs.claim("-o", &a.output, Kind::Binary)?;
     let bt = outs.claim_opt("--bt", a.bt.as_deref(), Kind::Binary)?;
@@ -81,10 +67,7 @@ fn build(a: &BuildArgs) -> Result<u8> {
         let mut sink = |r: &StatsRow| -> Result<(), SinkError> {
             Ok(rows.as_mut().map_or(Ok(()), |w| w.row(r))?)
         };
-        let mut show = |done: u64, known: u64| {
-            bar.set_length(known);
-            bar.set_position(done);
-        };
+        let mut show = progress::follow(&bar);
         let mut hooks = Hooks {
             stop: stop::flag(),
             stats: a.stats.is_some().then_some(&mut sink as _),
@@ -93,9 +76,9 @@ fn build(a: &BuildArgs) -> Result<u8> {
         let built = pipeline::build(&cfg, &a.inputs, &mut out, &stream.name(), &mut hooks)?;
         bar.finish_and_clear();
         // Every output holds what was done, also when a signal stopped the build.
-        bt.map(|d| write_whole(&d, &files::write_bt(&built.tree)))
+        bt.map(|d| d.write_whole(&files::write_bt(&built.tree)))
             .transpose()?;
-        ot.map(|d| write_whole(&d, &files::write_ot(&built.tree)))
+        ot.map(|d| d.write_whole(&files::write_ot(&built.tree)))
             .transpose()?;
         out.finish()?;
         Ok(built)
@@ -109,34 +92,22 @@ fn build(a: &BuildArgs) -> Result<u8> {
     let built = outcome?;
     rows.map(RowWriter::finish).transpose()?;
     // Clouds left out of the map are said even with --quiet: the map lacks them.
-    for (reason, n) in &built.report.skipped {
-        say!("warning: {n} cloud(s) skipped: {reason}");
-    }
-    if !a.quiet {
-        built.report.notes.iter().for_each(|n| say!("{n}"));
-    }
-    if !a.quiet || built.report.interrupted {
-        let note = stop::note().unwrap_or_else(|| "interrupted".into());
-        say!("{}", built.summary(&note));
-    }
+    let messages = built.messages(a.quiet, stop::note().as_deref());
+    messages.iter().for_each(|m| say!("{m}"));
     let mut figures = built.figures();
     if let Some(model) = link {
         let report = transfer::send_over(&model, &built.report.messages, a.scan_period, a.seed);
         figures["link"] = report.figures();
         if let Some(d) = arrivals {
-            let mut w = RowWriter::new(d, RowFormat::Csv, &pipeline::ARRIVAL_COLUMNS);
-            pipeline::arrival_rows(&report)
-                .iter()
-                .try_for_each(|r| w.row(r))?;
-            w.finish()?;
+            let w = RowWriter::new(d, RowFormat::Csv, &pipeline::ARRIVAL_COLUMNS);
+            w.write_all(&pipeline::arrival_rows(&report))?;
         }
         if !a.quiet {
             report.lines().iter().for_each(|line| say!("{line}"));
         }
     }
     if let Some(mut out) = metrics_out.take() {
-        let seed = a.link.is_some().then_some(a.seed);
-        metrics::write(&mut out, TOOL, seed, &figures)?;
+        metrics::write(&mut out, TOOL, a.link.is_some().then_some(a.seed), &figures)?;
         out.finish()?;
     }
     Ok(stop::code_or(EXIT_OK))
@@ -152,23 +123,17 @@ fn apply(a: &ApplyArgs) -> Result<u8> {
     let messages = a.messages.map_or(usize::MAX, |n| n as usize);
     let Some(mcap) = mcap else {
         let view = pipeline::apply(&bytes, &name, messages)?;
-        ot.map(|d| write_whole(&d, &files::write_ot(&view)))
+        ot.map(|d| d.write_whole(&files::write_ot(&view)))
             .transpose()?;
         return Ok(EXIT_OK);
     };
-    let arrivals = a
-        .arrivals
-        .as_deref()
-        .map(pipeline::read_input)
-        .transpose()?;
-    let timing = match &arrivals {
-        Some((text, name)) => view::Timing::Arrivals { text, name },
-        None => view::Timing::Period(a.scan_period),
-    };
+    let arrivals = a.arrivals.as_deref().map(pipeline::read_input);
+    let arrivals = arrivals.transpose()?;
+    let timing = view::Timing::new(arrivals.as_ref(), a.scan_period);
     let mut out = mcap.open()?;
     let (view, _) = view::apply_with_view(&bytes, &name, messages, timing, &mut out, &mcap.name())?;
     // The .ot first: a failure there leaves no MCAP either (it is committed last).
-    ot.map(|d| write_whole(&d, &files::write_ot(&view)))
+    ot.map(|d| d.write_whole(&files::write_ot(&view)))
         .transpose()?;
     out.finish()?;
     Ok(EXIT_OK)
@@ -184,10 +149,7 @@ fn dump(a: &DumpArgs) -> Result<u8> {
 
 fn full(a: &FullArgs) -> Result<u8> {
     let (dest, bytes, name) = claim_and_read(&a.input, &a.output, Kind::Binary)?;
-    write_whole(
-        &dest,
-        &pipeline::full(&bytes, &name, a.view.coarse(), a.view.roi)?,
-    )?;
+    dest.write_whole(&pipeline::full(&bytes, &name, a.view.coarse(), a.view.roi)?)?;
     Ok(EXIT_OK)
 }
 
@@ -199,7 +161,7 @@ fn synth_cmd(a: &SynthArgs) -> Result<u8> {
     let bytes = pipeline::synth(&params, a.mcap())?;
     // The survey is made whole before anything is written: a stopped run writes nothing.
     if !stop::requested() {
-        write_whole(&dest, &bytes)?;
+        dest.write_whole(&bytes)?;
     }
     Ok(stop::code_or(EXIT_OK))
 }

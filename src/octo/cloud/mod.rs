@@ -66,7 +66,18 @@ pub use self::pcd::{PcdData, read_pcd, write_pcd};
 pub use self::ply::{PlyFormat, read_ply, write_ply, write_ply_as};
 pub use self::xyz::{read_xyz, write_xyz};
 
-/// A point-cloud file format that [`read`] understands.
+/// A point-cloud file format that [`read`] understands: the one place the point-cloud formats
+/// are named, with their command-line names ([`CloudFormat::name`]), file extensions
+/// ([`CloudFormat::extensions`]), sniffing ([`CloudFormat::sniff`]) and readers ([`read`]).
+/// `pipeline::InputFormat` wraps these (beside `.graph` and rosbag2) and octo-delta's
+/// `--format` parses, lists and names them from [`CloudFormat::ALL`].
+///
+/// A new point-cloud format touches three files: its reader (`src/octo/cloud/<format>.rs`, a
+/// `read_<format>(&[u8]) -> Result<Scan, ParseError>` declared and re-exported below), this
+/// file (a variant, in [`CloudFormat::ALL`], and its arms in `name`, `extensions`, `sniff`
+/// when its first bytes can tell, and [`read`]), and its tests (`tests/proptest_octo_cloud.rs`
+/// or the reader's own). The README's octo-delta section and `--help`'s prose list of input
+/// kinds are documentation to update with it; no code elsewhere names the formats.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum CloudFormat {
     /// Point Cloud Library `.pcd`.
@@ -80,25 +91,32 @@ pub enum CloudFormat {
 }
 
 impl CloudFormat {
-    /// Every format, in the order [`CloudFormat::sniff`] tries them.
+    /// Every format, in the order messages and `--help` list them.
     pub const ALL: [CloudFormat; 4] = [
-        CloudFormat::Mcap,
-        CloudFormat::Ply,
         CloudFormat::Pcd,
+        CloudFormat::Ply,
         CloudFormat::Xyz,
+        CloudFormat::Mcap,
     ];
 
-    /// The format a file name's extension names (case-insensitive): `.pcd`, `.ply`, `.xyz`,
-    /// `.txt`, `.csv`, `.mcap`; `None` for any other extension or none.
+    /// The file-name extensions of the format, lower case, the usual one first.
+    pub fn extensions(self) -> &'static [&'static str] {
+        match self {
+            CloudFormat::Pcd => &["pcd"],
+            CloudFormat::Ply => &["ply"],
+            CloudFormat::Xyz => &["xyz", "txt", "csv"],
+            CloudFormat::Mcap => &["mcap"],
+        }
+    }
+
+    /// The format a file name's extension names (case-insensitive): one of
+    /// [`CloudFormat::extensions`] (`.pcd`, `.ply`, `.xyz`, `.txt`, `.csv`, `.mcap`); `None` for
+    /// any other extension or none.
     pub fn from_path(path: &Path) -> Option<CloudFormat> {
         let ext = path.extension()?.to_str()?.to_ascii_lowercase();
-        match ext.as_str() {
-            "pcd" => Some(CloudFormat::Pcd),
-            "ply" => Some(CloudFormat::Ply),
-            "xyz" | "txt" | "csv" => Some(CloudFormat::Xyz),
-            "mcap" => Some(CloudFormat::Mcap),
-            _ => None,
-        }
+        CloudFormat::ALL
+            .into_iter()
+            .find(|f| f.extensions().contains(&ext.as_str()))
     }
 
     /// The format the first bytes look like: MCAP's magic, PLY's `ply` line, a PCD header

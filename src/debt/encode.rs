@@ -1,0 +1,270 @@
+//! The encoder: an image within a byte budget, exactly. The planes are transformed, quantised
+//! into bands and bit-plane coded until the budget is spent; a segmented stream codes each
+//! segment within the whole budget first, then shares the budget so that every segment stops
+//! at about the same pass, and interleaves their bytes trunk by trunk.
+
+use super::coder::{self, Band, BitCoder, Encoder};
+use super::colour::{downscale, to_components};
+use super::header::{Header, MAX_SEGMENTS, SegmentLayout, Segments};
+use super::transform::{build_bands, default_levels, transform_planes};
+use super::{Error, Image, MAX_SIDE, Rect, rangecoder};
+
+/// Encoder settings.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct EncodeOptions {
+    /// The byte budget: the stream is exactly this long unless the image codes completely in
+    /// fewer.
+    pub bytes: usize,
+    /// Wavelet levels (0..=7); `None` picks by image size.
+    pub levels: Option<u32>,
+    /// Code luma only.
+    pub gray: bool,
+    /// Reversible 5/3 transform and colour transform: with enough bytes, exact.
+    pub lossless: bool,
+    /// Encode at 1/2^scale of the size (0..=3); the decoder scales back up.
+    pub scale: u32,
+    /// Region of interest in pixels, coded first.
+    pub roi: Option<Rect>,
+    /// Bit-planes the region of interest is raised by (1..=15).
+    pub roi_shift: u32,
+    /// Split into independently decodable segments for lossy links.
+    pub segments: Option<Segments>,
+}
+
+impl Default for EncodeOptions {
+    fn default() -> Self {
+        EncodeOptions {
+            bytes: 1000,
+            levels: None,
+            gray: false,
+            lossless: false,
+            scale: 0,
+            roi: None,
+            roi_shift: 3,
+            segments: None,
+        }
+    }
+}
+
+/// Encodes an image within `options.bytes` bytes.
+pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
+    if img.width == 0 || img.height == 0 || img.width > MAX_SIDE || img.height > MAX_SIDE {
+        return Err(Error::Size {
+            width: img.width,
+            height: img.height,
+        });
+    }
+    if img.channels != 1 && img.channels != 3 {
+        return Err(Error::Setting {
+            field: "channels",
+            expected: "1 or 3",
+            found: img.channels as u64,
+        });
+    }
+    let expected = img.width * img.height * img.channels;
+    if img.data.len() != expected {
+        return Err(Error::Data {
+            expected,
+            found: img.data.len(),
+        });
+    }
+    if options.scale > 3 {
+        return Err(Error::Setting {
+            field: "scale",
+            expected: "0..=3",
+            found: options.scale.into(),
+        });
+    }
+    let coded = downscale(img, options.scale);
+    let levels = options
+        .levels
+        .unwrap_or_else(|| default_levels(coded.width, coded.height));
+    if levels > 7 {
+        return Err(Error::Setting {
+            field: "levels",
+            expected: "0..=7",
+            found: levels.into(),
+        });
+    }
+    let roi = match options.roi {
+        None => None,
+        Some(r) => {
+            if !(1..=15).contains(&options.roi_shift) {
+                return Err(Error::Setting {
+                    field: "roi_shift",
+                    expected: "1..=15",
+                    found: options.roi_shift.into(),
+                });
+            }
+            if r.x0 >= r.x1 || r.y0 >= r.y1 || r.x1 > img.width || r.y1 > img.height {
+                return Err(Error::Roi {
+                    rect: r,
+                    width: img.width,
+                    height: img.height,
+                });
+            }
+            Some((
+                Header::roi_cells(&r, img.width, img.height),
+                options.roi_shift,
+            ))
+        }
+    };
+    let header = Header {
+        width: img.width,
+        height: img.height,
+        gray: options.gray || img.channels == 1,
+        lossless: options.lossless,
+        levels,
+        scale: options.scale,
+        roi,
+        segments: options.segments.map(|segments| SegmentLayout {
+            segments,
+            weights: [1; MAX_SEGMENTS + 1],
+        }),
+    };
+    if let Some(seg) = options.segments {
+        seg.check()?;
+    }
+    header.check_trunk()?;
+    // Nothing is allocated from the budget: a stream grows with what the image needs, and
+    // stops when it is complete (a budget of 2^64 - 1 bytes is as good as unbounded).
+    let mut out = Vec::with_capacity(header.len());
+    header.write(&mut out);
+    if options.bytes < out.len() {
+        return Err(Error::Budget {
+            found: options.bytes,
+            header: out.len(),
+        });
+    }
+    let (w, h) = header.coded_size();
+    let mut planes = to_components(&coded, header.gray, header.lossless);
+    transform_planes(&mut planes, w, h, &header, true);
+    let Some(layout) = header.segments else {
+        let budget = options.bytes - out.len();
+        let (bands, _) = build_bands(&header, Some(&planes), 0, 1);
+        out.extend_from_slice(&encode_bands(bands, budget).0);
+        return Ok(out);
+    };
+    let count = layout.segments.count + 1;
+    let header_bytes = header.len();
+    // Every segment is coded once within the whole budget, noting where each pass ends; the
+    // budget is then split so that all segments stop at about the same pass (equal
+    // distortion-rate slope), and each keeps the prefix of its stream that fits its trunks.
+    let budget = options.bytes.saturating_sub(header_bytes);
+    let mut streams = Vec::with_capacity(count);
+    let mut ends = Vec::with_capacity(count);
+    let mut all_complete = true;
+    for part in 0..count {
+        let (bands, _) = build_bands(&header, Some(&planes), part, count);
+        let (payload, complete, marks) = encode_bands(bands, budget);
+        ends.push(pass_ends(&marks, complete));
+        all_complete &= complete;
+        streams.push(payload);
+    }
+    // When every segment is complete the image needs no more than their sum: a larger budget
+    // would only pad, so the stream stops once every segment has had its bytes.
+    // Each then gets weight for the whole trunks it fills, so that small segments get their
+    // trunks early instead of once per round of the large ones.
+    let trunk = layout.segments.trunk_bytes;
+    let shares = if all_complete {
+        streams
+            .iter()
+            .map(|s| s.len().div_ceil(trunk).max(1) * trunk)
+            .collect()
+    } else {
+        split_budget(&ends, budget)
+    };
+    let largest = shares.iter().copied().max().unwrap_or(1).max(1) as u128;
+    let mut weights = [0u8; MAX_SEGMENTS + 1];
+    for (w, &share) in weights.iter_mut().zip(&shares) {
+        *w = (share as u128 * 255).div_ceil(largest).clamp(1, 255) as u8;
+    }
+    let layout = SegmentLayout {
+        segments: layout.segments,
+        weights,
+    };
+    let header = Header {
+        segments: Some(layout),
+        ..header
+    };
+    out.clear();
+    header.write(&mut out);
+    // Past its end a segment's trunks are zeros (a complete stream ends in zeros anyway).
+    let mut taken = vec![0; count];
+    let mut needed_end = out.len();
+    for (range, part) in layout.chunks(header_bytes, options.bytes) {
+        if all_complete && taken.iter().zip(&streams).all(|(&t, s)| t >= s.len()) {
+            break;
+        }
+        let stream = streams[part].get(taken[part]..).unwrap_or_default();
+        let real = stream.len().min(range.len());
+        out.extend_from_slice(&stream[..real]);
+        out.resize(out.len() + range.len() - real, 0);
+        taken[part] += range.len();
+        if real > 0 {
+            needed_end = range.start + real;
+        }
+    }
+    if all_complete {
+        out.truncate(needed_end);
+    }
+    Ok(out)
+}
+
+/// Where each pass ends in a segment's stream, in bytes a decoder needs to have it all, indexed
+/// by [`coder::pass_index`]; `u64::MAX` for passes the stream stopped before finishing.
+fn pass_ends(marks: &[(usize, u64)], complete: bool) -> Vec<u64> {
+    let bytes = |bits: u64| (bits + u64::from(rangecoder::MARGIN_BITS)).div_ceil(8);
+    (0..coder::PASS_INDICES)
+        .map(|i| match marks.iter().rev().find(|m| m.0 <= i) {
+            // Planes above the segment's largest magnitude: nothing but the plane count.
+            None => bytes(5),
+            Some(&(index, bits)) if index == i || complete => bytes(bits),
+            Some(_) => u64::MAX,
+        })
+        .collect()
+}
+
+/// Splits `budget` bytes among segments whose pass ends are `ends`: each gets what reaches the
+/// last pass that all can complete together, and the rest in proportion to the next pass.
+fn split_budget(ends: &[Vec<u64>], budget: usize) -> Vec<usize> {
+    let budget = budget as u64;
+    let total = |i: usize| -> u64 { ends.iter().map(|e| e[i]).fold(0, u64::saturating_add) };
+    let reached = (0..coder::PASS_INDICES)
+        .take_while(|&i| total(i) <= budget)
+        .last();
+    let base: Vec<u64> = ends.iter().map(|e| reached.map_or(0, |i| e[i])).collect();
+    let next = reached.map_or(0, |i| i + 1).min(coder::PASS_INDICES - 1);
+    let left = budget - base.iter().sum::<u64>().min(budget);
+    let growth: Vec<u64> = ends
+        .iter()
+        .zip(&base)
+        .map(|(e, &b)| e[next].min(budget).saturating_sub(b).max(1))
+        .collect();
+    let growth_sum: u64 = growth.iter().sum();
+    base.iter()
+        .zip(&growth)
+        .map(|(&b, &g)| (b + left * g / growth_sum) as usize)
+        .collect()
+}
+
+/// Codes a band list in at most `budget` bytes: the bytes (exactly `budget` unless complete),
+/// whether every plane was coded, and where each pass ended ([`Encoder::marks`]).
+pub(super) fn encode_bands(
+    mut bands: Vec<Band>,
+    budget: usize,
+) -> (Vec<u8>, bool, Vec<(usize, u64)>) {
+    let max = bands.iter().map(Band::max_magnitude).max().unwrap_or(0);
+    let plane_count = 32 - max.leading_zeros();
+    let mut enc = Encoder::new(budget);
+    let complete = enc.raw(plane_count, 5).is_ok()
+        && coder::code_planes(&mut bands, plane_count, &mut enc).is_ok();
+    let marks = std::mem::take(&mut enc.marks);
+    let mut payload = enc.finish(complete);
+    if complete {
+        payload.truncate(budget);
+    } else {
+        payload.resize(budget, 0);
+    }
+    (payload, complete, marks)
+}

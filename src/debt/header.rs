@@ -1,0 +1,379 @@
+//! The stream's header: what a decoder must know before the first coded bit (size, grey or
+//! colour, lossy or lossless, wavelet levels, downscale, region of interest), and for a
+//! segmented stream ([`Segments`]) how its trunks are shared among the segments
+//! ([`SegmentLayout`]). 5 bytes, 8 with a region of interest, 2 + segments + 1 more when
+//! segmented; the byte layout is in `docs/debt-format.md`.
+
+use std::ops::Range;
+
+use super::{Error, Rect};
+
+/// The bitstream version this build writes and reads: one embedded segment.
+pub const VERSION: u8 = 1;
+/// The same format split into trunk-interleaved segments ([`Segments`]).
+pub const VERSION_SEGMENTED: u8 = 2;
+/// Most segments a stream can have.
+pub const MAX_SEGMENTS: usize = 16;
+/// Smallest trunk a segmented stream can be cut for.
+pub const MIN_TRUNK_BYTES: usize = 16;
+const MAGIC: u8 = 0xd0;
+
+/// A segmented stream: `count` stripes of rows, each an embedded stream of its own, their bytes
+/// interleaved so that trunk `k` (bytes `k*trunk_bytes..(k+1)*trunk_bytes` of the stream, the
+/// header included in trunk 0) carries only segment `k % count`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Segments {
+    /// Number of segments, 2..=16.
+    pub count: usize,
+    /// Trunk size in bytes, 16..=255.
+    pub trunk_bytes: usize,
+}
+
+impl Segments {
+    pub(super) fn check(&self) -> Result<(), Error> {
+        if !(2..=MAX_SEGMENTS).contains(&self.count) {
+            return Err(Error::Setting {
+                field: "segments",
+                expected: "2..=16",
+                found: self.count as u64,
+            });
+        }
+        if !(MIN_TRUNK_BYTES..=255).contains(&self.trunk_bytes) {
+            return Err(Error::Setting {
+                field: "segment trunk size",
+                expected: "16..=255 bytes",
+                found: self.trunk_bytes as u64,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// A segmented stream's layout as its header states it: the segments and each one's share of
+/// the trunks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SegmentLayout {
+    /// Count and trunk size.
+    pub segments: Segments,
+    /// Relative share of the trunks of each segment (1..=255; entries past `count` are 0).
+    pub weights: [u8; MAX_SEGMENTS + 1],
+}
+
+impl SegmentLayout {
+    /// The chunks of a stream of `total_bytes` whose header takes `header_bytes`: each chunk's
+    /// byte range in the stream and the segment it carries, in stream order. Trunk `k` is
+    /// chunk `k` (less the header in trunk 0); trunks go to segments by smooth weighted round
+    /// robin: each trunk, every segment gains its weight in credit, the segment with the most
+    /// credit (the first on ties) takes the trunk and pays the total weight. Lazy, so that an
+    /// encoder can stop early; a range is never inverted (a trunk inside the header is empty).
+    pub(super) fn chunks(
+        &self,
+        header_bytes: usize,
+        total_bytes: usize,
+    ) -> impl Iterator<Item = (Range<usize>, usize)> + use<> {
+        let trunk = self.segments.trunk_bytes.max(1);
+        let count = self.segments.count;
+        let weights = self.weights;
+        let total_weight: i64 = weights[..=count].iter().map(|&w| i64::from(w)).sum();
+        let mut credit = [0i64; MAX_SEGMENTS + 1];
+        (0..total_bytes.div_ceil(trunk)).map(move |k| {
+            let mut best = 0;
+            for (i, &w) in weights[..=count].iter().enumerate() {
+                credit[i] += i64::from(w);
+                // Trunk 0, with the header, always carries the base.
+                if k > 0 && credit[i] > credit[best] {
+                    best = i;
+                }
+            }
+            credit[best] -= total_weight;
+            let start = k.saturating_mul(trunk);
+            let end = start.saturating_add(trunk).min(total_bytes);
+            (start.max(header_bytes).min(end)..end, best)
+        })
+    }
+}
+
+/// What the header says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Header {
+    /// Width of the image the decoder produces.
+    pub width: usize,
+    /// Height of the image the decoder produces.
+    pub height: usize,
+    /// One component (grey) or three.
+    pub gray: bool,
+    /// Reversible coding.
+    pub lossless: bool,
+    /// Wavelet levels.
+    pub levels: u32,
+    /// Downscale exponent.
+    pub scale: u32,
+    /// ROI as 1/32 cells: first and last column cell, first and last row cell; and its shift.
+    pub roi: Option<([u8; 4], u32)>,
+    /// Segmenting, for version 2 streams.
+    pub segments: Option<SegmentLayout>,
+}
+
+/// ROI cells per image side in the header.
+pub(super) const ROI_CELLS: usize = 32;
+
+impl Header {
+    /// Bytes the header takes: 5, or 8 with a region of interest; 2 more when segmented.
+    pub fn len(&self) -> usize {
+        let base = if self.roi.is_some() { 8 } else { 5 };
+        base + self.segments.map_or(0, |l| 3 + l.segments.count)
+    }
+
+    /// Always false: a header is never empty (for clippy's len-without-is-empty).
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    pub(super) fn write(&self, out: &mut Vec<u8>) {
+        out.push(
+            MAGIC
+                | if self.segments.is_some() {
+                    VERSION_SEGMENTED
+                } else {
+                    VERSION
+                },
+        );
+        let size = ((self.width as u32 - 1) << 12) | (self.height as u32 - 1);
+        out.extend_from_slice(&size.to_be_bytes()[1..]);
+        out.push(
+            u8::from(self.gray) << 7
+                | u8::from(self.lossless) << 6
+                | (self.levels as u8) << 3
+                | (self.scale as u8) << 1
+                | u8::from(self.roi.is_some()),
+        );
+        if let Some((c, shift)) = self.roi {
+            let bits = (shift << 20)
+                | (u32::from(c[0]) << 15)
+                | (u32::from(c[1]) << 10)
+                | (u32::from(c[2]) << 5)
+                | u32::from(c[3]);
+            out.extend_from_slice(&bits.to_be_bytes()[1..]);
+        }
+        if let Some(layout) = self.segments {
+            out.push((layout.segments.count - 1) as u8);
+            out.push(layout.segments.trunk_bytes as u8);
+            out.extend_from_slice(&layout.weights[..=layout.segments.count]);
+        }
+    }
+
+    /// Reads a header from the start of a stream.
+    pub fn read(data: &[u8]) -> Result<Header, Error> {
+        let first = *data.first().ok_or(Error::Truncated {
+            expected: 5,
+            found: 0,
+        })?;
+        if first & 0xf0 != MAGIC {
+            return Err(Error::NotDebt { found: first });
+        }
+        let version = first & 0x0f;
+        if version != VERSION && version != VERSION_SEGMENTED {
+            return Err(Error::Version {
+                found: first & 0x0f,
+            });
+        }
+        if data.len() < 5 {
+            return Err(Error::Truncated {
+                expected: 5,
+                found: data.len(),
+            });
+        }
+        let size = u32::from_be_bytes([0, data[1], data[2], data[3]]);
+        let flags = data[4];
+        let mut header = Header {
+            width: (size >> 12) as usize + 1,
+            height: (size & 0xfff) as usize + 1,
+            gray: flags & 0x80 != 0,
+            lossless: flags & 0x40 != 0,
+            levels: u32::from((flags >> 3) & 0x07),
+            scale: u32::from((flags >> 1) & 0x03),
+            roi: None,
+            segments: None,
+        };
+        if flags & 1 != 0 {
+            if data.len() < 8 {
+                return Err(Error::Truncated {
+                    expected: 8,
+                    found: data.len(),
+                });
+            }
+            let bits = u32::from_be_bytes([0, data[5], data[6], data[7]]);
+            let cell = |shift: u32| ((bits >> shift) & 0x1f) as u8;
+            let cells = [cell(15), cell(10), cell(5), cell(0)];
+            let shift = bits >> 20;
+            if cells[1] < cells[0] || cells[3] < cells[2] || shift == 0 {
+                return Err(Error::Setting {
+                    field: "ROI",
+                    expected: "first cell <= last cell, shift 1..=15",
+                    found: u64::from(bits),
+                });
+            }
+            header.roi = Some(([cells[0], cells[1], cells[2], cells[3]], shift));
+        }
+        if version == VERSION_SEGMENTED {
+            let at = if header.roi.is_some() { 8 } else { 5 };
+            let Some(&[count, trunk]) = data.get(at..at + 2) else {
+                return Err(Error::Truncated {
+                    expected: at + 2,
+                    found: data.len(),
+                });
+            };
+            let segments = Segments {
+                count: usize::from(count) + 1,
+                trunk_bytes: usize::from(trunk),
+            };
+            segments.check()?;
+            let at = at + 2;
+            let Some(read) = data.get(at..=at + segments.count) else {
+                return Err(Error::Truncated {
+                    expected: at + segments.count + 1,
+                    found: data.len(),
+                });
+            };
+            if let Some(&zero) = read.iter().find(|&&w| w == 0) {
+                return Err(Error::Setting {
+                    field: "segment weight",
+                    expected: "1..=255",
+                    found: zero.into(),
+                });
+            }
+            let mut weights = [0; MAX_SEGMENTS + 1];
+            weights[..=segments.count].copy_from_slice(read);
+            header.segments = Some(SegmentLayout { segments, weights });
+            header.check_trunk()?;
+        }
+        Ok(header)
+    }
+
+    /// A segmented header must fit in trunk 0 (a lost trunk 1 would otherwise lose it).
+    pub(super) fn check_trunk(&self) -> Result<(), Error> {
+        match self.segments {
+            Some(layout) if self.len() > layout.segments.trunk_bytes => Err(Error::HeaderTrunk {
+                header: self.len(),
+                trunk: layout.segments.trunk_bytes,
+            }),
+            _ => Ok(()),
+        }
+    }
+
+    /// Size of the coded (downscaled) image.
+    pub fn coded_size(&self) -> (usize, usize) {
+        (
+            self.width.div_ceil(1 << self.scale),
+            self.height.div_ceil(1 << self.scale),
+        )
+    }
+
+    /// The header's ROI cells of rectangle `r` of a `width` x `height` picture (first and last
+    /// column cell, first and last row cell), rounded outwards: what [`Header::roi`] holds.
+    pub(super) fn roi_cells(r: &Rect, width: usize, height: usize) -> [u8; 4] {
+        let cell = |v: usize, side: usize| ((v * ROI_CELLS) / side).min(ROI_CELLS - 1) as u8;
+        let last =
+            |v: usize, side: usize| ((v * ROI_CELLS).div_ceil(side) - 1).min(ROI_CELLS - 1) as u8;
+        [
+            cell(r.x0, width),
+            last(r.x1, width),
+            cell(r.y0, height),
+            last(r.y1, height),
+        ]
+    }
+
+    /// The ROI in coded-image pixels.
+    pub(super) fn roi_rect(&self) -> Option<(Rect, u32)> {
+        let (cw, ch) = self.coded_size();
+        self.roi.map(|(c, shift)| {
+            let edge = |cell: usize, side: usize| cell * side / ROI_CELLS;
+            (
+                Rect {
+                    x0: edge(c[0].into(), cw),
+                    x1: edge(usize::from(c[1]) + 1, cw).max(edge(c[0].into(), cw) + 1),
+                    y0: edge(c[2].into(), ch),
+                    y1: edge(usize::from(c[3]) + 1, ch).max(edge(c[2].into(), ch) + 1),
+                },
+                shift,
+            )
+        })
+    }
+
+    pub(super) fn components(&self) -> usize {
+        if self.gray { 1 } else { 3 }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn header_round_trip() {
+        let h = Header {
+            width: 640,
+            height: 360,
+            gray: false,
+            lossless: true,
+            levels: 5,
+            scale: 2,
+            roi: Some(([1, 30, 2, 29], 7)),
+            segments: None,
+        };
+        let mut out = Vec::new();
+        h.write(&mut out);
+        assert_eq!(out.len(), 8);
+        assert_eq!(Header::read(&out).unwrap(), h);
+        let mut weights = [0; MAX_SEGMENTS + 1];
+        weights[..4].copy_from_slice(&[9, 255, 1, 40]);
+        let segmented = Header {
+            segments: Some(SegmentLayout {
+                segments: Segments {
+                    count: 3,
+                    trunk_bytes: 39,
+                },
+                weights,
+            }),
+            ..h
+        };
+        let mut out = Vec::new();
+        segmented.write(&mut out);
+        assert_eq!(out[0], 0xd2);
+        assert_eq!(&out[8..], &[2, 39, 9, 255, 1, 40]);
+        assert_eq!(segmented.len(), out.len());
+        assert_eq!(Header::read(&out).unwrap(), segmented);
+        // A zero weight, a segment count or trunk out of range, a cut header: errors.
+        let mut bad = out.clone();
+        bad[12] = 0;
+        assert!(matches!(Header::read(&bad), Err(Error::Setting { .. })));
+        bad = out.clone();
+        bad[9] = 15;
+        assert!(matches!(Header::read(&bad), Err(Error::Setting { .. })));
+        bad = out.clone();
+        bad[8] = 0;
+        assert!(matches!(Header::read(&bad), Err(Error::Setting { .. })));
+        assert_eq!(
+            Header::read(&out[..12]),
+            Err(Error::Truncated {
+                expected: 14,
+                found: 12
+            })
+        );
+        assert_eq!(
+            Header::read(&[0x55, 0, 0, 0, 0]),
+            Err(Error::NotDebt { found: 0x55 })
+        );
+        assert_eq!(
+            Header::read(&[0xd7, 0, 0, 0, 0]),
+            Err(Error::Version { found: 7 })
+        );
+        assert_eq!(
+            Header::read(&[0xd1, 0]),
+            Err(Error::Truncated {
+                expected: 5,
+                found: 2
+            })
+        );
+    }
+}
