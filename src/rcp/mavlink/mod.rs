@@ -40,28 +40,32 @@
 //! The messages kept between two steps are bounded ([`MAX_QUEUED`]). Dropping the drive stops
 //! the thread and waits for it (at most a read timeout, or a reconnect attempt).
 
+mod transport;
+
+pub use transport::parse_endpoint;
+
 use std::collections::VecDeque;
-use std::fmt;
 use std::io;
-use std::net::{SocketAddr, TcpListener, TcpStream, ToSocketAddrs};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use mavlink::MavHeader;
 use mavlink::dialects::ardupilotmega::{
     COMMAND_LONG_DATA, HEARTBEAT_DATA, MANUAL_CONTROL_DATA, MavAutopilot, MavCmd, MavFrame,
     MavMessage, MavModeFlag, MavResult, MavSeverity, MavState, MavType, PositionTargetTypemask,
     SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
 use mavlink::error::MessageReadError;
-use mavlink::{Connectable, MavConnection, MavHeader, SerialConfig, TcpConfig, UdpConfig, UdpMode};
 
 use super::drive::{Demand, Drive, DriveEvent, DriveState};
+use crate::device::DeviceSpec;
 use crate::link::SimTime;
 use crate::vehicle::{Command, Vehicle, angle_diff_deg};
 use crate::wire::Nav;
 use crate::wire::rov::Why;
+use transport::{Conn, Reopen};
 
 /// How often an arm or mode request the autopilot has not met is sent again, s.
 pub const COMMAND_RETRY_S: f64 = 1.5;
@@ -84,10 +88,10 @@ pub const READ_TIMEOUT: Duration = Duration::from_millis(100);
 /// How long a TCP or serial write may wait before it fails.
 pub const WRITE_TIMEOUT: Duration = Duration::from_millis(200);
 
-/// How long `tcpout:` waits for the autopilot to accept the connection.
+/// How long `tcp:` (`tcpout:`) waits for the autopilot to accept the connection.
 pub const TCP_CONNECT_TIMEOUT: Duration = Duration::from_secs(3);
 
-/// How often a closed `tcpout:` connection is tried again.
+/// How often a closed `tcp:` (`tcpout:`) connection is tried again.
 pub const RECONNECT_PERIOD: Duration = Duration::from_secs(1);
 
 /// The most acknowledgements and notes kept between two steps (older ones are dropped).
@@ -201,109 +205,10 @@ pub fn manual_control_axes(thrust_percent: [f64; 4]) -> [i16; 4] {
 /// MANUAL_CONTROL with the sticks centred.
 pub const NEUTRAL_AXES: [i16; 4] = [0, 0, 500, 0];
 
-/// Where the autopilot is: one of the connection forms ArduSub users know.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Endpoint {
-    /// `udpin:HOST:PORT` (or `udp:`): listen there; answer whoever sent last (BlueOS and
-    /// MAVProxy send to a GCS at 14550).
-    UdpIn(String),
-    /// `udpout:HOST:PORT`: send there, from an ephemeral port, and listen on that port.
-    UdpOut(String),
-    /// `tcpin:HOST:PORT`: listen there for the autopilot to connect (one connection at a time).
-    TcpIn(String),
-    /// `tcpout:HOST:PORT` (or `tcp:`): connect there (ArduSub SITL listens on 5760).
-    TcpOut(String),
-    /// `serial:DEVICE:BAUD`: a serial port (the device may itself hold colons).
-    Serial {
-        /// The device path.
-        device: String,
-        /// Bits per second.
-        baud: u32,
-    },
-}
-
-/// The endpoint forms, for error messages.
-const FORMS: &str =
-    "udpin:HOST:PORT, udpout:HOST:PORT, tcpin:HOST:PORT, tcpout:HOST:PORT or serial:DEVICE:BAUD";
-
-impl Endpoint {
-    /// Parses an endpoint; an error names the text and what is wrong with it.
-    pub fn parse(text: &str) -> Result<Endpoint, MavlinkError> {
-        let syntax = |reason: String| MavlinkError::Syntax {
-            endpoint: text.to_string(),
-            reason,
-        };
-        let Some((scheme, rest)) = text.split_once(':') else {
-            return Err(syntax(format!("expected {FORMS}")));
-        };
-        match scheme {
-            "udpin" | "udp" => Ok(Endpoint::UdpIn(host_port(rest, true).map_err(syntax)?)),
-            "udpout" => Ok(Endpoint::UdpOut(host_port(rest, false).map_err(syntax)?)),
-            "tcpin" => Ok(Endpoint::TcpIn(host_port(rest, true).map_err(syntax)?)),
-            "tcpout" | "tcp" => Ok(Endpoint::TcpOut(host_port(rest, false).map_err(syntax)?)),
-            "serial" => {
-                let Some((device, baud)) = rest.rsplit_once(':') else {
-                    return Err(syntax("expected serial:DEVICE:BAUD".to_string()));
-                };
-                if device.is_empty() {
-                    return Err(syntax("the serial device is empty".to_string()));
-                }
-                match baud.parse::<u32>() {
-                    Ok(baud) if baud > 0 => Ok(Endpoint::Serial {
-                        device: device.to_string(),
-                        baud,
-                    }),
-                    _ => Err(syntax(format!(
-                        "expected a baud rate (bits per second) after the device, found '{baud}'"
-                    ))),
-                }
-            }
-            other => Err(syntax(format!(
-                "unknown connection type '{other}': expected {FORMS}"
-            ))),
-        }
-    }
-}
-
-/// Checks `HOST:PORT` (an IPv6 host in brackets); port 0 only where we listen.
-fn host_port(text: &str, listening: bool) -> Result<String, String> {
-    let Some((host, port)) = text.rsplit_once(':') else {
-        return Err(format!("expected HOST:PORT, found '{text}'"));
-    };
-    if host.is_empty() {
-        return Err(format!("expected HOST:PORT, found no host in '{text}'"));
-    }
-    let bracketed = host.starts_with('[') && host.ends_with(']') && host.len() > 2;
-    if host.contains(':') && !bracketed {
-        return Err(format!(
-            "an IPv6 host goes in brackets ([::1]:14550), found '{text}'"
-        ));
-    }
-    match port.parse::<u16>() {
-        Ok(0) if !listening => Err(format!("port 0 cannot be connected to, in '{text}'")),
-        Ok(_) => Ok(text.to_string()),
-        Err(_) => Err(format!(
-            "expected a port number 0..=65535 after the host, found '{port}'"
-        )),
-    }
-}
-
-impl fmt::Display for Endpoint {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Endpoint::UdpIn(a) => write!(f, "udpin:{a}"),
-            Endpoint::UdpOut(a) => write!(f, "udpout:{a}"),
-            Endpoint::TcpIn(a) => write!(f, "tcpin:{a}"),
-            Endpoint::TcpOut(a) => write!(f, "tcpout:{a}"),
-            Endpoint::Serial { device, baud } => write!(f, "serial:{device}:{baud}"),
-        }
-    }
-}
-
 /// Why the autopilot's endpoint could not be opened.
 #[derive(Debug, thiserror::Error)]
 pub enum MavlinkError {
-    /// The endpoint text is not one of the forms.
+    /// The endpoint text is not one of the forms ([`parse_endpoint`]).
     #[error("mavlink endpoint '{endpoint}': {reason}")]
     Syntax {
         /// The text given.
@@ -389,8 +294,6 @@ impl MavlinkOptions {
         Ok(())
     }
 }
-
-type Conn = mavlink::Connection<MavMessage>;
 
 /// The autopilot the link settled on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -480,16 +383,6 @@ struct Shared {
 
 fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
-}
-
-/// How the receiving thread gets a connection back when TCP closes.
-enum Reopen {
-    /// UDP and serial: the connection stays.
-    Never,
-    /// `tcpout:`: connect again.
-    Connect(SocketAddr),
-    /// `tcpin:`: accept the next connection.
-    Accept(TcpListener),
 }
 
 /// A time base for "every so often", on the session clock.
@@ -609,7 +502,7 @@ impl Stream {
 
 /// A real autopilot behind a MAVLink endpoint, driven as the ROV's vehicle.
 pub struct MavlinkDrive {
-    endpoint: Endpoint,
+    endpoint: DeviceSpec,
     options: MavlinkOptions,
     shared: Arc<Shared>,
     thread: Option<JoinHandle<()>>,
@@ -645,56 +538,15 @@ pub struct MavlinkDrive {
     send_error: Option<String>,
 }
 
-/// Opens `endpoint` (see [`Endpoint`]) and starts listening for the autopilot. A syntax error or
-/// an endpoint that cannot be opened (bind fails, TCP refused or unanswered for
+/// Opens `endpoint` (see [`parse_endpoint`]) and starts listening for the autopilot. A syntax
+/// error or an endpoint that cannot be opened (bind fails, TCP refused or unanswered for
 /// [`TCP_CONNECT_TIMEOUT`], no such serial device) is an error naming the endpoint and why. It
 /// does not wait for the autopilot: an absent autopilot shows as silence.
 pub fn connect(endpoint: &str, options: &MavlinkOptions) -> Result<MavlinkDrive, MavlinkError> {
     options.check()?;
-    let parsed = Endpoint::parse(endpoint)?;
-    let open = |action: &'static str| {
-        let endpoint = parsed.to_string();
-        move |source: io::Error| MavlinkError::Open {
-            endpoint,
-            action,
-            source,
-        }
-    };
-    let (conn, reopen, polls) = match &parsed {
-        Endpoint::UdpIn(address) | Endpoint::UdpOut(address) => {
-            let (mode, action) = match parsed {
-                Endpoint::UdpIn(_) => (UdpMode::Udpin, "bind"),
-                _ => (UdpMode::Udpout, "resolve or bind"),
-            };
-            let config = UdpConfig::new(address.clone(), mode).read_timeout(READ_TIMEOUT);
-            let conn = config.connect::<MavMessage>().map_err(open(action))?;
-            (Some(conn), Reopen::Never, false)
-        }
-        Endpoint::TcpOut(address) => {
-            let to = resolve(address).map_err(open("resolve"))?;
-            let conn = tcp_connection(to, TCP_CONNECT_TIMEOUT).map_err(open("connect"))?;
-            (Some(conn), Reopen::Connect(to), false)
-        }
-        Endpoint::TcpIn(address) => {
-            let listener = TcpListener::bind(resolve(address).map_err(open("resolve"))?)
-                .and_then(|l| l.set_nonblocking(true).map(|()| l))
-                .map_err(open("listen"))?;
-            (None, Reopen::Accept(listener), false)
-        }
-        Endpoint::Serial { device, baud } => {
-            let config = SerialConfig::new(device.clone(), *baud).timeout(READ_TIMEOUT);
-            let conn = config
-                .connect::<MavMessage>()
-                .map_err(open("open the serial port"))?;
-            (Some(conn), Reopen::Never, true)
-        }
-    };
-    let conn = conn.map(|mut c| {
-        // ArduPilot answers in the version it is spoken to, but a port set to MAVLink 1 sends
-        // version 1 heartbeats: read both, send version 2.
-        c.set_allow_recv_any_version(true);
-        Arc::new(c)
-    });
+    let parsed = parse_endpoint(endpoint)?;
+    let (conn, reopen) = transport::open(&parsed, endpoint)?;
+    let conn = conn.map(Arc::new);
     let shared = Arc::new(Shared {
         conn: Mutex::new(conn),
         inbox: Mutex::new(Inbox::default()),
@@ -704,8 +556,12 @@ pub fn connect(endpoint: &str, options: &MavlinkOptions) -> Result<MavlinkDrive,
     let our_system = options.system_id;
     let thread = std::thread::Builder::new()
         .name("mavlink-receive".to_string())
-        .spawn(move || receive(&thread_shared, reopen, polls, our_system))
-        .map_err(open("start its receiving thread"))?;
+        .spawn(move || receive(&thread_shared, reopen, our_system))
+        .map_err(|source| MavlinkError::Open {
+            endpoint: endpoint.to_string(),
+            action: "start its receiving thread",
+            source,
+        })?;
     Ok(MavlinkDrive {
         endpoint: parsed,
         options: options.clone(),
@@ -750,59 +606,22 @@ pub fn connect(endpoint: &str, options: &MavlinkOptions) -> Result<MavlinkDrive,
     })
 }
 
-fn resolve(address: &str) -> io::Result<SocketAddr> {
-    address
-        .to_socket_addrs()?
-        .next()
-        .ok_or_else(|| io::Error::new(io::ErrorKind::NotFound, "the host has no address"))
-}
-
-/// A MAVLink connection over a TCP stream, with our read and write timeouts.
-fn tcp_stream_connection(stream: TcpStream) -> io::Result<Conn> {
-    stream.set_nonblocking(false)?;
-    stream.set_read_timeout(Some(READ_TIMEOUT))?;
-    stream.set_write_timeout(Some(WRITE_TIMEOUT))?;
-    stream.set_nodelay(true)?;
-    TcpConfig::from_stream(stream)?.connect::<MavMessage>()
-}
-
-fn tcp_connection(to: SocketAddr, timeout: Duration) -> io::Result<Conn> {
-    tcp_stream_connection(TcpStream::connect_timeout(&to, timeout)?)
-}
-
 /// The receiving thread: reads messages until told to stop, keeping what `step` needs.
-fn receive(shared: &Shared, reopen: Reopen, polls: bool, our_system: u8) {
+fn receive(shared: &Shared, reopen: Reopen, our_system: u8) {
     let mut failed: Option<String> = None;
     while !shared.stop.load(Ordering::Relaxed) {
         let conn = lock(&shared.conn).clone();
         let Some(conn) = conn else {
-            let fresh = match &reopen {
-                Reopen::Never => return,
-                Reopen::Connect(to) => {
-                    let again = std::time::Instant::now() + RECONNECT_PERIOD;
-                    while std::time::Instant::now() < again && !shared.stop.load(Ordering::Relaxed)
-                    {
-                        std::thread::sleep(READ_TIMEOUT);
-                    }
-                    tcp_connection(*to, READ_TIMEOUT * 5).ok()
-                }
-                Reopen::Accept(listener) => match listener.accept() {
-                    Ok((stream, _)) => tcp_stream_connection(stream).ok(),
-                    Err(_) => {
-                        std::thread::sleep(READ_TIMEOUT / 2);
-                        None
-                    }
-                },
-            };
-            if let Some(mut fresh) = fresh {
-                fresh.set_allow_recv_any_version(true);
+            if !reopen.reconnects() {
+                return;
+            }
+            if let Some(fresh) = reopen.again(&shared.stop) {
                 *lock(&shared.conn) = Some(Arc::new(fresh));
                 note(shared, "mavlink: TCP connection established".to_string());
             }
             continue;
         };
-        // A serial read retries its timeouts inside `recv`: poll it instead.
-        let result = if polls { conn.try_recv() } else { conn.recv() };
+        let result = conn.recv();
         match result {
             Ok((header, message)) => {
                 failed = None;
@@ -813,7 +632,7 @@ fn receive(shared: &Shared, reopen: Reopen, polls: bool, our_system: u8) {
                 io::ErrorKind::WouldBlock
                 | io::ErrorKind::TimedOut
                 | io::ErrorKind::Interrupted => {}
-                _ if !matches!(reopen, Reopen::Never) => {
+                _ if reopen.reconnects() => {
                     *lock(&shared.conn) = None;
                     note(shared, format!("mavlink: TCP connection closed: {error}"));
                 }
@@ -939,7 +758,7 @@ fn keep(shared: &Shared, header: &MavHeader, message: MavMessage, our_system: u8
 
 impl MavlinkDrive {
     /// The endpoint, as parsed.
-    pub fn endpoint(&self) -> &Endpoint {
+    pub fn endpoint(&self) -> &DeviceSpec {
         &self.endpoint
     }
 
@@ -1367,73 +1186,50 @@ mod tests {
     use super::*;
 
     #[test]
-    fn every_endpoint_form_parses() {
-        let cases = [
+    fn every_endpoint_form_of_the_device_grammar_is_an_autopilot_endpoint() {
+        // The grammar itself is device.rs's; here, which forms an autopilot takes, aliases too.
+        for (text, canonical) in [
+            ("udpin:0.0.0.0:14550", "udpin:0.0.0.0:14550"),
+            ("udp:0.0.0.0:14550", "udpin:0.0.0.0:14550"),
+            ("udpout:192.168.2.2:14551", "udpout:192.168.2.2:14551"),
             (
-                "udpin:0.0.0.0:14550",
-                Endpoint::UdpIn("0.0.0.0:14550".into()),
+                "udp:0.0.0.0:14550=127.0.0.1:14551",
+                "udp:0.0.0.0:14550=127.0.0.1:14551",
             ),
-            ("udp:0.0.0.0:14550", Endpoint::UdpIn("0.0.0.0:14550".into())),
-            (
-                "udpout:192.168.2.2:14551",
-                Endpoint::UdpOut("192.168.2.2:14551".into()),
-            ),
-            (
-                "tcpout:localhost:5760",
-                Endpoint::TcpOut("localhost:5760".into()),
-            ),
-            (
-                "tcp:127.0.0.1:5760",
-                Endpoint::TcpOut("127.0.0.1:5760".into()),
-            ),
-            ("tcpin:[::1]:5761", Endpoint::TcpIn("[::1]:5761".into())),
-            (
-                "serial:/dev/ttyACM0:115200",
-                Endpoint::Serial {
-                    device: "/dev/ttyACM0".into(),
-                    baud: 115200,
-                },
-            ),
-            (
-                "serial:/dev/serial/by-path/pci-0000:00:14.0-usb-0:2:1.0:57600",
-                Endpoint::Serial {
-                    device: "/dev/serial/by-path/pci-0000:00:14.0-usb-0:2:1.0".into(),
-                    baud: 57600,
-                },
-            ),
-        ];
-        for (text, expected) in cases {
-            let parsed = Endpoint::parse(text).unwrap();
-            assert_eq!(parsed, expected, "{text}");
-            // Display gives the canonical form, which parses back to the same.
-            assert_eq!(Endpoint::parse(&parsed.to_string()).unwrap(), parsed);
+            ("tcpout:localhost:5760", "tcp:localhost:5760"),
+            ("tcp:127.0.0.1:5760", "tcp:127.0.0.1:5760"),
+            ("tcpin:[::1]:5761", "tcpin:[::1]:5761"),
+            ("serial:/dev/ttyACM0:115200", "serial:/dev/ttyACM0:115200"),
+        ] {
+            let parsed = parse_endpoint(text).unwrap();
+            assert_eq!(parsed.to_string(), canonical, "{text}");
         }
     }
 
     #[test]
     fn bad_endpoints_say_what_is_wrong() {
         let cases = [
-            ("14550", "expected udpin:HOST:PORT"),
+            (
+                "14550",
+                "a serial autopilot needs its baud rate), found '14550'",
+            ),
+            ("/dev/ttyACM0", "expected udpin:HOST:PORT"),
+            ("pty", "found 'pty'"),
             ("udpin:14550", "expected HOST:PORT, found '14550'"),
             ("udpin::14550", "found no host"),
             (
                 "udpout:host:port",
                 "expected a port number 0..=65535 after the host, found 'port'",
             ),
-            ("udpout:host:70000", "found '70000'"),
-            ("tcpout:127.0.0.1:0", "port 0 cannot be connected to"),
-            ("tcpout:::1:5760", "an IPv6 host goes in brackets"),
-            ("serial:/dev/ttyACM0", "expected serial:DEVICE:BAUD"),
-            ("serial::115200", "the serial device is empty"),
-            (
-                "serial:/dev/ttyACM0:fast",
-                "expected a baud rate (bits per second) after the device, found 'fast'",
-            ),
-            ("serial:/dev/ttyACM0:0", "found '0'"),
-            ("file:log.tlog", "unknown connection type 'file'"),
+            ("tcpout:127.0.0.1:0", "expected a port to connect to"),
+            ("tcpout:::1:5760", "an IPv6 host in brackets"),
+            ("serial:/dev/ttyACM0", "expected serial:PATH:BAUD"),
+            ("serial::115200", "expected a device path"),
+            ("serial:/dev/ttyACM0:fast", "found 'fast'"),
+            ("file:log.tlog", "no device kind 'file'"),
         ];
         for (text, part) in cases {
-            let error = Endpoint::parse(text).unwrap_err().to_string();
+            let error = parse_endpoint(text).unwrap_err().to_string();
             assert!(
                 error.starts_with(&format!("mavlink endpoint '{text}': ")),
                 "{error}"
@@ -1441,8 +1237,6 @@ mod tests {
             assert!(error.contains(part), "{text}: {error}");
             assert!(!error.contains('\n'), "{error}");
         }
-        // Listening on port 0 is allowed (an ephemeral port).
-        assert!(Endpoint::parse("udpin:127.0.0.1:0").is_ok());
     }
 
     #[test]
@@ -1579,9 +1373,9 @@ mod tests {
             .err()
             .unwrap();
         assert!(
-            serial.to_string().starts_with(
-                "mavlink endpoint 'serial:/dev/nonexistent:115200': cannot open the serial port: "
-            ),
+            serial
+                .to_string()
+                .starts_with("mavlink endpoint 'serial:/dev/nonexistent:115200': cannot open: "),
             "{serial}"
         );
         // A port in use: bind fails.
@@ -1641,18 +1435,7 @@ mod tests {
     proptest::proptest! {
         #[test]
         fn parsing_never_panics(text in "\\PC{0,40}") {
-            let _ = Endpoint::parse(&text);
-        }
-
-        #[test]
-        fn parsing_endpoint_like_text_never_panics(
-            scheme in "(udpin|udpout|tcpin|tcpout|serial|udp|tcp|x)",
-            rest in "[\\[\\]:0-9a-z./]{0,24}",
-        ) {
-            let text = format!("{scheme}:{rest}");
-            if let Ok(parsed) = Endpoint::parse(&text) {
-                proptest::prop_assert_eq!(Endpoint::parse(&parsed.to_string()).unwrap(), parsed);
-            }
+            let _ = parse_endpoint(&text);
         }
     }
 }
