@@ -39,25 +39,34 @@
 //! [`WRITE_TIMEOUT`]). A send that fails is a [`DriveEvent::Note`], once until sends work again.
 //! The messages kept between two steps are bounded ([`MAX_QUEUED`]). Dropping the drive stops
 //! the thread and waits for it (at most a read timeout, or a reconnect attempt).
+//!
+//! By concern: `transport.rs` is the connection (the endpoint in the one device grammar, opened
+//! by the one opener, MAVLink framing over it, the receiving thread and TCP's reconnects);
+//! `codec.rs` what the messages mean (ArduSub's modes and NAV, the stick axes, what the heard
+//! messages leave in the inbox); this file the options and the drive's state machine. The
+//! public paths are this module's (`rcp::mavlink::manual_control_axes`, ...).
 
+mod codec;
 mod transport;
 
+pub use codec::{
+    ALT_HOLD, GUIDED, NEUTRAL_AXES, OTHER_MODE_NAV, POSHOLD, ardusub_mode_name, custom_mode_of,
+    demanded_mode, manual_control_axes, nav_of_custom_mode,
+};
 pub use transport::parse_endpoint;
 
-use std::collections::VecDeque;
 use std::io;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
 use mavlink::MavHeader;
 use mavlink::dialects::ardupilotmega::{
     COMMAND_LONG_DATA, HEARTBEAT_DATA, MANUAL_CONTROL_DATA, MavAutopilot, MavCmd, MavFrame,
-    MavMessage, MavModeFlag, MavResult, MavSeverity, MavState, MavType, PositionTargetTypemask,
+    MavMessage, MavModeFlag, MavResult, MavState, MavType, PositionTargetTypemask,
     SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
-use mavlink::error::MessageReadError;
 
 use super::drive::{Demand, Drive, DriveEvent, DriveState};
 use crate::device::DeviceSpec;
@@ -65,7 +74,8 @@ use crate::link::SimTime;
 use crate::vehicle::{Command, Vehicle, angle_diff_deg};
 use crate::wire::Nav;
 use crate::wire::rov::Why;
-use transport::{Conn, Reopen};
+use codec::{Autopilot, Inbox};
+use transport::{Shared, lock, receive};
 
 /// How often an arm or mode request the autopilot has not met is sent again, s.
 pub const COMMAND_RETRY_S: f64 = 1.5;
@@ -97,113 +107,8 @@ pub const RECONNECT_PERIOD: Duration = Duration::from_secs(1);
 /// The most acknowledgements and notes kept between two steps (older ones are dropped).
 pub const MAX_QUEUED: usize = 64;
 
-/// ArduSub's custom modes that the status block's NAV has a value for, and back.
-const MODE_TABLE: [(u32, Nav); 5] = [
-    (19, Nav::Manual),
-    (0, Nav::Stabilize),
-    (2, Nav::DepthHold),
-    (16, Nav::HoldPosition),
-    (4, Nav::Guided),
-];
-
-/// The NAV reported while ArduSub is in a mode outside [`MODE_TABLE`] (ACRO, AUTO, CIRCLE,
-/// SURFACE, ...): 5, the first value wire.md leaves reserved, so the operator sees "none of
-/// ours" rather than a mode the vehicle is not in.
-pub const OTHER_MODE_NAV: Nav = Nav::Unknown(5);
-
-/// The NAV for an ArduSub custom mode (MANUAL 19, STABILIZE 0, ALT_HOLD 2, POSHOLD 16,
-/// GUIDED 4); `None` for the others.
-pub fn nav_of_custom_mode(custom_mode: u32) -> Option<Nav> {
-    MODE_TABLE
-        .iter()
-        .find(|(mode, _)| *mode == custom_mode)
-        .map(|(_, nav)| *nav)
-}
-
-/// The ArduSub custom mode a NAV reads back from ([`nav_of_custom_mode`]'s inverse; what is
-/// asked for is [`demanded_mode`]); `None` for a reserved NAV value.
-pub fn custom_mode_of(nav: Nav) -> Option<u32> {
-    MODE_TABLE
-        .iter()
-        .find(|(_, n)| *n == nav)
-        .map(|(mode, _)| *mode)
-}
-
-/// The ArduSub custom mode the ROV end asks for when the operator asks for `nav`: every stick
-/// mode holds depth, since a BlueROV2 is positively buoyant and in MANUAL or STABILIZE with
-/// neutral sticks floats up to the surface; HoldPosition is POSHOLD where the vehicle has a
-/// position estimate (`position_known`), ALT_HOLD where it has none; Guided is GUIDED. `None`
-/// for a reserved NAV value.
-///
-/// | NAV | ArduSub mode | what ArduSub holds with neutral sticks |
-/// | --- | --- | --- |
-/// | manual, stabilize, depth_hold | ALT_HOLD (2) | attitude and depth |
-/// | hold_position | POSHOLD (16); ALT_HOLD (2) without a position | attitude, depth, position |
-/// | guided | GUIDED (4) | the last setpoint (needs a position) |
-pub fn demanded_mode(nav: Nav, position_known: bool) -> Option<u32> {
-    match nav {
-        Nav::Manual | Nav::Stabilize | Nav::DepthHold => Some(ALT_HOLD),
-        Nav::HoldPosition if position_known => Some(POSHOLD),
-        Nav::HoldPosition => Some(ALT_HOLD),
-        Nav::Guided => Some(GUIDED),
-        Nav::Unknown(_) => None,
-    }
-}
-
-/// ArduSub's ALT_HOLD: attitude and depth held.
-pub const ALT_HOLD: u32 = 2;
-/// ArduSub's POSHOLD: attitude, depth and position held (needs a position estimate).
-pub const POSHOLD: u32 = 16;
-/// ArduSub's GUIDED: goes to and holds the last setpoint (needs a position estimate).
-pub const GUIDED: u32 = 4;
-
 /// LOCAL_POSITION_NED missing for this long means the vehicle has no position estimate, s.
 pub const POSITION_STALE_S: f64 = 3.0;
-
-/// ArduSub's name for a custom mode (`mode 12` for a number it does not define).
-pub fn ardusub_mode_name(custom_mode: u32) -> String {
-    let name = match custom_mode {
-        0 => "STABILIZE",
-        1 => "ACRO",
-        2 => "ALT_HOLD",
-        3 => "AUTO",
-        4 => "GUIDED",
-        7 => "CIRCLE",
-        9 => "SURFACE",
-        16 => "POSHOLD",
-        19 => "MANUAL",
-        20 => "MOTOR_DETECT",
-        21 => "SURFTRAK",
-        other => return format!("mode {other}"),
-    };
-    name.to_string()
-}
-
-/// MANUAL_CONTROL's x, y, z, r for thrust in percent (surge, sway, heave down, yaw clockwise,
-/// each -100..=100), as ArduSub's `transform_manual_control_to_rc_override` reads them: x
-/// forward, y starboard and r clockwise in -1000..=1000; z is its throttle, 0..=1000 with 500
-/// neutral, where a larger z raises the vehicle, so heave down `h` gives `500 - 5 h`.
-/// Out-of-range or non-finite input is clamped (not-a-number gives neutral).
-pub fn manual_control_axes(thrust_percent: [f64; 4]) -> [i16; 4] {
-    let axis = |value: f64, scale: f64, centre: f64, low: f64, high: f64| -> i16 {
-        let raw = centre + value * scale;
-        if raw.is_nan() {
-            centre as i16
-        } else {
-            raw.round().clamp(low, high) as i16
-        }
-    };
-    let [surge, sway, heave, yaw] = thrust_percent;
-    [
-        axis(surge, 10.0, 0.0, -1000.0, 1000.0),
-        axis(sway, 10.0, 0.0, -1000.0, 1000.0),
-        axis(heave, -5.0, 500.0, 0.0, 1000.0),
-        axis(yaw, 10.0, 0.0, -1000.0, 1000.0),
-    ]
-}
-
-/// MANUAL_CONTROL with the sticks centred.
-pub const NEUTRAL_AXES: [i16; 4] = [0, 0, 500, 0];
 
 /// Why the autopilot's endpoint could not be opened.
 #[derive(Debug, thiserror::Error)]
@@ -293,96 +198,6 @@ impl MavlinkOptions {
         }
         Ok(())
     }
-}
-
-/// The autopilot the link settled on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Autopilot {
-    system: u8,
-    component: u8,
-    submarine: bool,
-}
-
-/// What the receiving thread learnt, handed to `step`.
-#[derive(Debug, Default)]
-struct Inbox {
-    autopilot: Option<Autopilot>,
-    /// Messages heard from the autopilot.
-    heard: u64,
-    /// Armed and custom mode from its last HEARTBEAT.
-    heartbeat: Option<(bool, u32)>,
-    /// LOCAL_POSITION_NED: x, y, z (m), vx, vy, vz (m/s); and how many.
-    position: Option<[f64; 6]>,
-    positions: u64,
-    /// ATTITUDE: roll, pitch, yaw (rad), yaw speed (rad/s); and how many.
-    attitude: Option<[f64; 4]>,
-    attitudes: u64,
-    /// Whether the one warning for a dropped position / attitude was given.
-    position_warned: bool,
-    attitude_warned: bool,
-    acks: VecDeque<(MavCmd, MavResult)>,
-    notes: VecDeque<String>,
-}
-
-/// The fields of LOCAL_POSITION_NED kept, with the largest magnitude each may have: x, y, z
-/// within the toolkit's 100 km site ([`super::session::MAX_POSITION_M`]); vx, vy, vz within
-/// 100 m/s (no underwater vehicle comes near it).
-const POSITION_BOUNDS: [(&str, f64); 6] = [
-    ("x", super::session::MAX_POSITION_M),
-    ("y", super::session::MAX_POSITION_M),
-    ("z", super::session::MAX_POSITION_M),
-    ("vx", 100.0),
-    ("vy", 100.0),
-    ("vz", 100.0),
-];
-
-/// The fields of ATTITUDE kept, with the largest magnitude each may have: angles within 2π
-/// rad, the yaw rate within 100 rad/s.
-const ATTITUDE_BOUNDS: [(&str, f64); 4] = [
-    ("roll", std::f64::consts::TAU),
-    ("pitch", std::f64::consts::TAU),
-    ("yaw", std::f64::consts::TAU),
-    ("yawspeed", 100.0),
-];
-
-/// True if every value is finite and within its bound: an autopilot's pose that is not (NaN,
-/// ±1e38) is dropped rather than becoming the vehicle's.
-fn plausible(values: &[f64], bounds: &[(&str, f64)]) -> bool {
-    values
-        .iter()
-        .zip(bounds)
-        .all(|(v, (_, bound))| v.is_finite() && v.abs() <= *bound)
-}
-
-/// The one warning for a dropped message: its first implausible field, the bound and the value.
-fn dropped_note(message: &str, values: &[f64], bounds: &[(&str, f64)]) -> String {
-    let bad = values
-        .iter()
-        .zip(bounds)
-        .find(|(v, (_, bound))| !(v.is_finite() && v.abs() <= *bound));
-    let what = bad.map_or_else(String::new, |(v, (field, bound))| {
-        format!(": field {field}: expected within ±{bound}, found {v}")
-    });
-    format!("warning: autopilot's {message} dropped{what} (later ones dropped without a word)")
-}
-
-fn push_bounded<T>(queue: &mut VecDeque<T>, item: T) {
-    if queue.len() >= MAX_QUEUED {
-        queue.pop_front();
-    }
-    queue.push_back(item);
-}
-
-/// The connection and the inbox, shared by `step` and the receiving thread.
-struct Shared {
-    /// `None` while a TCP connection is (re)established.
-    conn: Mutex<Option<Arc<Conn>>>,
-    inbox: Mutex<Inbox>,
-    stop: AtomicBool,
-}
-
-fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 /// A time base for "every so often", on the session clock.
@@ -604,156 +419,6 @@ pub fn connect(endpoint: &str, options: &MavlinkOptions) -> Result<MavlinkDrive,
         refusals_said: [None, None],
         send_error: None,
     })
-}
-
-/// The receiving thread: reads messages until told to stop, keeping what `step` needs.
-fn receive(shared: &Shared, reopen: Reopen, our_system: u8) {
-    let mut failed: Option<String> = None;
-    while !shared.stop.load(Ordering::Relaxed) {
-        let conn = lock(&shared.conn).clone();
-        let Some(conn) = conn else {
-            if !reopen.reconnects() {
-                return;
-            }
-            if let Some(fresh) = reopen.again(&shared.stop) {
-                *lock(&shared.conn) = Some(Arc::new(fresh));
-                note(shared, "mavlink: TCP connection established".to_string());
-            }
-            continue;
-        };
-        let result = conn.recv();
-        match result {
-            Ok((header, message)) => {
-                failed = None;
-                keep(shared, &header, message, our_system);
-            }
-            Err(MessageReadError::Parse(_)) => {}
-            Err(MessageReadError::Io(error)) => match error.kind() {
-                io::ErrorKind::WouldBlock
-                | io::ErrorKind::TimedOut
-                | io::ErrorKind::Interrupted => {}
-                _ if reopen.reconnects() => {
-                    *lock(&shared.conn) = None;
-                    note(shared, format!("mavlink: TCP connection closed: {error}"));
-                }
-                _ => {
-                    let text = format!("mavlink: receive failed: {error}");
-                    if failed.as_deref() != Some(text.as_str()) {
-                        note(shared, text.clone());
-                        failed = Some(text);
-                    }
-                    std::thread::sleep(READ_TIMEOUT);
-                }
-            },
-        }
-    }
-}
-
-fn note(shared: &Shared, text: String) {
-    push_bounded(&mut lock(&shared.inbox).notes, text);
-}
-
-/// Keeps one message in the inbox if it comes from the autopilot.
-fn keep(shared: &Shared, header: &MavHeader, message: MavMessage, our_system: u8) {
-    let (Ok(system), component) = (u8::try_from(header.system_id), header.component_id) else {
-        return;
-    };
-    if system == our_system {
-        return; // Another ground station speaking as us, or our own echo.
-    }
-    let mut inbox = lock(&shared.inbox);
-    if let MavMessage::HEARTBEAT(heartbeat) = &message {
-        let autopilot = heartbeat.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID
-            && heartbeat.mavtype != MavType::MAV_TYPE_GCS;
-        let submarine = heartbeat.mavtype == MavType::MAV_TYPE_SUBMARINE;
-        let better = match inbox.autopilot {
-            None => autopilot,
-            Some(known) => autopilot && submarine && !known.submarine,
-        };
-        if better {
-            inbox.autopilot = Some(Autopilot {
-                system,
-                component,
-                submarine,
-            });
-            let text = format!(
-                "mavlink: autopilot found: system {system} component {component}, {:?}, {:?}{}",
-                heartbeat.mavtype,
-                heartbeat.autopilot,
-                if submarine {
-                    ""
-                } else {
-                    " (not a submarine: its modes are read as ArduSub's)"
-                }
-            );
-            push_bounded(&mut inbox.notes, text);
-        }
-    }
-    let from_autopilot = inbox
-        .autopilot
-        .is_some_and(|a| a.system == system && a.component == component);
-    if !from_autopilot {
-        return;
-    }
-    inbox.heard += 1;
-    match message {
-        MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-            base_mode,
-            custom_mode,
-            ..
-        }) => {
-            let armed = base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
-            inbox.heartbeat = Some((armed, custom_mode));
-        }
-        MavMessage::LOCAL_POSITION_NED(p) => {
-            let values = [p.x, p.y, p.z, p.vx, p.vy, p.vz].map(f64::from);
-            if plausible(&values, &POSITION_BOUNDS) {
-                inbox.position = Some(values);
-                inbox.positions += 1;
-            } else {
-                if !inbox.position_warned {
-                    inbox.position_warned = true;
-                    let text = dropped_note("LOCAL_POSITION_NED", &values, &POSITION_BOUNDS);
-                    push_bounded(&mut inbox.notes, text);
-                }
-            }
-        }
-        MavMessage::ATTITUDE(a) => {
-            let values = [a.roll, a.pitch, a.yaw, a.yawspeed].map(f64::from);
-            if plausible(&values, &ATTITUDE_BOUNDS) {
-                inbox.attitude = Some(values);
-                inbox.attitudes += 1;
-            } else {
-                if !inbox.attitude_warned {
-                    inbox.attitude_warned = true;
-                    let text = dropped_note("ATTITUDE", &values, &ATTITUDE_BOUNDS);
-                    push_bounded(&mut inbox.notes, text);
-                }
-            }
-        }
-        MavMessage::COMMAND_ACK(ack) => push_bounded(&mut inbox.acks, (ack.command, ack.result)),
-        MavMessage::STATUSTEXT(status) => {
-            let warning = matches!(
-                status.severity,
-                MavSeverity::MAV_SEVERITY_EMERGENCY
-                    | MavSeverity::MAV_SEVERITY_ALERT
-                    | MavSeverity::MAV_SEVERITY_CRITICAL
-                    | MavSeverity::MAV_SEVERITY_ERROR
-                    | MavSeverity::MAV_SEVERITY_WARNING
-            );
-            if warning {
-                let bytes: Vec<u8> = status
-                    .text
-                    .iter()
-                    .copied()
-                    .take_while(|&b| b != 0)
-                    .collect();
-                let text = format!("autopilot: {}", String::from_utf8_lossy(&bytes).trim());
-                push_bounded(&mut inbox.notes, text);
-            }
-        }
-        _ => {}
-    }
 }
 
 impl MavlinkDrive {

@@ -1,18 +1,19 @@
 //! The autopilot's connection: its endpoint in the one device grammar ([`DeviceSpec`]), opened
-//! by the one opener ([`crate::device::open`]), and MAVLink messages over what it opened
-//! (version 1 or 2 read, version 2 sent, numbered in the order they are written).
+//! by the one opener ([`crate::device::open`]), MAVLink messages over what it opened (version 1
+//! or 2 read, version 2 sent, numbered in the order they are written), and the receiving
+//! thread that keeps what the autopilot says ([`receive`]) until the drive is dropped.
 
 use std::io::{self, Read, Write};
 use std::net::TcpListener;
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
 use mavlink::dialects::ardupilotmega::MavMessage;
 use mavlink::error::{MessageReadError, MessageWriteError};
 use mavlink::{MavHeader, MavlinkReader, MavlinkVersion};
 
-use super::lock;
+use super::codec::{Inbox, keep, push_bounded};
 use super::{MavlinkError, READ_TIMEOUT, RECONNECT_PERIOD, TCP_CONNECT_TIMEOUT, WRITE_TIMEOUT};
 use crate::device::{self, DeviceSpec, Io, OpenOptions};
 
@@ -157,4 +158,67 @@ impl Reopen {
     pub(super) fn reconnects(&self) -> bool {
         !matches!(self, Reopen::Never)
     }
+}
+
+/// The connection and the inbox, shared by `step` and the receiving thread.
+pub(super) struct Shared {
+    /// `None` while a TCP connection is (re)established.
+    pub(super) conn: Mutex<Option<Arc<Conn>>>,
+    /// What the autopilot said since the last step.
+    pub(super) inbox: Mutex<Inbox>,
+    /// Set when the drive is dropped.
+    pub(super) stop: AtomicBool,
+}
+
+/// Locks `mutex`, also when a panicking thread poisoned it.
+pub(super) fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// The receiving thread: reads messages until told to stop, keeping what `step` needs.
+pub(super) fn receive(shared: &Shared, reopen: Reopen, our_system: u8) {
+    let mut failed: Option<String> = None;
+    while !shared.stop.load(Ordering::Relaxed) {
+        let conn = lock(&shared.conn).clone();
+        let Some(conn) = conn else {
+            if !reopen.reconnects() {
+                return;
+            }
+            if let Some(fresh) = reopen.again(&shared.stop) {
+                *lock(&shared.conn) = Some(Arc::new(fresh));
+                note(shared, "mavlink: TCP connection established".to_string());
+            }
+            continue;
+        };
+        let result = conn.recv();
+        match result {
+            Ok((header, message)) => {
+                failed = None;
+                keep(&mut lock(&shared.inbox), &header, message, our_system);
+            }
+            Err(MessageReadError::Parse(_)) => {}
+            Err(MessageReadError::Io(error)) => match error.kind() {
+                io::ErrorKind::WouldBlock
+                | io::ErrorKind::TimedOut
+                | io::ErrorKind::Interrupted => {}
+                _ if reopen.reconnects() => {
+                    *lock(&shared.conn) = None;
+                    note(shared, format!("mavlink: TCP connection closed: {error}"));
+                }
+                _ => {
+                    let text = format!("mavlink: receive failed: {error}");
+                    if failed.as_deref() != Some(text.as_str()) {
+                        note(shared, text.clone());
+                        failed = Some(text);
+                    }
+                    std::thread::sleep(READ_TIMEOUT);
+                }
+            },
+        }
+    }
+}
+
+/// Keeps a note for the next step.
+fn note(shared: &Shared, text: String) {
+    push_bounded(&mut lock(&shared.inbox).notes, text);
 }
