@@ -11,8 +11,10 @@
 //!   files it reads and writes.
 //! - [`link`]: link models (the paper's modems, netem-like links), the virtual-time scheduler,
 //!   the simulated link and its real-time emulator.
+//! - [`device`]: the one device grammar of every tool (`/dev/ttyUSB0`, `serial:`, `tcp:`,
+//!   `tcpin:`, `udp:`, `udpin:`, `udpout:`, `pty`) and the one opener.
 //! - [`gll`]: device adapters (transparent modems, EvoLogics, UDP) behind one endpoint trait,
-//!   and the one way to open a device.
+//!   put on the devices the opener opened.
 //! - [`measure`]: probes and Table 3's figures, from a simulated or a real link.
 //! - [`rcp`]: the remote-control protocol's operator and ROV engines, sessions and their logs.
 //! - [`vehicle`]: the ROV's kinematic model.
@@ -30,6 +32,7 @@
 
 pub mod cli;
 pub mod debt;
+pub mod device;
 pub mod geometry;
 pub mod gll;
 pub mod io;

@@ -294,6 +294,26 @@ fn open_rw(path: &str) -> std::fs::File {
     file
 }
 
+/// link-sim with `args`, started: the child, its stderr, and the first line it said there.
+fn start(
+    args: &[&str],
+) -> (
+    std::process::Child,
+    BufReader<std::process::ChildStderr>,
+    String,
+) {
+    let mut child = Command::new(LINK_SIM)
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stderr = BufReader::new(child.stderr.take().unwrap());
+    let mut first = String::new();
+    stderr.read_line(&mut first).unwrap();
+    (child, stderr, first)
+}
+
 /// How long a read waits for bytes the link delivers in well under a second: only a hang
 /// takes this long, however loaded the machine.
 const READ_LIMIT: Duration = Duration::from_secs(10);
@@ -384,24 +404,17 @@ fn pty_mode_forwards_frames_in_real_time_both_ways() {
 fn serial_ports_that_vanish_end_the_run_naming_the_side() {
     let (mut master_a, path_a) = open_pty();
     let (master_b, path_b) = open_pty();
-    let mut child = Command::new(LINK_SIM)
-        .args([
-            "--jitter-ms",
-            "0",
-            "--a",
-            &path_a,
-            "--b",
-            &path_b,
-            "--baud",
-            "115200",
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stderr = BufReader::new(child.stderr.take().unwrap());
-    let mut first = String::new();
-    stderr.read_line(&mut first).unwrap();
+    let args = [
+        "--jitter-ms",
+        "0",
+        "--a",
+        &path_a,
+        "--b",
+        &path_b,
+        "--baud",
+        "115200",
+    ];
+    let (mut child, mut stderr, first) = start(&args);
     assert!(first.contains("forwarding A"), "{first}");
 
     let frame_a = frame::build(1, 2, &[7; 20]).unwrap();
@@ -437,23 +450,19 @@ fn udp_mode_carries_datagrams_as_frames() {
             .unwrap()
     };
     let (side_a, side_b) = (free(), free());
-    let mut child = Command::new(LINK_SIM)
-        .args([
-            "--model",
-            "satellite-up",
-            "--udp-a",
-            &side_a.to_string(),
-            "--udp-b",
-        ])
-        .arg(side_b.to_string())
-        .args(["--udp-b-peer", &client_b.local_addr().unwrap().to_string()])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stderr = BufReader::new(child.stderr.take().unwrap());
-    let mut first = String::new();
-    stderr.read_line(&mut first).unwrap();
+    let (a, b) = (side_a.to_string(), side_b.to_string());
+    let peer = client_b.local_addr().unwrap().to_string();
+    let args = [
+        "--model",
+        "satellite-up",
+        "--udp-a",
+        &a,
+        "--udp-b",
+        &b,
+        "--udp-b-peer",
+        &peer,
+    ];
+    let (mut child, _stderr, first) = start(&args);
     assert!(first.contains("forwarding A"), "{first}");
 
     let datagram = b"any bytes: a datagram is a packet".to_vec();
@@ -474,6 +483,48 @@ fn udp_mode_carries_datagrams_as_frames() {
     client_a.set_read_timeout(Some(READ_LIMIT)).unwrap();
     let (n, _) = client_a.recv_from(&mut buf).unwrap();
     assert_eq!(&buf[..n], b"reply");
+
+    signal_once(&mut child, Signal::SIGINT, &|| true, EXIT_LIMIT);
+    assert_eq!(
+        common::wait_for_exit(&mut child, EXIT_LIMIT).code(),
+        Some(0)
+    );
+}
+
+/// Sides named in the one device grammar: a new pseudo-terminal on A (its path alone on
+/// stdout), a UDP socket with a fixed peer on B (`udp:BIND=PEER`), frames both ways.
+#[test]
+fn sides_given_as_devices_mix_a_pty_and_udp() {
+    let client_b = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    client_b.set_read_timeout(Some(READ_LIMIT)).unwrap();
+    let side_b = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap();
+    let b = format!("udp:{side_b}={}", client_b.local_addr().unwrap());
+    let (mut child, _stderr, first) = start(&["--jitter-ms", "0", "--a", "pty", "--b", &b]);
+    let mut path_a = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut path_a)
+        .unwrap();
+    let path_a = path_a.trim_end().to_string();
+    assert!(path_a.starts_with("/dev/"), "{path_a}");
+    assert!(
+        first.contains(&format!("forwarding A ({path_a}) <-> B ({side_b})")),
+        "{first}"
+    );
+    let mut a = open_rw(&path_a);
+
+    let frame_a = frame::build(1, 2, &[7; 20]).unwrap();
+    a.write_all(&frame_a).unwrap();
+    let mut buf = [0u8; 512];
+    let (n, from) = client_b.recv_from(&mut buf).unwrap();
+    assert_eq!(&buf[..n], &frame_a[..]);
+    assert_eq!(from, side_b);
+
+    let frame_b = frame::build(2, 1, &[9; 12]).unwrap();
+    client_b.send_to(&frame_b, side_b).unwrap();
+    assert_eq!(read_exactly(&mut a, frame_b.len(), READ_LIMIT), frame_b);
 
     signal_once(&mut child, Signal::SIGINT, &|| true, EXIT_LIMIT);
     assert_eq!(

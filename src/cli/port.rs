@@ -1,22 +1,17 @@
 //! The port flags every tool that talks to a real modem shares (`rcp-dump`, `modem-bench`,
-//! `tdma-run`, `link-sim`), flattened into each tool's arguments, and the one way to open a
-//! device: a serial port or pseudo-terminal path, `tcp:HOST:PORT` (a modem's TCP console) or
-//! `udp:BIND_ADDR=PEER_ADDR` (one datagram per packet).
+//! `tdma-run`, `link-sim`), flattened into each tool's arguments; the devices themselves are
+//! named in the one grammar of [`crate::device`] (checked by [`crate::cli::value::device`]).
 
 use crate::cli::value;
 use crate::gll::{Dialect, Endpoint, PortError, PortOptions};
 
 impl clap::ValueEnum for Dialect {
     fn value_variants<'a>() -> &'a [Self] {
-        &[Dialect::Transparent, Dialect::Evologics]
+        &Dialect::ALL
     }
 
     fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
-        let help = match self {
-            Dialect::Transparent => "bytes in, bytes out: packets are wire.md frames",
-            Dialect::Evologics => "EvoLogics AT commands (AT*SEND / AT*SENDIM, RECV)",
-        };
-        Some(clap::builder::PossibleValue::new(self.name()).help(help))
+        Some(clap::builder::PossibleValue::new(self.name()).help(self.help()))
     }
 }
 

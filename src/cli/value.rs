@@ -332,6 +332,13 @@ pub fn baud() -> clap::builder::MapValueParser<CountParser, fn(u64) -> u32> {
     )
 }
 
+/// A device in the one grammar ([`crate::device::DeviceSpec`]), kept as the text given (the
+/// tool opens it later): a device flag's error says what was expected and what was found.
+pub fn device(text: &str) -> Result<String, crate::device::DeviceSpecError> {
+    text.parse::<crate::device::DeviceSpec>()
+        .map(|_| text.to_string())
+}
+
 /// A comma-separated list, each element checked by `item`, 1 ..= `max_len` of them.
 #[derive(Debug, Clone, Copy)]
 pub struct ListParser<I> {

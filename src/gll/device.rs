@@ -1,15 +1,13 @@
-//! Opening a device: the one function every tool uses to turn a device name into an
-//! [`Endpoint`], with the options the command line's port flags give.
-//!
-//! A device is a serial port or pseudo-terminal path, `tcp:HOST:PORT` (a modem's TCP console,
-//! EvoLogics' usual interface) or `udp:BIND_ADDR=PEER_ADDR` (one datagram per packet).
+//! Opening a modem: the options the command line's port flags give ([`PortOptions`]), and the
+//! adapter they put on a device that [`crate::device::open`] opened (named in the one grammar,
+//! [`DeviceSpec`]: a serial port or pseudo-terminal path, `serial:PATH:BAUD`, `tcp:`, `tcpin:`,
+//! `udp:BIND=PEER`, `udpin:`, `udpout:`).
 
-use std::io::{self, Read, Write};
-use std::net::{SocketAddr, TcpStream, UdpSocket};
 use std::time::Duration;
 
 use super::evologics::{EvoLogics, SendMode};
-use super::{Endpoint, GllError, Pacing, TimedRead, Transparent, Udp, open_serial};
+use super::{Endpoint, GllError, Pacing, TimedRead, Transparent, Udp};
+use crate::device::{self, DeviceSpec, Io, OpenError, OpenOptions};
 
 /// How a modem is spoken to: the one dialect enum of every tool that opens a port.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -22,17 +20,22 @@ pub enum Dialect {
 }
 
 impl Dialect {
-    /// Every dialect with its command-line name.
-    pub const ALL: [(Dialect, &'static str); 2] = [
-        (Dialect::Transparent, "transparent"),
-        (Dialect::Evologics, "evologics"),
-    ];
+    /// Every dialect, in the order `--help` lists them.
+    pub const ALL: [Dialect; 2] = [Dialect::Transparent, Dialect::Evologics];
 
     /// The command-line name.
     pub fn name(self) -> &'static str {
         match self {
             Dialect::Transparent => "transparent",
             Dialect::Evologics => "evologics",
+        }
+    }
+
+    /// What the dialect is, for `--help`.
+    pub fn help(self) -> &'static str {
+        match self {
+            Dialect::Transparent => "bytes in, bytes out: packets are wire.md frames",
+            Dialect::Evologics => "EvoLogics AT commands (AT*SEND / AT*SENDIM, RECV)",
         }
     }
 }
@@ -78,21 +81,49 @@ pub enum PortError {
     Open(#[from] GllError),
 }
 
+impl From<OpenError> for PortError {
+    fn from(error: OpenError) -> PortError {
+        PortError::Open(GllError::Open {
+            name: error.device,
+            reason: error.error.to_string(),
+        })
+    }
+}
+
+/// Parses a device flag's text: a usage error naming it when it is not a device.
+fn parse(device: &str) -> Result<DeviceSpec, PortError> {
+    device
+        .parse()
+        .map_err(|e| PortError::Usage(format!("{device}: {e}")))
+}
+
 impl PortOptions {
     /// True when any flag differs from its default (they only mean something with a device).
     pub fn any_set(&self) -> bool {
         self.dialect != Dialect::Transparent || self.instant || self.chunk_bytes.is_some()
     }
 
-    /// Opens `device` as these flags say.
+    /// How the one opener opens a modem's device: at the baud rate, serial reads waiting
+    /// 50 ms at most (each receive sets its own wait).
+    fn open_options(&self) -> OpenOptions {
+        OpenOptions {
+            baud: self.baud,
+            ..OpenOptions::default()
+        }
+    }
+
+    /// Opens `device` (in the grammar of [`DeviceSpec`]) as these flags say.
     pub fn open(&self, device: &str) -> Result<Box<dyn Endpoint>, PortError> {
-        if let Some((bind, peer)) = udp_addresses(device)? {
-            if self.dialect != Dialect::Transparent {
-                return Err(PortError::Usage(format!(
-                    "{device}: UDP carries bare datagrams: use --dialect transparent"
-                )));
-            }
-            return Ok(Box::new(Udp::open(bind, peer)?));
+        self.open_spec(&parse(device)?)
+    }
+
+    /// Opens `spec` as these flags say: the dialect's adapter on the device (UDP carries bare
+    /// datagrams: transparent only).
+    pub fn open_spec(&self, spec: &DeviceSpec) -> Result<Box<dyn Endpoint>, PortError> {
+        if spec.is_datagram() && self.dialect != Dialect::Transparent {
+            return Err(PortError::Usage(format!(
+                "{spec}: UDP carries bare datagrams: use --dialect transparent"
+            )));
         }
         if !(self.chunk_rate_bps.is_finite() && self.chunk_rate_bps > 0.0) {
             return Err(PortError::Usage(format!(
@@ -100,6 +131,14 @@ impl PortOptions {
                 self.chunk_rate_bps
             )));
         }
+        let opened = device::open(spec, &self.open_options())?;
+        let name = opened.name;
+        if let Io::Udp(socket) = opened.io {
+            return Ok(Box::new(Udp::new(socket)));
+        }
+        let Some(stream) = opened.io.into_stream() else {
+            return Err(PortError::Usage(format!("{spec}: not a modem's device")));
+        };
         let pacing = self.chunk_bytes.map(|chunk_bytes| Pacing {
             chunk_bytes: usize::try_from(chunk_bytes).unwrap_or(usize::MAX),
             rate_bps: self.chunk_rate_bps,
@@ -109,106 +148,30 @@ impl PortOptions {
         } else {
             SendMode::Burst
         };
-        if let Some(address) = device.strip_prefix("tcp:") {
-            let stream = connect_tcp(device, address)?;
-            return Ok(match self.dialect {
-                Dialect::Transparent => Box::new(Transparent::new(device, stream, pacing)),
-                Dialect::Evologics => Box::new(EvoLogics::new(device, stream, self.address, mode)),
-            });
-        }
-        let port = open_serial(device, self.baud)?;
         Ok(match self.dialect {
-            Dialect::Transparent => Box::new(Transparent::new(device, port, pacing)),
-            Dialect::Evologics => Box::new(EvoLogics::new(device, port, self.address, mode)),
+            Dialect::Transparent => Box::new(Transparent::new(&name, stream, pacing)),
+            Dialect::Evologics => Box::new(EvoLogics::new(&name, stream, self.address, mode)),
         })
     }
-}
 
-impl PortOptions {
     /// Opens `device` as a bare byte stream whose reads time out after `timeout`, for tools
     /// that watch a line's bytes as they come (`rcp-dump --port`): a serial port or
-    /// pseudo-terminal at the baud rate, a TCP console, or UDP datagrams back to back. No
+    /// pseudo-terminal at the baud rate, a TCP connection, or UDP datagrams back to back. No
     /// dialect is spoken.
     pub fn open_bytes(
         &self,
         device: &str,
         timeout: Duration,
     ) -> Result<Box<dyn TimedRead>, PortError> {
-        let mut port: Box<dyn TimedRead> = if let Some((bind, peer)) = udp_addresses(device)? {
-            let socket = UdpSocket::bind(bind).map_err(|e| GllError::Open {
-                name: device.to_string(),
-                reason: e.to_string(),
-            })?;
-            Box::new(UdpBytes { socket, peer })
-        } else if let Some(address) = device.strip_prefix("tcp:") {
-            Box::new(connect_tcp(device, address)?)
-        } else {
-            Box::new(open_serial(device, self.baud)?)
+        let spec = parse(device)?;
+        let opened = device::open(&spec, &self.open_options())?;
+        let Some(mut port) = opened.io.into_stream() else {
+            return Err(PortError::Usage(format!("{spec}: not a byte stream")));
         };
         port.set_read_timeout(timeout).map_err(|e| GllError::Open {
-            name: device.to_string(),
+            name: opened.name,
             reason: e.to_string(),
         })?;
         Ok(port)
-    }
-}
-
-/// The addresses of a `udp:BIND_ADDR=PEER_ADDR` device; `None` for another device.
-fn udp_addresses(device: &str) -> Result<Option<(SocketAddr, SocketAddr)>, PortError> {
-    let Some(spec) = device.strip_prefix("udp:") else {
-        return Ok(None);
-    };
-    let Some((bind, peer)) = spec.split_once('=') else {
-        return Err(PortError::Usage(format!(
-            "{device}: expected udp:BIND_ADDR=PEER_ADDR"
-        )));
-    };
-    let parse = |text: &str| {
-        text.parse::<SocketAddr>()
-            .map_err(|e| PortError::Usage(format!("{device}: `{text}`: {e}")))
-    };
-    Ok(Some((parse(bind)?, parse(peer)?)))
-}
-
-/// Connects a `tcp:HOST:PORT` device.
-fn connect_tcp(device: &str, address: &str) -> Result<TcpStream, GllError> {
-    let stream = TcpStream::connect(address).map_err(|e| GllError::Open {
-        name: device.to_string(),
-        reason: e.to_string(),
-    })?;
-    let _ = stream.set_nodelay(true);
-    Ok(stream)
-}
-
-/// A UDP socket read as a byte stream: each datagram's bytes in turn (empty ones skipped);
-/// writes go to the peer.
-struct UdpBytes {
-    socket: UdpSocket,
-    peer: SocketAddr,
-}
-
-impl Read for UdpBytes {
-    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
-        match self.socket.recv(buf)? {
-            0 => Err(io::ErrorKind::WouldBlock.into()),
-            n => Ok(n),
-        }
-    }
-}
-
-impl Write for UdpBytes {
-    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
-        self.socket.send_to(buf, self.peer)
-    }
-
-    fn flush(&mut self) -> io::Result<()> {
-        Ok(())
-    }
-}
-
-impl TimedRead for UdpBytes {
-    fn set_read_timeout(&mut self, timeout: Duration) -> io::Result<()> {
-        self.socket
-            .set_read_timeout(Some(timeout.max(Duration::from_micros(1))))
     }
 }

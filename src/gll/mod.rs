@@ -10,18 +10,22 @@
 //!   `AT*SENDIM`) over a serial port or TCP;
 //! - [`Udp`]: a UDP socket, one datagram per packet.
 //!
+//! Devices are named and opened by [`crate::device`] (the one grammar and the one opener);
+//! [`PortOptions::open`] puts the adapter the dialect says on what it opened.
+//!
 //! The simulated link needs no adapter: in virtual time the tools drive a [`crate::link::Link`]
 //! directly.
 
 pub mod device;
 pub mod evologics;
 
+pub use crate::device::TimedRead;
 pub use device::{Dialect, PortError, PortOptions};
 
-use std::io::{self, Read, Write};
-use std::net::{SocketAddr, UdpSocket};
+use std::io;
 use std::time::{Duration, Instant};
 
+use crate::device::Datagrams;
 use crate::wire::{DeframeEvent, Deframer};
 
 /// A packet that arrived.
@@ -76,59 +80,6 @@ pub trait Endpoint {
     fn refusals(&self) -> &[String] {
         &[]
     }
-}
-
-/// Reads with a timeout: the common shape of serial ports and sockets.
-pub trait TimedRead: Read + Write + Send {
-    /// Sets how long a read may wait.
-    fn set_read_timeout(&mut self, timeout: Duration) -> io::Result<()>;
-}
-
-impl TimedRead for Box<dyn serialport::SerialPort> {
-    fn set_read_timeout(&mut self, timeout: Duration) -> io::Result<()> {
-        self.set_timeout(timeout).map_err(io::Error::other)
-    }
-}
-
-impl TimedRead for std::net::TcpStream {
-    fn set_read_timeout(&mut self, timeout: Duration) -> io::Result<()> {
-        std::net::TcpStream::set_read_timeout(self, Some(timeout.max(Duration::from_micros(1))))
-    }
-}
-
-/// Opens a serial port (or pseudo-terminal) for an adapter. A path that is not a terminal (a
-/// regular file, a directory, `/dev/null`) is named as such, not as "Not a typewriter".
-pub fn open_serial(path: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort>, GllError> {
-    serialport::new(path, baud)
-        .timeout(Duration::from_millis(50))
-        .open()
-        .map_err(|e| GllError::Open {
-            name: path.to_string(),
-            reason: not_a_terminal(path).unwrap_or_else(|| e.to_string()),
-        })
-}
-
-/// Why `path`, which exists, cannot be a serial port: `None` when it may be one (or is gone).
-pub(crate) fn not_a_terminal(path: &str) -> Option<String> {
-    let kind = std::fs::metadata(path).ok()?.file_type();
-    let what = if let Some(what) = crate::io::kind_name(kind) {
-        what
-    } else {
-        use std::os::unix::fs::OpenOptionsExt;
-        // Non-blocking: a serial line waiting for carrier must not hold the error up.
-        let nonblocking = nix::fcntl::OFlag::O_NONBLOCK.bits();
-        let mut options = std::fs::OpenOptions::new();
-        let file = options
-            .read(true)
-            .custom_flags(nonblocking)
-            .open(path)
-            .ok()?;
-        if nix::unistd::isatty(&file).unwrap_or(true) {
-            return None;
-        }
-        "a device that is not a terminal"
-    };
-    Some(format!("{what}, not a serial port or pseudo-terminal"))
 }
 
 /// Reads once from `port`, waiting until `deadline` at most: `Ok(None)` on timeout.
@@ -248,25 +199,25 @@ impl<P: TimedRead> Endpoint for Transparent<P> {
     }
 }
 
-/// A UDP socket: one datagram per packet, sent to a fixed peer.
+/// A UDP device: one datagram per packet, sent to its peer.
 pub struct Udp {
     name: String,
-    socket: UdpSocket,
-    peer: SocketAddr,
+    socket: Datagrams,
 }
 
 impl Udp {
-    /// Binds `local` and sends to `peer`.
-    pub fn open(local: SocketAddr, peer: SocketAddr) -> Result<Udp, GllError> {
-        let socket = UdpSocket::bind(local).map_err(|e| GllError::Open {
-            name: local.to_string(),
-            reason: e.to_string(),
-        })?;
-        Ok(Udp {
+    /// An adapter over an open UDP device.
+    pub fn new(socket: Datagrams) -> Udp {
+        let local = socket
+            .local_addr()
+            .map_or_else(|_| "?".to_string(), |a| a.to_string());
+        let peer = socket
+            .peer()
+            .map_or_else(|| "the last sender".to_string(), |a| a.to_string());
+        Udp {
             name: format!("udp {local} -> {peer}"),
             socket,
-            peer,
-        })
+        }
     }
 }
 
@@ -277,7 +228,7 @@ impl Endpoint for Udp {
 
     fn send(&mut self, packet: &[u8]) -> Result<(), GllError> {
         self.socket
-            .send_to(packet, self.peer)
+            .send(packet)
             .map(|_| ())
             .map_err(|e| closed(&self.name, "send failed", e))
     }
@@ -288,11 +239,11 @@ impl Endpoint for Udp {
             return Ok(None);
         }
         self.socket
-            .set_read_timeout(Some(wait))
+            .set_timeout(Some(wait))
             .map_err(|e| closed(&self.name, "set timeout", e))?;
         let mut buf = vec![0u8; 65_536];
-        match self.socket.recv_from(&mut buf) {
-            Ok((n, _)) => {
+        match self.socket.recv(&mut buf) {
+            Ok(n) => {
                 buf.truncate(n);
                 Ok(Some(Received {
                     at: Instant::now(),
@@ -310,40 +261,5 @@ impl Endpoint for Udp {
             }
             Err(e) => Err(closed(&self.name, "receive failed", e)),
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_path_that_is_not_a_terminal_is_named_as_such() {
-        let dir = tempfile::tempdir().unwrap();
-        let file = dir.path().join("frames.bin");
-        std::fs::write(&file, b"x").unwrap();
-        for (path, what) in [
-            (file.to_str().unwrap(), "a regular file, not a serial port"),
-            (
-                dir.path().to_str().unwrap(),
-                "a directory, not a serial port",
-            ),
-            (
-                "/dev/null",
-                "a device that is not a terminal, not a serial port",
-            ),
-        ] {
-            let Err(err) = open_serial(path, 9600) else {
-                panic!("{path} opened");
-            };
-            let err = err.to_string();
-            assert!(err.contains(what), "{err}");
-            assert!(!err.contains("typewriter"), "{err}");
-        }
-        let Err(err) = open_serial("/no/such/tty", 9600) else {
-            panic!("/no/such/tty opened");
-        };
-        let err = err.to_string();
-        assert!(err.contains("No such file"), "{err}");
     }
 }

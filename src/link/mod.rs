@@ -11,11 +11,13 @@
 //! A [`Model`] holds one direction's figures (bit rate, delays, jitter, range, errors, netem's
 //! extras); a [`Link`] runs two of them as a state machine given time, which the virtual-time
 //! driver ([`pipe`]) and the real-time driver ([`realtime`]) both drive; [`stats`] holds what a
-//! run reports (trace rows, counters, summary, `--stats` JSON).
+//! run reports (trace rows, counters, summary, `--stats` JSON). [`emulate`] is link-sim's
+//! real-time runs as library calls, and [`dialect`] the modem dialects they can emulate.
 
 pub mod channel;
 pub mod dialect;
 pub mod distance;
+pub mod emulate;
 pub mod medium;
 pub mod model;
 pub mod pipe;

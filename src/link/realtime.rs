@@ -1,8 +1,9 @@
 //! The real-time driver: a [`Link`] between two real transports ([`Endpoints`]), or a
 //! [`Medium`] among N of them ([`Ports`]), on the monotonic clock.
 //!
-//! Each side is a pseudo-terminal this process creates, an existing serial port (or someone
-//! else's pseudo-terminal), or a UDP socket. One thread per side reads bytes and stamps them
+//! Each side is a device in the one grammar ([`DeviceSpec`], opened by [`crate::device::open`]):
+//! a pseudo-terminal this process creates, an existing serial port (or someone else's
+//! pseudo-terminal), a TCP connection, or a UDP socket. One thread per side reads bytes and stamps them
 //! with the time they arrived; one thread per side writes what the link delivers, so a side
 //! whose reader has stopped reading can never stall the other direction. The main loop owns the
 //! link: it cuts the bytes into packets (wire.md frames found by the deframer, or, with raw
@@ -17,22 +18,16 @@
 
 use std::fs::File;
 use std::io::{self, Read, Write};
-use std::net::{SocketAddr, UdpSocket};
-use std::os::unix::fs::OpenOptionsExt;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender, SyncSender, TrySendError};
-use std::sync::{Arc, Mutex};
 use std::thread;
 use std::time::{Duration, Instant};
 
-use nix::fcntl::OFlag;
-use nix::pty::{PtyMaster, grantpt, posix_openpt, ptsname_r, unlockpt};
-use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
-
 use super::channel::{Link, Report, Side};
-use super::dialect::EvoLogicsEmulator;
+use super::dialect::Emulator;
 use super::medium::{Medium, MediumReport};
 use super::sched::SimTime;
+use crate::device::{self, DeviceSpec, OpenOptions};
 use crate::stats::Quantiles;
 use crate::wire::{DeframeEvent, Deframer};
 
@@ -42,26 +37,27 @@ const WRITE_QUEUE_FRAMES: usize = 1024;
 /// Longest sleep of the main loop when nothing is scheduled, so a stop is seen promptly.
 const IDLE_POLL: Duration = Duration::from_millis(200);
 
-/// What one side of the link is.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum PortSpec {
-    /// A new pseudo-terminal pair; programs open its path as if it were a serial port.
-    Pty,
-    /// An existing serial port or pseudo-terminal.
-    Serial {
-        /// Device path.
-        path: String,
-        /// Baud rate.
-        baud: u32,
-    },
-    /// A UDP socket bound here; each datagram is one packet. Packets for this side go to
-    /// `peer`, or else to whoever sent the last datagram to this socket.
-    Udp {
-        /// Local address to bind.
-        bind: SocketAddr,
-        /// Where this side's program listens, if known in advance.
-        peer: Option<SocketAddr>,
-    },
+/// How the sides are opened: the baud rate of a bare serial path, and whether the threads ask
+/// for real-time scheduling ([`raise_priority`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SideOptions {
+    /// The baud rate of a side given as a path (`serial:PATH:BAUD` carries its own).
+    pub baud: u32,
+    /// Run the threads under real-time scheduling.
+    pub realtime_priority: bool,
+}
+
+impl SideOptions {
+    /// What the one opener is asked: pseudo-terminals offered, serial reads waiting 100 ms at
+    /// most, sockets blocking, `tcpin:` waiting for its peer.
+    fn open_options(&self) -> OpenOptions {
+        OpenOptions {
+            baud: self.baud,
+            serial_timeout: Duration::from_millis(100),
+            pty: true,
+            ..OpenOptions::default()
+        }
+    }
 }
 
 /// How a byte stream is cut into packets.
@@ -116,6 +112,18 @@ pub enum Ended {
     },
 }
 
+impl Ended {
+    /// What a run that ended when a side closed says of it (none when it was stopped).
+    pub fn closed_line(&self) -> Option<String> {
+        match self {
+            Ended::Stopped => None,
+            Ended::Closed { side, name, reason } => {
+                Some(format!("side {} ({name}) closed: {reason}", side.name()))
+            }
+        }
+    }
+}
+
 /// Counters of a real-time run beyond the link's own reports.
 #[derive(Debug, Clone, Default)]
 pub struct RunInfo {
@@ -151,6 +159,19 @@ pub enum PortEnded {
         /// What happened.
         reason: String,
     },
+}
+
+impl PortEnded {
+    /// What a run that ended when a port closed says of it (ports numbered from 1; none when
+    /// it was stopped).
+    pub fn closed_line(&self) -> Option<String> {
+        match self {
+            PortEnded::Stopped => None,
+            PortEnded::Closed { port, name, reason } => {
+                Some(format!("port {} ({name}) closed: {reason}", port + 1))
+            }
+        }
+    }
 }
 
 /// Counters of a real-time run beyond the model's own reports, per port (in port order).
@@ -315,17 +336,15 @@ pub fn priority_allowed() -> Result<(), String> {
 }
 
 impl Ports {
-    /// Opens every port (at most [`MAX_PORTS`]) and starts their reader and writer threads;
-    /// with `realtime_priority` every thread asks for real-time scheduling
-    /// ([`raise_priority`]).
-    pub fn open(specs: Vec<PortSpec>, realtime_priority: bool) -> Result<Ports, OpenError> {
-        Ports::open_labelled(specs, &PORT_LABELS, realtime_priority)
+    /// Opens every port (at most [`MAX_PORTS`]) and starts their reader and writer threads.
+    pub fn open(specs: &[DeviceSpec], options: SideOptions) -> Result<Ports, OpenError> {
+        Ports::open_labelled(specs, &PORT_LABELS, options)
     }
 
     fn open_labelled(
-        specs: Vec<PortSpec>,
+        specs: &[DeviceSpec],
         labels: &[&'static str],
-        realtime_priority: bool,
+        options: SideOptions,
     ) -> Result<Ports, OpenError> {
         if specs.len() > labels.len() {
             return Err(OpenError {
@@ -336,9 +355,8 @@ impl Ports {
         }
         let (sender, inbox) = mpsc::channel();
         let (mut names, mut writers, mut slaves) = (Vec::new(), Vec::new(), Vec::new());
-        for (port, (spec, label)) in specs.into_iter().zip(labels).enumerate() {
-            let (name, writer, slave) =
-                open_side(port, label, spec, sender.clone(), realtime_priority)?;
+        for (port, (spec, label)) in specs.iter().zip(labels).enumerate() {
+            let (name, writer, slave) = open_side(port, label, spec, options, sender.clone())?;
             names.push(name);
             writers.push(writer);
             slaves.extend(slave);
@@ -348,7 +366,7 @@ impl Ports {
             writers,
             inbox,
             _slaves: slaves,
-            realtime_priority,
+            realtime_priority: options.realtime_priority,
         })
     }
 
@@ -486,10 +504,9 @@ impl Ports {
 }
 
 impl Endpoints {
-    /// Opens both sides and starts their reader and writer threads; with `realtime_priority`
-    /// every thread of the link asks for real-time scheduling ([`raise_priority`]).
-    pub fn open(specs: [PortSpec; 2], realtime_priority: bool) -> Result<Endpoints, OpenError> {
-        let ports = Ports::open_labelled(specs.into(), &["A", "B"], realtime_priority)?;
+    /// Opens both sides and starts their reader and writer threads.
+    pub fn open(specs: &[DeviceSpec; 2], options: SideOptions) -> Result<Endpoints, OpenError> {
+        let ports = Ports::open_labelled(specs, &["A", "B"], options)?;
         let names = [0, 1].map(|k| ports.names.get(k).cloned().unwrap_or_default());
         Ok(Endpoints { ports, names })
     }
@@ -503,13 +520,14 @@ impl Endpoints {
     /// Runs `link` between the two sides until one closes or the run is stopped. `on_report`
     /// sees every report when the model decides it (delivered frames are then written), with
     /// the link's clock anchored at the start of the call. With a `dialect`, the sides speak
-    /// the EvoLogics AT commands instead of sending bare packets (`framing` is then unused).
+    /// a modem's commands (see [`Emulator`]) instead of sending bare packets (`framing` is then
+    /// unused).
     /// The run ends ([`Ended::Stopped`]) within 200 ms of `stop` being set.
     pub fn run(
         &self,
         link: &mut Link,
         framing: Framing,
-        dialect: Option<&mut EvoLogicsEmulator>,
+        dialect: Option<&mut dyn Emulator>,
         stop: &AtomicBool,
         mut on_report: impl FnMut(&Report),
     ) -> (Ended, RunInfo) {
@@ -523,10 +541,9 @@ impl Endpoints {
                 let to = report.from.other();
                 match dialect.borrow_mut().as_deref_mut() {
                     Some(emulator) => {
-                        let (to_receiver, to_sender) =
-                            emulator.on_report(&report, link.model(report.from));
-                        ports.write(to.index(), to_receiver, info);
-                        ports.write(report.from.index(), to_sender, info);
+                        let notes = emulator.on_report(&report, link.model(report.from));
+                        ports.write(to.index(), notes.to_receiver, info);
+                        ports.write(report.from.index(), notes.to_sender, info);
                     }
                     None if report.fate.arrived() => {
                         ports.write(to.index(), report.bytes.clone(), info)
@@ -542,12 +559,8 @@ impl Endpoints {
                     return Some(bytes);
                 };
                 let side = side_of(port);
-                let (packets, replies) = emulator.from_host(side, &bytes);
+                let replies = emulator.host_wrote(side, &bytes, &mut |data| link.offer(side, data));
                 ports.write(port, replies, info);
-                for (data, kind) in packets {
-                    let seq = link.offer(side, data);
-                    emulator.sent(side, seq, kind);
-                }
                 None
             },
         );
@@ -640,95 +653,38 @@ impl Framer {
     }
 }
 
+/// Opens one port with the one opener and starts its reader and writer threads: its name (for
+/// a new pseudo-terminal, the path programs open), its writer, and a slave to keep open.
 fn open_side(
-    side: usize,
+    port: usize,
     label: &'static str,
-    spec: PortSpec,
+    spec: &DeviceSpec,
+    options: SideOptions,
     inbox: Sender<Message>,
-    rt: bool,
 ) -> Result<(String, Writer, Option<File>), OpenError> {
-    let fail = |name: &str, reason: String| OpenError {
+    let opened = device::open(spec, &options.open_options()).map_err(|e| OpenError {
         side: label,
-        name: name.to_string(),
-        reason,
-    };
+        name: e.device,
+        reason: e.error.to_string(),
+    })?;
+    let name = opened.name;
+    let halves = opened.io.split().map_err(|e| OpenError {
+        side: label,
+        name: name.clone(),
+        reason: e.to_string(),
+    })?;
+    let rt = options.realtime_priority;
     let (queue, outbox) = mpsc::sync_channel::<Vec<u8>>(WRITE_QUEUE_FRAMES);
-    match spec {
-        PortSpec::Pty => {
-            let (master, slave, path) = open_pty().map_err(|e| fail("pty", e.to_string()))?;
-            let master = Arc::new(master);
-            let reader = Arc::clone(&master);
-            spawn_reader(side, rt, false, inbox.clone(), move |buf| {
-                (&*reader).read(buf)
-            });
-            spawn_writer(side, rt, inbox, outbox, move |bytes| {
-                (&*master).write_all(bytes)
-            });
-            Ok((path, Writer { queue }, Some(slave)))
-        }
-        PortSpec::Serial { path, baud } => {
-            let port = serialport::new(&path, baud)
-                .timeout(Duration::from_millis(100))
-                .open()
-                .map_err(|e| {
-                    let not_a_tty = crate::gll::not_a_terminal(&path);
-                    fail(&path, not_a_tty.unwrap_or_else(|| e.to_string()))
-                })?;
-            let mut writer = port.try_clone().map_err(|e| fail(&path, e.to_string()))?;
-            let mut reader = port;
-            spawn_reader(side, rt, false, inbox.clone(), move |buf| reader.read(buf));
-            spawn_writer(side, rt, inbox, outbox, move |bytes| {
-                writer.write_all(bytes)?;
-                writer.flush()
-            });
-            Ok((path, Writer { queue }, None))
-        }
-        PortSpec::Udp { bind, peer } => {
-            let name = bind.to_string();
-            let socket = UdpSocket::bind(bind).map_err(|e| fail(&name, e.to_string()))?;
-            let reader = socket.try_clone().map_err(|e| fail(&name, e.to_string()))?;
-            let peer = Arc::new(Mutex::new(peer));
-            let learned = Arc::clone(&peer);
-            let fixed = peer.lock().map(|p| p.is_some()).unwrap_or(false);
-            spawn_reader(side, rt, true, inbox.clone(), move |buf| {
-                let (n, from) = reader.recv_from(buf)?;
-                if !fixed && let Ok(mut peer) = learned.lock() {
-                    *peer = Some(from);
-                }
-                if n == 0 {
-                    // An empty datagram is no packet (and 0 would read as end of file).
-                    return Err(io::ErrorKind::Interrupted.into());
-                }
-                Ok(n)
-            });
-            spawn_writer(side, rt, inbox, outbox, move |bytes| {
-                let target = peer.lock().ok().and_then(|p| *p);
-                match target {
-                    Some(addr) => socket.send_to(bytes, addr).map(|_| ()),
-                    None => Ok(()), // nobody has spoken on this side yet: the packet is lost
-                }
-            });
-            Ok((name, Writer { queue }, None))
-        }
-    }
-}
-
-/// A pseudo-terminal pair in raw mode: the master, the slave (kept open), the slave's path.
-fn open_pty() -> nix::Result<(PtyMaster, File, String)> {
-    let master = posix_openpt(OFlag::O_RDWR | OFlag::O_NOCTTY | OFlag::O_CLOEXEC)?;
-    grantpt(&master)?;
-    unlockpt(&master)?;
-    let path = ptsname_r(&master)?;
-    let slave = std::fs::OpenOptions::new()
-        .read(true)
-        .write(true)
-        .custom_flags(OFlag::O_NOCTTY.bits())
-        .open(&path)
-        .map_err(|e| nix::Error::from_raw(e.raw_os_error().unwrap_or(0)))?;
-    let mut termios = tcgetattr(&slave)?;
-    cfmakeraw(&mut termios);
-    tcsetattr(&slave, SetArg::TCSANOW, &termios)?;
-    Ok((master, slave, path))
+    let mut reader = halves.reader;
+    spawn_reader(port, rt, halves.datagrams, inbox.clone(), move |buf| {
+        reader.read(buf)
+    });
+    let mut writer = halves.writer;
+    spawn_writer(port, rt, inbox, outbox, move |bytes| {
+        writer.write_all(bytes)?;
+        writer.flush()
+    });
+    Ok((name, Writer { queue }, halves.keep))
 }
 
 fn spawn_reader(

@@ -100,6 +100,15 @@ impl Serialize for TraceRow<'_> {
     }
 }
 
+/// What a run reports: its `--stats` document and its summary, one line each.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Summary {
+    /// The `--stats` document.
+    pub stats: serde_json::Value,
+    /// The summary lines, for stderr.
+    pub lines: Vec<String>,
+}
+
 /// The counters of both directions of a run.
 #[derive(Debug, Clone, Default)]
 pub struct Counters {
@@ -165,6 +174,17 @@ impl Counters {
             lines.push(format!("{note}: the figures cover the run until then"));
         }
         lines
+    }
+
+    /// The summary and the `--stats` document of a run on `link` (in real time, with the ports'
+    /// figures `info`, whose lines follow the counters').
+    pub fn summary(&self, facts: &RunFacts<'_>, link: &Link, info: Option<&RunInfo>) -> Summary {
+        let mut lines = self.summary_lines(facts, link);
+        lines.extend(info.map(real_time_lines).unwrap_or_default());
+        Summary {
+            stats: self.stats_json(facts, link, info),
+            lines,
+        }
     }
 
     /// The `--stats` document: mode, seed, duration, both directions' counters, frames in

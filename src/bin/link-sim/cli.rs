@@ -11,13 +11,19 @@ use rovlink::cli::model::ModelArgs;
 use rovlink::cli::output::{Dest, Kind, Outputs};
 use rovlink::cli::rows::{RowFormat, RowWriter};
 use rovlink::cli::value::{self, CountParser};
+use rovlink::device::DeviceSpec;
 use rovlink::gll::Dialect;
 use rovlink::io::Output;
+use rovlink::link::SimTime;
+use rovlink::link::emulate::Emulation;
 use rovlink::link::model::MAX_RANGE_M;
 use rovlink::link::pipe::Pace;
-use rovlink::link::realtime::{Framing, MAX_PORTS, PortSpec};
-use rovlink::link::stats::Mode;
+use rovlink::link::realtime::{Framing, MAX_PORTS, SideOptions, priority_allowed};
+use rovlink::link::stats::{Mode, RunFacts};
 use rovlink::link::{Distance, Link, Medium};
+use rovlink::say;
+
+use crate::TOOL;
 
 const EXAMPLES: &str = "\
 Examples:
@@ -27,7 +33,8 @@ Examples:
   link-sim --model-file m.json --interval 500 < frames.bin > out.bin
   link-sim --model s100 --pty                           two pseudo-terminals (paths on stdout, A then B)
   link-sim --model s100 --a /dev/ttyUSB0 --b /dev/ttyUSB1 --baud 9600
-  link-sim --model satellite-up --reverse-model satellite-down --udp-a 127.0.0.1:9001 --udp-b 127.0.0.1:9002
+  link-sim --model s100 --a pty --b tcp:192.168.0.209:9200  a program on a new pty, a modem on TCP
+  link-sim --model satellite-up --reverse-model satellite-down --a udpin:127.0.0.1:9001 --b udpin:127.0.0.1:9002
   link-sim --model s100 --pty --raw --idle-ms 20 --distance-file dive.csv
   link-sim --model s2cr-burst --pty --dialect evologics  programs speak AT*SEND / RECV to it
   link-sim --model s100 --pty 3 --position 0,0,0 --position 3,0,1 --position 7,0,1
@@ -35,9 +42,14 @@ Examples:
                           middle one hears both ends, the ends (7.07 m apart) never hear each other
 
 Modes: with no port option, frames (wire.md) from INPUT or stdin go from side A to side B in
-virtual time and the frames that arrive go to stdout (or -o), in arrival order. With --pty,
---a/--b or --udp-a/--udp-b, the link runs in real time between the two sides until a side
+virtual time and the frames that arrive go to stdout (or -o), in arrival order. With --a/--b
+(each a device, see Devices below; a new pseudo-terminal's path is printed on stdout, A then
+B), --pty or --udp-a/--udp-b, the link runs in real time between the two sides until a side
 closes (exit 1), or SIGINT/SIGTERM/SIGHUP (exit 0).
+
+Aliases (the flags of earlier versions): --pty is --a pty --b pty; --udp-a ADDR is --a
+udpin:ADDR (packets to whoever sent last), and with --udp-a-peer PEER it is --a udp:ADDR=PEER
+(likewise --udp-b, --udp-b-peer); --a PATH is a serial port at --baud, as before.
 
 Shared medium: --pty N (3 ..= 16) creates N pseudo-terminals on one medium with one model:
 a frame written to a port reaches every other port in range (from the distance between their
@@ -64,7 +76,7 @@ summary saying it was interrupted.";
 /// air time, intrinsic delay and jitter, propagation, range, bit errors, collisions and losses.
 /// The same seed gives the same bytes and the same trace.
 #[derive(Parser, Debug)]
-#[command(version, after_help = EXAMPLES)]
+#[command(version, after_help = format!("{EXAMPLES}\n\n{}", rovlink::device::HELP))]
 pub struct Args {
     /// Frame byte stream for the virtual-time pipe; `-` or nothing reads standard input.
     pub input: Option<PathBuf>,
@@ -123,8 +135,9 @@ pub struct Args {
     #[arg(long, value_name = "FILE", visible_alias = "metrics")]
     pub stats: Option<PathBuf>,
 
-    /// Real time: create N pseudo-terminals (2 ..= 16; none given: 2, sides A and B) and
-    /// print their paths, one per line in port order; more than 2 share one medium.
+    /// Real time: create N pseudo-terminals (2 ..= 16; none given: 2, sides A and B, the
+    /// same as --a pty --b pty) and print their paths, one per line in port order; more than
+    /// 2 share one medium.
     #[arg(long, value_name = "N", num_args = 0..=1, default_missing_value = "2",
           help_heading = "Real time", conflicts_with_all = ["a", "udp_a"],
           value_parser = CountParser { min: 2, max: MAX_PORTS as u64, unit: "ports" })]
@@ -137,20 +150,23 @@ pub struct Args {
           value_parser = value::point3())]
     pub position: Vec<[f64; 3]>,
 
-    /// Real time: side A's serial port (or pseudo-terminal).
+    /// Real time: side A's device (see Devices below): a serial port or someone's
+    /// pseudo-terminal (as before), pty (a new one), serial:PATH:BAUD, tcp:, tcpin:, udp:,
+    /// udpin: or udpout:.
     #[arg(long, value_name = "DEV", requires = "b", help_heading = "Real time")]
-    pub a: Option<String>,
+    pub a: Option<DeviceSpec>,
 
-    /// Real time: side B's serial port.
+    /// Real time: side B's device, as --a.
     #[arg(long, value_name = "DEV", requires = "a", help_heading = "Real time")]
-    pub b: Option<String>,
+    pub b: Option<DeviceSpec>,
 
-    /// Baud rate of --a and --b (50 ..= 4000000).
+    /// Baud rate of a side given as a path (50 ..= 4000000).
     #[arg(long, default_value_t = 9600, help_heading = "Real time",
           value_parser = value::baud())]
     pub baud: u32,
 
-    /// Real time: side A's UDP address (bound here; each datagram is a frame).
+    /// Real time: side A's UDP address (bound here; each datagram is a frame). An alias: --a
+    /// udpin:ADDR:PORT, or with --udp-a-peer, --a udp:ADDR:PORT=PEER.
     #[arg(
         long,
         value_name = "ADDR:PORT",
@@ -160,7 +176,7 @@ pub struct Args {
     )]
     pub udp_a: Option<SocketAddr>,
 
-    /// Real time: side B's UDP address.
+    /// Real time: side B's UDP address (an alias, as --udp-a).
     #[arg(
         long,
         value_name = "ADDR:PORT",
@@ -271,8 +287,16 @@ impl Args {
         ];
         outs.inputs(inputs.into_iter().flatten().map(PathBuf::as_path));
         self.check_ports()?;
-        if self.pty.is_some() {
-            outs.claim_stdout("--pty", Kind::Text)?;
+        if self
+            .sides()
+            .is_some_and(|sides| sides.contains(&DeviceSpec::Pty))
+        {
+            let flag = if self.pty.is_some() {
+                "--pty"
+            } else {
+                "a pty side"
+            };
+            outs.claim_stdout(flag, Kind::Text)?;
         }
         let trace = outs.claim_opt("--trace", self.trace.as_deref(), Kind::Text)?;
         let stats = outs.claim_opt("--stats", self.stats.as_deref(), Kind::Text)?;
@@ -352,31 +376,50 @@ impl Args {
         }
     }
 
-    /// The two sides of a real-time run; none for the pipe.
-    pub fn port_specs(&self) -> Option<[PortSpec; 2]> {
+    /// The two sides of a real-time run, A then B (the aliases read as devices); none for the
+    /// pipe.
+    pub fn sides(&self) -> Option<Vec<DeviceSpec>> {
         if self.pty.is_some() {
-            return Some([PortSpec::Pty, PortSpec::Pty]);
+            return Some(vec![DeviceSpec::Pty, DeviceSpec::Pty]);
         }
         if let (Some(a), Some(b)) = (&self.a, &self.b) {
-            let serial = |path: &String| PortSpec::Serial {
-                path: path.clone(),
+            return Some(vec![a.clone(), b.clone()]);
+        }
+        let udp = |bind: SocketAddr, peer: Option<SocketAddr>| match peer {
+            Some(peer) => DeviceSpec::Udp { bind, peer },
+            None => DeviceSpec::UdpIn(bind.to_string()),
+        };
+        let (a, b) = (self.udp_a?, self.udp_b?);
+        Some(vec![udp(a, self.udp_a_peer), udp(b, self.udp_b_peer)])
+    }
+
+    /// The real-time run of `devices`: their baud rate, the framing, the dialect, and
+    /// real-time scheduling with `--rt-priority` when it is allowed (said when it is not).
+    pub fn emulation(&self, devices: Vec<DeviceSpec>) -> Emulation {
+        let realtime_priority = self.rt_priority
+            && priority_allowed()
+                .map_err(|why| say!("--rt-priority: not allowed ({why}); running without it"))
+                .is_ok();
+        Emulation {
+            devices,
+            sides: SideOptions {
                 baud: self.baud,
-            };
-            return Some([serial(a), serial(b)]);
+                realtime_priority,
+            },
+            framing: self.framing(),
+            dialect: self.dialect,
         }
-        if let (Some(a), Some(b)) = (self.udp_a, self.udp_b) {
-            return Some([
-                PortSpec::Udp {
-                    bind: a,
-                    peer: self.udp_a_peer,
-                },
-                PortSpec::Udp {
-                    bind: b,
-                    peer: self.udp_b_peer,
-                },
-            ]);
+    }
+
+    /// What the summary and `--stats` say of a run besides its counters: the mode, the seed,
+    /// the link's time at the end, and why it was cut short (`note`).
+    pub fn facts<'a>(&self, mode: Mode, now: SimTime, note: &'a Option<String>) -> RunFacts<'a> {
+        RunFacts {
+            mode,
+            seed: self.seed,
+            duration_s: now.as_secs_f64(),
+            interrupted: note.as_deref(),
         }
-        None
     }
 
     /// How a real-time run cuts bytes into packets.

@@ -26,8 +26,10 @@ Examples:
   modem-bench --tx A --rx B --dialect evologics --sizes 16,57 --count 60 --interval 3000
   modem-bench --port /dev/ttyUSB0 --echo --count 100 --interval 2000     round trips via a far-end echo
 
-DEV is a serial port or pseudo-terminal, tcp:HOST:PORT (a modem's TCP interface, e.g. an
-EvoLogics modem on Ethernet), or udp:BIND_ADDR=PEER_ADDR (one datagram per packet).
+DEV is a device (see Devices below): a serial port or pseudo-terminal, tcp:HOST:PORT (a
+modem's TCP interface, e.g. an EvoLogics modem on Ethernet), udp:BIND=PEER (one datagram per
+packet), or any other form of the grammar; the spellings modem-bench took before are its
+forms.
 
 Size = bytes written to the modem per packet: a whole wire.md frame (header and CRC included)
 whose payload carries the sequence number and the send time; 15 to 260 bytes.
@@ -53,7 +55,7 @@ SIGINT, SIGTERM or SIGHUP: 130, 143 or 129, rows, summary and fit covering what 
 /// packet, a summary with the figures of the paper's Table 3, and optionally a model file that
 /// link-sim and tdma-run accept.
 #[derive(Parser, Debug)]
-#[command(version, after_help = EXAMPLES)]
+#[command(version, after_help = format!("{EXAMPLES}\n\n{}", rovlink::device::HELP))]
 pub struct Args {
     /// Simulate in virtual time through this preset (default s100; or --model-file).
     #[arg(long, value_name = "NAME", num_args = 0..=1, default_missing_value = "s100",
@@ -72,32 +74,19 @@ pub struct Args {
           value_parser = value::real(0.0, MAX_RANGE_M, "m"))]
     pub distance: f64,
 
-    /// Real modems: the sending modem's serial port (both modems on this host: one clock).
-    #[arg(
-        long,
-        value_name = "DEV",
-        requires = "rx",
-        conflicts_with = "port",
-        help_heading = "Real modems"
-    )]
+    /// Real modems: the sending modem's device (both modems on this host: one clock).
+    #[arg(long, value_name = "DEV", requires = "rx", conflicts_with = "port",
+          help_heading = "Real modems", value_parser = value::device)]
     pub tx: Option<String>,
 
-    /// Real modems: the receiving modem's serial port.
-    #[arg(
-        long,
-        value_name = "DEV",
-        requires = "tx",
-        help_heading = "Real modems"
-    )]
+    /// Real modems: the receiving modem's device.
+    #[arg(long, value_name = "DEV", requires = "tx", help_heading = "Real modems",
+          value_parser = value::device)]
     pub rx: Option<String>,
 
     /// Real modem whose far end echoes every packet: delays are round trips.
-    #[arg(
-        long,
-        value_name = "DEV",
-        requires = "echo",
-        help_heading = "Real modems"
-    )]
+    #[arg(long, value_name = "DEV", requires = "echo", help_heading = "Real modems",
+          value_parser = value::device)]
     pub port: Option<String>,
 
     /// With --port: the far end echoes.

@@ -12,7 +12,7 @@ Examples:
   rcp-dump --format csv -o frames.csv frames.bin              a table for analysis
   rcp-dump --port /dev/ttyUSB0 --baud 9600     watch a modem's serial line until Ctrl-C
   rcp-dump --port tcp:192.168.0.209:9200       a modem's TCP console
-  rcp-dump --port udp:0.0.0.0:5000=127.0.0.1:5001   datagrams from link-sim --udp
+  rcp-dump --port udp:0.0.0.0:5000=127.0.0.1:5001   datagrams from link-sim --a udpin:...
   link-sim ... | rcp-dump -                    read a pipe
 
 Corrupted frames (CRC failures, truncated frames, skipped bytes) are reported on stderr with
@@ -39,15 +39,15 @@ pub enum Format {
 /// reported) and prints the ROV or operator message each carries. A frame with a good CRC but a
 /// payload that is not a valid message is printed as type "raw" with the reason.
 #[derive(Parser, Debug)]
-#[command(version, after_help = EXAMPLES)]
+#[command(version, after_help = format!("{EXAMPLES}\n\n{}", rovlink::device::HELP))]
 pub struct Args {
     /// Frame byte stream; `-` or nothing reads standard input.
     #[arg(conflicts_with = "port")]
     pub input: Option<PathBuf>,
 
     /// Read from a device until it closes (exit 1) or Ctrl-C (exit 0): a serial port or
-    /// pseudo-terminal, `tcp:HOST:PORT` or `udp:BIND_ADDR=PEER_ADDR`.
-    #[arg(long, value_name = "DEV")]
+    /// pseudo-terminal, `tcp:HOST:PORT`, `udp:BIND=PEER`, or any device of the grammar below.
+    #[arg(long, value_name = "DEV", value_parser = value::device)]
     pub port: Option<String>,
 
     /// Baud rate of a serial --port (50 ..= 4000000) [default: 9600].

@@ -13,6 +13,7 @@ use rovlink::cli::metrics;
 use rovlink::cli::output::{Dest, Kind, Outputs};
 use rovlink::cli::rows::{RowFormat, RowWriter};
 use rovlink::cli::{only_with, stop};
+use rovlink::device::DeviceSpec;
 use rovlink::gll::PortOptions;
 use rovlink::io::{CheckFailed, EXIT_OK, IoError, Output};
 use rovlink::say;
@@ -80,10 +81,12 @@ fn pump(args: &Args, printer: &mut Printer, sink: &mut Sink) -> Result<Option<Ca
     };
     let mut port = options.open_bytes(dev, Duration::from_millis(100))?;
     if !args.quiet {
-        // A baud rate is a serial line's only: not said for tcp: and udp:.
-        let baud = format!(" at {} baud", options.baud);
-        let serial = !(dev.starts_with("tcp:") || dev.starts_with("udp:"));
-        let at = if serial { baud.as_str() } else { "" };
+        // A baud rate is a serial line's only: not said for sockets.
+        let at = match dev.parse() {
+            Ok(DeviceSpec::Serial { baud, .. }) => format!(" at {baud} baud"),
+            Ok(DeviceSpec::Path(_)) => format!(" at {} baud", options.baud),
+            _ => String::new(),
+        };
         say!("reading {dev}{at} until it closes or Ctrl-C");
     }
     let idle_ms = args.idle_ms.unwrap_or(1000.0);

@@ -28,7 +28,7 @@ Real time, one end per process (through link-sim standing in for the modems):
   tdma-run --role rov --port $B --duration 130 &
   tdma-run --role operator --port $A --ipg 640 --duration 120 --images-out received/
 Real modems: --port /dev/ttyUSB0 (transparent, e.g. WFS S100), --dialect evologics with
---port tcp:192.168.0.209:9200, or --port udp:BIND_ADDR=PEER_ADDR. Start the ROV end first.
+--port tcp:192.168.0.209:9200, or --port udp:BIND=PEER. Start the ROV end first.
 
 In the field (docs/tdma-mavlink.md, docs/tdma-console.md, docs/tdma-foxglove.md):
   tdma-run --role rov --port /dev/ttyUSB0 --vehicle mavlink:udpin:0.0.0.0:14550 --camera cam/
@@ -114,7 +114,7 @@ fn roi(text: &str) -> Result<Roi, String> {
 /// status and DEBT-coded camera images up, one frame per slot, with heartbeats and the ROV's
 /// recovery by backtracking. In simulation the same seed gives the same session.
 #[derive(Parser, Debug)]
-#[command(version, after_help = EXAMPLES)]
+#[command(version, after_help = format!("{EXAMPLES}\n\n{}", rovlink::device::HELP))]
 pub struct Args {
     /// Both ends and the link in one process, in virtual time (the default).
     #[arg(long, conflicts_with_all = ["role", "port"])]
@@ -124,13 +124,11 @@ pub struct Args {
     #[arg(long, value_enum, requires = "port", help_heading = "Real time")]
     pub role: Option<RoleArg>,
 
-    /// The modem: a serial port or pseudo-terminal, tcp:HOST:PORT or udp:BIND_ADDR=PEER_ADDR.
-    #[arg(
-        long,
-        value_name = "DEV",
-        requires = "role",
-        help_heading = "Real time"
-    )]
+    /// The modem: a device (see Devices below): a serial port or pseudo-terminal path,
+    /// serial:PATH:BAUD, tcp:HOST:PORT, tcpin:HOST:PORT, udp:BIND=PEER, udpin:HOST:PORT or
+    /// udpout:HOST:PORT.
+    #[arg(long, value_name = "DEV", requires = "role", help_heading = "Real time",
+          value_parser = value::device)]
     pub port: Option<String>,
 
     /// A network (docs/tdma-network.md): a scenario file whose nodes, media and routes are
@@ -144,13 +142,10 @@ pub struct Args {
     )]
     pub routes: Option<PathBuf>,
 
-    /// With --routes: the modem of the node's second medium (a relay between two media).
-    #[arg(
-        long,
-        value_name = "DEV",
-        requires = "routes",
-        help_heading = "Real time"
-    )]
+    /// With --routes: the modem of the node's second medium (a relay between two media), a
+    /// device as --port.
+    #[arg(long, value_name = "DEV", requires = "routes", help_heading = "Real time",
+          value_parser = value::device)]
     pub port2: Option<String>,
 
     #[command(flatten)]
@@ -247,8 +242,10 @@ pub struct Args {
     pub mcap: Option<PathBuf>,
 
     /// What moves the vehicle: `sim` (the built-in model) or `mavlink:ENDPOINT`, an ArduSub
-    /// autopilot (real time, --role rov): udpin:0.0.0.0:14550, udpout:HOST:PORT,
-    /// tcpout:HOST:PORT or serial:/dev/ttyACM0:115200.
+    /// autopilot (real time, --role rov) at a device (see Devices below): udpin:0.0.0.0:14550
+    /// (listen, answer the sender), udpout:HOST:PORT, tcp:HOST:PORT, tcpin:HOST:PORT or
+    /// serial:/dev/ttyACM0:115200. Aliases, as before: udp:HOST:PORT = udpin:HOST:PORT (here
+    /// as for --port, udp: with = is BIND=PEER), tcpout:HOST:PORT = tcp:HOST:PORT.
     #[arg(long, value_name = "sim|mavlink:ENDPOINT", default_value = "sim",
           value_parser = vehicle, help_heading = "Field")]
     pub vehicle: Vehicle,
@@ -305,6 +302,7 @@ fn vehicle(text: &str) -> Result<Vehicle, String> {
     match text.split_once(':') {
         _ if text == "sim" => Ok(Vehicle::Sim),
         Some(("mavlink", endpoint)) if !endpoint.is_empty() => {
+            rovlink::rcp::mavlink::parse_endpoint(endpoint).map_err(|e| e.to_string())?;
             Ok(Vehicle::Mavlink(endpoint.to_string()))
         }
         _ => Err(format!(

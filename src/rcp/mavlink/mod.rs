@@ -39,29 +39,43 @@
 //! [`WRITE_TIMEOUT`]). A send that fails is a [`DriveEvent::Note`], once until sends work again.
 //! The messages kept between two steps are bounded ([`MAX_QUEUED`]). Dropping the drive stops
 //! the thread and waits for it (at most a read timeout, or a reconnect attempt).
+//!
+//! By concern: `transport.rs` is the connection (the endpoint in the one device grammar, opened
+//! by the one opener, MAVLink framing over it, the receiving thread and TCP's reconnects);
+//! `codec.rs` what the messages mean (ArduSub's modes and NAV, the stick axes, what the heard
+//! messages leave in the inbox); this file the options and the drive's state machine. The
+//! public paths are this module's (`rcp::mavlink::manual_control_axes`, ...).
 
-use std::collections::VecDeque;
-use std::fmt;
+mod codec;
+mod transport;
+
+pub use codec::{
+    ALT_HOLD, GUIDED, NEUTRAL_AXES, OTHER_MODE_NAV, POSHOLD, ardusub_mode_name, custom_mode_of,
+    demanded_mode, manual_control_axes, nav_of_custom_mode,
+};
+pub use transport::parse_endpoint;
+
 use std::io;
-use std::net::{SocketAddr, TcpListener, TcpStream, ToSocketAddrs};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use mavlink::MavHeader;
 use mavlink::dialects::ardupilotmega::{
     COMMAND_LONG_DATA, HEARTBEAT_DATA, MANUAL_CONTROL_DATA, MavAutopilot, MavCmd, MavFrame,
-    MavMessage, MavModeFlag, MavResult, MavSeverity, MavState, MavType, PositionTargetTypemask,
+    MavMessage, MavModeFlag, MavResult, MavState, MavType, PositionTargetTypemask,
     SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
-use mavlink::error::MessageReadError;
-use mavlink::{Connectable, MavConnection, MavHeader, SerialConfig, TcpConfig, UdpConfig, UdpMode};
 
 use super::drive::{Demand, Drive, DriveEvent, DriveState};
+use crate::device::DeviceSpec;
 use crate::link::SimTime;
 use crate::vehicle::{Command, Vehicle, angle_diff_deg};
 use crate::wire::Nav;
 use crate::wire::rov::Why;
+use codec::{Autopilot, Inbox};
+use transport::{Shared, lock, receive};
 
 /// How often an arm or mode request the autopilot has not met is sent again, s.
 pub const COMMAND_RETRY_S: f64 = 1.5;
@@ -84,226 +98,22 @@ pub const READ_TIMEOUT: Duration = Duration::from_millis(100);
 /// How long a TCP or serial write may wait before it fails.
 pub const WRITE_TIMEOUT: Duration = Duration::from_millis(200);
 
-/// How long `tcpout:` waits for the autopilot to accept the connection.
+/// How long `tcp:` (`tcpout:`) waits for the autopilot to accept the connection.
 pub const TCP_CONNECT_TIMEOUT: Duration = Duration::from_secs(3);
 
-/// How often a closed `tcpout:` connection is tried again.
+/// How often a closed `tcp:` (`tcpout:`) connection is tried again.
 pub const RECONNECT_PERIOD: Duration = Duration::from_secs(1);
 
 /// The most acknowledgements and notes kept between two steps (older ones are dropped).
 pub const MAX_QUEUED: usize = 64;
 
-/// ArduSub's custom modes that the status block's NAV has a value for, and back.
-const MODE_TABLE: [(u32, Nav); 5] = [
-    (19, Nav::Manual),
-    (0, Nav::Stabilize),
-    (2, Nav::DepthHold),
-    (16, Nav::HoldPosition),
-    (4, Nav::Guided),
-];
-
-/// The NAV reported while ArduSub is in a mode outside [`MODE_TABLE`] (ACRO, AUTO, CIRCLE,
-/// SURFACE, ...): 5, the first value wire.md leaves reserved, so the operator sees "none of
-/// ours" rather than a mode the vehicle is not in.
-pub const OTHER_MODE_NAV: Nav = Nav::Unknown(5);
-
-/// The NAV for an ArduSub custom mode (MANUAL 19, STABILIZE 0, ALT_HOLD 2, POSHOLD 16,
-/// GUIDED 4); `None` for the others.
-pub fn nav_of_custom_mode(custom_mode: u32) -> Option<Nav> {
-    MODE_TABLE
-        .iter()
-        .find(|(mode, _)| *mode == custom_mode)
-        .map(|(_, nav)| *nav)
-}
-
-/// The ArduSub custom mode a NAV reads back from ([`nav_of_custom_mode`]'s inverse; what is
-/// asked for is [`demanded_mode`]); `None` for a reserved NAV value.
-pub fn custom_mode_of(nav: Nav) -> Option<u32> {
-    MODE_TABLE
-        .iter()
-        .find(|(_, n)| *n == nav)
-        .map(|(mode, _)| *mode)
-}
-
-/// The ArduSub custom mode the ROV end asks for when the operator asks for `nav`: every stick
-/// mode holds depth, since a BlueROV2 is positively buoyant and in MANUAL or STABILIZE with
-/// neutral sticks floats up to the surface; HoldPosition is POSHOLD where the vehicle has a
-/// position estimate (`position_known`), ALT_HOLD where it has none; Guided is GUIDED. `None`
-/// for a reserved NAV value.
-///
-/// | NAV | ArduSub mode | what ArduSub holds with neutral sticks |
-/// | --- | --- | --- |
-/// | manual, stabilize, depth_hold | ALT_HOLD (2) | attitude and depth |
-/// | hold_position | POSHOLD (16); ALT_HOLD (2) without a position | attitude, depth, position |
-/// | guided | GUIDED (4) | the last setpoint (needs a position) |
-pub fn demanded_mode(nav: Nav, position_known: bool) -> Option<u32> {
-    match nav {
-        Nav::Manual | Nav::Stabilize | Nav::DepthHold => Some(ALT_HOLD),
-        Nav::HoldPosition if position_known => Some(POSHOLD),
-        Nav::HoldPosition => Some(ALT_HOLD),
-        Nav::Guided => Some(GUIDED),
-        Nav::Unknown(_) => None,
-    }
-}
-
-/// ArduSub's ALT_HOLD: attitude and depth held.
-pub const ALT_HOLD: u32 = 2;
-/// ArduSub's POSHOLD: attitude, depth and position held (needs a position estimate).
-pub const POSHOLD: u32 = 16;
-/// ArduSub's GUIDED: goes to and holds the last setpoint (needs a position estimate).
-pub const GUIDED: u32 = 4;
-
 /// LOCAL_POSITION_NED missing for this long means the vehicle has no position estimate, s.
 pub const POSITION_STALE_S: f64 = 3.0;
-
-/// ArduSub's name for a custom mode (`mode 12` for a number it does not define).
-pub fn ardusub_mode_name(custom_mode: u32) -> String {
-    let name = match custom_mode {
-        0 => "STABILIZE",
-        1 => "ACRO",
-        2 => "ALT_HOLD",
-        3 => "AUTO",
-        4 => "GUIDED",
-        7 => "CIRCLE",
-        9 => "SURFACE",
-        16 => "POSHOLD",
-        19 => "MANUAL",
-        20 => "MOTOR_DETECT",
-        21 => "SURFTRAK",
-        other => return format!("mode {other}"),
-    };
-    name.to_string()
-}
-
-/// MANUAL_CONTROL's x, y, z, r for thrust in percent (surge, sway, heave down, yaw clockwise,
-/// each -100..=100), as ArduSub's `transform_manual_control_to_rc_override` reads them: x
-/// forward, y starboard and r clockwise in -1000..=1000; z is its throttle, 0..=1000 with 500
-/// neutral, where a larger z raises the vehicle, so heave down `h` gives `500 - 5 h`.
-/// Out-of-range or non-finite input is clamped (not-a-number gives neutral).
-pub fn manual_control_axes(thrust_percent: [f64; 4]) -> [i16; 4] {
-    let axis = |value: f64, scale: f64, centre: f64, low: f64, high: f64| -> i16 {
-        let raw = centre + value * scale;
-        if raw.is_nan() {
-            centre as i16
-        } else {
-            raw.round().clamp(low, high) as i16
-        }
-    };
-    let [surge, sway, heave, yaw] = thrust_percent;
-    [
-        axis(surge, 10.0, 0.0, -1000.0, 1000.0),
-        axis(sway, 10.0, 0.0, -1000.0, 1000.0),
-        axis(heave, -5.0, 500.0, 0.0, 1000.0),
-        axis(yaw, 10.0, 0.0, -1000.0, 1000.0),
-    ]
-}
-
-/// MANUAL_CONTROL with the sticks centred.
-pub const NEUTRAL_AXES: [i16; 4] = [0, 0, 500, 0];
-
-/// Where the autopilot is: one of the connection forms ArduSub users know.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Endpoint {
-    /// `udpin:HOST:PORT` (or `udp:`): listen there; answer whoever sent last (BlueOS and
-    /// MAVProxy send to a GCS at 14550).
-    UdpIn(String),
-    /// `udpout:HOST:PORT`: send there, from an ephemeral port, and listen on that port.
-    UdpOut(String),
-    /// `tcpin:HOST:PORT`: listen there for the autopilot to connect (one connection at a time).
-    TcpIn(String),
-    /// `tcpout:HOST:PORT` (or `tcp:`): connect there (ArduSub SITL listens on 5760).
-    TcpOut(String),
-    /// `serial:DEVICE:BAUD`: a serial port (the device may itself hold colons).
-    Serial {
-        /// The device path.
-        device: String,
-        /// Bits per second.
-        baud: u32,
-    },
-}
-
-/// The endpoint forms, for error messages.
-const FORMS: &str =
-    "udpin:HOST:PORT, udpout:HOST:PORT, tcpin:HOST:PORT, tcpout:HOST:PORT or serial:DEVICE:BAUD";
-
-impl Endpoint {
-    /// Parses an endpoint; an error names the text and what is wrong with it.
-    pub fn parse(text: &str) -> Result<Endpoint, MavlinkError> {
-        let syntax = |reason: String| MavlinkError::Syntax {
-            endpoint: text.to_string(),
-            reason,
-        };
-        let Some((scheme, rest)) = text.split_once(':') else {
-            return Err(syntax(format!("expected {FORMS}")));
-        };
-        match scheme {
-            "udpin" | "udp" => Ok(Endpoint::UdpIn(host_port(rest, true).map_err(syntax)?)),
-            "udpout" => Ok(Endpoint::UdpOut(host_port(rest, false).map_err(syntax)?)),
-            "tcpin" => Ok(Endpoint::TcpIn(host_port(rest, true).map_err(syntax)?)),
-            "tcpout" | "tcp" => Ok(Endpoint::TcpOut(host_port(rest, false).map_err(syntax)?)),
-            "serial" => {
-                let Some((device, baud)) = rest.rsplit_once(':') else {
-                    return Err(syntax("expected serial:DEVICE:BAUD".to_string()));
-                };
-                if device.is_empty() {
-                    return Err(syntax("the serial device is empty".to_string()));
-                }
-                match baud.parse::<u32>() {
-                    Ok(baud) if baud > 0 => Ok(Endpoint::Serial {
-                        device: device.to_string(),
-                        baud,
-                    }),
-                    _ => Err(syntax(format!(
-                        "expected a baud rate (bits per second) after the device, found '{baud}'"
-                    ))),
-                }
-            }
-            other => Err(syntax(format!(
-                "unknown connection type '{other}': expected {FORMS}"
-            ))),
-        }
-    }
-}
-
-/// Checks `HOST:PORT` (an IPv6 host in brackets); port 0 only where we listen.
-fn host_port(text: &str, listening: bool) -> Result<String, String> {
-    let Some((host, port)) = text.rsplit_once(':') else {
-        return Err(format!("expected HOST:PORT, found '{text}'"));
-    };
-    if host.is_empty() {
-        return Err(format!("expected HOST:PORT, found no host in '{text}'"));
-    }
-    let bracketed = host.starts_with('[') && host.ends_with(']') && host.len() > 2;
-    if host.contains(':') && !bracketed {
-        return Err(format!(
-            "an IPv6 host goes in brackets ([::1]:14550), found '{text}'"
-        ));
-    }
-    match port.parse::<u16>() {
-        Ok(0) if !listening => Err(format!("port 0 cannot be connected to, in '{text}'")),
-        Ok(_) => Ok(text.to_string()),
-        Err(_) => Err(format!(
-            "expected a port number 0..=65535 after the host, found '{port}'"
-        )),
-    }
-}
-
-impl fmt::Display for Endpoint {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Endpoint::UdpIn(a) => write!(f, "udpin:{a}"),
-            Endpoint::UdpOut(a) => write!(f, "udpout:{a}"),
-            Endpoint::TcpIn(a) => write!(f, "tcpin:{a}"),
-            Endpoint::TcpOut(a) => write!(f, "tcpout:{a}"),
-            Endpoint::Serial { device, baud } => write!(f, "serial:{device}:{baud}"),
-        }
-    }
-}
 
 /// Why the autopilot's endpoint could not be opened.
 #[derive(Debug, thiserror::Error)]
 pub enum MavlinkError {
-    /// The endpoint text is not one of the forms.
+    /// The endpoint text is not one of the forms ([`parse_endpoint`]).
     #[error("mavlink endpoint '{endpoint}': {reason}")]
     Syntax {
         /// The text given.
@@ -388,108 +198,6 @@ impl MavlinkOptions {
         }
         Ok(())
     }
-}
-
-type Conn = mavlink::Connection<MavMessage>;
-
-/// The autopilot the link settled on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Autopilot {
-    system: u8,
-    component: u8,
-    submarine: bool,
-}
-
-/// What the receiving thread learnt, handed to `step`.
-#[derive(Debug, Default)]
-struct Inbox {
-    autopilot: Option<Autopilot>,
-    /// Messages heard from the autopilot.
-    heard: u64,
-    /// Armed and custom mode from its last HEARTBEAT.
-    heartbeat: Option<(bool, u32)>,
-    /// LOCAL_POSITION_NED: x, y, z (m), vx, vy, vz (m/s); and how many.
-    position: Option<[f64; 6]>,
-    positions: u64,
-    /// ATTITUDE: roll, pitch, yaw (rad), yaw speed (rad/s); and how many.
-    attitude: Option<[f64; 4]>,
-    attitudes: u64,
-    /// Whether the one warning for a dropped position / attitude was given.
-    position_warned: bool,
-    attitude_warned: bool,
-    acks: VecDeque<(MavCmd, MavResult)>,
-    notes: VecDeque<String>,
-}
-
-/// The fields of LOCAL_POSITION_NED kept, with the largest magnitude each may have: x, y, z
-/// within the toolkit's 100 km site ([`super::session::MAX_POSITION_M`]); vx, vy, vz within
-/// 100 m/s (no underwater vehicle comes near it).
-const POSITION_BOUNDS: [(&str, f64); 6] = [
-    ("x", super::session::MAX_POSITION_M),
-    ("y", super::session::MAX_POSITION_M),
-    ("z", super::session::MAX_POSITION_M),
-    ("vx", 100.0),
-    ("vy", 100.0),
-    ("vz", 100.0),
-];
-
-/// The fields of ATTITUDE kept, with the largest magnitude each may have: angles within 2π
-/// rad, the yaw rate within 100 rad/s.
-const ATTITUDE_BOUNDS: [(&str, f64); 4] = [
-    ("roll", std::f64::consts::TAU),
-    ("pitch", std::f64::consts::TAU),
-    ("yaw", std::f64::consts::TAU),
-    ("yawspeed", 100.0),
-];
-
-/// True if every value is finite and within its bound: an autopilot's pose that is not (NaN,
-/// ±1e38) is dropped rather than becoming the vehicle's.
-fn plausible(values: &[f64], bounds: &[(&str, f64)]) -> bool {
-    values
-        .iter()
-        .zip(bounds)
-        .all(|(v, (_, bound))| v.is_finite() && v.abs() <= *bound)
-}
-
-/// The one warning for a dropped message: its first implausible field, the bound and the value.
-fn dropped_note(message: &str, values: &[f64], bounds: &[(&str, f64)]) -> String {
-    let bad = values
-        .iter()
-        .zip(bounds)
-        .find(|(v, (_, bound))| !(v.is_finite() && v.abs() <= *bound));
-    let what = bad.map_or_else(String::new, |(v, (field, bound))| {
-        format!(": field {field}: expected within ±{bound}, found {v}")
-    });
-    format!("warning: autopilot's {message} dropped{what} (later ones dropped without a word)")
-}
-
-fn push_bounded<T>(queue: &mut VecDeque<T>, item: T) {
-    if queue.len() >= MAX_QUEUED {
-        queue.pop_front();
-    }
-    queue.push_back(item);
-}
-
-/// The connection and the inbox, shared by `step` and the receiving thread.
-struct Shared {
-    /// `None` while a TCP connection is (re)established.
-    conn: Mutex<Option<Arc<Conn>>>,
-    inbox: Mutex<Inbox>,
-    stop: AtomicBool,
-}
-
-fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(PoisonError::into_inner)
-}
-
-/// How the receiving thread gets a connection back when TCP closes.
-enum Reopen {
-    /// UDP and serial: the connection stays.
-    Never,
-    /// `tcpout:`: connect again.
-    Connect(SocketAddr),
-    /// `tcpin:`: accept the next connection.
-    Accept(TcpListener),
 }
 
 /// A time base for "every so often", on the session clock.
@@ -609,7 +317,7 @@ impl Stream {
 
 /// A real autopilot behind a MAVLink endpoint, driven as the ROV's vehicle.
 pub struct MavlinkDrive {
-    endpoint: Endpoint,
+    endpoint: DeviceSpec,
     options: MavlinkOptions,
     shared: Arc<Shared>,
     thread: Option<JoinHandle<()>>,
@@ -645,56 +353,15 @@ pub struct MavlinkDrive {
     send_error: Option<String>,
 }
 
-/// Opens `endpoint` (see [`Endpoint`]) and starts listening for the autopilot. A syntax error or
-/// an endpoint that cannot be opened (bind fails, TCP refused or unanswered for
+/// Opens `endpoint` (see [`parse_endpoint`]) and starts listening for the autopilot. A syntax
+/// error or an endpoint that cannot be opened (bind fails, TCP refused or unanswered for
 /// [`TCP_CONNECT_TIMEOUT`], no such serial device) is an error naming the endpoint and why. It
 /// does not wait for the autopilot: an absent autopilot shows as silence.
 pub fn connect(endpoint: &str, options: &MavlinkOptions) -> Result<MavlinkDrive, MavlinkError> {
     options.check()?;
-    let parsed = Endpoint::parse(endpoint)?;
-    let open = |action: &'static str| {
-        let endpoint = parsed.to_string();
-        move |source: io::Error| MavlinkError::Open {
-            endpoint,
-            action,
-            source,
-        }
-    };
-    let (conn, reopen, polls) = match &parsed {
-        Endpoint::UdpIn(address) | Endpoint::UdpOut(address) => {
-            let (mode, action) = match parsed {
-                Endpoint::UdpIn(_) => (UdpMode::Udpin, "bind"),
-                _ => (UdpMode::Udpout, "resolve or bind"),
-            };
-            let config = UdpConfig::new(address.clone(), mode).read_timeout(READ_TIMEOUT);
-            let conn = config.connect::<MavMessage>().map_err(open(action))?;
-            (Some(conn), Reopen::Never, false)
-        }
-        Endpoint::TcpOut(address) => {
-            let to = resolve(address).map_err(open("resolve"))?;
-            let conn = tcp_connection(to, TCP_CONNECT_TIMEOUT).map_err(open("connect"))?;
-            (Some(conn), Reopen::Connect(to), false)
-        }
-        Endpoint::TcpIn(address) => {
-            let listener = TcpListener::bind(resolve(address).map_err(open("resolve"))?)
-                .and_then(|l| l.set_nonblocking(true).map(|()| l))
-                .map_err(open("listen"))?;
-            (None, Reopen::Accept(listener), false)
-        }
-        Endpoint::Serial { device, baud } => {
-            let config = SerialConfig::new(device.clone(), *baud).timeout(READ_TIMEOUT);
-            let conn = config
-                .connect::<MavMessage>()
-                .map_err(open("open the serial port"))?;
-            (Some(conn), Reopen::Never, true)
-        }
-    };
-    let conn = conn.map(|mut c| {
-        // ArduPilot answers in the version it is spoken to, but a port set to MAVLink 1 sends
-        // version 1 heartbeats: read both, send version 2.
-        c.set_allow_recv_any_version(true);
-        Arc::new(c)
-    });
+    let parsed = parse_endpoint(endpoint)?;
+    let (conn, reopen) = transport::open(&parsed, endpoint)?;
+    let conn = conn.map(Arc::new);
     let shared = Arc::new(Shared {
         conn: Mutex::new(conn),
         inbox: Mutex::new(Inbox::default()),
@@ -704,8 +371,12 @@ pub fn connect(endpoint: &str, options: &MavlinkOptions) -> Result<MavlinkDrive,
     let our_system = options.system_id;
     let thread = std::thread::Builder::new()
         .name("mavlink-receive".to_string())
-        .spawn(move || receive(&thread_shared, reopen, polls, our_system))
-        .map_err(open("start its receiving thread"))?;
+        .spawn(move || receive(&thread_shared, reopen, our_system))
+        .map_err(|source| MavlinkError::Open {
+            endpoint: endpoint.to_string(),
+            action: "start its receiving thread",
+            source,
+        })?;
     Ok(MavlinkDrive {
         endpoint: parsed,
         options: options.clone(),
@@ -750,196 +421,9 @@ pub fn connect(endpoint: &str, options: &MavlinkOptions) -> Result<MavlinkDrive,
     })
 }
 
-fn resolve(address: &str) -> io::Result<SocketAddr> {
-    address
-        .to_socket_addrs()?
-        .next()
-        .ok_or_else(|| io::Error::new(io::ErrorKind::NotFound, "the host has no address"))
-}
-
-/// A MAVLink connection over a TCP stream, with our read and write timeouts.
-fn tcp_stream_connection(stream: TcpStream) -> io::Result<Conn> {
-    stream.set_nonblocking(false)?;
-    stream.set_read_timeout(Some(READ_TIMEOUT))?;
-    stream.set_write_timeout(Some(WRITE_TIMEOUT))?;
-    stream.set_nodelay(true)?;
-    TcpConfig::from_stream(stream)?.connect::<MavMessage>()
-}
-
-fn tcp_connection(to: SocketAddr, timeout: Duration) -> io::Result<Conn> {
-    tcp_stream_connection(TcpStream::connect_timeout(&to, timeout)?)
-}
-
-/// The receiving thread: reads messages until told to stop, keeping what `step` needs.
-fn receive(shared: &Shared, reopen: Reopen, polls: bool, our_system: u8) {
-    let mut failed: Option<String> = None;
-    while !shared.stop.load(Ordering::Relaxed) {
-        let conn = lock(&shared.conn).clone();
-        let Some(conn) = conn else {
-            let fresh = match &reopen {
-                Reopen::Never => return,
-                Reopen::Connect(to) => {
-                    let again = std::time::Instant::now() + RECONNECT_PERIOD;
-                    while std::time::Instant::now() < again && !shared.stop.load(Ordering::Relaxed)
-                    {
-                        std::thread::sleep(READ_TIMEOUT);
-                    }
-                    tcp_connection(*to, READ_TIMEOUT * 5).ok()
-                }
-                Reopen::Accept(listener) => match listener.accept() {
-                    Ok((stream, _)) => tcp_stream_connection(stream).ok(),
-                    Err(_) => {
-                        std::thread::sleep(READ_TIMEOUT / 2);
-                        None
-                    }
-                },
-            };
-            if let Some(mut fresh) = fresh {
-                fresh.set_allow_recv_any_version(true);
-                *lock(&shared.conn) = Some(Arc::new(fresh));
-                note(shared, "mavlink: TCP connection established".to_string());
-            }
-            continue;
-        };
-        // A serial read retries its timeouts inside `recv`: poll it instead.
-        let result = if polls { conn.try_recv() } else { conn.recv() };
-        match result {
-            Ok((header, message)) => {
-                failed = None;
-                keep(shared, &header, message, our_system);
-            }
-            Err(MessageReadError::Parse(_)) => {}
-            Err(MessageReadError::Io(error)) => match error.kind() {
-                io::ErrorKind::WouldBlock
-                | io::ErrorKind::TimedOut
-                | io::ErrorKind::Interrupted => {}
-                _ if !matches!(reopen, Reopen::Never) => {
-                    *lock(&shared.conn) = None;
-                    note(shared, format!("mavlink: TCP connection closed: {error}"));
-                }
-                _ => {
-                    let text = format!("mavlink: receive failed: {error}");
-                    if failed.as_deref() != Some(text.as_str()) {
-                        note(shared, text.clone());
-                        failed = Some(text);
-                    }
-                    std::thread::sleep(READ_TIMEOUT);
-                }
-            },
-        }
-    }
-}
-
-fn note(shared: &Shared, text: String) {
-    push_bounded(&mut lock(&shared.inbox).notes, text);
-}
-
-/// Keeps one message in the inbox if it comes from the autopilot.
-fn keep(shared: &Shared, header: &MavHeader, message: MavMessage, our_system: u8) {
-    let (Ok(system), component) = (u8::try_from(header.system_id), header.component_id) else {
-        return;
-    };
-    if system == our_system {
-        return; // Another ground station speaking as us, or our own echo.
-    }
-    let mut inbox = lock(&shared.inbox);
-    if let MavMessage::HEARTBEAT(heartbeat) = &message {
-        let autopilot = heartbeat.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID
-            && heartbeat.mavtype != MavType::MAV_TYPE_GCS;
-        let submarine = heartbeat.mavtype == MavType::MAV_TYPE_SUBMARINE;
-        let better = match inbox.autopilot {
-            None => autopilot,
-            Some(known) => autopilot && submarine && !known.submarine,
-        };
-        if better {
-            inbox.autopilot = Some(Autopilot {
-                system,
-                component,
-                submarine,
-            });
-            let text = format!(
-                "mavlink: autopilot found: system {system} component {component}, {:?}, {:?}{}",
-                heartbeat.mavtype,
-                heartbeat.autopilot,
-                if submarine {
-                    ""
-                } else {
-                    " (not a submarine: its modes are read as ArduSub's)"
-                }
-            );
-            push_bounded(&mut inbox.notes, text);
-        }
-    }
-    let from_autopilot = inbox
-        .autopilot
-        .is_some_and(|a| a.system == system && a.component == component);
-    if !from_autopilot {
-        return;
-    }
-    inbox.heard += 1;
-    match message {
-        MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-            base_mode,
-            custom_mode,
-            ..
-        }) => {
-            let armed = base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
-            inbox.heartbeat = Some((armed, custom_mode));
-        }
-        MavMessage::LOCAL_POSITION_NED(p) => {
-            let values = [p.x, p.y, p.z, p.vx, p.vy, p.vz].map(f64::from);
-            if plausible(&values, &POSITION_BOUNDS) {
-                inbox.position = Some(values);
-                inbox.positions += 1;
-            } else {
-                if !inbox.position_warned {
-                    inbox.position_warned = true;
-                    let text = dropped_note("LOCAL_POSITION_NED", &values, &POSITION_BOUNDS);
-                    push_bounded(&mut inbox.notes, text);
-                }
-            }
-        }
-        MavMessage::ATTITUDE(a) => {
-            let values = [a.roll, a.pitch, a.yaw, a.yawspeed].map(f64::from);
-            if plausible(&values, &ATTITUDE_BOUNDS) {
-                inbox.attitude = Some(values);
-                inbox.attitudes += 1;
-            } else {
-                if !inbox.attitude_warned {
-                    inbox.attitude_warned = true;
-                    let text = dropped_note("ATTITUDE", &values, &ATTITUDE_BOUNDS);
-                    push_bounded(&mut inbox.notes, text);
-                }
-            }
-        }
-        MavMessage::COMMAND_ACK(ack) => push_bounded(&mut inbox.acks, (ack.command, ack.result)),
-        MavMessage::STATUSTEXT(status) => {
-            let warning = matches!(
-                status.severity,
-                MavSeverity::MAV_SEVERITY_EMERGENCY
-                    | MavSeverity::MAV_SEVERITY_ALERT
-                    | MavSeverity::MAV_SEVERITY_CRITICAL
-                    | MavSeverity::MAV_SEVERITY_ERROR
-                    | MavSeverity::MAV_SEVERITY_WARNING
-            );
-            if warning {
-                let bytes: Vec<u8> = status
-                    .text
-                    .iter()
-                    .copied()
-                    .take_while(|&b| b != 0)
-                    .collect();
-                let text = format!("autopilot: {}", String::from_utf8_lossy(&bytes).trim());
-                push_bounded(&mut inbox.notes, text);
-            }
-        }
-        _ => {}
-    }
-}
-
 impl MavlinkDrive {
     /// The endpoint, as parsed.
-    pub fn endpoint(&self) -> &Endpoint {
+    pub fn endpoint(&self) -> &DeviceSpec {
         &self.endpoint
     }
 
@@ -1367,73 +851,50 @@ mod tests {
     use super::*;
 
     #[test]
-    fn every_endpoint_form_parses() {
-        let cases = [
+    fn every_endpoint_form_of_the_device_grammar_is_an_autopilot_endpoint() {
+        // The grammar itself is device.rs's; here, which forms an autopilot takes, aliases too.
+        for (text, canonical) in [
+            ("udpin:0.0.0.0:14550", "udpin:0.0.0.0:14550"),
+            ("udp:0.0.0.0:14550", "udpin:0.0.0.0:14550"),
+            ("udpout:192.168.2.2:14551", "udpout:192.168.2.2:14551"),
             (
-                "udpin:0.0.0.0:14550",
-                Endpoint::UdpIn("0.0.0.0:14550".into()),
+                "udp:0.0.0.0:14550=127.0.0.1:14551",
+                "udp:0.0.0.0:14550=127.0.0.1:14551",
             ),
-            ("udp:0.0.0.0:14550", Endpoint::UdpIn("0.0.0.0:14550".into())),
-            (
-                "udpout:192.168.2.2:14551",
-                Endpoint::UdpOut("192.168.2.2:14551".into()),
-            ),
-            (
-                "tcpout:localhost:5760",
-                Endpoint::TcpOut("localhost:5760".into()),
-            ),
-            (
-                "tcp:127.0.0.1:5760",
-                Endpoint::TcpOut("127.0.0.1:5760".into()),
-            ),
-            ("tcpin:[::1]:5761", Endpoint::TcpIn("[::1]:5761".into())),
-            (
-                "serial:/dev/ttyACM0:115200",
-                Endpoint::Serial {
-                    device: "/dev/ttyACM0".into(),
-                    baud: 115200,
-                },
-            ),
-            (
-                "serial:/dev/serial/by-path/pci-0000:00:14.0-usb-0:2:1.0:57600",
-                Endpoint::Serial {
-                    device: "/dev/serial/by-path/pci-0000:00:14.0-usb-0:2:1.0".into(),
-                    baud: 57600,
-                },
-            ),
-        ];
-        for (text, expected) in cases {
-            let parsed = Endpoint::parse(text).unwrap();
-            assert_eq!(parsed, expected, "{text}");
-            // Display gives the canonical form, which parses back to the same.
-            assert_eq!(Endpoint::parse(&parsed.to_string()).unwrap(), parsed);
+            ("tcpout:localhost:5760", "tcp:localhost:5760"),
+            ("tcp:127.0.0.1:5760", "tcp:127.0.0.1:5760"),
+            ("tcpin:[::1]:5761", "tcpin:[::1]:5761"),
+            ("serial:/dev/ttyACM0:115200", "serial:/dev/ttyACM0:115200"),
+        ] {
+            let parsed = parse_endpoint(text).unwrap();
+            assert_eq!(parsed.to_string(), canonical, "{text}");
         }
     }
 
     #[test]
     fn bad_endpoints_say_what_is_wrong() {
         let cases = [
-            ("14550", "expected udpin:HOST:PORT"),
+            (
+                "14550",
+                "a serial autopilot needs its baud rate), found '14550'",
+            ),
+            ("/dev/ttyACM0", "expected udpin:HOST:PORT"),
+            ("pty", "found 'pty'"),
             ("udpin:14550", "expected HOST:PORT, found '14550'"),
             ("udpin::14550", "found no host"),
             (
                 "udpout:host:port",
                 "expected a port number 0..=65535 after the host, found 'port'",
             ),
-            ("udpout:host:70000", "found '70000'"),
-            ("tcpout:127.0.0.1:0", "port 0 cannot be connected to"),
-            ("tcpout:::1:5760", "an IPv6 host goes in brackets"),
-            ("serial:/dev/ttyACM0", "expected serial:DEVICE:BAUD"),
-            ("serial::115200", "the serial device is empty"),
-            (
-                "serial:/dev/ttyACM0:fast",
-                "expected a baud rate (bits per second) after the device, found 'fast'",
-            ),
-            ("serial:/dev/ttyACM0:0", "found '0'"),
-            ("file:log.tlog", "unknown connection type 'file'"),
+            ("tcpout:127.0.0.1:0", "expected a port to connect to"),
+            ("tcpout:::1:5760", "an IPv6 host in brackets"),
+            ("serial:/dev/ttyACM0", "expected serial:PATH:BAUD"),
+            ("serial::115200", "expected a device path"),
+            ("serial:/dev/ttyACM0:fast", "found 'fast'"),
+            ("file:log.tlog", "no device kind 'file'"),
         ];
         for (text, part) in cases {
-            let error = Endpoint::parse(text).unwrap_err().to_string();
+            let error = parse_endpoint(text).unwrap_err().to_string();
             assert!(
                 error.starts_with(&format!("mavlink endpoint '{text}': ")),
                 "{error}"
@@ -1441,8 +902,6 @@ mod tests {
             assert!(error.contains(part), "{text}: {error}");
             assert!(!error.contains('\n'), "{error}");
         }
-        // Listening on port 0 is allowed (an ephemeral port).
-        assert!(Endpoint::parse("udpin:127.0.0.1:0").is_ok());
     }
 
     #[test]
@@ -1579,9 +1038,9 @@ mod tests {
             .err()
             .unwrap();
         assert!(
-            serial.to_string().starts_with(
-                "mavlink endpoint 'serial:/dev/nonexistent:115200': cannot open the serial port: "
-            ),
+            serial
+                .to_string()
+                .starts_with("mavlink endpoint 'serial:/dev/nonexistent:115200': cannot open: "),
             "{serial}"
         );
         // A port in use: bind fails.
@@ -1641,18 +1100,7 @@ mod tests {
     proptest::proptest! {
         #[test]
         fn parsing_never_panics(text in "\\PC{0,40}") {
-            let _ = Endpoint::parse(&text);
-        }
-
-        #[test]
-        fn parsing_endpoint_like_text_never_panics(
-            scheme in "(udpin|udpout|tcpin|tcpout|serial|udp|tcp|x)",
-            rest in "[\\[\\]:0-9a-z./]{0,24}",
-        ) {
-            let text = format!("{scheme}:{rest}");
-            if let Ok(parsed) = Endpoint::parse(&text) {
-                proptest::prop_assert_eq!(Endpoint::parse(&parsed.to_string()).unwrap(), parsed);
-            }
+            let _ = parse_endpoint(&text);
         }
     }
 }

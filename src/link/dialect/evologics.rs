@@ -1,7 +1,4 @@
-//! Modem dialects `link-sim` can speak on its ports, so that programs written for a real modem's
-//! command set run unchanged against a simulated link.
-//!
-//! [`EvoLogicsEmulator`] answers the EvoLogics AT dialect ([`crate::gll::evologics`]): a host
+//! The EvoLogics dialect, emulated: [`EvoLogicsEmulator`] answers the EvoLogics AT dialect ([`crate::gll::evologics`]): a host
 //! writes `AT*SEND` (burst) or `AT*SENDIM` (instant message) commands; the data goes through the
 //! link model; the other side's host receives `RECV` or `RECVIM` notifications; an instant
 //! message sent with `ack` is answered `DELIVEREDIM` or `FAILEDIM` when its fate is known.
@@ -10,9 +7,10 @@
 
 use std::collections::HashMap;
 
-use super::channel::{Fate, Report, Side};
-use super::model::Model;
+use super::{Emulator, Notifications};
 use crate::gll::evologics::{Command, CommandReader, Notification, format_notification};
+use crate::link::channel::{Fate, Report, Side};
+use crate::link::model::Model;
 
 /// How a packet was sent, to answer in kind.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -44,22 +42,29 @@ impl EvoLogicsEmulator {
     pub fn new() -> EvoLogicsEmulator {
         EvoLogicsEmulator::default()
     }
+}
 
-    /// Bytes a side's host wrote: the packets to offer to the link (with how they were sent),
-    /// and the replies to write back to that host.
-    pub fn from_host(&mut self, side: Side, bytes: &[u8]) -> (Vec<(Vec<u8>, Kind)>, Vec<u8>) {
+impl Emulator for EvoLogicsEmulator {
+    /// `AT*SEND` and `AT*SENDIM` put their data on the air (answered `OK`); `AT?T` is answered
+    /// with the last propagation time in microseconds, other `AT` commands `OK`, anything else
+    /// `ERROR WRONG FORMAT`.
+    fn host_wrote(
+        &mut self,
+        side: Side,
+        bytes: &[u8],
+        offer: &mut dyn FnMut(Vec<u8>) -> u64,
+    ) -> Vec<u8> {
         let reader = &mut self.readers[side.index()];
         reader.push(bytes);
-        let mut packets = Vec::new();
         let mut replies = Vec::new();
         while let Some(command) = reader.next_command() {
             let reply = match command {
                 Command::Send { data, .. } => {
-                    packets.push((data, Kind::Burst));
+                    self.sent.insert((side, offer(data)), Kind::Burst);
                     Notification::Ok
                 }
                 Command::SendIm { ack, data, .. } => {
-                    packets.push((data, Kind::Instant { ack }));
+                    self.sent.insert((side, offer(data)), Kind::Instant { ack });
                     Notification::Ok
                 }
                 Command::Other(line) if line == "AT?T" => {
@@ -70,16 +75,13 @@ impl EvoLogicsEmulator {
             };
             replies.extend(format_notification(&reply));
         }
-        (packets, replies)
+        replies
     }
 
-    /// Records how the link's frame `seq` from `side` was sent.
-    pub fn sent(&mut self, side: Side, seq: u64, kind: Kind) {
-        self.sent.insert((side, seq), kind);
-    }
-
-    /// A report of the link: what to write to the receiving host, and to the sending host.
-    pub fn on_report(&mut self, report: &Report, model: &Model) -> (Vec<u8>, Vec<u8>) {
+    /// `RECV` (a burst) or `RECVIM` (an instant message) to the receiver when the data
+    /// arrived (integrity 40 when corrupted); `DELIVEREDIM` or `FAILEDIM` to the sender of an
+    /// instant message that asked for it.
+    fn on_report(&mut self, report: &Report, model: &Model) -> Notifications {
         let key = (report.from, report.seq);
         let kind = if report.duplicate {
             self.sent.get(&key).copied()
@@ -134,7 +136,10 @@ impl EvoLogicsEmulator {
             };
             to_sender = format_notification(&note);
         }
-        (to_receiver, to_sender)
+        Notifications {
+            to_receiver,
+            to_sender,
+        }
     }
 }
 
@@ -160,19 +165,15 @@ mod tests {
             data: b"im".to_vec(),
         }));
         stream.extend(b"AT?T\r\nhello\r\n");
-        let (packets, replies) = emulator.from_host(Side::A, &stream);
+        let replies = emulator.host_wrote(Side::A, &stream, &mut |data| link.offer(Side::A, data));
         assert_eq!(replies, b"OK\r\nOK\r\n0\r\nERROR WRONG FORMAT\r\n");
-        for (data, kind) in packets {
-            let seq = link.offer(Side::A, data);
-            emulator.sent(Side::A, seq, kind);
-        }
         while link.step() {}
         let mut at_b = NotificationReader::new();
         let mut at_a = NotificationReader::new();
         while let Some(report) = link.pop_report() {
-            let (to_b, to_a) = emulator.on_report(&report, &model);
-            at_b.push(&to_b);
-            at_a.push(&to_a);
+            let notes = emulator.on_report(&report, &model);
+            at_b.push(&notes.to_receiver);
+            at_a.push(&notes.to_sender);
         }
         match at_b.next_notification() {
             Some(Notification::Recv {
