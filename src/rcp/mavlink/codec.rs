@@ -147,12 +147,12 @@ pub(super) struct Inbox {
 }
 
 /// The fields of LOCAL_POSITION_NED kept, with the largest magnitude each may have: x, y, z
-/// within the toolkit's 100 km site ([`crate::rcp::session::MAX_POSITION_M`]); vx, vy, vz within
+/// within the toolkit's 100 km site ([`crate::rcp::config::MAX_POSITION_M`]); vx, vy, vz within
 /// 100 m/s (no underwater vehicle comes near it).
 const POSITION_BOUNDS: [(&str, f64); 6] = [
-    ("x", crate::rcp::session::MAX_POSITION_M),
-    ("y", crate::rcp::session::MAX_POSITION_M),
-    ("z", crate::rcp::session::MAX_POSITION_M),
+    ("x", crate::rcp::config::MAX_POSITION_M),
+    ("y", crate::rcp::config::MAX_POSITION_M),
+    ("z", crate::rcp::config::MAX_POSITION_M),
     ("vx", 100.0),
     ("vy", 100.0),
     ("vz", 100.0),
