@@ -17,10 +17,9 @@
 use std::path::PathBuf;
 
 use super::net_mcap::NetMcapLog;
-use super::outputs::{Telemetry, event_fields, write_whole};
+use super::outputs::{Destinations, Telemetry, event_fields, write_whole};
 use super::report::{EVENTS_HEADER, FrameEvent, Observer};
 use super::{Event, PoseSample, Role};
-use crate::cli::output::Dest;
 use crate::cli::rows::{RowFormat, RowWriter};
 
 /// The columns of `--track` in a scenario.
@@ -33,21 +32,6 @@ pub const NET_TRACK_HEADER: [&str; 7] = [
     "heading_deg",
     "link_up",
 ];
-
-/// Where a scenario's outputs go; each claimed by the caller before the run.
-#[derive(Debug, Default)]
-pub struct NetDestinations {
-    /// `--events`.
-    pub events: Option<Dest>,
-    /// `--track`.
-    pub track: Option<Dest>,
-    /// `--images-out`.
-    pub images_out: Option<PathBuf>,
-    /// `--telemetry`.
-    pub telemetry: Option<Dest>,
-    /// `--mcap`.
-    pub mcap: Option<Dest>,
-}
 
 /// The observer writing every output of a scenario.
 pub struct NetRecorder {
@@ -63,10 +47,10 @@ pub struct NetRecorder {
 }
 
 impl NetRecorder {
-    /// The outputs of a scenario with `vehicles`; the MCAP log starts at once, CSV files
-    /// appear with their first row. `progress` counts session seconds.
+    /// The outputs of a scenario with `vehicles` (`dests.preview` is a single session's); the
+    /// MCAP log starts at once, CSV files appear with their first row. `progress` counts session seconds.
     pub fn new(
-        dests: NetDestinations,
+        dests: Destinations,
         vehicles: &[u8],
         progress: indicatif::ProgressBar,
     ) -> anyhow::Result<NetRecorder> {

@@ -4,10 +4,9 @@ use std::path::Path;
 
 use anyhow::Result;
 use rovlink::cli::UsageError;
-use rovlink::cli::output::{Kind, Outputs};
 use rovlink::cli::{progress, stop};
 use rovlink::io::EXIT_OK;
-use rovlink::rcp::net_outputs::{NetDestinations, NetRecorder};
+use rovlink::rcp::net_outputs::NetRecorder;
 use rovlink::rcp::network::{self, NetworkMetrics};
 use rovlink::rcp::outputs::{summary, write_metrics};
 use rovlink::rcp::pace::Pacer;
@@ -21,18 +20,7 @@ use crate::cli::Args;
 
 /// Runs the scenario at `path` with the flags that apply to it.
 pub fn run(args: &Args, path: &Path) -> Result<u8> {
-    let mut outs = Outputs::new();
-    outs.inputs(args.inputs());
-    let metrics_dest = outs.claim_opt("--metrics", args.metrics.as_deref(), Kind::Text)?;
-    let dests = NetDestinations {
-        events: outs.claim_opt("--events", args.events.as_deref(), Kind::Text)?,
-        track: outs.claim_opt("--track", args.track.as_deref(), Kind::Text)?,
-        images_out: (args.images_out.as_deref())
-            .map(|dir| outs.claim_dir("--images-out", dir))
-            .transpose()?,
-        telemetry: outs.claim_opt("--telemetry", args.telemetry.as_deref(), Kind::Text)?,
-        mcap: outs.claim_opt("--mcap", args.mcap.as_deref(), Kind::Binary)?,
-    };
+    let (metrics_dest, dests) = crate::setup::claim_outputs(args)?;
     if args.model.model.is_some() || args.model.model_file.is_some() {
         return Err(UsageError(
             "--model/--model-file: a scenario names each medium's model; the other link flags \

@@ -5,11 +5,10 @@ use std::path::Path;
 
 use anyhow::Result;
 use rovlink::cli::UsageError;
-use rovlink::cli::output::{Kind, Outputs};
 use rovlink::cli::{progress, stop};
 use rovlink::gll::Endpoint;
 use rovlink::io::EXIT_OK;
-use rovlink::rcp::net_outputs::{NetDestinations, NetRecorder};
+use rovlink::rcp::net_outputs::NetRecorder;
 use rovlink::rcp::outputs::write_metrics;
 use rovlink::rcp::realnet::{self, Network};
 use rovlink::rcp::realtime::Role;
@@ -29,18 +28,7 @@ const EVOLOGICS_BROADCAST: u32 = 255;
 
 /// Runs this process's node of the network in `path`.
 pub fn run(args: &Args, path: &Path) -> Result<u8> {
-    let mut outs = Outputs::new();
-    outs.inputs(args.inputs());
-    let metrics_dest = outs.claim_opt("--metrics", args.metrics.as_deref(), Kind::Text)?;
-    let dests = NetDestinations {
-        events: outs.claim_opt("--events", args.events.as_deref(), Kind::Text)?,
-        track: outs.claim_opt("--track", args.track.as_deref(), Kind::Text)?,
-        images_out: (args.images_out.as_deref())
-            .map(|dir| outs.claim_dir("--images-out", dir))
-            .transpose()?,
-        telemetry: outs.claim_opt("--telemetry", args.telemetry.as_deref(), Kind::Text)?,
-        mcap: outs.claim_opt("--mcap", args.mcap.as_deref(), Kind::Binary)?,
-    };
+    let (metrics_dest, dests) = crate::setup::claim_outputs(args)?;
     let role = args.role.map_or(Role::Operator, RoleArg::role);
     usage(args)?;
     crate::setup::field_usage(args, Some(role))?;

@@ -2,9 +2,11 @@
 //! (order sources, the vehicle, the camera), how a real-time run's end is said.
 
 use anyhow::Result;
+use rovlink::cli::output::{Dest, Kind, Outputs};
 use rovlink::cli::stop;
 use rovlink::io::{EXIT_CHECK_FAILED, EXIT_OK};
 use rovlink::rcp::camera;
+use rovlink::rcp::outputs::{Destinations, check_images_out};
 use rovlink::rcp::realtime::{Ended, Role};
 use rovlink::rcp::report::Observer;
 use rovlink::rcp::session::{Parts, SessionConfig};
@@ -138,4 +140,26 @@ fn open_orders(path: &std::path::Path, live: bool) -> Result<rovlink::rcp::conso
 /// The host part of HOST:PORT, for the URL said at start.
 pub(crate) fn host_of(addr: &str) -> &str {
     addr.rsplit_once(':').map_or(addr, |(host, _)| host)
+}
+
+/// Every output the flags name, claimed before any work (so bad usage leaves no file): the
+/// metrics' destination and the others', in every kind of session.
+pub(crate) fn claim_outputs(args: &Args) -> Result<(Option<Dest>, Destinations)> {
+    let mut outs = Outputs::new();
+    outs.inputs(args.inputs());
+    let metrics = outs.claim_opt("--metrics", args.metrics.as_deref(), Kind::Text)?;
+    let dests = Destinations {
+        events: outs.claim_opt("--events", args.events.as_deref(), Kind::Text)?,
+        track: outs.claim_opt("--track", args.track.as_deref(), Kind::Text)?,
+        mcap: outs.claim_opt("--mcap", args.mcap.as_deref(), Kind::Binary)?,
+        images_out: (args.images_out.as_deref())
+            .map(|dir| outs.claim_dir("--images-out", dir))
+            .transpose()?,
+        telemetry: outs.claim_opt("--telemetry", args.telemetry.as_deref(), Kind::Text)?,
+        preview: args.preview,
+    };
+    if let Some(dir) = &dests.images_out {
+        check_images_out(dir, args.inputs())?;
+    }
+    Ok((metrics, dests))
 }

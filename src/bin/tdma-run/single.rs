@@ -3,12 +3,9 @@
 //! library's one driver.
 
 use anyhow::Result;
-use rovlink::cli::output::{Kind, Outputs};
 use rovlink::cli::{progress, stop};
 use rovlink::io::EXIT_OK;
-use rovlink::rcp::outputs::{
-    Destinations, Recorder, check_images_out, summary, wall_clock_ns, write_metrics,
-};
+use rovlink::rcp::outputs::{Recorder, summary, wall_clock_ns, write_metrics};
 use rovlink::rcp::pace::Pacer;
 use rovlink::rcp::realtime::{self, Role};
 use rovlink::rcp::report::Tee;
@@ -23,22 +20,7 @@ use crate::setup::{Stderr, Stopped, ended_code, field_usage, host_of, parts};
 /// Runs the session the flags describe.
 pub fn run(args: &Args) -> Result<u8> {
     // Every output is claimed before any work, so bad usage leaves no file.
-    let mut outs = Outputs::new();
-    outs.inputs(args.inputs());
-    let metrics_dest = outs.claim_opt("--metrics", args.metrics.as_deref(), Kind::Text)?;
-    let dests = Destinations {
-        events: outs.claim_opt("--events", args.events.as_deref(), Kind::Text)?,
-        track: outs.claim_opt("--track", args.track.as_deref(), Kind::Text)?,
-        mcap: outs.claim_opt("--mcap", args.mcap.as_deref(), Kind::Binary)?,
-        images_out: (args.images_out.as_deref())
-            .map(|dir| outs.claim_dir("--images-out", dir))
-            .transpose()?,
-        telemetry: outs.claim_opt("--telemetry", args.telemetry.as_deref(), Kind::Text)?,
-        preview: args.preview,
-    };
-    if let Some(dir) = &dests.images_out {
-        check_images_out(dir, args.inputs())?;
-    }
+    let (metrics_dest, dests) = crate::setup::claim_outputs(args)?;
     let role = args.role.map(RoleArg::role);
     let port_flags = "each of --dialect, --instant and --chunk-bytes";
     rovlink::cli::only_with(
