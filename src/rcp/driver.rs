@@ -662,6 +662,17 @@ pub fn rov_end(
     RovEnd::new(Rov::with(config, drive, camera))
 }
 
+/// Node `address`'s router in `scenario`: the scenario's routes, the node's neighbours per
+/// interface, a duplicate window of `duplicate_window_s`.
+pub fn router(scenario: &Scenario, address: u8, duplicate_window_s: f64) -> Router {
+    Router::new(
+        address,
+        scenario.routes.clone(),
+        scenario.neighbours(address),
+        duplicate_window_s,
+    )
+}
+
 /// The nodes this process runs, their ends and counters.
 struct Net<'a> {
     scenario: &'a Scenario,
@@ -685,19 +696,10 @@ pub fn run<A: Air>(
 ) -> (NetworkMetrics, Ended) {
     let scenario = setup.scenario;
     let cycle_s = scenario.cycle_s();
-    let duplicate_window_s = setup.duplicate_window_s;
     let routers = setup
         .nodes
         .iter()
-        .map(|&a| {
-            let router = Router::new(
-                a,
-                scenario.routes.clone(),
-                scenario.neighbours(a),
-                duplicate_window_s,
-            );
-            (a, router)
-        })
+        .map(|&a| (a, router(scenario, a, setup.duplicate_window_s)))
         .collect();
     let real_time = air.real_time();
     let vehicles = setup
@@ -940,13 +942,15 @@ impl Net<'_> {
                 Some(Dropped::Own) => node.own_dropped += 1,
                 Some(Dropped::Malformed) | None => {}
             }
-            if let (Some(tx), Some((_, dst))) = (heard.tx, decision.addresses) {
-                let back = self.scenario.routes.next_hop(heard.rx, dst) == tx;
-                let neighbours = self.scenario.neighbours(heard.rx);
+            if let (Some(tx), Some((_, dst)), Some(router)) =
+                (heard.tx, decision.addresses, self.routers.get(&heard.rx))
+                && self.scenario.routes.next_hop(heard.rx, dst) == tx
+            {
+                let reaches = router.interfaces();
                 node.forwarded_back += decision
                     .forward_on
                     .iter()
-                    .filter(|&&k| back && neighbours.get(k).is_some_and(|r| r.contains(&tx)))
+                    .filter(|&&k| reaches.get(k).is_some_and(|r| r.contains(&tx)))
                     .count() as u64;
             }
             action = match (decision.deliver, decision.forward_on.is_empty()) {

@@ -151,10 +151,9 @@ impl Network {
     /// This node's router: the file's routes, its neighbours per interface, the duplicate
     /// window of the cycle ([`rules::duplicate_window_s`]).
     pub fn router(&self) -> Router {
-        Router::new(
+        driver::router(
+            &self.scenario,
             self.address,
-            self.scenario.routes.clone(),
-            self.scenario.neighbours(self.address),
             rules::duplicate_window_s(self.cycle_s()),
         )
     }
