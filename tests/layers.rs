@@ -26,7 +26,6 @@ const LAYERS: [(&str, &[&str]); 5] = [
         "application",
         &[
             "outputs",
-            "net_outputs",
             "mcap_log",
             "net_mcap",
             "foxglove",
@@ -34,6 +33,7 @@ const LAYERS: [(&str, &[&str]); 5] = [
             "console",
             "mavlink",
             "pace",
+            "tdma_run",
         ],
     ),
 ];

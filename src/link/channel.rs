@@ -128,12 +128,15 @@ impl Fate {
     }
 }
 
-/// The fate of one frame (or of a duplicate copy of one).
+/// The fate of one frame at one receiver (or of a duplicate copy of it). `Node` names the
+/// ends: a [`Side`] on a [`Link`], an index on a [`Medium`] (see [`super::MediumReport`]).
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Report {
-    /// The side that sent it.
-    pub from: Side,
-    /// Its number among the frames offered on that side, from 0.
+pub struct Report<Node = Side> {
+    /// The end that sent it.
+    pub from: Node,
+    /// The end this report is about (on a link, the other side).
+    pub to: Node,
+    /// Its number among the frames offered by `from`, from 0.
     pub seq: u64,
     /// Its length, bytes.
     pub len: usize,
@@ -141,9 +144,9 @@ pub struct Report {
     pub t_offered: SimTime,
     /// When it went on air (none when it never did).
     pub t_tx_start: Option<SimTime>,
-    /// When its last bit arrived (none when it did not arrive).
+    /// When its last bit arrived at `to` (none when it did not arrive).
     pub t_rx: Option<SimTime>,
-    /// What became of it.
+    /// What became of it at `to`.
     pub fate: Fate,
     /// True for the extra copy of a duplicated frame.
     pub duplicate: bool,
@@ -277,8 +280,10 @@ impl Reception {
 
 /// A two-node medium's report as a link's (node 0 is side A).
 pub(super) fn link_report(report: MediumReport) -> Report {
+    let side = |node: usize| if node == 0 { Side::A } else { Side::B };
     Report {
-        from: if report.from == 0 { Side::A } else { Side::B },
+        from: side(report.from),
+        to: side(report.to),
         seq: report.seq,
         len: report.len,
         t_offered: report.t_offered,

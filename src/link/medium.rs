@@ -35,36 +35,15 @@
 
 use std::collections::{HashMap, VecDeque};
 
+use super::Distance;
 use super::channel::{OnAir, Reception, Receptions, Transmitter, lost_report};
 use super::model::{Model, ModelError};
 use super::sched::{Scheduler, SimTime};
-use super::{Distance, Fate};
 use crate::geometry::distance_m;
 
-/// The fate of one frame at one receiver (or of a duplicate copy of it).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct MediumReport {
-    /// The node that sent it (its index on the medium).
-    pub from: usize,
-    /// The node this report is about.
-    pub to: usize,
-    /// Its number among the frames offered by `from`, from 0.
-    pub seq: u64,
-    /// Its length, bytes.
-    pub len: usize,
-    /// When it was offered.
-    pub t_offered: SimTime,
-    /// When it went on air (none when it never did).
-    pub t_tx_start: Option<SimTime>,
-    /// When its last bit arrived at `to` (none when it did not arrive).
-    pub t_rx: Option<SimTime>,
-    /// What became of it at `to`.
-    pub fate: Fate,
-    /// True for the extra copy of a duplicated frame.
-    pub duplicate: bool,
-    /// The bytes that arrived (empty when nothing arrived).
-    pub bytes: Vec<u8>,
-}
+/// The fate of one frame at one receiver of a medium (or of a duplicate copy of it): nodes
+/// are indices on the medium.
+pub type MediumReport = super::Report<usize>;
 
 /// One modem on the medium.
 struct Node {
@@ -421,7 +400,7 @@ mod tests {
     use crate::link::channel::link_report;
     use crate::link::channel::tests::{quiet, s100};
     use crate::link::model::{ErrorMode, GilbertElliott, JitterDistribution};
-    use crate::link::{Distance, Link, Report, Side};
+    use crate::link::{Distance, Fate, Link, Report, Side};
 
     fn drain(medium: &mut Medium) -> Vec<MediumReport> {
         while medium.step() {}

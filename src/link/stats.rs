@@ -264,6 +264,7 @@ mod tests {
     fn report(fate: Fate, t_rx: Option<u64>, from: Side) -> Report {
         Report {
             from,
+            to: from.other(),
             seq: 7,
             len: 57,
             t_offered: SimTime(1_500_000_000),

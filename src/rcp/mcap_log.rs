@@ -573,91 +573,134 @@ impl View {
 /// The name the log's lines carry.
 const TOOL: &str = "tdma-run";
 
+/// An MCAP file of JSON channels being written: the writer, its message sequence and the first
+/// write error (later messages are dropped; [`JsonMcapFile::finish`] reports it). Both session
+/// logs ([`McapLog`] and [`super::net_mcap::NetMcapLog`]) write through one.
+pub struct JsonMcapFile {
+    path: String,
+    writer: mcap::Writer<NoSeek<Output>>,
+    sequence: u32,
+    error: Option<McapLogError>,
+}
+
+impl JsonMcapFile {
+    /// Opens `dest` (a file written aside, or standard output) and starts the MCAP stream.
+    pub fn create(dest: &Dest) -> Result<JsonMcapFile, McapLogError> {
+        let path = dest.name();
+        let writer =
+            crate::io::json_mcap_writer(dest.open()?).map_err(|source| McapLogError::Mcap {
+                path: path.clone(),
+                source,
+            })?;
+        Ok(JsonMcapFile {
+            path,
+            writer,
+            sequence: 0,
+            error: None,
+        })
+    }
+
+    /// Adds a channel of JSON messages on `topic` with a JSON Schema; returns its id.
+    pub fn channel(
+        &mut self,
+        schema_name: &str,
+        schema: &str,
+        topic: &str,
+    ) -> Result<u16, McapLogError> {
+        crate::io::json_mcap_channel(
+            &mut self.writer,
+            schema_name,
+            schema,
+            topic,
+            &BTreeMap::new(),
+        )
+        .map_err(|source| McapLogError::Mcap {
+            path: self.path.clone(),
+            source,
+        })
+    }
+
+    /// True once a write failed.
+    pub fn failed(&self) -> bool {
+        self.error.is_some()
+    }
+
+    /// Writes one message on `channel_id` at `log_time_ns` (nothing once a write failed).
+    pub fn write(&mut self, channel_id: u16, log_time_ns: u64, json: &str) {
+        if self.error.is_some() {
+            return;
+        }
+        let header = mcap::records::MessageHeader {
+            channel_id,
+            sequence: self.sequence,
+            log_time: log_time_ns,
+            publish_time: log_time_ns,
+        };
+        self.sequence = self.sequence.wrapping_add(1);
+        if let Err(source) = self.writer.write_to_known_channel(&header, json.as_bytes()) {
+            self.error = Some(McapLogError::Mcap {
+                path: self.path.clone(),
+                source,
+            });
+        }
+    }
+
+    /// Closes the file (summary, footer) and puts it in place; reports the first error.
+    pub fn finish(self) -> Result<(), McapLogError> {
+        let JsonMcapFile {
+            path,
+            mut writer,
+            error,
+            ..
+        } = self;
+        if let Some(error) = error {
+            return Err(error);
+        }
+        writer
+            .finish()
+            .map_err(|source| McapLogError::Mcap { path, source })?;
+        writer.into_inner().into_inner().finish()?;
+        Ok(())
+    }
+}
+
 /// An [`Observer`] that writes the session into an MCAP file, committed by [`McapLog::finish`]
 /// (nothing is left at the path when the run fails before), or to standard output. The writer
 /// never seeks (chunks are assembled in memory), so a pipe is as good as a file. It has the
 /// channels whose [`Topic::in_log`] is true.
 pub struct McapLog {
-    path: String,
-    writer: Option<mcap::Writer<NoSeek<Output>>>,
+    file: JsonMcapFile,
     /// The MCAP channel id of each [`Topic`] the log has, by [`Topic::index`].
     channels: Vec<Option<u16>>,
-    sequence: u32,
     view: View,
-    /// The first write error; later messages are dropped.
-    error: Option<McapLogError>,
 }
 
 impl McapLog {
     /// Creates the log at `dest` (a file, or standard output); log times are `base_ns` plus
     /// the session's time.
     pub fn create(dest: &Dest, base_ns: u64) -> Result<McapLog, McapLogError> {
-        let name = dest.name();
-        let wrap = |source| McapLogError::Mcap {
-            path: name.clone(),
-            source,
-        };
-        let out = dest.open()?;
-        let mut writer = crate::io::json_mcap_writer(out).map_err(wrap)?;
+        let mut file = JsonMcapFile::create(dest)?;
         let mut channels = vec![None; Topic::ALL.len()];
         for topic in Topic::ALL.into_iter().filter(|t| t.in_log()) {
-            let channel = crate::io::json_mcap_channel(
-                &mut writer,
-                topic.schema_name(),
-                topic.schema(),
-                topic.name(),
-                &BTreeMap::new(),
-            );
-            channels[topic.index()] = Some(channel.map_err(wrap)?);
+            let channel = file.channel(topic.schema_name(), topic.schema(), topic.name())?;
+            channels[topic.index()] = Some(channel);
         }
         Ok(McapLog {
-            path: name,
-            writer: Some(writer),
+            file,
             channels,
-            sequence: 0,
             view: View::new(Clock::Session { base_ns }),
-            error: None,
         })
     }
 
     /// Closes the file (summary, footer) and puts it in place; reports the first error.
-    pub fn finish(mut self) -> Result<(), McapLogError> {
-        if let Some(error) = self.error.take() {
-            return Err(error);
-        }
-        let Some(mut writer) = self.writer.take() else {
-            return Ok(());
-        };
-        writer.finish().map_err(|source| McapLogError::Mcap {
-            path: self.path.clone(),
-            source,
-        })?;
-        writer.into_inner().into_inner().finish()?;
-        Ok(())
+    pub fn finish(self) -> Result<(), McapLogError> {
+        self.file.finish()
     }
 
     fn write(&mut self, message: &ViewMessage) {
-        if self.error.is_some() {
-            return;
-        }
-        let Some(writer) = self.writer.as_mut() else {
-            return;
-        };
-        let Some(&Some(channel_id)) = self.channels.get(message.topic.index()) else {
-            return;
-        };
-        let header = mcap::records::MessageHeader {
-            channel_id,
-            sequence: self.sequence,
-            log_time: message.log_time_ns,
-            publish_time: message.log_time_ns,
-        };
-        self.sequence = self.sequence.wrapping_add(1);
-        if let Err(source) = writer.write_to_known_channel(&header, message.json.as_bytes()) {
-            self.error = Some(McapLogError::Mcap {
-                path: self.path.clone(),
-                source,
-            });
+        if let Some(&Some(channel_id)) = self.channels.get(message.topic.index()) {
+            self.file
+                .write(channel_id, message.log_time_ns, &message.json);
         }
     }
 
@@ -713,7 +756,7 @@ fn velocity_json(timestamp: &serde_json::Value, v: [f64; 4]) -> serde_json::Valu
 impl McapLog {
     /// True once a write failed: later messages are dropped, [`McapLog::finish`] reports it.
     pub fn failed(&self) -> bool {
-        self.error.is_some()
+        self.file.failed()
     }
 
     /// A frame's fate.

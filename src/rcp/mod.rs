@@ -22,7 +22,6 @@ pub mod harness;
 pub mod mavlink;
 pub mod mcap_log;
 pub mod net_mcap;
-pub mod net_outputs;
 pub mod network;
 pub mod operator;
 pub mod orders;
@@ -37,6 +36,7 @@ pub mod rules;
 pub mod scenario;
 pub mod script;
 pub mod session;
+pub mod tdma_run;
 
 use crate::debt;
 use crate::wire::operator::{Order, Roi};

@@ -14,14 +14,12 @@
 
 use std::collections::BTreeMap;
 
-use mcap::write::NoSeek;
 use serde_json::json;
 
-use super::mcap_log::{Clock, McapLogError, Topic, View, ViewMessage, without_nulls};
+use super::mcap_log::{Clock, JsonMcapFile, McapLogError, Topic, View, ViewMessage, without_nulls};
 use super::report::FrameEvent;
 use super::{PoseSample, Role};
 use crate::cli::output::Dest;
-use crate::io::Output;
 
 /// The JSON Schema of `/network/frames`.
 pub const HOP_FRAME: &str = r#"{"title":"rovlink.HopFrame","type":"object","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},"medium":{"type":"string"},"src":{"type":"integer","description":"omitted when the frame had no readable header"},"dst":{"type":"integer","description":"omitted when the frame had no readable header"},"tx":{"type":"integer"},"rx":{"type":"integer"},"kind":{"type":"string"},"bytes":{"type":"integer"},"fate":{"type":"string"},"action":{"type":"string"},"t_sent_s":{"type":"number"},"t_received_s":{"type":"number","description":"omitted when not received"},"delay_ms":{"type":"number","description":"omitted when not delivered"}}}"#;
@@ -56,48 +54,26 @@ pub fn vehicle_topic(vehicle: u8, topic: Topic) -> String {
 
 /// The MCAP log of a scenario.
 pub struct NetMcapLog {
-    path: String,
-    writer: Option<mcap::Writer<NoSeek<Output>>>,
+    file: JsonMcapFile,
     /// Channel ids by (vehicle, topic index).
     channels: BTreeMap<(u8, usize), u16>,
     frames: u16,
     views: BTreeMap<u8, View>,
-    sequence: u32,
-    error: Option<McapLogError>,
 }
 
 impl NetMcapLog {
     /// Creates the log at `dest` with the channels of `vehicles`.
     pub fn create(dest: &Dest, vehicles: &[u8]) -> Result<NetMcapLog, McapLogError> {
-        let name = dest.name();
-        let wrap = |source| McapLogError::Mcap {
-            path: name.clone(),
-            source,
-        };
-        let mut writer = crate::io::json_mcap_writer(dest.open()?).map_err(wrap)?;
-        let none = BTreeMap::new();
+        let mut file = JsonMcapFile::create(dest)?;
         let mut channels = BTreeMap::new();
         for &vehicle in vehicles {
             for topic in vehicle_topics() {
-                let id = crate::io::json_mcap_channel(
-                    &mut writer,
-                    topic.schema_name(),
-                    topic.schema(),
-                    &vehicle_topic(vehicle, topic),
-                    &none,
-                )
-                .map_err(wrap)?;
+                let topic_name = vehicle_topic(vehicle, topic);
+                let id = file.channel(topic.schema_name(), topic.schema(), &topic_name)?;
                 channels.insert((vehicle, topic.index()), id);
             }
         }
-        let frames = crate::io::json_mcap_channel(
-            &mut writer,
-            "rovlink.HopFrame",
-            HOP_FRAME,
-            NETWORK_FRAMES_TOPIC,
-            &none,
-        )
-        .map_err(wrap)?;
+        let frames = file.channel("rovlink.HopFrame", HOP_FRAME, NETWORK_FRAMES_TOPIC)?;
         let views = vehicles
             .iter()
             .map(|&v| {
@@ -106,54 +82,25 @@ impl NetMcapLog {
             })
             .collect();
         Ok(NetMcapLog {
-            path: name,
-            writer: Some(writer),
+            file,
             channels,
             frames,
             views,
-            sequence: 0,
-            error: None,
         })
     }
 
     /// True once a write failed.
     pub fn failed(&self) -> bool {
-        self.error.is_some()
+        self.file.failed()
     }
 
     /// Closes the file and puts it in place; reports the first error.
-    pub fn finish(mut self) -> Result<(), McapLogError> {
-        if let Some(error) = self.error.take() {
-            return Err(error);
-        }
-        let Some(mut writer) = self.writer.take() else {
-            return Ok(());
-        };
-        writer.finish().map_err(|source| McapLogError::Mcap {
-            path: self.path.clone(),
-            source,
-        })?;
-        writer.into_inner().into_inner().finish()?;
-        Ok(())
+    pub fn finish(self) -> Result<(), McapLogError> {
+        self.file.finish()
     }
 
     fn write(&mut self, channel_id: u16, log_time_ns: u64, json: &str) {
-        let (Some(writer), None) = (self.writer.as_mut(), self.error.as_ref()) else {
-            return;
-        };
-        let header = mcap::records::MessageHeader {
-            channel_id,
-            sequence: self.sequence,
-            log_time: log_time_ns,
-            publish_time: log_time_ns,
-        };
-        self.sequence = self.sequence.wrapping_add(1);
-        if let Err(source) = writer.write_to_known_channel(&header, json.as_bytes()) {
-            self.error = Some(McapLogError::Mcap {
-                path: self.path.clone(),
-                source,
-            });
-        }
+        self.file.write(channel_id, log_time_ns, json);
     }
 
     fn write_vehicle(&mut self, vehicle: u8, messages: &[ViewMessage]) {

@@ -113,13 +113,7 @@ mod tests {
     use crate::rcp::report::{Metrics, Quiet, STOPPED};
     use std::path::Path;
 
-    /// The issue's scenario.
-    pub(crate) const THREE: &str = r#"{"duration_s":600,"seed":1,
-      "nodes":[{"address":0,"role":"operator","position":[0,0,0]},
-               {"address":1,"role":"rov","start":[3,0,1]},
-               {"address":2,"role":"rov","start":[7,0,1],"waypoints":[[30,7.5,1,1,90]]}],
-      "media":[{"name":"rf","model":"s100","nodes":[0,1,2]}],
-      "routes":{"0":{"2":1},"2":{"0":1}}}"#;
+    use crate::rcp::scenario::tests::THREE;
 
     fn scenario(text: &str) -> Scenario {
         Scenario::parse(text, Path::new(".")).unwrap()

@@ -730,7 +730,7 @@ fn image_settings(value: Option<&Value>) -> Result<ImageSettings, ScenarioError>
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// The scenario.

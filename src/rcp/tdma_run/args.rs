@@ -2,15 +2,15 @@
 
 use std::path::PathBuf;
 
+use crate::cli::model::ModelArgs;
+use crate::cli::port::PortArgs;
+use crate::cli::value::{self, Bound, Range, RealParser, Unit};
+use crate::link::Model;
+use crate::rcp::ImageSettings;
+use crate::rcp::realtime::Role;
+use crate::rcp::session::{MAX_DURATION_S, MAX_IPG_S, MIN_IMAGE_BYTES, MIN_IPG_S, auto_ipg_for};
+use crate::wire::operator::Roi;
 use clap::{Parser, ValueEnum};
-use rovlink::cli::model::ModelArgs;
-use rovlink::cli::port::PortArgs;
-use rovlink::cli::value::{self, Bound, Range, RealParser, Unit};
-use rovlink::link::Model;
-use rovlink::rcp::ImageSettings;
-use rovlink::rcp::realtime::Role;
-use rovlink::rcp::session::{MAX_DURATION_S, MAX_IPG_S, MIN_IMAGE_BYTES, MIN_IPG_S, auto_ipg_for};
-use rovlink::wire::operator::Roi;
 
 const EXAMPLES: &str = "\
 Examples:
@@ -114,7 +114,7 @@ fn roi(text: &str) -> Result<Roi, String> {
 /// status and DEBT-coded camera images up, one frame per slot, with heartbeats and the ROV's
 /// recovery by backtracking. In simulation the same seed gives the same session.
 #[derive(Parser, Debug)]
-#[command(version, after_help = format!("{EXAMPLES}\n\n{}", rovlink::device::HELP))]
+#[command(version, after_help = format!("{EXAMPLES}\n\n{}", crate::device::HELP))]
 pub struct Args {
     /// Both ends and the link in one process, in virtual time (the default).
     #[arg(long, conflicts_with_all = ["role", "port"])]
@@ -148,9 +148,11 @@ pub struct Args {
           value_parser = value::device)]
     pub port2: Option<String>,
 
+    /// The port's dialect and pacing (with `--role`).
     #[command(flatten)]
     pub port_args: PortArgs,
 
+    /// The link model (a built-in, a file, or flags).
     #[command(flatten)]
     pub model: ModelArgs,
 
@@ -161,7 +163,7 @@ pub struct Args {
     /// Run a simulation (--sim or --scenario) at X times real time (1 = real time), to watch
     /// it live, e.g. in Foxglove with --foxglove; the results are the same as unpaced.
     #[arg(long, value_name = "X", conflicts_with = "role",
-          value_parser = value::real(rovlink::rcp::pace::MIN_PACE, rovlink::rcp::pace::MAX_PACE, "x"))]
+          value_parser = value::real(crate::rcp::pace::MIN_PACE, crate::rcp::pace::MAX_PACE, "x"))]
     pub pace: Option<f64>,
 
     /// Session length, s (at most a week) [default: 600, or the scenario's].
@@ -206,7 +208,7 @@ pub struct Args {
 
     /// Trunk size, 1 ..= 242 bytes (39 makes the paper's 57-byte ROV frame).
     #[arg(long, value_name = "BYTES", default_value_t = 39,
-          value_parser = value::bytes(1, rovlink::wire::rov::MAX_TRUNK_BYTES as u64))]
+          value_parser = value::bytes(1, crate::wire::rov::MAX_TRUNK_BYTES as u64))]
     pub trunk: u64,
 
     /// Region of interest x0,y0,x1,y1 in pixels (each < 1024).
@@ -302,7 +304,7 @@ fn vehicle(text: &str) -> Result<Vehicle, String> {
     match text.split_once(':') {
         _ if text == "sim" => Ok(Vehicle::Sim),
         Some(("mavlink", endpoint)) if !endpoint.is_empty() => {
-            rovlink::rcp::mavlink::parse_endpoint(endpoint).map_err(|e| e.to_string())?;
+            crate::rcp::mavlink::parse_endpoint(endpoint).map_err(|e| e.to_string())?;
             Ok(Vehicle::Mavlink(endpoint.to_string()))
         }
         _ => Err(format!(

@@ -1,22 +1,22 @@
 //! What every tdma-run mode shares: the flags that apply to one end only, the ends' parts
 //! (order sources, the vehicle, the camera), how a real-time run's end is said.
 
+use crate::cli::output::{Dest, Kind, Outputs};
+use crate::cli::stop;
+use crate::io::{EXIT_CHECK_FAILED, EXIT_OK};
+use crate::rcp::camera;
+use crate::rcp::outputs::{Destinations, check_images_out};
+use crate::rcp::realtime::{Ended, Role};
+use crate::rcp::report::Observer;
+use crate::rcp::session::{Parts, SessionConfig};
+use crate::say;
 use anyhow::Result;
-use rovlink::cli::output::{Dest, Kind, Outputs};
-use rovlink::cli::stop;
-use rovlink::io::{EXIT_CHECK_FAILED, EXIT_OK};
-use rovlink::rcp::camera;
-use rovlink::rcp::outputs::{Destinations, check_images_out};
-use rovlink::rcp::realtime::{Ended, Role};
-use rovlink::rcp::report::Observer;
-use rovlink::rcp::session::{Parts, SessionConfig};
-use rovlink::say;
 
-use crate::TOOL;
-use crate::cli::{Args, Vehicle};
+use super::TOOL;
+use super::args::{Args, Vehicle};
 
 /// The exit code of a real-time run that ended so after `duration_s`, said on stderr.
-pub(crate) fn ended_code(ended: Ended, duration_s: f64) -> u8 {
+pub(super) fn ended_code(ended: Ended, duration_s: f64) -> u8 {
     match ended {
         Ended::Done => EXIT_OK,
         Ended::Stopped => {
@@ -31,7 +31,7 @@ pub(crate) fn ended_code(ended: Ended, duration_s: f64) -> u8 {
 }
 
 /// Warnings of the session (a bad order line) on standard error, as they come.
-pub(crate) struct Stderr;
+pub(super) struct Stderr;
 
 impl Observer for Stderr {
     fn warning(&mut self, _t_s: f64, text: &str) {
@@ -40,8 +40,8 @@ impl Observer for Stderr {
 }
 
 /// The field flags that apply only to one end.
-pub(crate) fn field_usage(args: &Args, role: Option<Role>) -> Result<()> {
-    use rovlink::cli::UsageError;
+pub(super) fn field_usage(args: &Args, role: Option<Role>) -> Result<()> {
+    use crate::cli::UsageError;
     let rov_side = role != Some(Role::Operator);
     let operator_side = role != Some(Role::Rov);
     if matches!(args.vehicle, Vehicle::Mavlink(_)) && role != Some(Role::Rov) {
@@ -75,12 +75,12 @@ pub(crate) fn field_usage(args: &Args, role: Option<Role>) -> Result<()> {
 }
 
 /// What the ends run beyond the config: order sources, the vehicle, the camera.
-pub(crate) fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
+pub(super) fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
     let mut parts = Parts::from_config(config);
     if let Vehicle::Mavlink(endpoint) = &args.vehicle {
-        let options = rovlink::rcp::mavlink::MavlinkOptions::default();
-        let drive = rovlink::rcp::mavlink::connect(endpoint, &options)
-            .map_err(|e| rovlink::cli::UsageError(format!("--vehicle: {e}")))?;
+        let options = crate::rcp::mavlink::MavlinkOptions::default();
+        let drive = crate::rcp::mavlink::connect(endpoint, &options)
+            .map_err(|e| crate::cli::UsageError(format!("--vehicle: {e}")))?;
         say!("vehicle: ArduSub over MAVLink at {}", drive.endpoint());
         parts.drive = Box::new(drive);
     }
@@ -105,22 +105,22 @@ pub(crate) fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
 /// A signal came while the run was still starting.
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
-pub(crate) struct Stopped(pub(crate) String);
+pub(super) struct Stopped(pub(super) String);
 
 /// Opens `--orders`. In simulation the whole input is read at start, which waits for a
 /// FIFO's writer (or a terminal's end of input): that wait is done aside, so a signal
 /// meanwhile ends the run ([`Stopped`]) instead of being left for later.
-fn open_orders(path: &std::path::Path, live: bool) -> Result<rovlink::rcp::console::JsonOrders> {
+fn open_orders(path: &std::path::Path, live: bool) -> Result<crate::rcp::console::JsonOrders> {
     use std::sync::mpsc::RecvTimeoutError;
     if live {
-        return Ok(rovlink::rcp::console::open_orders(path, true)?);
+        return Ok(crate::rcp::console::open_orders(path, true)?);
     }
     let (tx, rx) = std::sync::mpsc::channel();
     let owned = path.to_path_buf();
     std::thread::Builder::new()
         .name("orders-open".into())
         .spawn(move || {
-            let _ = tx.send(rovlink::rcp::console::open_orders(&owned, false));
+            let _ = tx.send(crate::rcp::console::open_orders(&owned, false));
         })?;
     loop {
         match rx.recv_timeout(std::time::Duration::from_millis(50)) {
@@ -138,13 +138,13 @@ fn open_orders(path: &std::path::Path, live: bool) -> Result<rovlink::rcp::conso
 }
 
 /// The host part of HOST:PORT, for the URL said at start.
-pub(crate) fn host_of(addr: &str) -> &str {
+pub(super) fn host_of(addr: &str) -> &str {
     addr.rsplit_once(':').map_or(addr, |(host, _)| host)
 }
 
 /// Every output the flags name, claimed before any work (so bad usage leaves no file): the
 /// metrics' destination and the others', in every kind of session.
-pub(crate) fn claim_outputs(args: &Args) -> Result<(Option<Dest>, Destinations)> {
+pub(super) fn claim_outputs(args: &Args) -> Result<(Option<Dest>, Destinations)> {
     let mut outs = Outputs::new();
     outs.inputs(args.inputs());
     let metrics = outs.claim_opt("--metrics", args.metrics.as_deref(), Kind::Text)?;

@@ -1,29 +1,29 @@
-//! tdma-run's single-vehicle session: both ends in virtual time ([`rovlink::rcp::session`]),
-//! or one end in real time ([`rovlink::rcp::realtime`]), each a one-vehicle network run by the
+//! tdma-run's single-vehicle session: both ends in virtual time ([`crate::rcp::session`]),
+//! or one end in real time ([`crate::rcp::realtime`]), each a one-vehicle network run by the
 //! library's one driver.
 
+use crate::cli::{progress, stop};
+use crate::io::EXIT_OK;
+use crate::rcp::outputs::{Layout, Recorder, summary, wall_clock_ns, write_metrics};
+use crate::rcp::pace::Pacer;
+use crate::rcp::realtime::{self, Role};
+use crate::rcp::report::Tee;
+use crate::rcp::session::{self, SessionConfig};
+use crate::rcp::{camera, script};
+use crate::say;
 use anyhow::Result;
-use rovlink::cli::{progress, stop};
-use rovlink::io::EXIT_OK;
-use rovlink::rcp::outputs::{Recorder, summary, wall_clock_ns, write_metrics};
-use rovlink::rcp::pace::Pacer;
-use rovlink::rcp::realtime::{self, Role};
-use rovlink::rcp::report::Tee;
-use rovlink::rcp::session::{self, SessionConfig};
-use rovlink::rcp::{camera, script};
-use rovlink::say;
 
-use crate::TOOL;
-use crate::cli::{Args, RoleArg};
-use crate::setup::{Stderr, Stopped, ended_code, field_usage, host_of, parts};
+use super::TOOL;
+use super::args::{Args, RoleArg};
+use super::setup::{Stderr, Stopped, ended_code, field_usage, host_of, parts};
 
 /// Runs the session the flags describe.
 pub fn run(args: &Args) -> Result<u8> {
     // Every output is claimed before any work, so bad usage leaves no file.
-    let (metrics_dest, dests) = crate::setup::claim_outputs(args)?;
+    let (metrics_dest, dests) = super::setup::claim_outputs(args)?;
     let role = args.role.map(RoleArg::role);
     let port_flags = "each of --dialect, --instant and --chunk-bytes";
-    rovlink::cli::only_with(
+    crate::cli::only_with(
         role.is_some(),
         "--role",
         &[(port_flags, args.port_args.any_set())],
@@ -65,8 +65,8 @@ pub fn run(args: &Args) -> Result<u8> {
     let mut live = match &args.foxglove {
         Some(addr) => {
             let end = role.unwrap_or(Role::Operator);
-            let (view, orders) = rovlink::rcp::foxglove::start(addr, end)
-                .map_err(|e| rovlink::cli::UsageError(e.to_string()))?;
+            let (view, orders) = crate::rcp::foxglove::start(addr, end)
+                .map_err(|e| crate::cli::UsageError(e.to_string()))?;
             say!(
                 "Foxglove: ws://{}:{} (open it in Foxglove's WebSocket connection)",
                 host_of(addr),
@@ -82,7 +82,11 @@ pub fn run(args: &Args) -> Result<u8> {
     let base_ns = if role.is_some() { wall_clock_ns() } else { 0 };
     let template = "{spinner} {pos}/{len} s [{bar:30}] {msg}";
     let bar = progress::bar(role.is_none(), args.duration_s().ceil() as u64, template);
-    let mut recorder = Recorder::new(dests, args.buoy, base_ns, bar)?;
+    let layout = Layout::Single {
+        buoy_m: args.buoy,
+        base_ns,
+    };
+    let mut recorder = Recorder::new(dests, &layout, bar)?;
     let mut stderr = Stderr;
     let mut pacer = args.pace.map(|pace| Pacer::new(pace, stop::flag()));
     let mut observer = Tee(Vec::new());

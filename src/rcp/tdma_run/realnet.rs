@@ -1,26 +1,25 @@
 //! tdma-run `--role ... --routes FILE`: one node of a multi-vehicle network in real time
-//! ([`rovlink::rcp::realnet`]), over `--port` and, for a node on two media, `--port2`.
+//! ([`crate::rcp::realnet`]), over `--port` and, for a node on two media, `--port2`.
 
 use std::path::Path;
 
+use crate::cli::UsageError;
+use crate::cli::{progress, stop};
+use crate::gll::Endpoint;
+use crate::io::EXIT_OK;
+use crate::rcp::outputs::{Layout, Recorder, write_metrics};
+use crate::rcp::realnet::{self, Network};
+use crate::rcp::realtime::Role;
+use crate::rcp::report::Tee;
+use crate::rcp::scenario::Scenario;
+use crate::rcp::session::{MAX_IPG_S, MIN_IPG_S, SessionConfig};
+use crate::rcp::{camera, script};
+use crate::say;
 use anyhow::Result;
-use rovlink::cli::UsageError;
-use rovlink::cli::{progress, stop};
-use rovlink::gll::Endpoint;
-use rovlink::io::EXIT_OK;
-use rovlink::rcp::net_outputs::NetRecorder;
-use rovlink::rcp::outputs::write_metrics;
-use rovlink::rcp::realnet::{self, Network};
-use rovlink::rcp::realtime::Role;
-use rovlink::rcp::report::Tee;
-use rovlink::rcp::scenario::Scenario;
-use rovlink::rcp::session::{MAX_IPG_S, MIN_IPG_S, SessionConfig};
-use rovlink::rcp::{camera, script};
-use rovlink::say;
 
-use crate::TOOL;
-use crate::cli::{Args, Ipg, RoleArg};
-use crate::network::{Both, mark_interrupted, network_summary};
+use super::TOOL;
+use super::args::{Args, Ipg, RoleArg};
+use super::network::{Both, mark_interrupted, network_summary};
 
 /// The EvoLogics destination of every packet a network node sends: broadcast (the routers
 /// decide who takes a frame).
@@ -28,10 +27,10 @@ const EVOLOGICS_BROADCAST: u32 = 255;
 
 /// Runs this process's node of the network in `path`.
 pub fn run(args: &Args, path: &Path) -> Result<u8> {
-    let (metrics_dest, dests) = crate::setup::claim_outputs(args)?;
+    let (metrics_dest, dests) = super::setup::claim_outputs(args)?;
     let role = args.role.map_or(Role::Operator, RoleArg::role);
     usage(args)?;
-    crate::setup::field_usage(args, Some(role))?;
+    super::setup::field_usage(args, Some(role))?;
     let file = format!("--routes {}", path.display());
     let mut scenario =
         Scenario::from_file(path).map_err(|e| UsageError(format!("--routes {e}")))?;
@@ -49,8 +48,8 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     let network = Network::new(scenario, &file, role, address, ports.len())
         .map_err(|e| UsageError(e.to_string()))?;
     let config = session_config(args, &network, role)?;
-    let parts = match crate::setup::parts(args, &config) {
-        Err(e) if e.is::<crate::setup::Stopped>() => {
+    let parts = match super::setup::parts(args, &config) {
+        Err(e) if e.is::<super::setup::Stopped>() => {
             say!("{e}: nothing was run");
             return Ok(stop::code_or(EXIT_OK));
         }
@@ -73,19 +72,25 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     // and the node's own frames on `/link/frames`.
     let mut live = match &args.foxglove {
         Some(addr) => {
-            let view = rovlink::rcp::foxglove::start_node(addr, role, &shown)
+            let view = crate::rcp::foxglove::start_node(addr, role, &shown)
                 .map_err(|e| UsageError(e.to_string()))?;
             say!(
                 "Foxglove: ws://{}:{} (every vehicle under /vehicle/N/, this node's frames on \
                  /link/frames)",
-                crate::setup::host_of(addr),
+                super::setup::host_of(addr),
                 view.port()
             );
             Some(view)
         }
         None => None,
     };
-    let mut recorder = NetRecorder::new(dests, &shown, bar)?;
+    let mut recorder = Recorder::new(
+        dests,
+        &Layout::Network {
+            vehicles: shown.clone(),
+        },
+        bar,
+    )?;
     say!("{}", start_line(&network, role, &ports, config.duration_s));
     let (mut metrics, ended) = {
         let mut both = Both(&mut recorder);
@@ -107,7 +112,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
         view.take_refusals().iter().for_each(|line| say!("{line}"));
         view.stop();
     }
-    let code = crate::setup::ended_code(ended, metrics.duration_s);
+    let code = super::setup::ended_code(ended, metrics.duration_s);
     mark_interrupted(&mut metrics);
     if let Some(out) = metrics_out.as_mut() {
         write_metrics(out, network.scenario.seed, &metrics)?;

@@ -1,26 +1,25 @@
-//! tdma-run `--scenario`: a multi-vehicle session in virtual time ([`rovlink::rcp::network`]).
+//! tdma-run `--scenario`: a multi-vehicle session in virtual time ([`crate::rcp::network`]).
 
 use std::path::Path;
 
+use crate::cli::UsageError;
+use crate::cli::{progress, stop};
+use crate::io::EXIT_OK;
+use crate::rcp::network::{self, NetworkMetrics};
+use crate::rcp::outputs::{Layout, Recorder, summary, write_metrics};
+use crate::rcp::pace::Pacer;
+use crate::rcp::report::{FrameEvent, Observer, Tee};
+use crate::rcp::scenario::Scenario;
+use crate::rcp::{Event, PoseSample, Role, camera};
+use crate::say;
 use anyhow::Result;
-use rovlink::cli::UsageError;
-use rovlink::cli::{progress, stop};
-use rovlink::io::EXIT_OK;
-use rovlink::rcp::net_outputs::NetRecorder;
-use rovlink::rcp::network::{self, NetworkMetrics};
-use rovlink::rcp::outputs::{summary, write_metrics};
-use rovlink::rcp::pace::Pacer;
-use rovlink::rcp::report::{FrameEvent, Observer, Tee};
-use rovlink::rcp::scenario::Scenario;
-use rovlink::rcp::{Event, PoseSample, Role, camera};
-use rovlink::say;
 
-use crate::TOOL;
-use crate::cli::Args;
+use super::TOOL;
+use super::args::Args;
 
 /// Runs the scenario at `path` with the flags that apply to it.
 pub fn run(args: &Args, path: &Path) -> Result<u8> {
-    let (metrics_dest, dests) = crate::setup::claim_outputs(args)?;
+    let (metrics_dest, dests) = super::setup::claim_outputs(args)?;
     if args.model.model.is_some() || args.model.model_file.is_some() {
         return Err(UsageError(
             "--model/--model-file: a scenario names each medium's model; the other link flags \
@@ -51,7 +50,13 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     let mut metrics_out = metrics_dest.map(|dest| dest.open()).transpose()?;
     let template = "{spinner} {pos}/{len} s [{bar:30}] {msg}";
     let bar = progress::bar(true, scenario.duration_s.ceil() as u64, template);
-    let mut recorder = NetRecorder::new(dests, &scenario.vehicles(), bar)?;
+    let mut recorder = Recorder::new(
+        dests,
+        &Layout::Network {
+            vehicles: scenario.vehicles(),
+        },
+        bar,
+    )?;
     let cycle = scenario.cycle();
     let slots: Vec<String> = cycle
         .iter()
@@ -66,11 +71,11 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     // A live view of every vehicle (`/vehicle/N/...`), as the MCAP log has them.
     let mut live = match &args.foxglove {
         Some(addr) => {
-            let view = rovlink::rcp::foxglove::start_network(addr, &scenario.vehicles())
+            let view = crate::rcp::foxglove::start_network(addr, &scenario.vehicles())
                 .map_err(|e| UsageError(e.to_string()))?;
             say!(
                 "Foxglove: ws://{}:{} (every vehicle under /vehicle/N/)",
-                crate::setup::host_of(addr),
+                super::setup::host_of(addr),
                 view.port()
             );
             Some(view)
@@ -119,7 +124,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
 }
 
 /// Marks the figures (the network's and each vehicle's) with the signal that ended the run.
-pub(crate) fn mark_interrupted(metrics: &mut NetworkMetrics) {
+pub(super) fn mark_interrupted(metrics: &mut NetworkMetrics) {
     if let Some(name) = stop::signal_name() {
         metrics.interrupted = Some(name.to_string());
         for m in metrics.vehicles.values_mut() {
@@ -129,7 +134,7 @@ pub(crate) fn mark_interrupted(metrics: &mut NetworkMetrics) {
 }
 
 /// Each vehicle's summary, then each relay's forwarding.
-pub(crate) fn network_summary(metrics: &NetworkMetrics) -> Vec<String> {
+pub(super) fn network_summary(metrics: &NetworkMetrics) -> Vec<String> {
     let mut lines = Vec::new();
     for (address, m) in &metrics.vehicles {
         lines.push(format!("vehicle {address}:"));
@@ -147,7 +152,7 @@ pub(crate) fn network_summary(metrics: &NetworkMetrics) -> Vec<String> {
 }
 
 /// The recorder, with warnings also on standard error.
-pub(crate) struct Both<'a>(pub(crate) &'a mut NetRecorder);
+pub(super) struct Both<'a>(pub(super) &'a mut Recorder);
 
 impl Observer for Both<'_> {
     fn frame(&mut self, event: &FrameEvent<'_>) {
