@@ -32,7 +32,6 @@ const LAYERS: [(&str, &[&str]); 5] = [
             "foxglove_gate",
             "console",
             "mavlink",
-            "pace",
             "tdma_run",
         ],
     ),

@@ -26,7 +26,6 @@ pub mod network;
 pub mod operator;
 pub mod orders;
 pub mod outputs;
-pub mod pace;
 pub mod realnet;
 pub mod realtime;
 pub mod report;

@@ -50,12 +50,14 @@ pub enum NetworkError {
 
 /// Runs `scenario` in virtual time; the vehicles' cameras cycle through `images` (each vehicle
 /// starting at its own picture). `stop` is checked at every event: once set, the run ends
-/// there with the figures so far and `interrupted` set to [`super::report::STOPPED`].
+/// there with the figures so far and `interrupted` set to [`super::report::STOPPED`]. With a
+/// `pace`, virtual time is held to `pace` times real time ([`driver::Pace`]).
 pub fn run(
     scenario: &Scenario,
     images: &[debt::Image],
     observer: &mut dyn Observer,
     stop: &AtomicBool,
+    pace: Option<f64>,
 ) -> Result<NetworkMetrics, NetworkError> {
     let mut vehicles = BTreeMap::new();
     for (k, address) in scenario.vehicles().into_iter().enumerate() {
@@ -83,7 +85,7 @@ pub fn run(
         };
         vehicles.insert(address, ends);
     }
-    simulate(scenario, vehicles, observer, stop)
+    simulate(scenario, vehicles, observer, stop, pace)
 }
 
 /// Runs `scenario` in virtual time with the vehicles' `ends`, every node in this process.
@@ -92,9 +94,13 @@ pub fn simulate(
     ends: BTreeMap<u8, VehicleEnds>,
     observer: &mut dyn Observer,
     stop: &AtomicBool,
+    pace: Option<f64>,
 ) -> Result<NetworkMetrics, NetworkError> {
     let mut air =
         SimAir::new(scenario).map_err(|(name, error)| NetworkError::Model { name, error })?;
+    if let Some(pace) = pace {
+        air = air.paced(driver::Pace::new(pace, stop));
+    }
     let setup = Setup {
         scenario,
         nodes: scenario.nodes.iter().map(|n| n.address).collect(),
@@ -124,7 +130,7 @@ mod tests {
     }
 
     fn run_quiet(s: &Scenario) -> NetworkMetrics {
-        run(s, &images(), &mut Quiet, &AtomicBool::new(false)).unwrap()
+        run(s, &images(), &mut Quiet, &AtomicBool::new(false), None).unwrap()
     }
 
     #[test]
@@ -232,7 +238,7 @@ mod tests {
     #[test]
     fn a_stop_ends_the_run_with_the_figures_so_far() {
         let stop = AtomicBool::new(true);
-        let m = run(&scenario(THREE), &images(), &mut Quiet, &stop).unwrap();
+        let m = run(&scenario(THREE), &images(), &mut Quiet, &stop, None).unwrap();
         assert_eq!(m.interrupted.as_deref(), Some(STOPPED));
         assert!(m.duration_s < 1.0);
     }

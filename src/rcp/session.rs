@@ -129,25 +129,27 @@ pub fn run(
     observer: &mut dyn Observer,
     stop: &AtomicBool,
 ) -> Result<Metrics, SessionError> {
-    run_with(config, Parts::from_config(config), observer, stop)
+    run_with(config, Parts::from_config(config), observer, stop, None)
 }
 
 /// Runs a session after [`SessionConfig::validate`]; `observer` sees frames, images, poses and
 /// events as they happen. `stop` is checked at every event: once set, the run ends there, and
 /// the metrics cover the virtual time reached, with `interrupted` set to
 /// [`super::report::STOPPED`]. The run also ends early once the observer has
-/// [`failed`](Observer::failed).
+/// [`failed`](Observer::failed). With a `pace`, virtual time is held to `pace` times real
+/// time ([`super::driver::Pace`]).
 pub fn run_with(
     config: &SessionConfig,
     parts: Parts,
     observer: &mut dyn Observer,
     stop: &AtomicBool,
+    pace: Option<f64>,
 ) -> Result<Metrics, SessionError> {
     config.validate()?;
     let scenario = scenario(config);
     let vehicle = rov_address();
     let ends = BTreeMap::from([(vehicle, parts.ends(&scenario, vehicle, None))]);
-    match network::simulate(&scenario, ends, observer, stop) {
+    match network::simulate(&scenario, ends, observer, stop, pace) {
         Ok(metrics) => Ok(single(metrics)),
         Err(NetworkError::Model { error, .. }) => Err(SessionError::Model(error)),
     }

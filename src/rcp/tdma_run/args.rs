@@ -163,7 +163,7 @@ pub struct Args {
     /// Run a simulation (--sim or --scenario) at X times real time (1 = real time), to watch
     /// it live, e.g. in Foxglove with --foxglove; the results are the same as unpaced.
     #[arg(long, value_name = "X", conflicts_with = "role",
-          value_parser = value::real(crate::rcp::pace::MIN_PACE, crate::rcp::pace::MAX_PACE, "x"))]
+          value_parser = value::real(crate::rcp::driver::MIN_PACE, crate::rcp::driver::MAX_PACE, "x"))]
     pub pace: Option<f64>,
 
     /// Session length, s (at most a week) [default: 600, or the scenario's].

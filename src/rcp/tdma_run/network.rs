@@ -7,7 +7,6 @@ use crate::cli::{progress, stop};
 use crate::io::EXIT_OK;
 use crate::rcp::network::{self, NetworkMetrics};
 use crate::rcp::outputs::{Layout, Recorder, summary, write_metrics};
-use crate::rcp::pace::Pacer;
 use crate::rcp::report::{FrameEvent, Observer, Tee};
 use crate::rcp::scenario::Scenario;
 use crate::rcp::{Event, PoseSample, Role, camera};
@@ -84,17 +83,19 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     };
     let wall = std::time::Instant::now();
     let mut metrics = {
-        let mut pacer = args.pace.map(|pace| Pacer::new(pace, stop::flag()));
         let mut both = Both(&mut recorder);
         let mut observers = Tee(Vec::new());
-        if let Some(pacer) = pacer.as_mut() {
-            observers.0.push(pacer);
-        }
         observers.0.push(&mut both);
         if let Some(view) = live.as_mut() {
             observers.0.push(view);
         }
-        network::run(&scenario, &pictures.images, &mut observers, stop::flag())?
+        network::run(
+            &scenario,
+            &pictures.images,
+            &mut observers,
+            stop::flag(),
+            args.pace,
+        )?
     };
     if let Some(view) = live.take() {
         view.take_refusals().iter().for_each(|line| say!("{line}"));

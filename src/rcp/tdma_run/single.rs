@@ -5,7 +5,6 @@
 use crate::cli::{progress, stop};
 use crate::io::EXIT_OK;
 use crate::rcp::outputs::{Layout, Recorder, summary, wall_clock_ns, write_metrics};
-use crate::rcp::pace::Pacer;
 use crate::rcp::realtime::{self, Role};
 use crate::rcp::report::Tee;
 use crate::rcp::session::{self, SessionConfig};
@@ -88,11 +87,7 @@ pub fn run(args: &Args) -> Result<u8> {
     };
     let mut recorder = Recorder::new(dests, &layout, bar)?;
     let mut stderr = Stderr;
-    let mut pacer = args.pace.map(|pace| Pacer::new(pace, stop::flag()));
     let mut observer = Tee(Vec::new());
-    if let Some(pacer) = pacer.as_mut() {
-        observer.0.push(pacer);
-    }
     observer.0.push(&mut recorder);
     observer.0.push(&mut stderr);
     if let Some(view) = live.as_mut() {
@@ -122,7 +117,8 @@ pub fn run(args: &Args) -> Result<u8> {
             (metrics, code)
         }
         _ => {
-            let metrics = session::run_with(&config, parts, &mut observer, stop::flag())?;
+            let metrics =
+                session::run_with(&config, parts, &mut observer, stop::flag(), args.pace)?;
             let model_name = match model.name.as_str() {
                 "" => "a model file",
                 name => name,
