@@ -5,7 +5,7 @@
 
 use proptest::prelude::*;
 use rovlink::wire::frame::{self, Frame};
-use rovlink::wire::operator::{self, Order, Roi, Velocity};
+use rovlink::wire::operator::{self, ImageOrder, Order, Roi, Velocity};
 use rovlink::wire::rov::{self, BasicStatus, Status};
 use rovlink::wire::{DeframeEvent, Deframer, Message, MessageRepr, Nav, json};
 
@@ -131,14 +131,14 @@ fn order() -> impl Strategy<Value = Order> {
             any::<u8>()
         )
             .prop_map(|(roi, roi_shift, gray, scale, size_bytes, trunk_bytes)| {
-                Order::ImageSettings {
+                Order::ImageSettings(ImageOrder {
                     roi: Roi::from_array(roi),
                     roi_shift,
                     gray,
                     scale,
                     size_bytes,
                     trunk_bytes,
-                }
+                })
             }),
         (0u16..360, any::<bool>()).prop_map(|(heading_deg, enable)| Order::HoldHeading {
             heading_deg,
@@ -267,14 +267,14 @@ fn reference_payload(message: &Message) -> Vec<u8> {
                     }
                     w.push(heading_deg.into(), 16);
                 }
-                Order::ImageSettings {
+                Order::ImageSettings(ImageOrder {
                     roi,
                     roi_shift,
                     gray,
                     scale,
                     size_bytes,
                     trunk_bytes,
-                } => {
+                }) => {
                     for c in roi.to_array() {
                         w.push(c.into(), 10);
                     }

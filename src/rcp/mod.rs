@@ -164,6 +164,20 @@ pub struct ImageSettings {
     pub trunk_bytes: u8,
 }
 
+impl From<crate::wire::operator::ImageOrder> for ImageSettings {
+    /// The settings an ImageSettings order asks for (an all-zero ROI is none).
+    fn from(order: crate::wire::operator::ImageOrder) -> Self {
+        ImageSettings {
+            roi: (order.roi.to_array() != [0; 4]).then_some(order.roi),
+            roi_shift: order.roi_shift,
+            gray: order.gray,
+            scale: order.scale,
+            size_bytes: order.size_bytes,
+            trunk_bytes: order.trunk_bytes,
+        }
+    }
+}
+
 impl Default for ImageSettings {
     fn default() -> Self {
         ImageSettings {

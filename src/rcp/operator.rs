@@ -263,7 +263,7 @@ mod tests {
     use super::super::ImageSettings;
     use super::super::rov::{Rov, RovConfig};
     use super::*;
-    use crate::wire::operator::Roi;
+    use crate::wire::operator::{ImageOrder, Roi};
 
     /// Both engines with nothing between them but `lose`, which drops the ROV's reply to slot k
     /// when it returns true.
@@ -353,7 +353,7 @@ mod tests {
         for _ in 0..4 {
             pair.slot(false);
         }
-        pair.operator.push_order(Order::ImageSettings {
+        pair.operator.push_order(Order::ImageSettings(ImageOrder {
             roi: Roi {
                 x0: 0,
                 y0: 0,
@@ -365,7 +365,7 @@ mod tests {
             scale: 0,
             size_bytes: 195,
             trunk_bytes: 39,
-        });
+        }));
         let cancelled = pair.slot(false);
         assert!(cancelled.ci && cancelled.trunk.is_empty(), "{cancelled:?}");
         assert!(pair.events.contains(&Event::ImageCancelled));

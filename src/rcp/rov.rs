@@ -384,9 +384,7 @@ impl Rov {
                 }
                 self.nav = order.nav;
             }
-            order @ (Order::GoTo { .. }
-            | Order::ImageSettings { .. }
-            | Order::HoldHeading { .. }) => {
+            order @ (Order::GoTo { .. } | Order::ImageSettings(_) | Order::HoldHeading { .. }) => {
                 if msg.oid == self.eoid {
                     self.eoid = !self.eoid;
                     self.loc = false;
@@ -445,7 +443,7 @@ impl Rov {
     }
 
     fn execute(&mut self, order: Order) {
-        if !matches!(order, Order::ImageSettings { .. }) {
+        if !matches!(order, Order::ImageSettings(_)) {
             self.hold = None;
         }
         match order {
@@ -466,22 +464,8 @@ impl Rov {
             } => {
                 self.heading_hold_deg = enable.then_some(f64::from(heading_deg));
             }
-            Order::ImageSettings {
-                roi,
-                roi_shift,
-                gray,
-                scale,
-                size_bytes,
-                trunk_bytes,
-            } => {
-                self.settings = ImageSettings {
-                    roi: (roi.to_array() != [0; 4]).then_some(roi),
-                    roi_shift,
-                    gray,
-                    scale,
-                    size_bytes,
-                    trunk_bytes,
-                };
+            Order::ImageSettings(image) => {
+                self.settings = ImageSettings::from(image);
                 if self.image.is_some() {
                     self.ci = true;
                     self.image = None;

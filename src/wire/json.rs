@@ -17,7 +17,7 @@
 use serde_json::{Map, Value};
 
 use super::message::{Message, MessageRepr};
-use super::operator::{self, Order, Roi, Velocity};
+use super::operator::{self, ImageOrder, Order, Roi, Velocity};
 use super::rov::{self, BasicStatus, Status};
 use super::{Error, Nav};
 
@@ -332,14 +332,14 @@ fn order_fields(o: &Fields<'_>) -> Result<Order, JsonError> {
                     c.map(|c| Roi::from_array([c[0], c[1], c[2], c[3]]))
                 })
                 .ok_or_else(|| o.bad("roi", "[x0, y0, x1, y1], each 0..=1023", roi_value))?;
-            Order::ImageSettings {
+            Order::ImageSettings(ImageOrder {
                 roi,
                 roi_shift: o.int("roi_shift", 0, 15)? as u8,
                 gray: o.bool("gray")?,
                 scale: o.int("scale", 0, 3)? as u8,
                 size_bytes: o.int("size_bytes", 0, u16::MAX.into())? as u16,
                 trunk_bytes: o.int("trunk_bytes", 0, u8::MAX.into())? as u8,
-            }
+            })
         }
         "hold_heading" => Order::HoldHeading {
             heading_deg: heading(o)?,
@@ -458,20 +458,13 @@ fn order_object(order: &Order) -> Map<String, Value> {
             m.insert("z_cm".into(), z_cm.into());
             m.insert("heading_deg".into(), heading_deg.into());
         }
-        Order::ImageSettings {
-            roi,
-            roi_shift,
-            gray,
-            scale,
-            size_bytes,
-            trunk_bytes,
-        } => {
-            m.insert("roi".into(), roi.to_array().to_vec().into());
-            m.insert("roi_shift".into(), roi_shift.into());
-            m.insert("gray".into(), gray.into());
-            m.insert("scale".into(), scale.into());
-            m.insert("size_bytes".into(), size_bytes.into());
-            m.insert("trunk_bytes".into(), trunk_bytes.into());
+        Order::ImageSettings(image) => {
+            m.insert("roi".into(), image.roi.to_array().to_vec().into());
+            m.insert("roi_shift".into(), image.roi_shift.into());
+            m.insert("gray".into(), image.gray.into());
+            m.insert("scale".into(), image.scale.into());
+            m.insert("size_bytes".into(), image.size_bytes.into());
+            m.insert("trunk_bytes".into(), image.trunk_bytes.into());
         }
         Order::HoldHeading {
             heading_deg,

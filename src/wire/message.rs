@@ -239,14 +239,14 @@ impl core::fmt::Display for MessageRepr {
                         f64::from(y_cm) / 100.0,
                         f64::from(z_cm) / 100.0
                     ),
-                    operator::Order::ImageSettings {
+                    operator::Order::ImageSettings(operator::ImageOrder {
                         roi,
                         roi_shift,
                         gray,
                         scale,
                         size_bytes,
                         trunk_bytes,
-                    } => {
+                    }) => {
                         if roi.is_none() {
                             write!(f, " roi=none")?;
                         } else {

@@ -496,6 +496,23 @@ impl Velocity {
     }
 }
 
+/// An ImageSettings order: how the next images are taken, encoded and cut.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct ImageOrder {
+    /// Region of interest in pixels (all zero: none).
+    pub roi: Roi,
+    /// ROI up-shift in bit-planes, 0..=15.
+    pub roi_shift: u8,
+    /// Capture in grey.
+    pub gray: bool,
+    /// Capture downscale exponent, 0..=3 (size / 2^scale).
+    pub scale: u8,
+    /// Target encoded size in bytes.
+    pub size_bytes: u16,
+    /// Trunk size in bytes.
+    pub trunk_bytes: u8,
+}
+
 /// One order, the body of an operator message.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Order {
@@ -513,20 +530,7 @@ pub enum Order {
         heading_deg: u16,
     },
     /// Settings for the next images; cancels the image in flight.
-    ImageSettings {
-        /// Region of interest in pixels (all zero: none).
-        roi: Roi,
-        /// ROI up-shift in bit-planes, 0..=15.
-        roi_shift: u8,
-        /// Capture in grey.
-        gray: bool,
-        /// Capture downscale exponent, 0..=3 (size / 2^scale).
-        scale: u8,
-        /// Target encoded size in bytes.
-        size_bytes: u16,
-        /// Trunk size in bytes.
-        trunk_bytes: u8,
-    },
+    ImageSettings(ImageOrder),
     /// Hold (or release) a heading.
     HoldHeading {
         /// Heading, whole degrees 0..=359.
@@ -549,7 +553,7 @@ impl Order {
         match self {
             Order::Velocity(_) => order_type::VELOCITY,
             Order::GoTo { .. } => order_type::GOTO,
-            Order::ImageSettings { .. } => order_type::IMAGE_SETTINGS,
+            Order::ImageSettings(_) => order_type::IMAGE_SETTINGS,
             Order::HoldHeading { .. } => order_type::HOLD_HEADING,
             Order::Unknown { ot, .. } => *ot,
         }
@@ -565,7 +569,7 @@ impl Order {
         match self {
             Order::Velocity(_) => "velocity",
             Order::GoTo { .. } => "goto",
-            Order::ImageSettings { .. } => "image_settings",
+            Order::ImageSettings(_) => "image_settings",
             Order::HoldHeading { .. } => "hold_heading",
             Order::Unknown { .. } => "unknown",
         }
@@ -576,7 +580,7 @@ impl Order {
         match self {
             Order::Velocity(_) => field::VEL_END,
             Order::GoTo { .. } => field::GOTO_END,
-            Order::ImageSettings { .. } => field::IMG_END,
+            Order::ImageSettings(_) => field::IMG_END,
             Order::HoldHeading { .. } => field::HH_END,
             Order::Unknown { .. } => MESSAGE_BYTES,
         }
@@ -643,14 +647,14 @@ impl Repr {
                     "image_settings reserved bit",
                     mode & field::IMG_MODE_RESERVED,
                 )?;
-                Order::ImageSettings {
+                Order::ImageSettings(ImageOrder {
                     roi: packet.image_roi(),
                     roi_shift: packet.image_roi_shift(),
                     gray: packet.image_gray(),
                     scale: packet.image_scale(),
                     size_bytes: packet.image_size_bytes(),
                     trunk_bytes: packet.image_trunk_bytes(),
-                }
+                })
             }
             order_type::HOLD_HEADING => {
                 let mode = packet.byte(field::HH_MODE);
@@ -699,17 +703,12 @@ impl Repr {
                 }
             }
             Order::GoTo { heading_deg, .. } => check_heading("heading_deg", heading_deg)?,
-            Order::ImageSettings {
-                roi,
-                roi_shift,
-                scale,
-                ..
-            } => {
-                for c in roi.to_array() {
+            Order::ImageSettings(image) => {
+                for c in image.roi.to_array() {
                     check_range("roi", c.into(), 0, 1023, "pixel coordinates 0..=1023")?;
                 }
-                check_range("roi_shift", roi_shift.into(), 0, 15, "0..=15")?;
-                check_range("scale", scale.into(), 0, 3, "0..=3")?;
+                check_range("roi_shift", image.roi_shift.into(), 0, 15, "0..=15")?;
+                check_range("scale", image.scale.into(), 0, 3, "0..=3")?;
             }
             Order::HoldHeading { heading_deg, .. } => check_heading("heading_deg", heading_deg)?,
             Order::Unknown { ot, .. } => {
@@ -756,20 +755,13 @@ impl Repr {
                 packet.set_goto_z_cm(z_cm);
                 packet.set_goto_heading_deg(heading_deg);
             }
-            Order::ImageSettings {
-                roi,
-                roi_shift,
-                gray,
-                scale,
-                size_bytes,
-                trunk_bytes,
-            } => {
-                packet.set_image_roi(roi);
-                packet.set_image_roi_shift(roi_shift);
-                packet.set_image_gray(gray);
-                packet.set_image_scale(scale);
-                packet.set_image_size_bytes(size_bytes);
-                packet.set_image_trunk_bytes(trunk_bytes);
+            Order::ImageSettings(image) => {
+                packet.set_image_roi(image.roi);
+                packet.set_image_roi_shift(image.roi_shift);
+                packet.set_image_gray(image.gray);
+                packet.set_image_scale(image.scale);
+                packet.set_image_size_bytes(image.size_bytes);
+                packet.set_image_trunk_bytes(image.trunk_bytes);
             }
             Order::HoldHeading {
                 heading_deg,
@@ -847,14 +839,14 @@ mod tests {
                     eisn: true,
                     ic: false,
                     rit: 0,
-                    order: Order::ImageSettings {
+                    order: Order::ImageSettings(ImageOrder {
                         roi: Roi::from_array([100, 80, 420, 300]),
                         roi_shift: 3,
                         gray: true,
                         scale: 1,
                         size_bytes: 2000,
                         trunk_bytes: 39,
-                    },
+                    }),
                 },
             ),
             (
