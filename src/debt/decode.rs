@@ -43,7 +43,10 @@ pub fn decode_with_loss(data: &[u8], lost: &[Range<usize>]) -> Result<Image, Err
     let mut coefficients = vec![Vec::new(); header.components()];
     match header.segments {
         None => {
-            let end = data.len().min(first_lost);
+            let end = data
+                .len()
+                .min(first_lost)
+                .min(header.restore_at.unwrap_or(usize::MAX));
             decode_part(
                 &header,
                 &data[header_bytes.min(end)..end],
@@ -80,7 +83,19 @@ pub fn decode_with_loss(data: &[u8], lost: &[Range<usize>]) -> Result<Image, Err
     } else {
         synthesise_channels(&coefficients, w, h, &header)
     };
-    Ok(upscale(img, header.width, header.height))
+    let img = upscale(img, header.width, header.height);
+    // The restoration filter, when the whole of it arrived.
+    if let Some(at) = header.restore_at {
+        let len = super::restore::Filter::len_for(img.channels);
+        let arrived = data.len() >= at + len && first_lost >= at + len;
+        if let Some(filter) = arrived
+            .then(|| super::restore::Filter::from_bytes(&data[at..], img.channels))
+            .flatten()
+        {
+            return Ok(super::restore::apply(&img, &filter));
+        }
+    }
+    Ok(img)
 }
 
 /// A plane of `len` zeros with `coefficients` put in it. Zeroed by writing: the wavelet reads

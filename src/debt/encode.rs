@@ -29,6 +29,10 @@ pub struct EncodeOptions {
     pub roi_shift: u32,
     /// Split into independently decodable segments for lossy links.
     pub segments: Option<Segments>,
+    /// End the budget with a restoration filter fitted on the stream's own decode (version 3,
+    /// [`super::restore`]); only for lossy, unsegmented streams, and only from
+    /// [`super::restore::MIN_BUDGET_BYTES`] (below, the stream is version 1).
+    pub restore: bool,
 }
 
 impl Default for EncodeOptions {
@@ -42,8 +46,38 @@ impl Default for EncodeOptions {
             roi: None,
             roi_shift: 3,
             segments: None,
+            restore: false,
         }
     }
+}
+
+/// Completes a version 3 stream: states where its payload ends, fits the restoration filter
+/// on the stream's own decode (its prefix without the filter) and appends it.
+fn finish_restored(out: &mut Vec<u8>, header: &Header, img: &Image) -> Result<(), Error> {
+    let at = out.len();
+    if at > super::header::MAX_RESTORE_AT {
+        return Err(Error::Setting {
+            field: "restore",
+            expected: "a payload below 16 MiB",
+            found: at as u64,
+        });
+    }
+    let header = Header {
+        restore_at: Some(at),
+        ..*header
+    };
+    let mut head = Vec::with_capacity(header.len());
+    header.write(&mut head);
+    out[..head.len()].copy_from_slice(&head);
+    let decoded = super::decode(out)?;
+    let reference = if header.gray && img.channels == 3 {
+        super::picture::to_gray(img)
+    } else {
+        img.clone()
+    };
+    let filter = super::restore::fit_checked(&decoded, &reference);
+    out.extend_from_slice(&filter.to_bytes());
+    Ok(())
 }
 
 /// Encodes an image within `options.bytes` bytes.
@@ -109,6 +143,20 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
             ))
         }
     };
+    if options.restore && (options.lossless || options.segments.is_some()) {
+        return Err(Error::Setting {
+            field: "restore",
+            expected: "a lossy stream without segments",
+            found: 1,
+        });
+    }
+    let channels = if options.gray || img.channels == 1 {
+        1
+    } else {
+        3
+    };
+    let filter_bytes = crate::debt::restore::Filter::len_for(channels);
+    let restore = options.restore && options.bytes >= crate::debt::restore::MIN_BUDGET_BYTES;
     let header = Header {
         width: img.width,
         height: img.height,
@@ -121,6 +169,7 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
             segments,
             weights: [1; MAX_SEGMENTS + 1],
         }),
+        restore_at: restore.then_some(0),
     };
     if let Some(seg) = options.segments {
         seg.check()?;
@@ -140,9 +189,13 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
     let mut planes = to_components(&coded, header.gray, header.lossless);
     transform_planes(&mut planes, w, h, &header, true);
     let Some(layout) = header.segments else {
-        let budget = options.bytes - out.len();
+        let trailer = if restore { filter_bytes } else { 0 };
+        let budget = options.bytes.saturating_sub(out.len() + trailer);
         let (bands, _) = build_bands(&header, Some(&planes), 0, 1);
         out.extend_from_slice(&encode_bands(bands, budget).0);
+        if restore {
+            finish_restored(&mut out, &header, img)?;
+        }
         return Ok(out);
     };
     let count = layout.segments.count + 1;

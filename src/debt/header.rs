@@ -12,6 +12,11 @@ use super::{Error, Rect};
 pub const VERSION: u8 = 1;
 /// The same format split into trunk-interleaved segments ([`Segments`]).
 pub const VERSION_SEGMENTED: u8 = 2;
+/// Version 1's stream followed by a restoration filter ([`super::restore`]) at the offset the
+/// header gives ([`Header::restore_at`]).
+pub const VERSION_RESTORED: u8 = 3;
+/// The largest payload end a version 3 header can state.
+pub const MAX_RESTORE_AT: usize = (1 << 24) - 1;
 /// Most segments a stream can have.
 pub const MAX_SEGMENTS: usize = 16;
 /// Smallest trunk a segmented stream can be cut for.
@@ -112,6 +117,9 @@ pub struct Header {
     pub roi: Option<([u8; 4], u32)>,
     /// Segmenting, for version 2 streams.
     pub segments: Option<SegmentLayout>,
+    /// For version 3 streams: the offset in the stream where the payload ends and the
+    /// restoration filter starts (24 bits).
+    pub restore_at: Option<usize>,
 }
 
 /// ROI cells per image side in the header.
@@ -122,6 +130,7 @@ impl Header {
     pub fn len(&self) -> usize {
         let base = if self.roi.is_some() { 8 } else { 5 };
         base + self.segments.map_or(0, |l| 3 + l.segments.count)
+            + 3 * usize::from(self.restore_at.is_some())
     }
 
     /// Always false: a header is never empty (for clippy's len-without-is-empty).
@@ -134,6 +143,8 @@ impl Header {
             MAGIC
                 | if self.segments.is_some() {
                     VERSION_SEGMENTED
+                } else if self.restore_at.is_some() {
+                    VERSION_RESTORED
                 } else {
                     VERSION
                 },
@@ -160,6 +171,9 @@ impl Header {
             out.push(layout.segments.trunk_bytes as u8);
             out.extend_from_slice(&layout.weights[..=layout.segments.count]);
         }
+        if let Some(at) = self.restore_at {
+            out.extend_from_slice(&(at.min(MAX_RESTORE_AT) as u32).to_be_bytes()[1..]);
+        }
     }
 
     /// Reads a header from the start of a stream.
@@ -172,7 +186,7 @@ impl Header {
             return Err(Error::NotDebt { found: first });
         }
         let version = first & 0x0f;
-        if version != VERSION && version != VERSION_SEGMENTED {
+        if ![VERSION, VERSION_SEGMENTED, VERSION_RESTORED].contains(&version) {
             return Err(Error::Version {
                 found: first & 0x0f,
             });
@@ -194,6 +208,7 @@ impl Header {
             scale: u32::from((flags >> 1) & 0x03),
             roi: None,
             segments: None,
+            restore_at: None,
         };
         if flags & 1 != 0 {
             if data.len() < 8 {
@@ -246,6 +261,24 @@ impl Header {
             weights[..=segments.count].copy_from_slice(read);
             header.segments = Some(SegmentLayout { segments, weights });
             header.check_trunk()?;
+        }
+        if version == VERSION_RESTORED {
+            let at = if header.roi.is_some() { 8 } else { 5 };
+            let Some(&[a, b, c]) = data.get(at..at + 3) else {
+                return Err(Error::Truncated {
+                    expected: at + 3,
+                    found: data.len(),
+                });
+            };
+            let restore_at = u32::from_be_bytes([0, a, b, c]) as usize;
+            if restore_at < at + 3 {
+                return Err(Error::Setting {
+                    field: "restoration offset",
+                    expected: "at least the header's length",
+                    found: restore_at as u64,
+                });
+            }
+            header.restore_at = Some(restore_at);
         }
         Ok(header)
     }
@@ -320,6 +353,7 @@ mod tests {
             scale: 2,
             roi: Some(([1, 30, 2, 29], 7)),
             segments: None,
+            restore_at: None,
         };
         let mut out = Vec::new();
         h.write(&mut out);
@@ -343,6 +377,20 @@ mod tests {
         assert_eq!(&out[8..], &[2, 39, 9, 255, 1, 40]);
         assert_eq!(segmented.len(), out.len());
         assert_eq!(Header::read(&out).unwrap(), segmented);
+        let restored = Header {
+            restore_at: Some(0x01_02_03),
+            ..h
+        };
+        let mut restored_out = Vec::new();
+        restored.write(&mut restored_out);
+        assert_eq!(restored_out[0], 0xd3);
+        assert_eq!(&restored_out[8..], &[1, 2, 3]);
+        assert_eq!(restored.len(), 11);
+        assert_eq!(Header::read(&restored_out).unwrap(), restored);
+        assert!(matches!(
+            Header::read(&restored_out[..10]),
+            Err(Error::Truncated { expected: 11, .. })
+        ));
         // A zero weight, a segment count or trunk out of range, a cut header: errors.
         let mut bad = out.clone();
         bad[12] = 0;

@@ -34,6 +34,7 @@ pub mod metrics;
 pub mod picture;
 pub mod rangecoder;
 pub mod resilient;
+pub mod restore;
 mod transform;
 pub mod trial;
 pub mod wavelet;
@@ -195,6 +196,94 @@ mod tests {
     }
 
     #[test]
+    fn a_restored_stream_is_the_plain_payload_then_its_filter_and_every_prefix_decodes() {
+        for channels in [1, 3] {
+            let img = synthetic(96, 64, channels);
+            let bytes = restore::MIN_BUDGET_BYTES + 37;
+            let opts = EncodeOptions {
+                bytes,
+                restore: true,
+                ..EncodeOptions::default()
+            };
+            let v3 = encode(&img, &opts).unwrap();
+            assert_eq!(v3.len(), bytes);
+            assert_eq!(v3[0], 0xd3);
+            let header = Header::read(&v3).unwrap();
+            let at = header.restore_at.unwrap();
+            let filter_bytes = restore::Filter::len_for(channels);
+            assert_eq!(at + filter_bytes, bytes);
+            // The payload is a version 1 stream's of the bytes left for it.
+            let v1 = encode(
+                &img,
+                &EncodeOptions {
+                    bytes: bytes - 3 - filter_bytes,
+                    ..EncodeOptions::default()
+                },
+            )
+            .unwrap();
+            assert_eq!(v1[0], 0xd1);
+            assert_eq!(&v3[header.len()..at], &v1[5..]);
+            // Without (all of) its filter a prefix decodes as the plain stream; with it, the
+            // picture is at least as close to the original.
+            let plain = decode(&v1).unwrap();
+            assert_eq!(decode(&v3[..at]).unwrap(), plain);
+            assert_eq!(decode(&v3[..bytes - 1]).unwrap(), plain);
+            let restored = decode(&v3).unwrap();
+            assert!(
+                psnr(&restored, &img) >= psnr(&plain, &img),
+                "{channels} channels"
+            );
+            for cut in (0..bytes).step_by(97) {
+                let _ = decode(&v3[..cut]);
+            }
+            // A lost filter byte leaves the picture unfiltered.
+            let lost: Vec<std::ops::Range<usize>> = std::iter::once(at + 2..at + 3).collect();
+            assert_eq!(decode_with_loss(&v3, &lost).unwrap(), plain);
+        }
+    }
+
+    #[test]
+    fn restore_is_for_lossy_plain_streams_from_its_smallest_budget() {
+        let img = synthetic(32, 32, 3);
+        let small = EncodeOptions {
+            bytes: restore::MIN_BUDGET_BYTES - 1,
+            restore: true,
+            ..EncodeOptions::default()
+        };
+        assert_eq!(encode(&img, &small).unwrap()[0], 0xd1);
+        for lossless in [true, false] {
+            let opts = EncodeOptions {
+                lossless,
+                segments: (!lossless).then_some(Segments {
+                    count: 2,
+                    trunk_bytes: 39,
+                }),
+                ..small.clone()
+            };
+            assert!(matches!(
+                encode(&img, &opts),
+                Err(Error::Setting {
+                    field: "restore",
+                    ..
+                })
+            ));
+        }
+        // A version 3 header whose offset is inside the header is refused, not a panic.
+        let mut bad = encode(
+            &img,
+            &EncodeOptions {
+                bytes: 4000,
+                restore: true,
+                ..EncodeOptions::default()
+            },
+        )
+        .unwrap();
+        bad[5..8].copy_from_slice(&[0, 0, 4]);
+        assert!(decode(&bad).is_err());
+        assert!(decode(&bad[..6]).is_err());
+    }
+
+    #[test]
     fn bad_roi_is_named() {
         let img = synthetic(16, 8, 1);
         let roi = Some(Rect {
@@ -328,6 +417,7 @@ mod tests {
             levels: 3,
             scale: 0,
             roi: None,
+            restore_at: None,
             segments: Some(SegmentLayout {
                 segments: Segments {
                     count: 16,

@@ -114,6 +114,7 @@ impl Layout {
             scale: 0,
             roi: None,
             segments: None,
+            restore_at: None,
         }
     }
 
