@@ -3,17 +3,21 @@
 //! filter's bytes plus the version 3 header's 3) filtered with the taps fitted on its own decode.
 //! Prints, per set (a directory) and budget, the mean PSNR of both and the mean gain, dB.
 //!
-//! `cargo run --release --example restore_probe -- [--bytes 300,...] [--row-step 1] DIR...`
+//! With `--cross`, a second variant: each colour channel's filter also takes the 12 differences
+//! of the decoded luma (24 taps a channel, 72 B), fitted and quantised the same way.
+//!
+//! `cargo run --release --example restore_probe -- [--bytes 300,...] [--row-step 1] [--cross] DIR...`
 
 use rovlink::debt::metrics::psnr;
-use rovlink::debt::restore::{Filter, apply, fit};
-use rovlink::debt::{self, EncodeOptions, picture};
+use rovlink::debt::restore::{Filter, OFFSETS, TAP_SCALE, apply, fit};
+use rovlink::debt::{self, EncodeOptions, Image, picture};
 use std::path::PathBuf;
 use std::time::Instant;
 
 fn main() {
     let mut budgets = vec![300, 500, 1000, 2000, 4000, 8000, 16000];
     let mut row_step = 1;
+    let mut cross = false;
     let mut dirs = Vec::new();
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
@@ -27,11 +31,12 @@ fn main() {
                     .collect()
             }
             "--row-step" => row_step = args.next().and_then(|s| s.parse().ok()).unwrap_or(1),
+            "--cross" => cross = true,
             _ => dirs.push(PathBuf::from(arg)),
         }
     }
-    println!("| set | bytes | plain dB | restored dB | gain dB | fit+apply ms |");
-    println!("|---|---|---|---|---|---|");
+    println!("| set | bytes | plain dB | restored dB | gain dB | fit+apply ms | cross gain dB |");
+    println!("|---|---|---|---|---|---|---|");
     for dir in &dirs {
         let images = match picture::load(dir) {
             Ok(images) => images,
@@ -41,7 +46,7 @@ fn main() {
             }
         };
         for &bytes in &budgets {
-            let (mut plain_db, mut restored_db, mut ms) = (0.0, 0.0, 0.0);
+            let (mut plain_db, mut restored_db, mut ms, mut cross_db) = (0.0, 0.0, 0.0, 0.0);
             for (_, img) in &images {
                 let trailer = Filter::len_for(img.channels) + 3;
                 let at = |bytes: usize| {
@@ -58,10 +63,19 @@ fn main() {
                 let restored = apply(&short, &filter);
                 ms += started.elapsed().as_secs_f64() * 1e3;
                 restored_db += psnr(&restored, img);
+                if cross && img.channels == 3 {
+                    let short = at(bytes.saturating_sub(72 + 3).max(8));
+                    cross_db += psnr(&cross_filtered(&short, img), img);
+                }
             }
             let n = images.len() as f64;
+            let cross_gain = if cross {
+                format!("{:+.3}", (cross_db - plain_db) / n)
+            } else {
+                "-".into()
+            };
             println!(
-                "| {} | {bytes} | {:.2} | {:.2} | {:+.3} | {:.1} |",
+                "| {} | {bytes} | {:.2} | {:.2} | {:+.3} | {:.1} | {cross_gain} |",
                 dir.display(),
                 plain_db / n,
                 restored_db / n,
@@ -70,4 +84,104 @@ fn main() {
             );
         }
     }
+}
+
+/// The 12 mirrored-pair differences of `plane` (w x h) at (x, y), borders repeated.
+fn differences(plane: &[f64], w: usize, h: usize, x: usize, y: usize) -> [f64; 12] {
+    let at = |dx: i32, dy: i32| {
+        let xx = (x as i64 + i64::from(dx)).clamp(0, w as i64 - 1) as usize;
+        let yy = (y as i64 + i64::from(dy)).clamp(0, h as i64 - 1) as usize;
+        plane[yy * w + xx]
+    };
+    let centre = at(0, 0);
+    std::array::from_fn(|k| {
+        let (dx, dy) = OFFSETS[k];
+        at(dx, dy) + at(-dx, -dy) - 2.0 * centre
+    })
+}
+
+/// Least squares `A a = b` (ridge 1e-3 of the mean diagonal) by Gaussian elimination.
+fn least_squares(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Vec<f64> {
+    let n = b.len();
+    let ridge = 1e-3 * (0..n).map(|j| a[j][j]).sum::<f64>() / n as f64 + 1e-9;
+    for (j, row) in a.iter_mut().enumerate() {
+        row[j] += ridge;
+    }
+    for col in 0..n {
+        let pivot = (col..n)
+            .max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))
+            .unwrap_or(col);
+        a.swap(col, pivot);
+        b.swap(col, pivot);
+        let (pivot_row, pivot_b) = (a[col].clone(), b[col]);
+        for (row, value) in a.iter_mut().zip(b.iter_mut()).skip(col + 1) {
+            let f = row[col] / pivot_row[col];
+            for (r, p) in row.iter_mut().zip(&pivot_row).skip(col) {
+                *r -= f * p;
+            }
+            *value -= f * pivot_b;
+        }
+    }
+    let mut x = vec![0.0; n];
+    for row in (0..n).rev() {
+        let s: f64 = (row + 1..n).map(|k| a[row][k] * x[k]).sum();
+        x[row] = (b[row] - s) / a[row][row];
+    }
+    x
+}
+
+/// `decoded` with each channel filtered by 24 quantised taps fitted against `original`: its
+/// own 12 differences and the decoded luma's 12.
+fn cross_filtered(decoded: &Image, original: &Image) -> Image {
+    let (w, h, n) = (decoded.width, decoded.height, decoded.channels);
+    let luma: Vec<f64> = picture::to_gray(decoded)
+        .data
+        .iter()
+        .map(|&v| f64::from(v))
+        .collect();
+    let mut out = decoded.clone();
+    for c in 0..n {
+        let plane: Vec<f64> = decoded
+            .data
+            .iter()
+            .skip(c)
+            .step_by(n)
+            .map(|&v| f64::from(v))
+            .collect();
+        let features = |x: usize, y: usize| -> Vec<f64> {
+            let mut f = differences(&plane, w, h, x, y).to_vec();
+            f.extend(differences(&luma, w, h, x, y));
+            f
+        };
+        let mut a = vec![vec![0.0; 24]; 24];
+        let mut b = vec![0.0; 24];
+        for y in 0..h {
+            for x in 0..w {
+                let f = features(x, y);
+                let i = (y * w + x) * n + c;
+                let e = f64::from(original.data[i]) - f64::from(decoded.data[i]);
+                for j in 0..24 {
+                    b[j] += f[j] * e;
+                    for k in 0..24 {
+                        a[j][k] += f[j] * f[k];
+                    }
+                }
+            }
+        }
+        let scale = f64::from(TAP_SCALE);
+        let taps: Vec<f64> = least_squares(a, b)
+            .iter()
+            .map(|t| (t * scale).round().clamp(-127.0, 127.0) / scale)
+            .collect();
+        for y in 0..h {
+            for x in 0..w {
+                let f = features(x, y);
+                let i = (y * w + x) * n + c;
+                let v = f64::from(decoded.data[i])
+                    + f.iter().zip(&taps).map(|(f, t)| f * t).sum::<f64>();
+                out.data[i] = v.round().clamp(0.0, 255.0) as u8;
+            }
+        }
+    }
+    out
 }
