@@ -4,9 +4,11 @@
 //! Prints, per set (a directory) and budget, the mean PSNR of both and the mean gain, dB.
 //!
 //! With `--cross`, a second variant: each colour channel's filter also takes the 12 differences
-//! of the decoded luma (24 taps a channel, 72 B), fitted and quantised the same way.
+//! of the decoded luma (24 taps a channel, 72 B), fitted and quantised the same way. With
+//! `--ycc`, a third: the filter works in YCbCr (BT.601), luma with its 12 taps, each chroma with
+//! its own 12 and the luma's 12 (60 B).
 //!
-//! `cargo run --release --example restore_probe -- [--bytes 300,...] [--row-step 1] [--cross] DIR...`
+//! `cargo run --release --example restore_probe -- [--bytes 300,...] [--row-step 1] [--cross] [--ycc] DIR...`
 
 use rovlink::debt::metrics::psnr;
 use rovlink::debt::restore::{Filter, OFFSETS, TAP_SCALE, apply, fit};
@@ -18,6 +20,7 @@ fn main() {
     let mut budgets = vec![300, 500, 1000, 2000, 4000, 8000, 16000];
     let mut row_step = 1;
     let mut cross = false;
+    let mut ycc = false;
     let mut dirs = Vec::new();
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
@@ -32,11 +35,14 @@ fn main() {
             }
             "--row-step" => row_step = args.next().and_then(|s| s.parse().ok()).unwrap_or(1),
             "--cross" => cross = true,
+            "--ycc" => ycc = true,
             _ => dirs.push(PathBuf::from(arg)),
         }
     }
-    println!("| set | bytes | plain dB | restored dB | gain dB | fit+apply ms | cross gain dB |");
-    println!("|---|---|---|---|---|---|---|");
+    println!(
+        "| set | bytes | plain dB | restored dB | gain dB | fit+apply ms | cross gain dB | YCbCr gain dB |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
     for dir in &dirs {
         let images = match picture::load(dir) {
             Ok(images) => images,
@@ -47,6 +53,7 @@ fn main() {
         };
         for &bytes in &budgets {
             let (mut plain_db, mut restored_db, mut ms, mut cross_db) = (0.0, 0.0, 0.0, 0.0);
+            let mut ycc_db = 0.0;
             for (_, img) in &images {
                 let trailer = Filter::len_for(img.channels) + 3;
                 let at = |bytes: usize| {
@@ -67,6 +74,10 @@ fn main() {
                     let short = at(bytes.saturating_sub(72 + 3).max(8));
                     cross_db += psnr(&cross_filtered(&short, img), img);
                 }
+                if ycc && img.channels == 3 {
+                    let short = at(bytes.saturating_sub(60 + 3).max(8));
+                    ycc_db += psnr(&ycc_filtered(&short, img), img);
+                }
             }
             let n = images.len() as f64;
             let cross_gain = if cross {
@@ -74,8 +85,13 @@ fn main() {
             } else {
                 "-".into()
             };
+            let ycc_gain = if ycc {
+                format!("{:+.3}", (ycc_db - plain_db) / n)
+            } else {
+                "-".into()
+            };
             println!(
-                "| {} | {bytes} | {:.2} | {:.2} | {:+.3} | {:.1} | {cross_gain} |",
+                "| {} | {bytes} | {:.2} | {:.2} | {:+.3} | {:.1} | {cross_gain} | {ycc_gain} |",
                 dir.display(),
                 plain_db / n,
                 restored_db / n,
@@ -181,6 +197,99 @@ fn cross_filtered(decoded: &Image, original: &Image) -> Image {
                     + f.iter().zip(&taps).map(|(f, t)| f * t).sum::<f64>();
                 out.data[i] = v.round().clamp(0.0, 255.0) as u8;
             }
+        }
+    }
+    out
+}
+
+/// The BT.601 components (Y, Cb, Cr) of a colour picture, as planes.
+fn ycc_planes(img: &Image) -> [Vec<f64>; 3] {
+    let px = |i: usize| {
+        let p = &img.data[i * 3..i * 3 + 3];
+        (f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))
+    };
+    let count = img.width * img.height;
+    [
+        (0..count)
+            .map(|i| {
+                let (r, g, b) = px(i);
+                0.299 * r + 0.587 * g + 0.114 * b
+            })
+            .collect(),
+        (0..count)
+            .map(|i| {
+                let (r, g, b) = px(i);
+                -0.168736 * r - 0.331264 * g + 0.5 * b
+            })
+            .collect(),
+        (0..count)
+            .map(|i| {
+                let (r, g, b) = px(i);
+                0.5 * r - 0.418688 * g - 0.081312 * b
+            })
+            .collect(),
+    ]
+}
+
+/// Quantised least-squares taps bringing `plane + features . taps` closest to `target`.
+fn fitted(
+    features: &dyn Fn(usize) -> Vec<f64>,
+    plane: &[f64],
+    target: &[f64],
+    taps: usize,
+) -> Vec<f64> {
+    let mut a = vec![vec![0.0; taps]; taps];
+    let mut b = vec![0.0; taps];
+    for (i, (&p, &t)) in plane.iter().zip(target).enumerate() {
+        let f = features(i);
+        let e = t - p;
+        for j in 0..taps {
+            b[j] += f[j] * e;
+            for k in 0..taps {
+                a[j][k] += f[j] * f[k];
+            }
+        }
+    }
+    let scale = f64::from(TAP_SCALE);
+    least_squares(a, b)
+        .iter()
+        .map(|t| (t * scale).round().clamp(-127.0, 127.0) / scale)
+        .collect()
+}
+
+/// `decoded` filtered in YCbCr: luma by its own 12 taps, each chroma by its own 12 and the
+/// decoded luma's 12, fitted against `original`.
+fn ycc_filtered(decoded: &Image, original: &Image) -> Image {
+    let (w, h) = (decoded.width, decoded.height);
+    let got = ycc_planes(decoded);
+    let want = ycc_planes(original);
+    let mut out_planes = got.clone();
+    for c in 0..3 {
+        let features = |i: usize| -> Vec<f64> {
+            let (x, y) = (i % w, i / w);
+            let mut f = differences(&got[c], w, h, x, y).to_vec();
+            if c > 0 {
+                f.extend(differences(&got[0], w, h, x, y));
+            }
+            f
+        };
+        let taps = if c == 0 { 12 } else { 24 };
+        let t = fitted(&features, &got[c], &want[c], taps);
+        for (i, v) in out_planes[c].iter_mut().enumerate() {
+            *v += features(i).iter().zip(&t).map(|(f, t)| f * t).sum::<f64>();
+        }
+    }
+    let mut out = decoded.clone();
+    let [ys, cbs, crs] = &out_planes;
+    let components = ys.iter().zip(cbs).zip(crs);
+    for (pixel, ((&y, &cb), &cr)) in out.data.chunks_exact_mut(3).zip(components) {
+        let rgb = [
+            y + 1.402 * cr,
+            y - 0.344136 * cb - 0.714136 * cr,
+            y + 1.772 * cb,
+        ];
+        for (sample, v) in pixel.iter_mut().zip(rgb) {
+            *sample = v.round().clamp(0.0, 255.0) as u8;
         }
     }
     out
