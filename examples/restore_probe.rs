@@ -11,7 +11,7 @@
 //! `cargo run --release --example restore_probe -- [--bytes 300,...] [--row-step 1] [--cross] [--ycc] DIR...`
 
 use rovlink::debt::metrics::psnr;
-use rovlink::debt::restore::{Filter, OFFSETS, TAP_SCALE, apply, fit};
+use rovlink::debt::restore::{Filter, OFFSETS, TAP_SCALE, apply, fit, ridge_solve};
 use rovlink::debt::{self, EncodeOptions, Image, picture};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -116,40 +116,18 @@ fn differences(plane: &[f64], w: usize, h: usize, x: usize, y: usize) -> [f64; 1
     })
 }
 
-/// Least squares `A a = b` (ridge 1e-3 of the mean diagonal) by Gaussian elimination.
-fn least_squares(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Vec<f64> {
-    let n = b.len();
-    let ridge = 1e-3 * (0..n).map(|j| a[j][j]).sum::<f64>() / n as f64 + 1e-9;
-    for (j, row) in a.iter_mut().enumerate() {
-        row[j] += ridge;
-    }
-    for col in 0..n {
-        let pivot = (col..n)
-            .max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))
-            .unwrap_or(col);
-        a.swap(col, pivot);
-        b.swap(col, pivot);
-        let (pivot_row, pivot_b) = (a[col].clone(), b[col]);
-        for (row, value) in a.iter_mut().zip(b.iter_mut()).skip(col + 1) {
-            let f = row[col] / pivot_row[col];
-            for (r, p) in row.iter_mut().zip(&pivot_row).skip(col) {
-                *r -= f * p;
-            }
-            *value -= f * pivot_b;
-        }
-    }
-    let mut x = vec![0.0; n];
-    for row in (0..n).rev() {
-        let s: f64 = (row + 1..n).map(|k| a[row][k] * x[k]).sum();
-        x[row] = (b[row] - s) / a[row][row];
-    }
-    x
-}
-
 /// `decoded` with each channel filtered by 24 quantised taps fitted against `original`: its
 /// own 12 differences and the decoded luma's 12.
 fn cross_filtered(decoded: &Image, original: &Image) -> Image {
     let (w, h, n) = (decoded.width, decoded.height, decoded.channels);
+    let channel = |img: &Image, c: usize| -> Vec<f64> {
+        img.data
+            .iter()
+            .skip(c)
+            .step_by(n)
+            .map(|&v| f64::from(v))
+            .collect()
+    };
     let luma: Vec<f64> = picture::to_gray(decoded)
         .data
         .iter()
@@ -157,46 +135,17 @@ fn cross_filtered(decoded: &Image, original: &Image) -> Image {
         .collect();
     let mut out = decoded.clone();
     for c in 0..n {
-        let plane: Vec<f64> = decoded
-            .data
-            .iter()
-            .skip(c)
-            .step_by(n)
-            .map(|&v| f64::from(v))
-            .collect();
-        let features = |x: usize, y: usize| -> Vec<f64> {
-            let mut f = differences(&plane, w, h, x, y).to_vec();
-            f.extend(differences(&luma, w, h, x, y));
-            f
+        let plane = channel(decoded, c);
+        let features = |i: usize| -> [f64; 24] {
+            let (own, by_luma) = (
+                differences(&plane, w, h, i % w, i / w),
+                differences(&luma, w, h, i % w, i / w),
+            );
+            std::array::from_fn(|k| if k < 12 { own[k] } else { by_luma[k - 12] })
         };
-        let mut a = vec![vec![0.0; 24]; 24];
-        let mut b = vec![0.0; 24];
-        for y in 0..h {
-            for x in 0..w {
-                let f = features(x, y);
-                let i = (y * w + x) * n + c;
-                let e = f64::from(original.data[i]) - f64::from(decoded.data[i]);
-                for j in 0..24 {
-                    b[j] += f[j] * e;
-                    for k in 0..24 {
-                        a[j][k] += f[j] * f[k];
-                    }
-                }
-            }
-        }
-        let scale = f64::from(TAP_SCALE);
-        let taps: Vec<f64> = least_squares(a, b)
-            .iter()
-            .map(|t| (t * scale).round().clamp(-127.0, 127.0) / scale)
-            .collect();
-        for y in 0..h {
-            for x in 0..w {
-                let f = features(x, y);
-                let i = (y * w + x) * n + c;
-                let v = f64::from(decoded.data[i])
-                    + f.iter().zip(&taps).map(|(f, t)| f * t).sum::<f64>();
-                out.data[i] = v.round().clamp(0.0, 255.0) as u8;
-            }
+        let filtered = filtered(&features, &plane, &channel(original, c));
+        for (sample, v) in out.data.iter_mut().skip(c).step_by(n).zip(filtered) {
+            *sample = v.round().clamp(0.0, 255.0) as u8;
         }
     }
     out
@@ -231,29 +180,38 @@ fn ycc_planes(img: &Image) -> [Vec<f64>; 3] {
     ]
 }
 
-/// Quantised least-squares taps bringing `plane + features . taps` closest to `target`.
-fn fitted(
-    features: &dyn Fn(usize) -> Vec<f64>,
+/// `plane` plus `features . taps`, the taps fitted by least squares (the library's
+/// [`ridge_solve`]) to bring it closest to `target` and quantised as the stream's are.
+fn filtered<const N: usize>(
+    features: &dyn Fn(usize) -> [f64; N],
     plane: &[f64],
     target: &[f64],
-    taps: usize,
 ) -> Vec<f64> {
-    let mut a = vec![vec![0.0; taps]; taps];
-    let mut b = vec![0.0; taps];
+    let mut a = [[0.0; N]; N];
+    let mut b = [0.0; N];
     for (i, (&p, &t)) in plane.iter().zip(target).enumerate() {
         let f = features(i);
-        let e = t - p;
-        for j in 0..taps {
-            b[j] += f[j] * e;
-            for k in 0..taps {
+        for j in 0..N {
+            b[j] += f[j] * (t - p);
+            for k in 0..N {
                 a[j][k] += f[j] * f[k];
             }
         }
     }
     let scale = f64::from(TAP_SCALE);
-    least_squares(a, b)
+    let taps = ridge_solve(&a, &b)
+        .unwrap_or([0.0; N])
+        .map(|t| (t * scale).round().clamp(-127.0, 127.0) / scale);
+    plane
         .iter()
-        .map(|t| (t * scale).round().clamp(-127.0, 127.0) / scale)
+        .enumerate()
+        .map(|(i, &p)| {
+            p + features(i)
+                .iter()
+                .zip(&taps)
+                .map(|(f, t)| f * t)
+                .sum::<f64>()
+        })
         .collect()
 }
 
@@ -263,22 +221,19 @@ fn ycc_filtered(decoded: &Image, original: &Image) -> Image {
     let (w, h) = (decoded.width, decoded.height);
     let got = ycc_planes(decoded);
     let want = ycc_planes(original);
-    let mut out_planes = got.clone();
-    for c in 0..3 {
-        let features = |i: usize| -> Vec<f64> {
-            let (x, y) = (i % w, i / w);
-            let mut f = differences(&got[c], w, h, x, y).to_vec();
-            if c > 0 {
-                f.extend(differences(&got[0], w, h, x, y));
-            }
-            f
-        };
-        let taps = if c == 0 { 12 } else { 24 };
-        let t = fitted(&features, &got[c], &want[c], taps);
-        for (i, v) in out_planes[c].iter_mut().enumerate() {
-            *v += features(i).iter().zip(&t).map(|(f, t)| f * t).sum::<f64>();
+    let got = &got;
+    let own = |c: usize| move |i: usize| differences(&got[c], w, h, i % w, i / w);
+    let with_luma = |c: usize| {
+        move |i: usize| -> [f64; 24] {
+            let (mine, luma) = (own(c)(i), own(0)(i));
+            std::array::from_fn(|k| if k < 12 { mine[k] } else { luma[k - 12] })
         }
-    }
+    };
+    let out_planes = [
+        filtered(&own(0), &got[0], &want[0]),
+        filtered(&with_luma(1), &got[1], &want[1]),
+        filtered(&with_luma(2), &got[2], &want[2]),
+    ];
     let mut out = decoded.clone();
     let [ys, cbs, crs] = &out_planes;
     let components = ys.iter().zip(cbs).zip(crs);

@@ -70,12 +70,11 @@ fn finish_restored(out: &mut Vec<u8>, header: &Header, img: &Image) -> Result<()
     header.write(&mut head);
     out[..head.len()].copy_from_slice(&head);
     let decoded = super::decode(out)?;
-    let reference = if header.gray && img.channels == 3 {
-        super::picture::to_gray(img)
+    let filter = if header.gray && img.channels == 3 {
+        super::restore::fit_checked(&decoded, &super::picture::to_gray(img))
     } else {
-        img.clone()
+        super::restore::fit_checked(&decoded, img)
     };
-    let filter = super::restore::fit_checked(&decoded, &reference);
     out.extend_from_slice(&filter.to_bytes());
     Ok(())
 }
@@ -150,12 +149,6 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
             found: 1,
         });
     }
-    let channels = if options.gray || img.channels == 1 {
-        1
-    } else {
-        3
-    };
-    let filter_bytes = crate::debt::restore::Filter::len_for(channels);
     let restore = options.restore && options.bytes >= crate::debt::restore::MIN_BUDGET_BYTES;
     let header = Header {
         width: img.width,
@@ -189,7 +182,11 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
     let mut planes = to_components(&coded, header.gray, header.lossless);
     transform_planes(&mut planes, w, h, &header, true);
     let Some(layout) = header.segments else {
-        let trailer = if restore { filter_bytes } else { 0 };
+        let trailer = if restore {
+            super::restore::Filter::len_for(header.components())
+        } else {
+            0
+        };
         let budget = options.bytes.saturating_sub(out.len() + trailer);
         let (bands, _) = build_bands(&header, Some(&planes), 0, 1);
         out.extend_from_slice(&encode_bands(bands, budget).0);

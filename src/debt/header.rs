@@ -230,8 +230,9 @@ impl Header {
             }
             header.roi = Some(([cells[0], cells[1], cells[2], cells[3]], shift));
         }
+        // Where a version 2 or 3 header's own fields start.
+        let at = if header.roi.is_some() { 8 } else { 5 };
         if version == VERSION_SEGMENTED {
-            let at = if header.roi.is_some() { 8 } else { 5 };
             let Some(&[count, trunk]) = data.get(at..at + 2) else {
                 return Err(Error::Truncated {
                     expected: at + 2,
@@ -263,7 +264,6 @@ impl Header {
             header.check_trunk()?;
         }
         if version == VERSION_RESTORED {
-            let at = if header.roi.is_some() { 8 } else { 5 };
             let Some(&[a, b, c]) = data.get(at..at + 3) else {
                 return Err(Error::Truncated {
                     expected: at + 3,

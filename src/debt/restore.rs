@@ -206,13 +206,7 @@ pub fn fit_checked(decoded: &Image, original: &Image) -> Filter {
 /// The least-squares taps of `A a = b` (ridge-regularised), quantised; all zero unless the
 /// quantised taps lower the error `e.e - 2 a.b + a.A.a` below `ee`.
 fn quantised(a: &[[f64; TAPS]; TAPS], b: &[f64; TAPS], ee: f64) -> [i8; TAPS] {
-    let trace: f64 = (0..TAPS).map(|j| a[j][j]).sum();
-    let ridge = 1e-3 * trace / TAPS as f64 + 1e-9;
-    let mut m = *a;
-    for (j, row) in m.iter_mut().enumerate() {
-        row[j] += ridge;
-    }
-    let Some(weights) = solve(m, *b) else {
+    let Some(weights) = ridge_solve(a, b) else {
         return [0; TAPS];
     };
     let scale = f64::from(TAP_SCALE);
@@ -229,10 +223,18 @@ fn quantised(a: &[[f64; TAPS]; TAPS], b: &[f64; TAPS], ee: f64) -> [i8; TAPS] {
     if error < ee { q } else { [0; TAPS] }
 }
 
-/// Solves `m x = v` by Gaussian elimination with partial pivoting; none when singular.
-fn solve(mut m: [[f64; TAPS]; TAPS], mut v: [f64; TAPS]) -> Option<[f64; TAPS]> {
-    for col in 0..TAPS {
-        let pivot = (col..TAPS).max_by(|&i, &j| m[i][col].abs().total_cmp(&m[j][col].abs()))?;
+/// The least-squares solution of the normal equations `A x = b`, ridge-regularised (1e-3 of
+/// `A`'s mean diagonal added to it) and solved by Gaussian elimination with partial pivoting;
+/// none when singular or not finite.
+pub fn ridge_solve<const N: usize>(a: &[[f64; N]; N], b: &[f64; N]) -> Option<[f64; N]> {
+    let trace: f64 = (0..N).map(|j| a[j][j]).sum();
+    let ridge = 1e-3 * trace / N as f64 + 1e-9;
+    let (mut m, mut v) = (*a, *b);
+    for (j, row) in m.iter_mut().enumerate() {
+        row[j] += ridge;
+    }
+    for col in 0..N {
+        let pivot = (col..N).max_by(|&i, &j| m[i][col].abs().total_cmp(&m[j][col].abs()))?;
         if m[pivot][col].abs() < 1e-12 || !m[pivot][col].is_finite() {
             return None;
         }
@@ -247,9 +249,9 @@ fn solve(mut m: [[f64; TAPS]; TAPS], mut v: [f64; TAPS]) -> Option<[f64; TAPS]> 
             *value -= f * pivot_v;
         }
     }
-    let mut x = [0f64; TAPS];
-    for row in (0..TAPS).rev() {
-        let s: f64 = (row + 1..TAPS).map(|k| m[row][k] * x[k]).sum();
+    let mut x = [0f64; N];
+    for row in (0..N).rev() {
+        let s: f64 = (row + 1..N).map(|k| m[row][k] * x[k]).sum();
         x[row] = (v[row] - s) / m[row][row];
     }
     x.iter().all(|v| v.is_finite()).then_some(x)
