@@ -9,7 +9,7 @@ interleaved; the table gives the median wall time of each and the ratio to OpenJ
 ROI: each underwater image resized to 640 wide is coded at 1000 bytes without and with a centred
 ROI (a quarter and a sixteenth of the area, shift 3 and 5); the table gives the ROI's PSNR.
 
-Usage: scripts/debt-bench.sh [--runs N]
+Usage: scripts/debt-bench.sh [--runs N] [--restore] [--no-roi]
 """
 import argparse
 import math
@@ -34,24 +34,36 @@ def timed(cmd):
     return time.perf_counter() - start
 
 
-def speed(tmp, runs):
+def speed(tmp, runs, restore):
     src = os.path.join(tmp, "u616.ppm")
     Image.open(os.path.join(SHARED, "uieb-616.png")).convert("RGB").save(src)
     w, h = Image.open(src).size
     ratio = w * h * 3 / 6000
-    times = {k: [] for k in ("debt-encode", "opj_compress", "debt-decode", "opj_decompress")}
+    keys = ["debt-encode", "opj_compress", "debt-decode", "opj_decompress"]
+    if restore:
+        keys += ["debt-encode --restore", "debt-decode (v3)"]
+    times = {k: [] for k in keys}
     debt, j2k = os.path.join(tmp, "s.debt"), os.path.join(tmp, "s.j2k")
+    debt3 = os.path.join(tmp, "s3.debt")
     for _ in range(runs):
         times["debt-encode"].append(timed([ENC, src, "--bytes", "6000", "-o", debt]))
         times["opj_compress"].append(timed(["opj_compress", "-i", src, "-o", j2k, "-r", f"{ratio:.3f}", "-I"]))
         times["debt-decode"].append(timed([DEC, debt, "-o", os.path.join(tmp, "d.ppm")]))
         times["opj_decompress"].append(timed(["opj_decompress", "-i", j2k, "-o", os.path.join(tmp, "j.ppm")]))
+        if restore:
+            times["debt-encode --restore"].append(timed([ENC, src, "--bytes", "6000", "--restore", "-o", debt3]))
+            times["debt-decode (v3)"].append(timed([DEC, debt3, "-o", os.path.join(tmp, "d3.ppm")]))
     med = {k: statistics.median(v) * 1e3 for k, v in times.items()}
     print(f"speed: {w}x{h} RGB, DEBT {os.path.getsize(debt)} B, J2K {os.path.getsize(j2k)} B, {runs} runs, median ms")
     print(f"  {'encode':<8} DEBT {med['debt-encode']:7.1f}  OpenJPEG {med['opj_compress']:7.1f}  "
           f"ratio {med['debt-encode'] / med['opj_compress']:.2f} (bar <= 0.25)")
     print(f"  {'decode':<8} DEBT {med['debt-decode']:7.1f}  OpenJPEG {med['opj_decompress']:7.1f}  "
           f"ratio {med['debt-decode'] / med['opj_decompress']:.2f} (bar <= 0.7)")
+    if restore:
+        print(f"  {'encode':<8} DEBT --restore {med['debt-encode --restore']:7.1f}  "
+              f"ratio {med['debt-encode --restore'] / med['opj_compress']:.2f} (bar <= 0.25)")
+        print(f"  {'decode':<8} DEBT v3 {med['debt-decode (v3)']:7.1f}  "
+              f"ratio {med['debt-decode (v3)'] / med['opj_decompress']:.2f} (bar <= 0.7)")
 
 
 def psnr(a, b):
@@ -92,10 +104,14 @@ def roi(tmp):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", type=int, default=15)
+    ap.add_argument("--restore", action="store_true",
+                    help="also time debt-encode --restore (version 3) and its decode in the same runs")
+    ap.add_argument("--no-roi", action="store_true", help="skip the ROI table")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        speed(tmp, args.runs)
-        roi(tmp)
+        speed(tmp, args.runs, args.restore)
+        if not args.no_roi:
+            roi(tmp)
 
 
 if __name__ == "__main__":

@@ -92,7 +92,9 @@ pub fn decode_with_loss(data: &[u8], lost: &[Range<usize>]) -> Result<Image, Err
             .then(|| super::restore::Filter::from_bytes(&data[at..], img.channels))
             .flatten()
         {
-            return Ok(super::restore::apply(&img, &filter));
+            let mut img = img;
+            super::restore::apply_in_place(&mut img, &filter);
+            return Ok(img);
         }
     }
     Ok(img)

@@ -104,9 +104,69 @@ fn padded(img: &Image, c: usize) -> Vec<i16> {
     plane
 }
 
+/// Lanes of the dot products and filter sums: a multiple of every SIMD width the compiler may
+/// use, so that the lane loops below vectorise.
+const LANES: usize = 16;
+
+/// Rows of at least this many pixels a thread (below, one thread does the whole picture).
+const PIXELS_PER_THREAD: usize = 1 << 16;
+
+/// The rows `0..height` cut into one stripe per thread: as many threads as the machine has
+/// cores (at most 8), and no more than leave [`PIXELS_PER_THREAD`] pixels each.
+fn stripes(width: usize, height: usize) -> Vec<std::ops::Range<usize>> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get().min(8));
+    let threads = cores
+        .min((width * height / PIXELS_PER_THREAD).max(1))
+        .min(height.max(1));
+    (0..threads)
+        .map(|t| t * height / threads..(t + 1) * height / threads)
+        .collect()
+}
+
+/// `work` run on each stripe's item, in parallel when there is more than one; results in
+/// stripe order, so a sum over them does not depend on the number of threads.
+fn each_stripe<I: Send, T: Send>(items: Vec<I>, work: impl Fn(I) -> T + Sync) -> Vec<T> {
+    if items.len() <= 1 {
+        return items.into_iter().map(&work).collect();
+    }
+    std::thread::scope(|scope| {
+        let work = &work;
+        let handles: Vec<_> = items
+            .into_iter()
+            .map(|item| scope.spawn(move || work(item)))
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join()
+                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+            })
+            .collect()
+    })
+}
+
+/// The dot product of two rows of `i16`, in lanes the compiler vectorises. Exact while the
+/// sum fits in `i32` (rows of at most 4096 samples of magnitude at most 510).
+fn dot(a: &[i16], b: &[i16]) -> i32 {
+    let mut lanes = [0i32; LANES];
+    let (ca, cb) = (a.chunks_exact(LANES), b.chunks_exact(LANES));
+    let tail: i32 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(&x, &y)| i32::from(x) * i32::from(y))
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for l in 0..LANES {
+            lanes[l] += i32::from(x[l]) * i32::from(y[l]);
+        }
+    }
+    lanes.iter().sum::<i32>() + tail
+}
+
 /// The 12 feature rows of row `y` of a padded plane `pw` wide holding `w` samples a row: for
-/// each offset, each pixel's mirrored pair's sum less twice its centre.
-fn feature_rows(plane: &[i16], pw: usize, w: usize, y: usize, rows: &mut [Vec<i32>; TAPS]) {
+/// each offset, each pixel's mirrored pair's sum less twice its centre (|f| <= 510).
+fn feature_rows(plane: &[i16], pw: usize, w: usize, y: usize, rows: &mut [Vec<i16>; TAPS]) {
     let start = (y + 2) * pw + 2;
     let centre = &plane[start..start + w];
     for (k, row) in rows.iter_mut().enumerate() {
@@ -120,83 +180,115 @@ fn feature_rows(plane: &[i16], pw: usize, w: usize, y: usize, rows: &mut [Vec<i3
                 .iter()
                 .zip(behind)
                 .zip(centre)
-                .map(|((&p, &q), &c)| i32::from(p) + i32::from(q) - 2 * i32::from(c)),
+                .map(|((&p, &q), &c)| p + q - 2 * c),
         );
+    }
+}
+
+/// One channel's normal equations over some rows, in integers: the upper triangle of `A`,
+/// `b`, and the residual's energy `e.e`.
+#[derive(Clone, Copy)]
+struct Sums {
+    a: [[i64; TAPS]; TAPS],
+    b: [i64; TAPS],
+    ee: i64,
+}
+
+impl Sums {
+    const ZERO: Sums = Sums {
+        a: [[0; TAPS]; TAPS],
+        b: [0; TAPS],
+        ee: 0,
+    };
+
+    fn add(&mut self, other: &Sums) {
+        for (row, o) in self.a.iter_mut().zip(&other.a) {
+            for (v, o) in row.iter_mut().zip(o) {
+                *v += o;
+            }
+        }
+        for (v, o) in self.b.iter_mut().zip(&other.b) {
+            *v += o;
+        }
+        self.ee += other.ee;
     }
 }
 
 /// Fits the filter that brings `decoded` closest to `original` (same size and channels; else
 /// the identity), from every `row_step`-th row.
 pub fn fit(decoded: &Image, original: &Image, row_step: usize) -> Filter {
+    fit_sums(decoded, original, row_step).0
+}
+
+/// [`fit`], and each channel's residual energy (`e.e` unfiltered) over the rows used.
+fn fit_sums(decoded: &Image, original: &Image, row_step: usize) -> (Filter, Vec<i64>) {
     let same = decoded.width == original.width
         && decoded.height == original.height
         && decoded.channels == original.channels
         && decoded.data.len() == original.data.len()
         && decoded.data.len() == decoded.width * decoded.height * decoded.channels;
     if !same || decoded.data.is_empty() {
-        return Filter {
+        let identity = Filter {
             channels: vec![[0; TAPS]; decoded.channels],
         };
+        return (identity, vec![0; decoded.channels]);
     }
-    let (w, n) = (decoded.width, decoded.channels);
+    let (w, h, n) = (decoded.width, decoded.height, decoded.channels);
     let pw = w + 4;
     let step = row_step.max(1);
-    let mut rows: [Vec<i32>; TAPS] = std::array::from_fn(|_| Vec::with_capacity(w));
-    let mut residual = Vec::with_capacity(w);
-    let channels = (0..n)
-        .map(|c| {
-            let plane = padded(decoded, c);
-            // Normal equations of the residual, in integers: A a = b, and e.e for the error.
-            // A row's sums fit in i32 (|f| <= 510, |e| <= 255, 4096 samples a row at most).
-            let mut a = [[0i64; TAPS]; TAPS];
-            let mut b = [0i64; TAPS];
-            let mut ee = 0i64;
-            for y in (0..decoded.height).step_by(step) {
-                feature_rows(&plane, pw, w, y, &mut rows);
-                let row = y * w * n;
-                let (o, d) = (&original.data[row..], &decoded.data[row..]);
+    let planes: Vec<Vec<i16>> = (0..n).map(|c| padded(decoded, c)).collect();
+    let partial = each_stripe(stripes(w, h), |rows| {
+        let mut features: [Vec<i16>; TAPS] = std::array::from_fn(|_| Vec::with_capacity(w));
+        let mut residual = Vec::with_capacity(w);
+        let mut sums = vec![Sums::ZERO; n];
+        // Every `step`-th row of the picture, whichever stripe it falls in.
+        for y in rows.filter(|y| y % step == 0) {
+            let line = y * w * n;
+            let (o, d) = (&original.data[line..], &decoded.data[line..]);
+            for (c, (plane, s)) in planes.iter().zip(sums.iter_mut()).enumerate() {
+                feature_rows(plane, pw, w, y, &mut features);
                 residual.clear();
-                residual.extend((0..w).map(|x| i32::from(o[x * n + c]) - i32::from(d[x * n + c])));
-                ee += residual.iter().map(|&e| i64::from(e * e)).sum::<i64>();
+                residual.extend((0..w).map(|x| i16::from(o[x * n + c]) - i16::from(d[x * n + c])));
+                s.ee += i64::from(dot(&residual, &residual));
                 for j in 0..TAPS {
-                    let fj = &rows[j];
-                    let fe: i32 = fj.iter().zip(&residual).map(|(&f, &e)| f * e).sum();
-                    b[j] += i64::from(fe);
+                    s.b[j] += i64::from(dot(&features[j], &residual));
                     for k in j..TAPS {
-                        let dot: i32 = fj.iter().zip(&rows[k]).map(|(&f, &g)| f * g).sum();
-                        a[j][k] += i64::from(dot);
+                        s.a[j][k] += i64::from(dot(&features[j], &features[k]));
                     }
                 }
             }
+        }
+        sums
+    });
+    let mut total = vec![Sums::ZERO; n];
+    for sums in &partial {
+        for (t, s) in total.iter_mut().zip(sums) {
+            t.add(s);
+        }
+    }
+    let channels = total
+        .iter()
+        .map(|s| {
             let a: [[f64; TAPS]; TAPS] =
-                std::array::from_fn(|j| std::array::from_fn(|k| a[j.min(k)][j.max(k)] as f64));
-            quantised(&a, &b.map(|v| v as f64), ee as f64)
+                std::array::from_fn(|j| std::array::from_fn(|k| s.a[j.min(k)][j.max(k)] as f64));
+            quantised(&a, &s.b.map(|v| v as f64), s.ee as f64)
         })
         .collect();
-    Filter { channels }
+    (Filter { channels }, total.iter().map(|s| s.ee).collect())
 }
 
 /// [`fit`], then each channel's taps dropped unless filtering (in integers, as the decoder
 /// does) really lowers that channel's squared error against `original`: the filtered picture
 /// is never further from the original than the unfiltered one.
 pub fn fit_checked(decoded: &Image, original: &Image) -> Filter {
-    let mut filter = fit(decoded, original, 1);
+    let (mut filter, unfiltered) = fit_sums(decoded, original, 1);
     if filter.is_identity() {
         return filter;
     }
-    let filtered = apply(decoded, &filter);
-    let n = decoded.channels;
-    for (c, taps) in filter.channels.iter_mut().enumerate() {
-        let sse = |img: &Image| -> u64 {
-            img.data
-                .iter()
-                .zip(&original.data)
-                .skip(c)
-                .step_by(n)
-                .map(|(&a, &b)| u64::from(a.abs_diff(b)).pow(2))
-                .sum()
-        };
-        if sse(&filtered) >= sse(decoded) {
+    let (w, h, n) = (decoded.width, decoded.height, decoded.channels);
+    let filtered = Planes::of(decoded, &filter).filter(w, h, n, None, Some(original));
+    for ((taps, before), after) in filter.channels.iter_mut().zip(unfiltered).zip(filtered) {
+        if after >= before {
             *taps = [0; TAPS];
         }
     }
@@ -260,35 +352,122 @@ pub fn ridge_solve<const N: usize>(a: &[[f64; N]; N], b: &[f64; N]) -> Option<[f
 /// `img` filtered: each channel with its taps (a channel without taps as it was).
 pub fn apply(img: &Image, filter: &Filter) -> Image {
     let mut out = img.clone();
-    let (w, n) = (img.width, img.channels);
-    if img.data.len() != w * img.height * n || img.data.is_empty() {
-        return out;
+    apply_in_place(&mut out, filter);
+    out
+}
+
+/// [`apply`] on the picture itself.
+pub fn apply_in_place(img: &mut Image, filter: &Filter) {
+    if img.data.len() != img.width * img.height * img.channels || img.data.is_empty() {
+        return;
     }
-    let pw = w + 4;
-    let mut rows: [Vec<i32>; TAPS] = std::array::from_fn(|_| Vec::with_capacity(w));
-    let mut acc = vec![0i32; w];
-    for (c, taps) in filter.channels.iter().enumerate().take(n) {
-        if taps.iter().all(|&t| t == 0) {
-            continue;
-        }
-        let plane = padded(img, c);
-        for y in 0..img.height {
-            feature_rows(&plane, pw, w, y, &mut rows);
-            acc.fill(TAP_SCALE / 2);
-            for (row, &t) in rows.iter().zip(taps) {
-                let t = i32::from(t);
-                for (a, &f) in acc.iter_mut().zip(row) {
-                    *a += f * t;
+    let planes = Planes::of(img, filter);
+    let (w, h, n) = (img.width, img.height, img.channels);
+    planes.filter(w, h, n, Some(&mut img.data), None);
+}
+
+/// The padded planes of the channels a filter changes, with their taps.
+struct Planes {
+    channels: Vec<(usize, [i8; TAPS], Vec<i16>)>,
+}
+
+impl Planes {
+    fn of(img: &Image, filter: &Filter) -> Planes {
+        let channels = filter
+            .channels
+            .iter()
+            .take(img.channels)
+            .enumerate()
+            .filter(|(_, taps)| taps.iter().any(|&t| t != 0))
+            .map(|(c, &taps)| (c, taps, padded(img, c)))
+            .collect();
+        Planes { channels }
+    }
+
+    /// Filters the planes (of a `w` x `h` picture of `n` channels), stripe by stripe in
+    /// parallel: writes each filtered channel into `out` (interleaved) when given, and returns
+    /// each channel's squared error against `original` after filtering when given (zero for
+    /// the channels without taps, and without `original`).
+    fn filter(
+        &self,
+        w: usize,
+        h: usize,
+        n: usize,
+        out: Option<&mut [u8]>,
+        original: Option<&Image>,
+    ) -> Vec<i64> {
+        let pw = w + 4;
+        let stripes = stripes(w, h);
+        // Each stripe's share of the output, cut at its rows.
+        let mut items: Vec<(std::ops::Range<usize>, Option<&mut [u8]>)> = Vec::new();
+        match out {
+            Some(mut rest) => {
+                for rows in stripes {
+                    let (share, tail) = rest.split_at_mut(rows.len() * w * n);
+                    items.push((rows, Some(share)));
+                    rest = tail;
                 }
             }
-            let line = &mut out.data[y * w * n..(y + 1) * w * n];
-            let centre = &plane[(y + 2) * pw + 2..][..w];
-            for ((pixel, &a), &x) in line.chunks_exact_mut(n).zip(&acc).zip(centre) {
-                pixel[c] = (i32::from(x) + a.div_euclid(TAP_SCALE)).clamp(0, 255) as u8;
+            None => items.extend(stripes.into_iter().map(|rows| (rows, None))),
+        }
+        let errors = each_stripe(items, |(rows, mut share)| {
+            let mut acc = vec![0i32; w];
+            let mut sse = vec![0i64; n];
+            for y in rows.clone() {
+                for (c, taps, plane) in &self.channels {
+                    let start = (y + 2) * pw + 2;
+                    let centre = &plane[start..][..w];
+                    // x + (128 + sum_k t_k (x(+d_k) + x(-d_k)) - 2 T x) / 256, T = sum of t_k.
+                    let total: i32 = taps.iter().map(|&t| i32::from(t)).sum();
+                    for (a, &x) in acc.iter_mut().zip(centre) {
+                        *a = TAP_SCALE / 2 - 2 * total * i32::from(x);
+                    }
+                    for (&(dx, dy), &t) in OFFSETS.iter().zip(taps) {
+                        if t != 0 {
+                            let s = dy as isize * pw as isize + dx as isize;
+                            let ahead = &plane[start.wrapping_add_signed(s)..][..w];
+                            let behind = &plane[start.wrapping_add_signed(-s)..][..w];
+                            add_pairs(&mut acc, ahead, behind, i32::from(t));
+                        }
+                    }
+                    let values = acc.iter().zip(centre).map(|(&a, &x)| {
+                        (i32::from(x) + a.div_euclid(TAP_SCALE)).clamp(0, 255) as u8
+                    });
+                    if let Some(share) = share.as_deref_mut() {
+                        let line = &mut share[(y - rows.start) * w * n..][..w * n];
+                        for (pixel, v) in line.chunks_exact_mut(n).zip(values.clone()) {
+                            pixel[*c] = v;
+                        }
+                    }
+                    if let Some(original) = original {
+                        let o = &original.data[y * w * n..][..w * n];
+                        sse[*c] += o
+                            .iter()
+                            .skip(*c)
+                            .step_by(n)
+                            .zip(values)
+                            .map(|(&o, v)| i64::from(o.abs_diff(v)).pow(2))
+                            .sum::<i64>();
+                    }
+                }
+            }
+            sse
+        });
+        let mut total = vec![0i64; n];
+        for sse in errors {
+            for (t, s) in total.iter_mut().zip(sse) {
+                *t += s;
             }
         }
+        total
     }
-    out
+}
+
+/// `acc[x] += t * (ahead[x] + behind[x])`, in lanes the compiler vectorises.
+fn add_pairs(acc: &mut [i32], ahead: &[i16], behind: &[i16], t: i32) {
+    for ((a, &p), &q) in acc.iter_mut().zip(ahead).zip(behind) {
+        *a += t * (i32::from(p) + i32::from(q));
+    }
 }
 
 #[cfg(test)]
