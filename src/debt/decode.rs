@@ -81,6 +81,9 @@ pub fn decode_with_loss(data: &[u8], lost: &[Range<usize>]) -> Result<Image, Err
         transform_planes(&mut planes, w, h, &header, false);
         from_components(&planes, w, h, true)
     } else {
+        if let Some(m) = header.cfl {
+            m.add_prediction(&mut coefficients, w, h, header.levels);
+        }
         synthesise_channels(&coefficients, w, h, &header)
     };
     let img = upscale(img, header.width, header.height);

@@ -33,6 +33,9 @@ pub struct EncodeOptions {
     /// [`super::restore`]); only for lossy, unsegmented streams, and only from
     /// [`super::restore::MIN_BUDGET_BYTES`] (below, the stream is version 1).
     pub restore: bool,
+    /// Predict chroma from luma ([`super::cfl`], version 4) in lossy colour streams without
+    /// segments from [`super::cfl::MIN_BUDGET_BYTES`]; off, such streams are version 1 (or 3).
+    pub chroma_from_luma: bool,
 }
 
 impl Default for EncodeOptions {
@@ -47,6 +50,7 @@ impl Default for EncodeOptions {
             roi_shift: 3,
             segments: None,
             restore: false,
+            chroma_from_luma: true,
         }
     }
 }
@@ -163,6 +167,7 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
             weights: [1; MAX_SEGMENTS + 1],
         }),
         restore_at: restore.then_some(0),
+        cfl: None,
     };
     if let Some(seg) = options.segments {
         seg.check()?;
@@ -181,6 +186,18 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
     let (w, h) = header.coded_size();
     let mut planes = to_components(&coded, header.gray, header.lossless);
     transform_planes(&mut planes, w, h, &header, true);
+    let mut header = header;
+    if options.chroma_from_luma
+        && options.bytes >= super::cfl::MIN_BUDGET_BYTES
+        && planes.len() == 3
+        && !header.lossless
+        && header.segments.is_none()
+    {
+        let m = super::cfl::Multipliers::fit_and_subtract(&mut planes, w, h, levels);
+        header.cfl = Some(m);
+        out.clear();
+        header.write(&mut out);
+    }
     let Some(layout) = header.segments else {
         let trailer = if restore {
             super::restore::Filter::len_for(header.components())

@@ -1,11 +1,14 @@
 //! The stream's header: what a decoder must know before the first coded bit (size, grey or
 //! colour, lossy or lossless, wavelet levels, downscale, region of interest), and for a
 //! segmented stream ([`Segments`]) how its trunks are shared among the segments
-//! ([`SegmentLayout`]). 5 bytes, 8 with a region of interest, 2 + segments + 1 more when
-//! segmented; the byte layout is in `docs/debt-format.md`.
+//! ([`SegmentLayout`]), for a restored stream where its filter starts, and for a version 4
+//! stream the chroma-from-luma multipliers. 5 bytes, 8 with a region of interest; when
+//! segmented 3 more and one a segment, 3 more with a filter, and 3 and the multipliers' bytes
+//! more in version 4; the byte layout is in `docs/debt-format.md`.
 
 use std::ops::Range;
 
+use super::cfl::Multipliers;
 use super::{Error, Rect};
 
 /// The bitstream version this build writes and reads: one embedded segment.
@@ -15,6 +18,10 @@ pub const VERSION_SEGMENTED: u8 = 2;
 /// Version 1's stream followed by a restoration filter ([`super::restore`]) at the offset the
 /// header gives ([`Header::restore_at`]).
 pub const VERSION_RESTORED: u8 = 3;
+/// Version 1's stream with chroma predicted from luma ([`super::cfl`]): the header carries the
+/// multipliers ([`Header::cfl`]) and, like version 3's, where a restoration filter starts (0:
+/// none).
+pub const VERSION_CHROMA: u8 = 4;
 /// The largest payload end a version 3 header can state.
 pub const MAX_RESTORE_AT: usize = (1 << 24) - 1;
 /// Most segments a stream can have.
@@ -120,6 +127,8 @@ pub struct Header {
     /// For version 3 streams: the offset in the stream where the payload ends and the
     /// restoration filter starts (24 bits).
     pub restore_at: Option<usize>,
+    /// For version 4 streams: the chroma-from-luma multipliers.
+    pub cfl: Option<Multipliers>,
 }
 
 /// ROI cells per image side in the header.
@@ -130,7 +139,8 @@ impl Header {
     pub fn len(&self) -> usize {
         let base = if self.roi.is_some() { 8 } else { 5 };
         base + self.segments.map_or(0, |l| 3 + l.segments.count)
-            + 3 * usize::from(self.restore_at.is_some())
+            + 3 * usize::from(self.restore_at.is_some() || self.cfl.is_some())
+            + self.cfl.map_or(0, |m| m.len())
     }
 
     /// Always false: a header is never empty (for clippy's len-without-is-empty).
@@ -143,6 +153,8 @@ impl Header {
             MAGIC
                 | if self.segments.is_some() {
                     VERSION_SEGMENTED
+                } else if self.cfl.is_some() {
+                    VERSION_CHROMA
                 } else if self.restore_at.is_some() {
                     VERSION_RESTORED
                 } else {
@@ -171,8 +183,12 @@ impl Header {
             out.push(layout.segments.trunk_bytes as u8);
             out.extend_from_slice(&layout.weights[..=layout.segments.count]);
         }
-        if let Some(at) = self.restore_at {
-            out.extend_from_slice(&(at.min(MAX_RESTORE_AT) as u32).to_be_bytes()[1..]);
+        if self.restore_at.is_some() || self.cfl.is_some() {
+            let at = self.restore_at.unwrap_or(0).min(MAX_RESTORE_AT) as u32;
+            out.extend_from_slice(&at.to_be_bytes()[1..]);
+        }
+        if let Some(m) = self.cfl {
+            m.write(out);
         }
     }
 
@@ -186,7 +202,7 @@ impl Header {
             return Err(Error::NotDebt { found: first });
         }
         let version = first & 0x0f;
-        if ![VERSION, VERSION_SEGMENTED, VERSION_RESTORED].contains(&version) {
+        if ![VERSION, VERSION_SEGMENTED, VERSION_RESTORED, VERSION_CHROMA].contains(&version) {
             return Err(Error::Version {
                 found: first & 0x0f,
             });
@@ -209,6 +225,7 @@ impl Header {
             roi: None,
             segments: None,
             restore_at: None,
+            cfl: None,
         };
         if flags & 1 != 0 {
             if data.len() < 8 {
@@ -263,7 +280,7 @@ impl Header {
             header.segments = Some(SegmentLayout { segments, weights });
             header.check_trunk()?;
         }
-        if version == VERSION_RESTORED {
+        if version == VERSION_RESTORED || version == VERSION_CHROMA {
             let Some(&[a, b, c]) = data.get(at..at + 3) else {
                 return Err(Error::Truncated {
                     expected: at + 3,
@@ -271,14 +288,31 @@ impl Header {
                 });
             };
             let restore_at = u32::from_be_bytes([0, a, b, c]) as usize;
-            if restore_at < at + 3 {
-                return Err(Error::Setting {
-                    field: "restoration offset",
-                    expected: "at least the header's length",
-                    found: restore_at as u64,
-                });
+            let mut end = at + 3;
+            if version == VERSION_CHROMA {
+                if header.gray || header.lossless {
+                    return Err(Error::Setting {
+                        field: "version 4 flags",
+                        expected: "a lossy colour stream",
+                        found: u64::from(flags),
+                    });
+                }
+                let (w, h) = header.coded_size();
+                let m = Multipliers::read(&data[end..], end, w, h, header.levels)?;
+                end += m.len();
+                header.cfl = Some(m);
             }
-            header.restore_at = Some(restore_at);
+            // Version 4 says 0 when there is no filter.
+            if version == VERSION_RESTORED || restore_at != 0 {
+                if restore_at < end {
+                    return Err(Error::Setting {
+                        field: "restoration offset",
+                        expected: "at least the header's length",
+                        found: restore_at as u64,
+                    });
+                }
+                header.restore_at = Some(restore_at);
+            }
         }
         Ok(header)
     }
@@ -354,6 +388,7 @@ mod tests {
             roi: Some(([1, 30, 2, 29], 7)),
             segments: None,
             restore_at: None,
+            cfl: None,
         };
         let mut out = Vec::new();
         h.write(&mut out);
@@ -390,6 +425,55 @@ mod tests {
         assert!(matches!(
             Header::read(&restored_out[..10]),
             Err(Error::Truncated { expected: 11, .. })
+        ));
+        // Version 4: 5 + 3 bytes (no filter: 0) + the multipliers of a 64 x 32 image of 3
+        // levels (9 detail subbands, 18 pairs: a 3-byte mask, then two values).
+        let mut steps = [0; crate::debt::cfl::MAX_PAIRS];
+        steps[1] = -4;
+        steps[17] = 9;
+        let chroma = Header {
+            width: 64,
+            height: 32,
+            gray: false,
+            lossless: false,
+            levels: 3,
+            scale: 0,
+            roi: None,
+            segments: None,
+            restore_at: None,
+            cfl: Some(Multipliers { pairs: 18, steps }),
+        };
+        let mut chroma_out = Vec::new();
+        chroma.write(&mut chroma_out);
+        assert_eq!(
+            chroma_out,
+            [
+                0xd4, 0x03, 0xf0, 0x1f, 0x18, 0, 0, 0, 0x40, 0x00, 0x40, 0xfc, 0x09
+            ]
+        );
+        assert_eq!(chroma.len(), chroma_out.len());
+        assert_eq!(Header::read(&chroma_out).unwrap(), chroma);
+        for cut in 0..chroma_out.len() {
+            assert!(Header::read(&chroma_out[..cut]).is_err(), "{cut}");
+        }
+        let filtered = Header {
+            restore_at: Some(13),
+            ..chroma
+        };
+        let mut filtered_out = Vec::new();
+        filtered.write(&mut filtered_out);
+        assert_eq!(&filtered_out[5..8], &[0, 0, 13]);
+        assert_eq!(Header::read(&filtered_out).unwrap(), filtered);
+        // A filter inside the header, a grey version 4 stream: errors.
+        filtered_out[7] = 12;
+        assert!(matches!(
+            Header::read(&filtered_out),
+            Err(Error::Setting { .. })
+        ));
+        chroma_out[4] |= 0x80;
+        assert!(matches!(
+            Header::read(&chroma_out),
+            Err(Error::Setting { .. })
         ));
         // A zero weight, a segment count or trunk out of range, a cut header: errors.
         let mut bad = out.clone();

@@ -25,6 +25,7 @@
 //! No-panic contract: [`decode`] returns an [`Error`] for a stream that is not DEBT and decodes
 //! any other bytes, truncated or corrupt, to some image without panicking.
 
+pub mod cfl;
 pub mod coder;
 mod colour;
 mod decode;
@@ -42,7 +43,8 @@ pub mod wavelet;
 pub use decode::{decode, decode_with_loss};
 pub use encode::{EncodeOptions, encode};
 pub use header::{
-    Header, MAX_SEGMENTS, MIN_TRUNK_BYTES, SegmentLayout, Segments, VERSION, VERSION_SEGMENTED,
+    Header, MAX_SEGMENTS, MIN_TRUNK_BYTES, SegmentLayout, Segments, VERSION, VERSION_CHROMA,
+    VERSION_SEGMENTED,
 };
 pub use transform::default_levels;
 
@@ -193,6 +195,73 @@ mod tests {
             channels,
             data,
         }
+    }
+
+    /// A colour picture whose chroma is an affine function of a textured luma.
+    fn luma_coloured(width: usize, height: usize) -> Image {
+        let mut data = Vec::with_capacity(width * height * 3);
+        for y in 0..height {
+            for x in 0..width {
+                let v = 128.0
+                    + 60.0 * ((x as f32) * 0.31).sin() * ((y as f32) * 0.17).cos()
+                    + if (x / 8 + y / 12) % 2 == 0 {
+                        40.0
+                    } else {
+                        -40.0
+                    };
+                for (gain, offset) in [(1.0, 0.0), (0.6, 40.0), (0.2, 100.0)] {
+                    data.push((gain * v + offset).clamp(0.0, 255.0) as u8);
+                }
+            }
+        }
+        Image {
+            width,
+            height,
+            channels: 3,
+            data,
+        }
+    }
+
+    #[test]
+    fn chroma_from_luma_makes_version_4_from_its_budget_and_every_prefix_decodes() {
+        let img = luma_coloured(256, 192);
+        let bytes = cfl::MIN_BUDGET_BYTES + 500;
+        let with = |chroma_from_luma, bytes, restore| EncodeOptions {
+            bytes,
+            chroma_from_luma,
+            restore,
+            ..EncodeOptions::default()
+        };
+        let v4 = encode(&img, &with(true, bytes, false)).unwrap();
+        assert_eq!((v4[0], v4.len()), (0xd4, bytes));
+        let header = Header::read(&v4).unwrap();
+        let m = header.cfl.unwrap();
+        assert!(m.steps.iter().any(|&q| q != 0), "{m:?}");
+        assert_eq!(header.restore_at, None);
+        let v1 = encode(&img, &with(false, bytes, false)).unwrap();
+        assert_eq!(v1[0], 0xd1);
+        assert_eq!(
+            encode(&img, &with(true, bytes - 501, false)).unwrap()[0],
+            0xd1
+        );
+        assert!(
+            psnr(&decode(&v4).unwrap(), &img) > psnr(&decode(&v1).unwrap(), &img) + 0.1,
+            "{} vs {}",
+            psnr(&decode(&v4).unwrap(), &img),
+            psnr(&decode(&v1).unwrap(), &img)
+        );
+        for cut in (0..bytes).step_by(61) {
+            let decoded = decode(&v4[..cut]);
+            assert_eq!(decoded.is_ok(), cut >= header.len(), "{cut}");
+        }
+        // With the filter too: version 4 still, the filter at the end, a prefix without it is
+        // the unfiltered picture.
+        let both = encode(&img, &with(true, bytes, true)).unwrap();
+        assert_eq!((both[0], both.len()), (0xd4, bytes));
+        let at = Header::read(&both).unwrap().restore_at.unwrap();
+        assert_eq!(at + restore::Filter::len_for(3), bytes);
+        let unfiltered = decode(&both[..at]).unwrap();
+        assert!(psnr(&decode(&both).unwrap(), &img) >= psnr(&unfiltered, &img));
     }
 
     #[test]
@@ -418,6 +487,7 @@ mod tests {
             scale: 0,
             roi: None,
             restore_at: None,
+            cfl: None,
             segments: Some(SegmentLayout {
                 segments: Segments {
                     count: 16,

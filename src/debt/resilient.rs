@@ -115,6 +115,7 @@ impl Layout {
             roi: None,
             segments: None,
             restore_at: None,
+            cfl: None,
         }
     }
 

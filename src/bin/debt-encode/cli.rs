@@ -107,6 +107,13 @@ pub struct Args {
     /// stream is written); not with --lossless or --segments.
     #[arg(long, conflicts_with_all = ["lossless", "segments"])]
     pub restore: bool,
+
+    /// Do not predict chroma from luma. By default a lossy colour stream of 4000 bytes or more
+    /// (without --segments) carries one multiplier per chroma subband in its header (version 4,
+    /// 7 to 50 bytes) and codes what the luma does not predict; with this flag it is a version
+    /// 1 stream (3 with --restore), as older decoders read.
+    #[arg(long)]
+    pub no_cfl: bool,
 }
 
 fn parse_rect(text: &str) -> Result<Rect, String> {
@@ -132,6 +139,7 @@ impl Args {
                 trunk_bytes: self.trunk_size.unwrap_or(39) as usize,
             }),
             restore: self.restore,
+            chroma_from_luma: !self.no_cfl,
         }
     }
 }
