@@ -1,7 +1,9 @@
 #!/usr/bin/env python3
-"""The loss trade-off of segmented DEBT streams: mean PSNR with nothing lost, and with a share
-of the 39-byte trunks lost at random (seeded, the same patterns for every segment count), for
-plain streams and `--segments K`. Prints a table; --csv writes the rows too."""
+"""The loss trade-off of DEBT streams cut into trunks: mean PSNR with nothing lost, and with a
+share of the 39-byte trunks lost at random (seeded: the same patterns for every layout), for
+plain streams, segmented streams (`--segments K`: segK) and streams with parity trunks
+(`--fec P`: fecP). Trunk 0 (the header) is spared unless --lose-header; a picture that cannot
+be decoded at all counts as a flat mid-grey one. Prints a table; --csv writes the rows too."""
 import argparse, csv, os, random, subprocess, sys, tempfile
 import numpy as np
 from PIL import Image
@@ -41,14 +43,20 @@ def images(tmp):
 def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--bytes", default="500,1000,2000,4000,8000")
-    ap.add_argument("--segments", default="1,2,4,8", help="1 = plain stream")
+    ap.add_argument("--layouts", default="plain,seg2,seg4,fec10,fec15,fec20",
+                    help="comma list of plain, segK (--segments K), fecP (--fec P)")
+    ap.add_argument("--lose-header", action="store_true",
+                    help="trunk 0 may be lost too (a plain or segmented stream then shows nothing)")
     ap.add_argument("--loss", default="0,0.05,0.2", help="shares of trunks lost")
     ap.add_argument("--patterns", type=int, default=8, help="loss patterns per image")
     ap.add_argument("--trunk-size", type=int, default=39)
     ap.add_argument("--csv")
     args = ap.parse_args()
     budgets = [int(b) for b in args.bytes.split(",")]
-    counts = [int(k) for k in args.segments.split(",")]
+    layouts = args.layouts.split(",")
+    for k in layouts:
+        if not (k == "plain" or (k[:3] in ("seg", "fec") and k[3:].isdigit())):
+            sys.exit(f"debt-loss: --layouts: expected plain, segK or fecP, found {k!r}")
     losses = [float(x) for x in args.loss.split(",")]
     t = args.trunk_size
     rows = []
@@ -59,34 +67,44 @@ def main():
         refs = {f: Image.open(f) for f in files}
         stream, decoded = os.path.join(tmp, "s.debt"), os.path.join(tmp, "s.png")
         print(f"{len(files)} images, {t}-byte trunks; mean PSNR in dB", flush=True)
-        print(f"{'bytes':>6} {'loss':>5} " + " ".join(f"{('plain' if k == 1 else f'K={k}'):>7}" for k in counts))
+        print(f"{'bytes':>6} {'loss':>5} " + " ".join(f"{k:>7}" for k in layouts))
         for b in budgets:
             trunks = -(-b // t)
             for loss in losses:
                 line = []
-                for k in counts:
+                for k in layouts:
                     scores = []
                     for f in files:
                         enc = [f"{BIN}/debt-encode", f, "--bytes", str(b), "-o", stream]
-                        if k > 1:
-                            enc += ["--segments", str(k), "--trunk-size", str(t)]
+                        if k.startswith("seg"):
+                            enc += ["--segments", k[3:], "--trunk-size", str(t)]
+                        elif k.startswith("fec"):
+                            enc += ["--fec", k[3:], "--trunk-size", str(t)]
                         subprocess.run(enc, check=True)
                         rng = random.Random(f"{f}-{b}")
+                        first = 0 if args.lose_header else 1
                         for _ in range(args.patterns if loss > 0 else 1):
-                            # Trunk 0 holds the header: its loss is fatal for any layout.
-                            lost = [i for i in range(1, trunks) if rng.random() < loss]
+                            # The same draws for every layout: trunk i is lost or not by the
+                            # same number whatever the stream's length.
+                            draws = [rng.random() for _ in range(trunks)]
+                            n = -(-os.path.getsize(stream) // t)
+                            lost = [i for i in range(first, n) if draws[i] < loss]
                             dec = [f"{BIN}/debt-decode", stream, "-o", decoded]
                             if lost:
                                 dec += ["--trunk-size", str(t), "--erase", ",".join(map(str, lost))]
-                            subprocess.run(dec, check=True)
-                            scores.append(psnr(refs[f], decoded))
+                            if subprocess.run(dec, stderr=subprocess.DEVNULL).returncode == 0:
+                                scores.append(psnr(refs[f], decoded))
+                            else:
+                                flat = Image.new(refs[f].mode, refs[f].size, (128,) * len(refs[f].getbands()))
+                                flat.save(decoded)
+                                scores.append(psnr(refs[f], decoded))
                     mean = float(np.mean(scores))
                     line.append(mean)
-                    rows.append({"bytes": b, "loss": loss, "segments": k, "psnr_db": round(mean, 3)})
+                    rows.append({"bytes": b, "loss": loss, "layout": k, "psnr_db": round(mean, 3)})
                 print(f"{b:>6} {loss:>5} " + " ".join(f"{v:>7.2f}" for v in line), flush=True)
     if args.csv:
         with open(args.csv, "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=["bytes", "loss", "segments", "psnr_db"])
+            w = csv.DictWriter(fh, fieldnames=["bytes", "loss", "layout", "psnr_db"])
             w.writeheader()
             w.writerows(rows)
 

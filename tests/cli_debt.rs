@@ -301,7 +301,7 @@ fn erased_trunks_decode_the_prefix_before_the_first_loss() {
     assert!(
         header_lost
             .stderr
-            .contains("trunk 0 (the header) is erased"),
+            .contains("trunk 0 (the header) was lost and no parity brought it back"),
         "{}",
         header_lost.stderr
     );
@@ -310,6 +310,67 @@ fn erased_trunks_decode_the_prefix_before_the_first_loss() {
         2,
         "--erase needs --trunk-size"
     );
+}
+
+#[test]
+fn parity_trunks_bring_back_lost_trunks_and_the_header() {
+    let input = testdata("kodim23-64x48.png");
+    let dir = tempfile::tempdir().unwrap();
+    let stream = dir.path().join("p.debt");
+    let s = stream.to_str().unwrap();
+    let enc = run(
+        ENCODE,
+        &[
+            input.to_str().unwrap(),
+            "-b",
+            "1000",
+            "--fec",
+            "20",
+            "-o",
+            s,
+        ],
+        b"",
+    );
+    assert_eq!(enc.code, 0, "{}", enc.stderr);
+    // 25 whole 39-byte trunks (975 bytes), 5 of them parity.
+    let bytes = std::fs::read(&stream).unwrap();
+    assert_eq!((bytes[0], bytes.len()), (0xd5, 975));
+    let whole = run(DECODE, &[s], b"");
+    assert_eq!(whole.code, 0, "{}", whole.stderr);
+    for erase in ["0", "3,7", "0,1,2,3,4", "19,20,21,22,23"] {
+        let erased = run(DECODE, &[s, "--trunk-size", "39", "--erase", erase], b"");
+        assert_eq!(erased.code, 0, "{erase}: {}", erased.stderr);
+        assert_eq!(erased.stdout, whole.stdout, "{erase}: recovered");
+    }
+    // One more than the parity: the prefix before the first gap.
+    let erased = run(
+        DECODE,
+        &[s, "--trunk-size", "39", "--erase", "3,4,5,6,7,8"],
+        b"",
+    );
+    let prefix = run(DECODE, &[s, "--bytes", "117"], b"");
+    assert_eq!(erased.code, 0, "{}", erased.stderr);
+    assert_eq!(erased.stdout, prefix.stdout);
+    // Bad settings: one line, exit 2, no output.
+    for bad in [
+        &["--fec", "0"][..],
+        &["--fec", "51"],
+        &["--fec", "10", "--lossless"],
+        &["--fec", "10", "--segments", "2"],
+        &["--fec", "10", "-b", "60"],
+        &["--trunk-size", "39"],
+    ] {
+        let out = dir.path().join("bad.debt");
+        let mut args = vec![input.to_str().unwrap(), "-o", out.to_str().unwrap()];
+        args.extend_from_slice(bad);
+        if !bad.contains(&"-b") {
+            args.extend_from_slice(&["-b", "1000"]);
+        }
+        let r = run(ENCODE, &args, b"");
+        assert_eq!(r.code, 2, "{bad:?}: {}", r.stderr);
+        assert_eq!(r.stderr.trim().lines().count().min(1), 1, "{bad:?}");
+        assert!(!out.exists(), "{bad:?}");
+    }
 }
 
 #[test]

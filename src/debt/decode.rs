@@ -20,6 +20,17 @@ pub fn decode(data: &[u8]) -> Result<Image, Error> {
     decode_with_loss(data, &[])
 }
 
+/// Decodes a stream cut into trunks of `trunk_bytes` of which the trunks `lost` (0-based) never
+/// arrived (their contents are ignored): a stream with parity ([`super::fec`]) first gets back
+/// what its parity can recover, the header too; then as [`decode_with_loss`].
+pub fn decode_trunks(data: &[u8], trunk_bytes: usize, lost: &[usize]) -> Result<Image, Error> {
+    let repaired = super::fec::repair(data, trunk_bytes, lost);
+    if repaired.lost.iter().any(|r| r.start == 0) {
+        return Err(Error::HeaderLost { trunk: trunk_bytes });
+    }
+    decode_with_loss(&repaired.data, &repaired.lost)
+}
+
 /// Decodes a stream of which the byte ranges `lost` never arrived (their contents are ignored).
 /// A single-segment stream decodes up to its first lost byte; a segmented one loses, in each
 /// segment, the chunks from its first lost one on. The header must have arrived.
@@ -46,7 +57,8 @@ pub fn decode_with_loss(data: &[u8], lost: &[Range<usize>]) -> Result<Image, Err
             let end = data
                 .len()
                 .min(first_lost)
-                .min(header.restore_at.unwrap_or(usize::MAX));
+                .min(header.restore_at.unwrap_or(usize::MAX))
+                .min(header.fec.map_or(usize::MAX, |f| f.data_bytes));
             decode_part(
                 &header,
                 &data[header_bytes.min(end)..end],

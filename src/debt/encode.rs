@@ -5,6 +5,7 @@
 
 use super::coder::{self, Band, BitCoder, Encoder};
 use super::colour::{downscale, to_components};
+use super::fec::{self, Fec};
 use super::header::{Header, MAX_SEGMENTS, SegmentLayout, Segments};
 use super::transform::{build_bands, default_levels, transform_planes};
 use super::{Error, Image, MAX_SIDE, Rect, rangecoder};
@@ -29,13 +30,26 @@ pub struct EncodeOptions {
     pub roi_shift: u32,
     /// Split into independently decodable segments for lossy links.
     pub segments: Option<Segments>,
-    /// End the budget with a restoration filter fitted on the stream's own decode (version 3,
+    /// End the budget with a restoration filter fitted on the stream's own decode (version 5,
     /// [`super::restore`]); only for lossy, unsegmented streams, and only from
-    /// [`super::restore::MIN_BUDGET_BYTES`] (below, the stream is version 1).
+    /// [`super::restore::MIN_BUDGET_BYTES`].
     pub restore: bool,
-    /// Predict chroma from luma ([`super::cfl`], version 4) in lossy colour streams without
-    /// segments from [`super::cfl::MIN_BUDGET_BYTES`]; off, such streams are version 1 (or 3).
+    /// Predict chroma from luma ([`super::cfl`], version 5) in lossy colour streams without
+    /// segments from [`super::cfl::MIN_BUDGET_BYTES`].
     pub chroma_from_luma: bool,
+    /// Parity trunks after the stream ([`super::fec`], version 5), inside the budget; only for
+    /// lossy, unsegmented streams.
+    pub fec: Option<FecOptions>,
+}
+
+/// How much parity a stream carries, and for which trunks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FecOptions {
+    /// Parity in percent of the stream's trunks (1..=[`fec::MAX_PERCENT`]), rounded, at least
+    /// one trunk ([`fec::parity_trunks`]).
+    pub percent: u32,
+    /// The link's trunk size in bytes (1..=255).
+    pub trunk_bytes: usize,
 }
 
 impl Default for EncodeOptions {
@@ -51,6 +65,7 @@ impl Default for EncodeOptions {
             segments: None,
             restore: false,
             chroma_from_luma: true,
+            fec: None,
         }
     }
 }
@@ -85,6 +100,87 @@ fn finish_restored(out: &mut Vec<u8>, header: &Header, img: &Image) -> Result<()
 
 /// Encodes an image within `options.bytes` bytes.
 pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
+    match options.fec {
+        None => encode_stream(img, options, None),
+        Some(f) => encode_with_parity(img, options, f),
+    }
+}
+
+/// A stream with parity: the budget's whole trunks, of which [`fec::parity_trunks`] are parity
+/// and the rest the stream (its last trunk padded with zeros). A stream that codes completely
+/// in fewer trunks gets the parity its own trunk count calls for, so that a decoder that lost
+/// the header finds the layout again ([`fec::repair`]).
+fn encode_with_parity(
+    img: &Image,
+    options: &EncodeOptions,
+    f: FecOptions,
+) -> Result<Vec<u8>, Error> {
+    if !(1..=fec::MAX_PERCENT).contains(&f.percent) {
+        return Err(Error::Setting {
+            field: "fec",
+            expected: "1..=50 percent",
+            found: f.percent.into(),
+        });
+    }
+    if !(1..=255).contains(&f.trunk_bytes) {
+        return Err(Error::Setting {
+            field: "fec trunk size",
+            expected: "1..=255 bytes",
+            found: f.trunk_bytes as u64,
+        });
+    }
+    if options.lossless || options.segments.is_some() {
+        return Err(Error::Setting {
+            field: "fec",
+            expected: "a lossy stream without segments",
+            found: f.percent.into(),
+        });
+    }
+    let t = f.trunk_bytes;
+    let trunks = options.bytes / t;
+    let mut parity = fec::parity_trunks(trunks, f.percent);
+    if trunks < parity + 1 || (trunks - parity) * t > fec::MAX_DATA_BYTES {
+        return Err(Error::Setting {
+            field: "fec budget",
+            expected: "room for a data and a parity trunk, at most 16 MiB of data",
+            found: options.bytes as u64,
+        });
+    }
+    loop {
+        let mut code = Fec {
+            trunk_bytes: t,
+            data_bytes: (trunks - parity) * t,
+            parity_trunks: parity,
+        };
+        let inner = EncodeOptions {
+            bytes: code.data_bytes,
+            fec: None,
+            ..options.clone()
+        };
+        let mut out = encode_stream(img, &inner, Some(code))?;
+        let again = fec::parity_trunks(out.len().div_ceil(t) + parity, f.percent);
+        if again < parity {
+            parity = again;
+            continue;
+        }
+        code.data_bytes = out.len();
+        let header = Header {
+            fec: Some(code),
+            ..Header::read(&out)?
+        };
+        let mut head = Vec::with_capacity(header.len());
+        header.write(&mut head);
+        out[..head.len()].copy_from_slice(&head);
+        let parity_bytes = code.parity(&out);
+        out.resize(code.data_trunks() * t, 0);
+        out.extend_from_slice(&parity_bytes);
+        return Ok(out);
+    }
+}
+
+/// [`encode`] without parity; `fec`, when given, is stated in the header (its protected length
+/// as the budget, until [`encode_with_parity`] writes the true one).
+fn encode_stream(img: &Image, options: &EncodeOptions, fec: Option<Fec>) -> Result<Vec<u8>, Error> {
     if img.width == 0 || img.height == 0 || img.width > MAX_SIDE || img.height > MAX_SIDE {
         return Err(Error::Size {
             width: img.width,
@@ -168,6 +264,7 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
         }),
         restore_at: restore.then_some(0),
         cfl: None,
+        fec,
     };
     if let Some(seg) = options.segments {
         seg.check()?;

@@ -9,6 +9,7 @@
 use std::ops::Range;
 
 use super::cfl::Multipliers;
+use super::fec::Fec;
 use super::{Error, Rect};
 
 /// The bitstream version this build writes and reads: one embedded segment.
@@ -22,6 +23,10 @@ pub const VERSION_RESTORED: u8 = 3;
 /// multipliers ([`Header::cfl`]) and, like version 3's, where a restoration filter starts (0:
 /// none).
 pub const VERSION_CHROMA: u8 = 4;
+/// Version 1's stream with optional features named by a features byte ([`Features`]): a
+/// restoration filter, chroma predicted from luma, parity trunks. What this build writes
+/// whenever a stream has one of them; versions 3 and 4 are read only.
+pub const VERSION_FEATURES: u8 = 5;
 /// The largest payload end a version 3 header can state.
 pub const MAX_RESTORE_AT: usize = (1 << 24) - 1;
 /// Most segments a stream can have.
@@ -127,8 +132,22 @@ pub struct Header {
     /// For version 3 streams: the offset in the stream where the payload ends and the
     /// restoration filter starts (24 bits).
     pub restore_at: Option<usize>,
-    /// For version 4 streams: the chroma-from-luma multipliers.
+    /// For version 4 and 5 streams: the chroma-from-luma multipliers.
     pub cfl: Option<Multipliers>,
+    /// For version 5 streams: the parity trunks after the stream ([`super::fec`]).
+    pub fec: Option<Fec>,
+}
+
+/// Bits of a version 5 header's features byte; each feature's fields follow in bit order.
+pub mod features {
+    /// A restoration filter: 3 bytes, the offset where it starts.
+    pub const RESTORE: u8 = 1 << 0;
+    /// Chroma from luma: the multipliers (mask, then one byte each).
+    pub const CHROMA_FROM_LUMA: u8 = 1 << 1;
+    /// Parity trunks: 6 bytes (trunk size, protected bytes, parity trunks).
+    pub const FEC: u8 = 1 << 3;
+    /// Every bit this build reads.
+    pub const KNOWN: u8 = RESTORE | CHROMA_FROM_LUMA | FEC;
 }
 
 /// ROI cells per image side in the header.
@@ -138,9 +157,21 @@ impl Header {
     /// Bytes the header takes: 5, or 8 with a region of interest; 2 more when segmented.
     pub fn len(&self) -> usize {
         let base = if self.roi.is_some() { 8 } else { 5 };
-        base + self.segments.map_or(0, |l| 3 + l.segments.count)
-            + 3 * usize::from(self.restore_at.is_some() || self.cfl.is_some())
+        if self.segments.is_some() || self.features() == 0 {
+            return base + self.segments.map_or(0, |l| 3 + l.segments.count);
+        }
+        base + 1
+            + 3 * usize::from(self.restore_at.is_some())
             + self.cfl.map_or(0, |m| m.len())
+            + self.fec.map_or(0, |_| Fec::LEN)
+    }
+
+    /// The version 5 features byte this header has (0: none, the stream is version 1 or 2).
+    pub fn features(&self) -> u8 {
+        let bit = |on: bool, bit: u8| if on { bit } else { 0 };
+        bit(self.restore_at.is_some(), features::RESTORE)
+            | bit(self.cfl.is_some(), features::CHROMA_FROM_LUMA)
+            | bit(self.fec.is_some(), features::FEC)
     }
 
     /// Always false: a header is never empty (for clippy's len-without-is-empty).
@@ -153,10 +184,8 @@ impl Header {
             MAGIC
                 | if self.segments.is_some() {
                     VERSION_SEGMENTED
-                } else if self.cfl.is_some() {
-                    VERSION_CHROMA
-                } else if self.restore_at.is_some() {
-                    VERSION_RESTORED
+                } else if self.features() != 0 {
+                    VERSION_FEATURES
                 } else {
                     VERSION
                 },
@@ -183,12 +212,18 @@ impl Header {
             out.push(layout.segments.trunk_bytes as u8);
             out.extend_from_slice(&layout.weights[..=layout.segments.count]);
         }
-        if self.restore_at.is_some() || self.cfl.is_some() {
-            let at = self.restore_at.unwrap_or(0).min(MAX_RESTORE_AT) as u32;
-            out.extend_from_slice(&at.to_be_bytes()[1..]);
+        if self.segments.is_some() || self.features() == 0 {
+            return;
+        }
+        out.push(self.features());
+        if let Some(at) = self.restore_at {
+            out.extend_from_slice(&(at.min(MAX_RESTORE_AT) as u32).to_be_bytes()[1..]);
         }
         if let Some(m) = self.cfl {
             m.write(out);
+        }
+        if let Some(fec) = self.fec {
+            fec.write(out);
         }
     }
 
@@ -202,7 +237,15 @@ impl Header {
             return Err(Error::NotDebt { found: first });
         }
         let version = first & 0x0f;
-        if ![VERSION, VERSION_SEGMENTED, VERSION_RESTORED, VERSION_CHROMA].contains(&version) {
+        if ![
+            VERSION,
+            VERSION_SEGMENTED,
+            VERSION_RESTORED,
+            VERSION_CHROMA,
+            VERSION_FEATURES,
+        ]
+        .contains(&version)
+        {
             return Err(Error::Version {
                 found: first & 0x0f,
             });
@@ -226,6 +269,7 @@ impl Header {
             segments: None,
             restore_at: None,
             cfl: None,
+            fec: None,
         };
         if flags & 1 != 0 {
             if data.len() < 8 {
@@ -314,7 +358,71 @@ impl Header {
                 header.restore_at = Some(restore_at);
             }
         }
+        if version == VERSION_FEATURES {
+            header.read_features(data, at, flags)?;
+        }
         Ok(header)
+    }
+
+    /// Reads a version 5 header's features byte at `at` and the fields it announces.
+    fn read_features(&mut self, data: &[u8], at: usize, flags: u8) -> Result<(), Error> {
+        let truncated = |expected: usize| Error::Truncated {
+            expected,
+            found: data.len(),
+        };
+        let bits = *data.get(at).ok_or(truncated(at + 1))?;
+        if bits & !features::KNOWN != 0 || bits == 0 {
+            return Err(Error::Setting {
+                field: "version 5 features",
+                expected: "a known non-empty set (bits 0, 1, 3)",
+                found: u64::from(bits),
+            });
+        }
+        let mut end = at + 1;
+        let mut restore_at = None;
+        if bits & features::RESTORE != 0 {
+            let Some(&[a, b, c]) = data.get(end..end + 3) else {
+                return Err(truncated(end + 3));
+            };
+            restore_at = Some(u32::from_be_bytes([0, a, b, c]) as usize);
+            end += 3;
+        }
+        if bits & features::CHROMA_FROM_LUMA != 0 {
+            if self.gray || self.lossless {
+                return Err(Error::Setting {
+                    field: "chroma from luma with flags",
+                    expected: "a lossy colour stream",
+                    found: u64::from(flags),
+                });
+            }
+            let (w, h) = self.coded_size();
+            let m = Multipliers::read(&data[end..], end, w, h, self.levels)?;
+            end += m.len();
+            self.cfl = Some(m);
+        }
+        if bits & features::FEC != 0 {
+            let fec = Fec::read(data.get(end..).unwrap_or_default(), end)?;
+            end += Fec::LEN;
+            if fec.data_bytes < end {
+                return Err(Error::Setting {
+                    field: "protected bytes",
+                    expected: "at least the header's length",
+                    found: fec.data_bytes as u64,
+                });
+            }
+            self.fec = Some(fec);
+        }
+        if let Some(at) = restore_at {
+            if at < end || self.fec.is_some_and(|f| at > f.data_bytes) {
+                return Err(Error::Setting {
+                    field: "restoration offset",
+                    expected: "between the header's end and the protected bytes' end",
+                    found: at as u64,
+                });
+            }
+            self.restore_at = Some(at);
+        }
+        Ok(())
     }
 
     /// A segmented header must fit in trunk 0 (a lost trunk 1 would otherwise lose it).
@@ -389,6 +497,7 @@ mod tests {
             segments: None,
             restore_at: None,
             cfl: None,
+            fec: None,
         };
         let mut out = Vec::new();
         h.write(&mut out);
@@ -412,22 +521,28 @@ mod tests {
         assert_eq!(&out[8..], &[2, 39, 9, 255, 1, 40]);
         assert_eq!(segmented.len(), out.len());
         assert_eq!(Header::read(&out).unwrap(), segmented);
+        // Version 3 (read only): the base header with ROI, then the filter's offset.
         let restored = Header {
             restore_at: Some(0x01_02_03),
             ..h
         };
-        let mut restored_out = Vec::new();
-        restored.write(&mut restored_out);
-        assert_eq!(restored_out[0], 0xd3);
-        assert_eq!(&restored_out[8..], &[1, 2, 3]);
-        assert_eq!(restored.len(), 11);
-        assert_eq!(Header::read(&restored_out).unwrap(), restored);
+        let mut restored_v3 = out[..8].to_vec();
+        restored_v3[0] = 0xd3;
+        restored_v3.extend_from_slice(&[1, 2, 3]);
+        assert_eq!(Header::read(&restored_v3).unwrap(), restored);
         assert!(matches!(
-            Header::read(&restored_out[..10]),
+            Header::read(&restored_v3[..10]),
             Err(Error::Truncated { expected: 11, .. })
         ));
-        // Version 4: 5 + 3 bytes (no filter: 0) + the multipliers of a 64 x 32 image of 3
-        // levels (9 detail subbands, 18 pairs: a 3-byte mask, then two values).
+        // Written as version 5: features byte 0x01, then the offset.
+        let mut restored_out = Vec::new();
+        restored.write(&mut restored_out);
+        assert_eq!(restored_out[0], 0xd5);
+        assert_eq!(&restored_out[8..], &[0x01, 1, 2, 3]);
+        assert_eq!(restored.len(), 12);
+        assert_eq!(Header::read(&restored_out).unwrap(), restored);
+        // Chroma from luma, a 64 x 32 image of 3 levels (9 detail subbands, 18 pairs: a 3-byte
+        // mask, then two values). Version 4 (read only): 5 + 3 bytes (no filter: 0) + those.
         let mut steps = [0; crate::debt::cfl::MAX_PAIRS];
         steps[1] = -4;
         steps[17] = 9;
@@ -442,13 +557,25 @@ mod tests {
             segments: None,
             restore_at: None,
             cfl: Some(Multipliers { pairs: 18, steps }),
+            fec: None,
         };
+        let chroma_v4 = [
+            0xd4, 0x03, 0xf0, 0x1f, 0x18, 0, 0, 0, 0x40, 0x00, 0x40, 0xfc, 0x09,
+        ];
+        assert_eq!(Header::read(&chroma_v4).unwrap(), chroma);
+        let mut filtered_v4 = chroma_v4;
+        filtered_v4[7] = 12;
+        assert!(matches!(
+            Header::read(&filtered_v4),
+            Err(Error::Setting { .. })
+        ));
+        // Version 5: features 0x02, then the multipliers.
         let mut chroma_out = Vec::new();
         chroma.write(&mut chroma_out);
         assert_eq!(
             chroma_out,
             [
-                0xd4, 0x03, 0xf0, 0x1f, 0x18, 0, 0, 0, 0x40, 0x00, 0x40, 0xfc, 0x09
+                0xd5, 0x03, 0xf0, 0x1f, 0x18, 0x02, 0x40, 0x00, 0x40, 0xfc, 0x09
             ]
         );
         assert_eq!(chroma.len(), chroma_out.len());
@@ -456,25 +583,52 @@ mod tests {
         for cut in 0..chroma_out.len() {
             assert!(Header::read(&chroma_out[..cut]).is_err(), "{cut}");
         }
-        let filtered = Header {
-            restore_at: Some(13),
+        // Every feature: filter at 400, multipliers, parity (39-byte trunks, 1805 protected
+        // bytes, 5 parity trunks).
+        let all = Header {
+            restore_at: Some(400),
+            fec: Some(Fec {
+                trunk_bytes: 39,
+                data_bytes: 1805,
+                parity_trunks: 5,
+            }),
             ..chroma
         };
-        let mut filtered_out = Vec::new();
-        filtered.write(&mut filtered_out);
-        assert_eq!(&filtered_out[5..8], &[0, 0, 13]);
-        assert_eq!(Header::read(&filtered_out).unwrap(), filtered);
-        // A filter inside the header, a grey version 4 stream: errors.
-        filtered_out[7] = 12;
-        assert!(matches!(
-            Header::read(&filtered_out),
-            Err(Error::Setting { .. })
-        ));
-        chroma_out[4] |= 0x80;
-        assert!(matches!(
-            Header::read(&chroma_out),
-            Err(Error::Setting { .. })
-        ));
+        let mut all_out = Vec::new();
+        all.write(&mut all_out);
+        assert_eq!(
+            all_out,
+            [
+                0xd5, 0x03, 0xf0, 0x1f, 0x18, 0x0b, 0x00, 0x01, 0x90, 0x40, 0x00, 0x40, 0xfc, 0x09,
+                39, 0x00, 0x07, 0x0d, 0x00, 0x05
+            ]
+        );
+        assert_eq!(all.len(), all_out.len());
+        assert_eq!(Header::read(&all_out).unwrap(), all);
+        for cut in 0..all_out.len() {
+            assert!(Header::read(&all_out[..cut]).is_err(), "{cut}");
+        }
+        // A filter inside the header or past the protected bytes, an unknown or empty
+        // features byte, no parity, a grey stream with multipliers: errors.
+        let patches: [&[(usize, u8)]; 6] = [
+            &[(7, 0), (8, 10)],
+            &[(6, 0x10)],
+            &[(5, 0x1b)],
+            &[(5, 0)],
+            &[(19, 0)],
+            &[(4, 0x98)],
+        ];
+        for patch in patches {
+            let mut bad = all_out.clone();
+            for &(at, byte) in patch {
+                bad[at] = byte;
+            }
+            assert!(
+                matches!(Header::read(&bad), Err(Error::Setting { .. })),
+                "{patch:?}: {:?}",
+                Header::read(&bad)
+            );
+        }
         // A zero weight, a segment count or trunk out of range, a cut header: errors.
         let mut bad = out.clone();
         bad[12] = 0;

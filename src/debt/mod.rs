@@ -30,6 +30,7 @@ pub mod coder;
 mod colour;
 mod decode;
 mod encode;
+pub mod fec;
 mod header;
 pub mod metrics;
 pub mod picture;
@@ -40,11 +41,11 @@ mod transform;
 pub mod trial;
 pub mod wavelet;
 
-pub use decode::{decode, decode_with_loss};
-pub use encode::{EncodeOptions, encode};
+pub use decode::{decode, decode_trunks, decode_with_loss};
+pub use encode::{EncodeOptions, FecOptions, encode};
 pub use header::{
     Header, MAX_SEGMENTS, MIN_TRUNK_BYTES, SegmentLayout, Segments, VERSION, VERSION_CHROMA,
-    VERSION_SEGMENTED,
+    VERSION_FEATURES, VERSION_SEGMENTED,
 };
 pub use transform::default_levels;
 
@@ -60,14 +61,14 @@ pub enum Error {
         found: usize,
     },
     /// The first byte does not say DEBT.
-    #[error("not a DEBT stream: first byte 0x{found:02x}, expected 0xd1 or 0xd2 (DEBT)")]
+    #[error("not a DEBT stream: first byte 0x{found:02x}, expected 0xd1 to 0xd5 (DEBT)")]
     NotDebt {
         /// The byte found.
         found: u8,
     },
     /// A DEBT stream of a version this build does not know.
     #[error(
-        "DEBT version {found} is not supported (this build reads {VERSION} and {VERSION_SEGMENTED})"
+        "DEBT version {found} is not supported (this build reads {VERSION} to {VERSION_FEATURES})"
     )]
     Version {
         /// The version found.
@@ -119,6 +120,15 @@ pub enum Error {
     HeaderTrunk {
         /// Bytes the header takes.
         header: usize,
+        /// The trunk size.
+        trunk: usize,
+    },
+    /// The trunk with the header was lost and no parity brought it back.
+    #[error(
+        "trunk 0 (the header) was lost and no parity brought it back ({trunk}-byte trunks): \
+         nothing to decode"
+    )]
+    HeaderLost {
         /// The trunk size.
         trunk: usize,
     },
@@ -233,7 +243,7 @@ mod tests {
             ..EncodeOptions::default()
         };
         let v4 = encode(&img, &with(true, bytes, false)).unwrap();
-        assert_eq!((v4[0], v4.len()), (0xd4, bytes));
+        assert_eq!((v4[0], v4.len()), (0xd5, bytes));
         let header = Header::read(&v4).unwrap();
         let m = header.cfl.unwrap();
         assert!(m.steps.iter().any(|&q| q != 0), "{m:?}");
@@ -257,7 +267,7 @@ mod tests {
         // With the filter too: version 4 still, the filter at the end, a prefix without it is
         // the unfiltered picture.
         let both = encode(&img, &with(true, bytes, true)).unwrap();
-        assert_eq!((both[0], both.len()), (0xd4, bytes));
+        assert_eq!((both[0], both.len()), (0xd5, bytes));
         let at = Header::read(&both).unwrap().restore_at.unwrap();
         assert_eq!(at + restore::Filter::len_for(3), bytes);
         let unfiltered = decode(&both[..at]).unwrap();
@@ -276,7 +286,7 @@ mod tests {
             };
             let v3 = encode(&img, &opts).unwrap();
             assert_eq!(v3.len(), bytes);
-            assert_eq!(v3[0], 0xd3);
+            assert_eq!(v3[0], 0xd5);
             let header = Header::read(&v3).unwrap();
             let at = header.restore_at.unwrap();
             let filter_bytes = restore::Filter::len_for(channels);
@@ -285,7 +295,7 @@ mod tests {
             let v1 = encode(
                 &img,
                 &EncodeOptions {
-                    bytes: bytes - 3 - filter_bytes,
+                    bytes: bytes - 4 - filter_bytes,
                     ..EncodeOptions::default()
                 },
             )
@@ -488,6 +498,7 @@ mod tests {
             roi: None,
             restore_at: None,
             cfl: None,
+            fec: None,
             segments: Some(SegmentLayout {
                 segments: Segments {
                     count: 16,

@@ -116,6 +116,7 @@ impl Layout {
             segments: None,
             restore_at: None,
             cfl: None,
+            fec: None,
         }
     }
 

@@ -694,8 +694,9 @@ pub fn operator_end(
         .iter()
         .find(|s| s.address == vehicle)
         .map_or(0.0, |s| s.start_s);
-    let mut end =
-        OperatorEnd::new(vehicle, cycle_s, sources).first_slot_at(SimTime::from_secs_f64(start_s));
+    let mut end = OperatorEnd::new(vehicle, cycle_s, sources)
+        .first_slot_at(SimTime::from_secs_f64(start_s))
+        .with_parity(scenario.settings.fec_percent > 0);
     end.answers_timeout_s = rules::link_timeout_s(cycle_s);
     end
 }

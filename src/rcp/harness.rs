@@ -173,6 +173,12 @@ impl OperatorEnd {
         }
     }
 
+    /// The same end expecting images with parity ([`Operator::with_parity`]).
+    pub fn with_parity(mut self, parity: bool) -> OperatorEnd {
+        self.engine = self.engine.with_parity(parity);
+        self
+    }
+
     /// The same end with its first slot at `first` (its vehicle's place in a multi-vehicle
     /// cycle; `ipg_s` is then the cycle's length).
     pub fn first_slot_at(mut self, first: SimTime) -> OperatorEnd {

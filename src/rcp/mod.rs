@@ -162,6 +162,10 @@ pub struct ImageSettings {
     pub size_bytes: u16,
     /// Trunk size, bytes.
     pub trunk_bytes: u8,
+    /// Parity trunks after the image's data trunks, percent of its trunks (0: none;
+    /// `tdma-run --fec`, [`debt::fec`]). A session setting both ends share: ImageSettings
+    /// orders do not carry it.
+    pub fec_percent: u8,
 }
 
 impl From<crate::wire::operator::ImageOrder> for ImageSettings {
@@ -174,6 +178,7 @@ impl From<crate::wire::operator::ImageOrder> for ImageSettings {
             scale: order.scale,
             size_bytes: order.size_bytes,
             trunk_bytes: order.trunk_bytes,
+            fec_percent: 0,
         }
     }
 }
@@ -187,6 +192,7 @@ impl Default for ImageSettings {
             scale: 0,
             size_bytes: 2000,
             trunk_bytes: 39,
+            fec_percent: 0,
         }
     }
 }
@@ -202,7 +208,8 @@ pub fn emit(src: u8, dst: u8, message: Message) -> Vec<u8> {
 
 /// Encodes `image` with `settings` and cuts the stream into trunks. The size is rounded up to a
 /// whole number of trunks, so every slot carries a full trunk (the paper's constant 57-byte ROV
-/// frame with 39-byte trunks), and capped at [`MAX_TRUNKS`] trunks.
+/// frame with 39-byte trunks), and capped at [`MAX_TRUNKS`] trunks. With parity
+/// (`fec_percent`), the last trunks are the parity, inside the size.
 pub fn trunks_of(image: &debt::Image, settings: &ImageSettings) -> Vec<Vec<u8>> {
     let trunk = usize::from(settings.trunk_bytes.max(1));
     let bytes = usize::from(settings.size_bytes)
@@ -222,6 +229,10 @@ pub fn trunks_of(image: &debt::Image, settings: &ImageSettings) -> Vec<Vec<u8>> 
         scale: u32::from(settings.scale.min(3)),
         roi,
         roi_shift: u32::from(settings.roi_shift.clamp(1, 15)),
+        fec: (settings.fec_percent > 0).then_some(debt::FecOptions {
+            percent: u32::from(settings.fec_percent).min(debt::fec::MAX_PERCENT),
+            trunk_bytes: trunk,
+        }),
         ..debt::EncodeOptions::default()
     };
     let stream = debt::encode(image, &options)

@@ -65,6 +65,9 @@ pub struct Operator {
     bitmap: u64,
     trunks: Vec<Vec<u8>>,
     count: Option<usize>,
+    /// Images carry parity trunks ([`crate::debt::fec`]): an image is complete once its parity
+    /// can recover what is missing.
+    parity: bool,
     /// The latest ROV status seen.
     pub last_status: Option<crate::wire::rov::BasicStatus>,
     events: Vec<Event>,
@@ -89,9 +92,18 @@ impl Operator {
             bitmap: 0,
             trunks: vec![Vec::new(); 64],
             count: None,
+            parity: false,
             last_status: None,
             events: Vec::new(),
         }
+    }
+
+    /// The same operator expecting images with parity trunks (`tdma-run --fec`): it completes
+    /// an image as soon as the trunks it has recover the rest, and its RIT asks only while
+    /// they do not.
+    pub fn with_parity(mut self, parity: bool) -> Operator {
+        self.parity = parity;
+        self
     }
 
     /// The same operator with its first slot at `first` (a vehicle's place in a multi-vehicle
@@ -247,14 +259,40 @@ impl Operator {
         }
         if let Some(n) = self.count {
             let all = if n == 64 { u64::MAX } else { (1u64 << n) - 1 };
-            if self.bitmap & all == all {
-                let stream: Vec<u8> = self.trunks[..n].concat();
+            let stream = if self.bitmap & all == all {
+                Some(self.trunks[..n].concat())
+            } else if new && self.parity {
+                self.recovered(n)
+            } else {
+                None
+            };
+            if let Some(stream) = stream {
                 self.events.push(Event::ImageCompleted(stream));
                 self.eisn = !self.eisn;
                 self.bitmap = 0;
                 self.count = None;
             }
         }
+    }
+
+    /// The whole stream of an image of `n` trunks with some missing, when its parity recovers
+    /// them (header included).
+    fn recovered(&self, n: usize) -> Option<Vec<u8>> {
+        let trunk = self.trunks[n - 1].len();
+        let missing: Vec<usize> = (0..n).filter(|&i| self.bitmap & (1 << i) == 0).collect();
+        // Fewer trunks than data trunks recover nothing: skip the decoding attempt.
+        if trunk == 0 || missing.len() * 2 > n {
+            return None;
+        }
+        let mut stream = Vec::with_capacity(n * trunk);
+        for (i, t) in self.trunks[..n].iter().enumerate() {
+            if self.bitmap & (1 << i) != 0 && t.len() == trunk {
+                stream.extend_from_slice(t);
+            } else {
+                stream.resize(stream.len() + trunk, 0);
+            }
+        }
+        crate::debt::fec::repair(&stream, trunk, &missing).whole()
     }
 }
 
@@ -345,6 +383,57 @@ mod tests {
         // The next image starts at trunk 0 with the ISN toggled.
         let next = pair.slot(false);
         assert_eq!((next.itsn, next.ft, next.isn), (0, true, true));
+    }
+
+    #[test]
+    fn with_parity_lost_trunks_need_no_resend_and_the_header_comes_back() {
+        // 1000 bytes rounded up to 26 trunks, 20 % parity: 5 parity trunks after 21 data
+        // trunks.
+        let settings = ImageSettings {
+            size_bytes: 1000,
+            fec_percent: 20,
+            ..ImageSettings::default()
+        };
+        let mut pair = Pair::new(settings);
+        pair.operator = Operator::new(1, 640_000_000).with_parity(true);
+        let lost = [0, 7, 13, 21];
+        let mut sent = Vec::new();
+        for k in 0..26 {
+            sent.push(pair.slot(lost.contains(&k)).itsn);
+        }
+        assert_eq!(sent, (0..26).collect::<Vec<u8>>());
+        assert_eq!(
+            pair.completed(),
+            1,
+            "complete at the last trunk, nothing resent"
+        );
+        let stream = pair
+            .events
+            .iter()
+            .find_map(|e| match e {
+                Event::ImageCompleted(s) => Some(s.clone()),
+                _ => None,
+            })
+            .unwrap();
+        assert_eq!(stream.len(), 26 * 39);
+        let header = crate::debt::Header::read(&stream).unwrap();
+        assert_eq!(header.fec.unwrap().parity_trunks, 5);
+        assert!(crate::debt::decode(&stream).is_ok());
+        // The next image starts at once.
+        let next = pair.slot(false);
+        assert_eq!((next.itsn, next.ft, next.isn), (0, true, true));
+        // More lost than parity: RIT asks for the first missing trunk, and its resend
+        // completes the image.
+        let mut pair = Pair::new(settings);
+        pair.operator = Operator::new(1, 640_000_000).with_parity(true);
+        let lost = [2, 3, 4, 5, 6, 9];
+        for k in 0..26 {
+            pair.slot(lost.contains(&k));
+        }
+        assert_eq!(pair.completed(), 0);
+        assert_eq!(pair.operator.rit(), 2);
+        assert_eq!(pair.slot(false).itsn, 2);
+        assert_eq!(pair.completed(), 1);
     }
 
     #[test]

@@ -465,7 +465,11 @@ impl Rov {
                 self.heading_hold_deg = enable.then_some(f64::from(heading_deg));
             }
             Order::ImageSettings(image) => {
-                self.settings = ImageSettings::from(image);
+                // Parity is the session's, not the order's.
+                self.settings = ImageSettings {
+                    fec_percent: self.settings.fec_percent,
+                    ..ImageSettings::from(image)
+                };
                 if self.image.is_some() {
                     self.ci = true;
                     self.image = None;

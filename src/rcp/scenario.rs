@@ -703,7 +703,11 @@ fn image_settings(value: Option<&Value>) -> Result<ImageSettings, ScenarioError>
             format!("expected an object, found {}", kind(value)),
         ));
     };
-    only_keys("image", object, &["size_bytes", "trunk_bytes", "gray"])?;
+    only_keys(
+        "image",
+        object,
+        &["size_bytes", "trunk_bytes", "gray", "fec_percent"],
+    )?;
     if let Some(v) = object.get("size_bytes") {
         settings.size_bytes = number_in(
             "image.size_bytes",
@@ -717,6 +721,11 @@ fn image_settings(value: Option<&Value>) -> Result<ImageSettings, ScenarioError>
     if let Some(v) = object.get("trunk_bytes") {
         let max = crate::wire::rov::MAX_TRUNK_BYTES as f64;
         settings.trunk_bytes = number_in("image.trunk_bytes", v, 1.0, max, "bytes")?.round() as u8;
+    }
+    if let Some(v) = object.get("fec_percent") {
+        let max = f64::from(crate::debt::fec::MAX_PERCENT);
+        settings.fec_percent =
+            number_in("image.fec_percent", v, 0.0, max, "percent")?.round() as u8;
     }
     if let Some(v) = object.get("gray") {
         settings.gray = v.as_bool().ok_or_else(|| {

@@ -12,6 +12,7 @@ Examples:
   debt-decode photo.debt --bytes 300 -o early.pgm what the first 300 bytes show
   debt-encode in.png -b 800 | debt-decode -o out.ppm
   debt-decode photo.debt --trunk-size 39 --erase 3,7 -o lossy.png   trunks 3 and 7 lost
+  debt-encode p.png -b 2000 --fec 15 | debt-decode --trunk-size 39 --erase 0,9 -o back.png
 
 Exit codes: 0 ok, 2 bad usage or a stream that is not DEBT.";
 
@@ -46,10 +47,13 @@ pub struct Args {
     #[arg(long, value_name = "T", requires = "erase", value_parser = value::bytes(1, 255))]
     pub trunk_size: Option<u64>,
 
-    /// Decode as if these trunks (0-based ITSN) were lost in transit. A plain stream is one
-    /// embedded segment: everything from the first lost trunk on is unusable, so this decodes
-    /// the prefix before it. A segmented stream (debt-encode --segments) loses only the
-    /// segments those trunks carried, from the lost trunk on.
+    /// Decode as if these trunks (0-based ITSN) were lost in transit. A stream with parity
+    /// (debt-encode --fec) first recovers them, the header's too, when a block lost no more
+    /// trunks than it has parity. Otherwise a plain stream is one embedded segment: everything
+    /// from the first lost trunk on is unusable, so this decodes the prefix before it. A
+    /// segmented stream (debt-encode --segments) loses only the segments those trunks
+    /// carried, from the lost trunk on. Without trunk 0 (the header) and parity that brings
+    /// it back, nothing decodes.
     #[arg(long, value_name = "ITSN,...", requires = "trunk_size",
           value_parser = value::count_list(value::count(0, value::MAX_COUNT), MAX_ERASED))]
     pub erase: Option<Trunks>,

@@ -44,25 +44,17 @@ fn run(args: &Args) -> Result<u8> {
             debt::MAX_STREAM_BYTES >> 20
         );
     }
-    let mut lost = Vec::new();
-    if let (Some(trunk), Some(erased)) = (args.trunk_size, &args.erase) {
-        // The header travels in trunk 0: without it nothing decodes.
-        if erased.contains(&0) {
-            bail!(
-                "{}: trunk 0 (the header) is erased: nothing to decode",
-                input.name
-            );
+    let img = match (args.trunk_size, &args.erase) {
+        (Some(trunk), Some(erased)) => {
+            let lost: Vec<usize> = erased
+                .iter()
+                .map(|&e| usize::try_from(e).unwrap_or(usize::MAX))
+                .collect();
+            debt::decode_trunks(&stream, trunk as usize, &lost)
         }
-        let trunk = trunk as usize;
-        for &e in erased {
-            let start = usize::try_from(e)
-                .unwrap_or(usize::MAX)
-                .saturating_mul(trunk);
-            lost.push(start..start.saturating_add(trunk));
-        }
+        _ => debt::decode(&stream),
     }
-    let img = debt::decode_with_loss(&stream, &lost)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", input.name))?;
+    .map_err(|e| anyhow::anyhow!("{}: {e}", input.name))?;
     // Opened only now: a signal while a pipe is read leaves no temporary file behind.
     let mut out = dest.open()?;
     // A PNM's samples are written from the image itself, not copied after its header.

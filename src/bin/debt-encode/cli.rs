@@ -14,6 +14,7 @@ Examples:
   debt-encode photo.png --lossless --bytes 10000000 -o exact.debt   (shorter when complete)
   debt-encode --sweep 250,500,1000,2000,8000 --csv trials.csv a.png b.png   compression trials
   debt-encode photo.png --bytes 2000 --segments 4 --trunk-size 39 -o robust.debt   loss-resilient
+  debt-encode photo.png --bytes 2000 --fec 15 --trunk-size 39 -o parity.debt   15 % parity trunks
 
 Exit codes: 0 ok, 2 bad usage or an unreadable image; a --sweep stopped by SIGINT or SIGTERM
 keeps its whole rows and exits 130 or 143.";
@@ -32,6 +33,7 @@ pub type Budgets = Vec<u64>;
 /// decoder shows what those bytes can.
 #[derive(Parser, Debug)]
 #[command(version, after_help = EXAMPLES)]
+#[command(group(clap::ArgGroup::new("trunked").args(["segments", "fec"]).multiple(true)))]
 pub struct Args {
     /// Image file (PNG, JPEG, PNM, BMP, TIFF, GIF, WebP, TGA, QOI; at most 4096 pixels a
     /// side); `-` or nothing reads stdin. With --sweep, any number of images, a directory
@@ -97,21 +99,30 @@ pub struct Args {
     #[arg(long, value_name = "K", value_parser = value::count(2, debt::MAX_SEGMENTS as u64))]
     pub segments: Option<u64>,
 
-    /// With --segments: the trunk size in bytes (16 ..= 255, at least the header: 8 + K, 3
-    /// more with --roi) the link cuts the stream into [default: 39, the paper's image trunk].
-    #[arg(long, value_name = "T", requires = "segments", value_parser = value::bytes(16, 255))]
+    /// With --segments or --fec: the trunk size in bytes (16 ..= 255; with --segments at
+    /// least the header: 8 + K, 3 more with --roi) the link cuts the stream into [default: 39,
+    /// the paper's image trunk].
+    #[arg(long, value_name = "T", requires = "trunked", value_parser = value::bytes(16, 255))]
     pub trunk_size: Option<u64>,
 
-    /// End the stream with a restoration filter fitted on its own decode (version 3, 12 bytes
-    /// a channel): a shorter prefix decodes unfiltered. From 2000 bytes (below, a version 1
-    /// stream is written); not with --lossless or --segments.
+    /// Spend PERCENT (1 ..= 50) of the budget's trunks on Reed-Solomon parity trunks after the
+    /// stream (version 5): `debt-decode --erase` (and tdma-run) gets back any lost trunks up to
+    /// the parity's count, the header too; a prefix still decodes as it arrives. The stream is
+    /// a whole number of trunks, at most the budget. Not with --lossless or --segments.
+    #[arg(long, value_name = "PERCENT", conflicts_with_all = ["lossless", "segments"],
+          value_parser = value::count(1, u64::from(debt::fec::MAX_PERCENT)))]
+    pub fec: Option<u64>,
+
+    /// End the stream with a restoration filter fitted on its own decode (version 5, 12 bytes
+    /// a channel): a shorter prefix decodes unfiltered. From 2000 bytes (below, no filter);
+    /// not with --lossless or --segments.
     #[arg(long, conflicts_with_all = ["lossless", "segments"])]
     pub restore: bool,
 
     /// Do not predict chroma from luma. By default a lossy colour stream of 4000 bytes or more
-    /// (without --segments) carries one multiplier per chroma subband in its header (version 4,
-    /// 7 to 50 bytes) and codes what the luma does not predict; with this flag it is a version
-    /// 1 stream (3 with --restore), as older decoders read.
+    /// (without --segments) carries one multiplier per chroma subband in its header (version 5,
+    /// 7 to 50 bytes) and codes what the luma does not predict; with this flag and no other
+    /// feature it is a version 1 stream, as older decoders read.
     #[arg(long)]
     pub no_cfl: bool,
 }
@@ -140,6 +151,10 @@ impl Args {
             }),
             restore: self.restore,
             chroma_from_luma: !self.no_cfl,
+            fec: self.fec.map(|percent| debt::FecOptions {
+                percent: percent as u32,
+                trunk_bytes: self.trunk_size.unwrap_or(39) as usize,
+            }),
         }
     }
 }

@@ -178,7 +178,7 @@ pub struct Args {
     /// JSON file (docs/tdma-network.md); --duration and --seed override the file's.
     #[arg(long, value_name = "FILE", help_heading = "Network",
           conflicts_with_all = ["sim", "role", "port", "script", "waypoints", "buoy", "start",
-                                "ipg", "image_size", "trunk", "roi", "orders", "camera",
+                                "ipg", "image_size", "trunk", "fec", "roi", "orders", "camera",
                                 "camera_cmd", "preview", "vehicle"])]
     pub scenario: Option<PathBuf>,
 
@@ -210,6 +210,13 @@ pub struct Args {
     #[arg(long, value_name = "BYTES", default_value_t = 39,
           value_parser = value::bytes(1, crate::wire::rov::MAX_TRUNK_BYTES as u64))]
     pub trunk: u64,
+
+    /// Spend PERCENT (1 ..= 50) of each image's trunks on Reed-Solomon parity, sent after its
+    /// data trunks (progressive display unchanged): the operator completes an image once any
+    /// data-trunk count of them arrived, and asks (RIT) only for what parity cannot recover.
+    #[arg(long, value_name = "PERCENT",
+          value_parser = value::count(1, u64::from(crate::debt::fec::MAX_PERCENT)))]
+    pub fec: Option<u64>,
 
     /// Region of interest x0,y0,x1,y1 in pixels (each < 1024).
     #[arg(long, value_name = "X0,Y0,X1,Y1", value_parser = roi)]
@@ -346,6 +353,7 @@ impl Args {
             roi: self.roi,
             size_bytes: u16::try_from(self.image_size).unwrap_or(u16::MAX),
             trunk_bytes: u8::try_from(self.trunk).unwrap_or(u8::MAX),
+            fec_percent: self.fec.map_or(0, |p| p as u8),
             ..ImageSettings::default()
         }
     }
