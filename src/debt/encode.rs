@@ -3,7 +3,7 @@
 //! segment within the whole budget first, then shares the budget so that every segment stops
 //! at about the same pass, and interleaves their bytes trunk by trunk.
 
-use super::coder::{self, Band, BitCoder, Encoder};
+use super::coder::{self, Band, BitCoder, Decision, Encoder};
 use super::colour::{downscale, to_components};
 use super::header::{Header, MAX_SEGMENTS, SegmentLayout, Segments};
 use super::transform::{build_bands, default_levels, transform_planes};
@@ -36,6 +36,10 @@ pub struct EncodeOptions {
     /// Predict chroma from luma ([`super::cfl`], version 4) in lossy colour streams without
     /// segments from [`super::cfl::MIN_BUDGET_BYTES`]; off, such streams are version 1 (or 3).
     pub chroma_from_luma: bool,
+    /// Start every coder's contexts from [`super::priors::PRIORS`] instead of one half. The
+    /// header does not say so yet: such a stream decodes only with
+    /// [`super::decode_with_priors`] (for measurement).
+    pub priors: bool,
 }
 
 impl Default for EncodeOptions {
@@ -51,13 +55,19 @@ impl Default for EncodeOptions {
             segments: None,
             restore: false,
             chroma_from_luma: true,
+            priors: false,
         }
     }
 }
 
 /// Completes a version 3 stream: states where its payload ends, fits the restoration filter
 /// on the stream's own decode (its prefix without the filter) and appends it.
-fn finish_restored(out: &mut Vec<u8>, header: &Header, img: &Image) -> Result<(), Error> {
+fn finish_restored(
+    out: &mut Vec<u8>,
+    header: &Header,
+    img: &Image,
+    priors: bool,
+) -> Result<(), Error> {
     let at = out.len();
     if at > super::header::MAX_RESTORE_AT {
         return Err(Error::Setting {
@@ -73,7 +83,7 @@ fn finish_restored(out: &mut Vec<u8>, header: &Header, img: &Image) -> Result<()
     let mut head = Vec::with_capacity(header.len());
     header.write(&mut head);
     out[..head.len()].copy_from_slice(&head);
-    let decoded = super::decode(out)?;
+    let decoded = super::decode_with_priors(out, &[], priors)?;
     let filter = if header.gray && img.channels == 3 {
         super::restore::fit_checked(&decoded, &super::picture::to_gray(img))
     } else {
@@ -85,6 +95,25 @@ fn finish_restored(out: &mut Vec<u8>, header: &Header, img: &Image) -> Result<()
 
 /// Encodes an image within `options.bytes` bytes.
 pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
+    encode_logged(img, options, None)
+}
+
+/// The context-coded decisions of encoding `img` with `options`, one list per segment (one
+/// for an unsegmented stream), each in coding order: what a priors table is trained on. A
+/// segment's list runs to where its coder stopped within the whole budget, past the share of
+/// the budget its stream keeps.
+pub fn decisions(img: &Image, options: &EncodeOptions) -> Result<Vec<Vec<Decision>>, Error> {
+    let mut log = Vec::new();
+    encode_logged(img, options, Some(&mut log))?;
+    Ok(log)
+}
+
+/// [`encode`], appending each segment's decisions to `log` when given.
+fn encode_logged(
+    img: &Image,
+    options: &EncodeOptions,
+    mut log: Option<&mut Vec<Vec<Decision>>>,
+) -> Result<Vec<u8>, Error> {
     if img.width == 0 || img.height == 0 || img.width > MAX_SIDE || img.height > MAX_SIDE {
         return Err(Error::Size {
             width: img.width,
@@ -206,9 +235,9 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
         };
         let budget = options.bytes.saturating_sub(out.len() + trailer);
         let (bands, _) = build_bands(&header, Some(&planes), 0, 1);
-        out.extend_from_slice(&encode_bands(bands, budget).0);
+        out.extend_from_slice(&encode_bands(bands, budget, options.priors, log).0);
         if restore {
-            finish_restored(&mut out, &header, img)?;
+            finish_restored(&mut out, &header, img, options.priors)?;
         }
         return Ok(out);
     };
@@ -223,7 +252,8 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
     let mut all_complete = true;
     for part in 0..count {
         let (bands, _) = build_bands(&header, Some(&planes), part, count);
-        let (payload, complete, marks) = encode_bands(bands, budget);
+        let (payload, complete, marks) =
+            encode_bands(bands, budget, options.priors, log.as_deref_mut());
         ends.push(pass_ends(&marks, complete));
         all_complete &= complete;
         streams.push(payload);
@@ -315,17 +345,31 @@ fn split_budget(ends: &[Vec<u64>], budget: usize) -> Vec<usize> {
         .collect()
 }
 
-/// Codes a band list in at most `budget` bytes: the bytes (exactly `budget` unless complete),
-/// whether every plane was coded, and where each pass ended ([`Encoder::marks`]).
+/// Codes a band list in at most `budget` bytes, its contexts starting from the priors table
+/// if `priors`: the bytes (exactly `budget` unless complete), whether every plane was coded,
+/// and where each pass ended ([`Encoder::marks`]). The decisions are appended to `log` as one
+/// more list when given.
 pub(super) fn encode_bands(
     mut bands: Vec<Band>,
     budget: usize,
+    priors: bool,
+    log: Option<&mut Vec<Vec<Decision>>>,
 ) -> (Vec<u8>, bool, Vec<(usize, u64)>) {
     let max = bands.iter().map(Band::max_magnitude).max().unwrap_or(0);
     let plane_count = 32 - max.leading_zeros();
-    let mut enc = Encoder::new(budget);
+    let mut enc = if priors {
+        Encoder::with_priors(budget, &super::priors::PRIORS)
+    } else {
+        Encoder::new(budget)
+    };
+    if log.is_some() {
+        enc.decisions = Some(Vec::new());
+    }
     let complete = enc.raw(plane_count, 5).is_ok()
         && coder::code_planes(&mut bands, plane_count, &mut enc).is_ok();
+    if let Some(log) = log {
+        log.push(enc.decisions.take().unwrap_or_default());
+    }
     let marks = std::mem::take(&mut enc.marks);
     let mut payload = enc.finish(complete);
     if complete {

@@ -33,6 +33,7 @@ mod encode;
 mod header;
 pub mod metrics;
 pub mod picture;
+pub mod priors;
 pub mod rangecoder;
 pub mod resilient;
 pub mod restore;
@@ -40,8 +41,8 @@ mod transform;
 pub mod trial;
 pub mod wavelet;
 
-pub use decode::{decode, decode_with_loss};
-pub use encode::{EncodeOptions, encode};
+pub use decode::{decode, decode_with_loss, decode_with_priors};
+pub use encode::{EncodeOptions, decisions, encode};
 pub use header::{
     Header, MAX_SEGMENTS, MIN_TRUNK_BYTES, SegmentLayout, Segments, VERSION, VERSION_CHROMA,
     VERSION_SEGMENTED,
@@ -630,6 +631,56 @@ mod tests {
             psnr(&img, &decode(&direct).unwrap()),
         );
         assert!((a - b).abs() < 0.5, "prefix {a:.2} dB, direct {b:.2} dB");
+    }
+
+    #[test]
+    fn priors_round_trip_and_every_prefix_decodes() {
+        assert_eq!(priors::PRIORS.len(), coder::CONTEXTS);
+        for (w, h, c) in [(33, 17, 3), (16, 16, 1)] {
+            let img = synthetic(w, h, c);
+            let options = EncodeOptions {
+                bytes: 1 << 20,
+                lossless: true,
+                priors: true,
+                ..Default::default()
+            };
+            let stream = encode(&img, &options).unwrap();
+            assert_eq!(decode_with_priors(&stream, &[], true).unwrap(), img);
+        }
+        let img = synthetic(64, 48, 3);
+        for segments in [
+            None,
+            Some(Segments {
+                count: 3,
+                trunk_bytes: 39,
+            }),
+        ] {
+            let options = EncodeOptions {
+                bytes: 1500,
+                segments,
+                priors: true,
+                ..Default::default()
+            };
+            let stream = encode(&img, &options).unwrap();
+            let header = Header::read(&stream).unwrap().len();
+            let mut last = 0.0;
+            for cut in header..=stream.len() {
+                let q = psnr(
+                    &img,
+                    &decode_with_priors(&stream[..cut], &[], true).unwrap(),
+                );
+                if segments.is_none() {
+                    assert!(q >= last - 0.3, "{cut} bytes: {q:.2} dB after {last:.2}");
+                }
+                last = q;
+            }
+            // Both sides start from the table: decoding without it goes wrong.
+            let without = psnr(&img, &decode(&stream).unwrap());
+            assert!(
+                last > without + 1.0,
+                "{last:.2} dB with, {without:.2} without"
+            );
+        }
     }
 
     #[test]

@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use super::{EncodeOptions, Error, Image, decode, encode, metrics, picture};
+use super::{EncodeOptions, Error, Image, decode_with_priors, encode, metrics, picture};
 
 /// The columns of a trials CSV, in [`Trial`]'s field order.
 pub const COLUMNS: [&str; 11] = [
@@ -65,7 +65,7 @@ pub fn measure(
     encode_ms: f64,
 ) -> Result<Trial, Error> {
     let started = Instant::now();
-    let decoded = decode(stream)?;
+    let decoded = decode_with_priors(stream, &[], options.priors)?;
     let decode_ms = started.elapsed().as_secs_f64() * 1e3;
     let reference = if decoded.channels == 1 {
         picture::to_gray(img)

@@ -53,4 +53,9 @@ pub struct Args {
     #[arg(long, value_name = "ITSN,...", requires = "trunk_size",
           value_parser = value::count_list(value::count(0, value::MAX_COUNT), MAX_ERASED))]
     pub erase: Option<Trunks>,
+
+    /// The stream was written with `debt-encode --priors`: start the coder's contexts from the
+    /// trained priors table (the header does not say so yet).
+    #[arg(long)]
+    pub priors: bool,
 }

@@ -61,7 +61,7 @@ fn run(args: &Args) -> Result<u8> {
             lost.push(start..start.saturating_add(trunk));
         }
     }
-    let img = debt::decode_with_loss(&stream, &lost)
+    let img = debt::decode_with_priors(&stream, &lost, args.priors)
         .map_err(|e| anyhow::anyhow!("{}: {e}", input.name))?;
     // Opened only now: a signal while a pipe is read leaves no temporary file behind.
     let mut out = dest.open()?;

@@ -114,6 +114,12 @@ pub struct Args {
     /// 1 stream (3 with --restore), as older decoders read.
     #[arg(long)]
     pub no_cfl: bool,
+
+    /// Start the coder's contexts from the trained priors table (src/debt/priors.rs) instead
+    /// of one half. For measurement: the header does not say so yet, so the stream decodes
+    /// only with `debt-decode --priors` (a --sweep decodes it so itself).
+    #[arg(long)]
+    pub priors: bool,
 }
 
 fn parse_rect(text: &str) -> Result<Rect, String> {
@@ -140,6 +146,7 @@ impl Args {
             }),
             restore: self.restore,
             chroma_from_luma: !self.no_cfl,
+            priors: self.priors,
         }
     }
 }
