@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Bit-identity check for refactors of the DEBT codec: encodes a fixed set of cases (colour and
 # grey test images at several budgets, lossless, --gray, --scale 1, --roi, --segments 4,
-# version 3 with --restore, version 4 (chroma from luma, the default from 4000 B) and --no-cfl),
+# version 5's features: --restore, chroma from luma (the default from 4000 B) and --no-cfl,
+# context priors (the default for lossy streams) and --no-priors, --fec parity trunks),
 # decodes each (as PNM, so that no PNG writer is involved), and prints one sha256 per stream
 # and per decoded picture. Run it before and after a change that must not alter the bytes and
 # compare the outputs (e.g. `diff <(scripts/debt-identity.sh) before.txt`).
@@ -35,6 +36,10 @@ cases=(
   "colour-seg4-2000|kodim05.png|--segments 4 --bytes 2000"
   "grey-seg4-6000|boats-gray.png|--segments 4 --trunk-size 39 --bytes 6000"
   "colour-nocfl-6000|kodim05.png|--no-cfl --bytes 6000"
+  "colour-v1-2000|kodim05.png|--no-priors --bytes 2000"
+  "grey-v1-6000|boats-gray.png|--no-priors --bytes 6000"
+  "colour-fec15-2000|kodim05.png|--fec 15 --trunk-size 39 --bytes 2000"
+  "grey-fec10-8000|boats-gray.png|--fec 10 --trunk-size 39 --bytes 8000"
   "colour-v3-4000|kodim05.png|--restore --bytes 4000"
   "grey-v3-8000|boats-gray.png|--restore --bytes 8000"
   "colour-v3-roi-6000|kodim05.png|--restore --roi 200,100,500,400 --bytes 6000"

@@ -56,6 +56,36 @@ mod ctx {
     pub const COUNT: usize = REFINE + 16;
 }
 
+/// Number of contexts the coder keeps (the length of a priors table).
+pub const CONTEXTS: usize = ctx::COUNT;
+
+/// A context's initial state: probability of a 0 in 1/32768, and the number of symbols the
+/// context counts as already seen (how slowly it adapts from there); see
+/// [`Context::with_prior`].
+pub type Prior = (u16, u8);
+
+/// The contexts at the start of a stream: all at one half, or from a priors table.
+fn initial_contexts(priors: Option<&[Prior; CONTEXTS]>) -> Vec<Context> {
+    match priors {
+        None => vec![Context::default(); CONTEXTS],
+        Some(table) => table
+            .iter()
+            .map(|&(p0, count)| Context::with_prior(p0, count))
+            .collect(),
+    }
+}
+
+/// One context-coded decision, as [`Encoder::decisions`] records it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Decision {
+    /// The context index (below [`CONTEXTS`]).
+    pub context: u16,
+    /// The bit coded.
+    pub bit: bool,
+    /// Bits the stream had spent before this decision.
+    pub at_bits: u64,
+}
+
 /// Zero bytes after a complete stream: enough for the decoder's margin.
 pub const COMPLETE_PADDING_BYTES: usize = (MARGIN_BITS as usize).div_ceil(8) + 1;
 
@@ -66,16 +96,30 @@ pub struct Encoder {
     budget_bits: u64,
     /// Each completed pass: its [`pass_index`] and the bits written by its end.
     pub marks: Vec<(usize, u64)>,
+    /// When `Some`, every context-coded decision is appended, in coding order (for training
+    /// a priors table; raw bits are not recorded).
+    pub decisions: Option<Vec<Decision>>,
 }
 
 impl Encoder {
     /// An encoder that stops before the symbol that would not fit in `budget_bytes`.
     pub fn new(budget_bytes: usize) -> Encoder {
+        Encoder::start(budget_bytes, None)
+    }
+
+    /// An encoder whose contexts start from `priors` instead of one half; its stream decodes
+    /// only with [`Decoder::with_priors`] and the same table.
+    pub fn with_priors(budget_bytes: usize, priors: &[Prior; CONTEXTS]) -> Encoder {
+        Encoder::start(budget_bytes, Some(priors))
+    }
+
+    fn start(budget_bytes: usize, priors: Option<&[Prior; CONTEXTS]>) -> Encoder {
         Encoder {
             rc: RangeEncoder::new(),
-            contexts: vec![Context::default(); ctx::COUNT],
+            contexts: initial_contexts(priors),
             budget_bits: (budget_bytes as u64).saturating_mul(8),
             marks: Vec::new(),
+            decisions: None,
         }
     }
 
@@ -102,6 +146,13 @@ impl BitCoder for Encoder {
     const ENCODER: bool = true;
     fn bit(&mut self, ctx: usize, bit: bool) -> Result<bool, Stop> {
         self.room()?;
+        if let Some(log) = self.decisions.as_mut() {
+            log.push(Decision {
+                context: ctx as u16,
+                bit,
+                at_bits: self.rc.tell_bits(),
+            });
+        }
         self.rc.encode(&mut self.contexts[ctx], bit);
         Ok(bit)
     }
@@ -125,9 +176,18 @@ pub struct Decoder<'a> {
 impl<'a> Decoder<'a> {
     /// Decodes `data`, all of whose bytes count as budget.
     pub fn new(data: &'a [u8]) -> Decoder<'a> {
+        Decoder::start(data, None)
+    }
+
+    /// Decodes `data` written by [`Encoder::with_priors`] with the same table.
+    pub fn with_priors(data: &'a [u8], priors: &[Prior; CONTEXTS]) -> Decoder<'a> {
+        Decoder::start(data, Some(priors))
+    }
+
+    fn start(data: &'a [u8], priors: Option<&[Prior; CONTEXTS]>) -> Decoder<'a> {
         Decoder {
             rc: RangeDecoder::new(data),
-            contexts: vec![Context::default(); ctx::COUNT],
+            contexts: initial_contexts(priors),
             budget_bits: (data.len() as u64).saturating_mul(8),
         }
     }
@@ -664,16 +724,45 @@ mod tests {
             .collect()
     }
 
+    fn encoder(budget: usize, priors: Option<&[Prior; CONTEXTS]>) -> Encoder {
+        priors.map_or_else(|| Encoder::new(budget), |p| Encoder::with_priors(budget, p))
+    }
+
+    fn decoder<'a>(data: &'a [u8], priors: Option<&[Prior; CONTEXTS]>) -> Decoder<'a> {
+        priors.map_or_else(|| Decoder::new(data), |p| Decoder::with_priors(data, p))
+    }
+
     #[test]
     fn lossless_round_trip_and_budget() {
+        round_trip_and_budget(None);
+    }
+
+    #[test]
+    fn priors_round_trip_and_every_budget_decodes() {
+        // Any table will do: random probabilities and counts, extremes included.
+        let mut s = crate::link::Rng::new(17, 0);
+        let mut table = [(0u16, 0u8); CONTEXTS];
+        for (i, prior) in table.iter_mut().enumerate() {
+            *prior = match i % 5 {
+                0 => (0, 0),
+                1 => (u16::MAX, 255),
+                _ => ((s.next_u32() % 32768) as u16, (s.next_u32() % 8) as u8),
+            };
+        }
+        round_trip_and_budget(Some(&table));
+        round_trip_and_budget(Some(&crate::debt::priors::PRIORS));
+        assert_eq!(crate::debt::priors::PRIORS.len(), CONTEXTS);
+    }
+
+    fn round_trip_and_budget(priors: Option<&[Prior; CONTEXTS]>) {
         let data = random_bands(5);
         let planes = 10;
         let mut enc_bands = make(&data, true);
-        let mut enc = Encoder::new(usize::MAX / 16);
+        let mut enc = encoder(usize::MAX / 16, priors);
         code_planes(&mut enc_bands, planes, &mut enc).unwrap();
         let bytes = enc.finish(true);
         let mut dec_bands = make(&data, false);
-        let mut dec = Decoder::new(&bytes);
+        let mut dec = decoder(&bytes, priors);
         code_planes(&mut dec_bands, planes, &mut dec).unwrap();
         for (b, (_, _, m, n)) in dec_bands.iter().zip(&data) {
             assert_eq!(&b.mag, m);
@@ -686,14 +775,14 @@ mod tests {
         // Any budget: the encoder fits it, the decoder agrees on what it got.
         for budget in [0, 1, 5, 10, 20, 40, bytes.len() / 2] {
             let mut enc_bands = make(&data, true);
-            let mut enc = Encoder::new(budget);
+            let mut enc = encoder(budget, priors);
             let complete = code_planes(&mut enc_bands, planes, &mut enc).is_ok();
             let cut = enc.finish(complete);
             assert!(cut.len() <= budget, "budget {budget}: {} bytes", cut.len());
             let mut padded = cut.clone();
             padded.resize(budget, 0);
             let mut dec_bands = make(&data, false);
-            let _ = code_planes(&mut dec_bands, planes, &mut Decoder::new(&padded));
+            let _ = code_planes(&mut dec_bands, planes, &mut decoder(&padded, priors));
             for (b, (_, _, m, _)) in dec_bands.iter().zip(&data) {
                 let significant: std::collections::HashSet<u32> =
                     b.significant().iter().copied().collect();

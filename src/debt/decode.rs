@@ -62,8 +62,8 @@ pub fn decode_with_loss(data: &[u8], lost: &[Range<usize>]) -> Result<Image, Err
             decode_part(
                 &header,
                 &data[header_bytes.min(end)..end],
-                0,
-                1,
+                (0, 1),
+                header.priors,
                 &mut coefficients,
             );
         }
@@ -81,7 +81,13 @@ pub fn decode_with_loss(data: &[u8], lost: &[Range<usize>]) -> Result<Image, Err
                 }
             }
             for (part, payload) in payloads.iter().enumerate() {
-                decode_part(&header, payload, part, count, &mut coefficients);
+                decode_part(
+                    &header,
+                    payload,
+                    (part, count),
+                    header.priors,
+                    &mut coefficients,
+                );
             }
         }
     }
@@ -215,18 +221,23 @@ pub(super) fn reconstructed(mag: u32, known: u8, lossless: bool) -> f32 {
     }
 }
 
-/// Decodes segment `part` of `parts` from its bytes and appends its significant coefficients
-/// to `coefficients` (per component: index in the plane, value).
+/// Decodes segment `part` of `parts` from its bytes, its contexts starting from the priors
+/// table if `priors`, and appends its significant coefficients to `coefficients` (per
+/// component: index in the plane, value).
 fn decode_part(
     header: &Header,
     payload: &[u8],
-    part: usize,
-    parts: usize,
+    (part, parts): (usize, usize),
+    priors: bool,
     coefficients: &mut [Vec<(u32, f32)>],
 ) {
     let (w, _) = header.coded_size();
     let (mut bands, layout) = build_bands(header, None, part, parts);
-    let mut dec = Decoder::new(payload);
+    let mut dec = if priors {
+        Decoder::with_priors(payload, &super::priors::PRIORS)
+    } else {
+        Decoder::new(payload)
+    };
     if let Ok(plane_count) = dec.raw(0, 5) {
         let _ = coder::code_planes(&mut bands, plane_count, &mut dec);
     }
@@ -277,7 +288,13 @@ mod tests {
             let header = Header::read(&stream).unwrap();
             let (w, h) = header.coded_size();
             let mut coefficients = vec![Vec::new(); header.components()];
-            decode_part(&header, &stream[header.len()..], 0, 1, &mut coefficients);
+            decode_part(
+                &header,
+                &stream[header.len()..],
+                (0, 1),
+                false,
+                &mut coefficients,
+            );
             let mut planes: Vec<Vec<f32>> =
                 coefficients.iter().map(|c| scattered(c, w * h)).collect();
             transform_planes(&mut planes, w, h, &header, false);

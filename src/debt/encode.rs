@@ -3,7 +3,7 @@
 //! segment within the whole budget first, then shares the budget so that every segment stops
 //! at about the same pass, and interleaves their bytes trunk by trunk.
 
-use super::coder::{self, Band, BitCoder, Encoder};
+use super::coder::{self, Band, BitCoder, Decision, Encoder};
 use super::colour::{downscale, to_components};
 use super::fec::{self, Fec};
 use super::header::{Header, MAX_SEGMENTS, SegmentLayout, Segments};
@@ -40,6 +40,9 @@ pub struct EncodeOptions {
     /// Parity trunks after the stream ([`super::fec`], version 5), inside the budget; only for
     /// lossy, unsegmented streams.
     pub fec: Option<FecOptions>,
+    /// Start the coder's contexts from the trained table [`super::priors::PRIORS`] instead of
+    /// one half (version 5); only for lossy streams without segments.
+    pub priors: bool,
 }
 
 /// How much parity a stream carries, and for which trunks.
@@ -66,6 +69,7 @@ impl Default for EncodeOptions {
             restore: false,
             chroma_from_luma: true,
             fec: None,
+            priors: true,
         }
     }
 }
@@ -101,7 +105,7 @@ fn finish_restored(out: &mut Vec<u8>, header: &Header, img: &Image) -> Result<()
 /// Encodes an image within `options.bytes` bytes.
 pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
     match options.fec {
-        None => encode_stream(img, options, None),
+        None => encode_stream(img, options, None, None),
         Some(f) => encode_with_parity(img, options, f),
     }
 }
@@ -157,7 +161,7 @@ fn encode_with_parity(
             fec: None,
             ..options.clone()
         };
-        let mut out = encode_stream(img, &inner, Some(code))?;
+        let mut out = encode_stream(img, &inner, Some(code), None)?;
         let again = fec::parity_trunks(out.len().div_ceil(t) + parity, f.percent);
         if again < parity {
             parity = again;
@@ -178,9 +182,25 @@ fn encode_with_parity(
     }
 }
 
+/// The context-coded decisions of encoding `img` with `options` (without parity), one list per
+/// segment (one for an unsegmented stream), each in coding order: what a priors table is
+/// trained on. A segment's list runs to where its coder stopped within the whole budget, past
+/// the share of the budget its stream keeps.
+pub fn decisions(img: &Image, options: &EncodeOptions) -> Result<Vec<Vec<Decision>>, Error> {
+    let mut log = Vec::new();
+    encode_stream(img, options, None, Some(&mut log))?;
+    Ok(log)
+}
+
 /// [`encode`] without parity; `fec`, when given, is stated in the header (its protected length
-/// as the budget, until [`encode_with_parity`] writes the true one).
-fn encode_stream(img: &Image, options: &EncodeOptions, fec: Option<Fec>) -> Result<Vec<u8>, Error> {
+/// as the budget, until [`encode_with_parity`] writes the true one); each segment's decisions
+/// appended to `log` when given.
+fn encode_stream(
+    img: &Image,
+    options: &EncodeOptions,
+    fec: Option<Fec>,
+    mut log: Option<&mut Vec<Vec<Decision>>>,
+) -> Result<Vec<u8>, Error> {
     if img.width == 0 || img.height == 0 || img.width > MAX_SIDE || img.height > MAX_SIDE {
         return Err(Error::Size {
             width: img.width,
@@ -265,6 +285,7 @@ fn encode_stream(img: &Image, options: &EncodeOptions, fec: Option<Fec>) -> Resu
         restore_at: restore.then_some(0),
         cfl: None,
         fec,
+        priors: options.priors && !options.lossless && options.segments.is_none(),
     };
     if let Some(seg) = options.segments {
         seg.check()?;
@@ -303,7 +324,7 @@ fn encode_stream(img: &Image, options: &EncodeOptions, fec: Option<Fec>) -> Resu
         };
         let budget = options.bytes.saturating_sub(out.len() + trailer);
         let (bands, _) = build_bands(&header, Some(&planes), 0, 1);
-        out.extend_from_slice(&encode_bands(bands, budget).0);
+        out.extend_from_slice(&encode_bands(bands, budget, header.priors, log).0);
         if restore {
             finish_restored(&mut out, &header, img)?;
         }
@@ -320,7 +341,8 @@ fn encode_stream(img: &Image, options: &EncodeOptions, fec: Option<Fec>) -> Resu
     let mut all_complete = true;
     for part in 0..count {
         let (bands, _) = build_bands(&header, Some(&planes), part, count);
-        let (payload, complete, marks) = encode_bands(bands, budget);
+        let (payload, complete, marks) =
+            encode_bands(bands, budget, header.priors, log.as_deref_mut());
         ends.push(pass_ends(&marks, complete));
         all_complete &= complete;
         streams.push(payload);
@@ -412,17 +434,31 @@ fn split_budget(ends: &[Vec<u64>], budget: usize) -> Vec<usize> {
         .collect()
 }
 
-/// Codes a band list in at most `budget` bytes: the bytes (exactly `budget` unless complete),
-/// whether every plane was coded, and where each pass ended ([`Encoder::marks`]).
+/// Codes a band list in at most `budget` bytes, its contexts starting from the priors table
+/// if `priors`: the bytes (exactly `budget` unless complete), whether every plane was coded,
+/// and where each pass ended ([`Encoder::marks`]). The decisions are appended to `log` as one
+/// more list when given.
 pub(super) fn encode_bands(
     mut bands: Vec<Band>,
     budget: usize,
+    priors: bool,
+    log: Option<&mut Vec<Vec<Decision>>>,
 ) -> (Vec<u8>, bool, Vec<(usize, u64)>) {
     let max = bands.iter().map(Band::max_magnitude).max().unwrap_or(0);
     let plane_count = 32 - max.leading_zeros();
-    let mut enc = Encoder::new(budget);
+    let mut enc = if priors {
+        Encoder::with_priors(budget, &super::priors::PRIORS)
+    } else {
+        Encoder::new(budget)
+    };
+    if log.is_some() {
+        enc.decisions = Some(Vec::new());
+    }
     let complete = enc.raw(plane_count, 5).is_ok()
         && coder::code_planes(&mut bands, plane_count, &mut enc).is_ok();
+    if let Some(log) = log {
+        log.push(enc.decisions.take().unwrap_or_default());
+    }
     let marks = std::mem::take(&mut enc.marks);
     let mut payload = enc.finish(complete);
     if complete {

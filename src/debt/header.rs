@@ -136,6 +136,8 @@ pub struct Header {
     pub cfl: Option<Multipliers>,
     /// For version 5 streams: the parity trunks after the stream ([`super::fec`]).
     pub fec: Option<Fec>,
+    /// For version 5 streams: the coder's contexts start from [`super::priors::PRIORS`].
+    pub priors: bool,
 }
 
 /// Bits of a version 5 header's features byte; each feature's fields follow in bit order.
@@ -144,10 +146,12 @@ pub mod features {
     pub const RESTORE: u8 = 1 << 0;
     /// Chroma from luma: the multipliers (mask, then one byte each).
     pub const CHROMA_FROM_LUMA: u8 = 1 << 1;
+    /// The coder's contexts start from the trained priors table: no bytes.
+    pub const PRIORS: u8 = 1 << 2;
     /// Parity trunks: 6 bytes (trunk size, protected bytes, parity trunks).
     pub const FEC: u8 = 1 << 3;
     /// Every bit this build reads.
-    pub const KNOWN: u8 = RESTORE | CHROMA_FROM_LUMA | FEC;
+    pub const KNOWN: u8 = RESTORE | CHROMA_FROM_LUMA | PRIORS | FEC;
 }
 
 /// ROI cells per image side in the header.
@@ -171,6 +175,7 @@ impl Header {
         let bit = |on: bool, bit: u8| if on { bit } else { 0 };
         bit(self.restore_at.is_some(), features::RESTORE)
             | bit(self.cfl.is_some(), features::CHROMA_FROM_LUMA)
+            | bit(self.priors, features::PRIORS)
             | bit(self.fec.is_some(), features::FEC)
     }
 
@@ -270,6 +275,7 @@ impl Header {
             restore_at: None,
             cfl: None,
             fec: None,
+            priors: false,
         };
         if flags & 1 != 0 {
             if data.len() < 8 {
@@ -374,11 +380,12 @@ impl Header {
         if bits & !features::KNOWN != 0 || bits == 0 {
             return Err(Error::Setting {
                 field: "version 5 features",
-                expected: "a known non-empty set (bits 0, 1, 3)",
+                expected: "a known non-empty set (bits 0 to 3)",
                 found: u64::from(bits),
             });
         }
         let mut end = at + 1;
+        self.priors = bits & features::PRIORS != 0;
         let mut restore_at = None;
         if bits & features::RESTORE != 0 {
             let Some(&[a, b, c]) = data.get(end..end + 3) else {
@@ -498,6 +505,7 @@ mod tests {
             restore_at: None,
             cfl: None,
             fec: None,
+            priors: false,
         };
         let mut out = Vec::new();
         h.write(&mut out);
@@ -558,6 +566,7 @@ mod tests {
             restore_at: None,
             cfl: Some(Multipliers { pairs: 18, steps }),
             fec: None,
+            priors: false,
         };
         let chroma_v4 = [
             0xd4, 0x03, 0xf0, 0x1f, 0x18, 0, 0, 0, 0x40, 0x00, 0x40, 0xfc, 0x09,

@@ -34,6 +34,7 @@ pub mod fec;
 mod header;
 pub mod metrics;
 pub mod picture;
+pub mod priors;
 pub mod rangecoder;
 pub mod resilient;
 pub mod restore;
@@ -42,7 +43,7 @@ pub mod trial;
 pub mod wavelet;
 
 pub use decode::{decode, decode_trunks, decode_with_loss};
-pub use encode::{EncodeOptions, FecOptions, encode};
+pub use encode::{EncodeOptions, FecOptions, decisions, encode};
 pub use header::{
     Header, MAX_SEGMENTS, MIN_TRUNK_BYTES, SegmentLayout, Segments, VERSION, VERSION_CHROMA,
     VERSION_FEATURES, VERSION_SEGMENTED,
@@ -240,6 +241,7 @@ mod tests {
             bytes,
             chroma_from_luma,
             restore,
+            priors: false,
             ..EncodeOptions::default()
         };
         let v4 = encode(&img, &with(true, bytes, false)).unwrap();
@@ -282,6 +284,7 @@ mod tests {
             let opts = EncodeOptions {
                 bytes,
                 restore: true,
+                priors: false,
                 ..EncodeOptions::default()
             };
             let v3 = encode(&img, &opts).unwrap();
@@ -296,6 +299,7 @@ mod tests {
                 &img,
                 &EncodeOptions {
                     bytes: bytes - 4 - filter_bytes,
+                    priors: false,
                     ..EncodeOptions::default()
                 },
             )
@@ -327,6 +331,7 @@ mod tests {
         let small = EncodeOptions {
             bytes: restore::MIN_BUDGET_BYTES - 1,
             restore: true,
+            priors: false,
             ..EncodeOptions::default()
         };
         assert_eq!(encode(&img, &small).unwrap()[0], 0xd1);
@@ -499,6 +504,7 @@ mod tests {
             restore_at: None,
             cfl: None,
             fec: None,
+            priors: false,
             segments: Some(SegmentLayout {
                 segments: Segments {
                     count: 16,
@@ -605,7 +611,7 @@ mod tests {
             ),
             Err(Error::Budget {
                 found: 4,
-                header: 5
+                header: 6
             })
         );
     }
@@ -622,7 +628,7 @@ mod tests {
         )
         .unwrap();
         let mut last = 0.0;
-        for cut in [5, 20, 60, 200, 600, 2000] {
+        for cut in [6, 20, 60, 200, 600, 2000] {
             let q = psnr(&img, &decode(&stream[..cut]).unwrap());
             assert!(q >= last - 0.05, "{cut} bytes: {q:.2} dB after {last:.2}");
             last = q;
@@ -641,6 +647,70 @@ mod tests {
             psnr(&img, &decode(&direct).unwrap()),
         );
         assert!((a - b).abs() < 0.5, "prefix {a:.2} dB, direct {b:.2} dB");
+    }
+
+    #[test]
+    fn priors_are_said_in_the_header_and_every_prefix_decodes() {
+        assert_eq!(priors::PRIORS.len(), coder::CONTEXTS);
+        // Lossless and segmented streams start from one half, as before.
+        let img = synthetic(33, 17, 3);
+        let options = EncodeOptions {
+            bytes: 1 << 20,
+            lossless: true,
+            ..Default::default()
+        };
+        let stream = encode(&img, &options).unwrap();
+        assert_eq!(stream[0], 0xd1);
+        assert_eq!(decode(&stream).unwrap(), img);
+        let segmented = encode(
+            &synthetic(64, 48, 3),
+            &EncodeOptions {
+                bytes: 1500,
+                segments: Some(Segments {
+                    count: 3,
+                    trunk_bytes: 39,
+                }),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert!(!Header::read(&segmented).unwrap().priors);
+        // A lossy stream: version 5, features byte 0x04 after the 5-byte base header.
+        let img = synthetic(64, 48, 3);
+        let options = EncodeOptions {
+            bytes: 1500,
+            ..Default::default()
+        };
+        let stream = encode(&img, &options).unwrap();
+        assert_eq!((stream[0], stream[5]), (0xd5, 0x04));
+        let header = Header::read(&stream).unwrap();
+        assert!(header.priors);
+        let mut last = 0.0;
+        for cut in header.len()..=stream.len() {
+            let q = psnr(&img, &decode(&stream[..cut]).unwrap());
+            assert!(q >= last - 0.3, "{cut} bytes: {q:.2} dB after {last:.2}");
+            last = q;
+        }
+        // Both sides start from the table: a decoder told otherwise goes wrong.
+        // (The same payload behind a version 1 header.)
+        let mut wrong = vec![0xd1];
+        wrong.extend_from_slice(&stream[1..5]);
+        wrong.extend_from_slice(&stream[6..]);
+        let without = psnr(&img, &decode(&wrong).unwrap());
+        assert!(
+            last > without + 1.0,
+            "{last:.2} dB with, {without:.2} without"
+        );
+        // Without priors: version 1.
+        let plain = encode(
+            &img,
+            &EncodeOptions {
+                priors: false,
+                ..options
+            },
+        )
+        .unwrap();
+        assert_eq!(plain[0], 0xd1);
     }
 
     #[test]

@@ -49,12 +49,25 @@ impl Default for Context {
 }
 
 impl Context {
+    /// A context that starts at probability `p0` of a 0 (in 1/32768, clamped to the coder's
+    /// range) as if it had already seen `count` symbols: the count sets how fast it adapts
+    /// from there ([`Context::default`] is `with_prior(16384, 0)`).
+    pub fn with_prior(p0: u16, count: u8) -> Context {
+        let p = u32::from(p0).clamp(PROB_MIN, PROB_MAX) as u16;
+        Context {
+            fast: p,
+            slow: p,
+            count,
+        }
+    }
+
     /// Probability of a 0, in 1/32768.
-    fn p0(&self) -> u32 {
+    pub fn p0(&self) -> u32 {
         ((u32::from(self.fast) + u32::from(self.slow)) / 2).clamp(PROB_MIN, PROB_MAX)
     }
 
-    fn update(&mut self, bit: bool) {
+    /// Adapts to a coded `bit`, as the encoder and the decoder do after each symbol.
+    pub fn update(&mut self, bit: bool) {
         let fast_shift = u32::from(self.count.min(2)) + 1;
         let slow_shift = u32::from(self.count.min(5)) + 1;
         let target: i32 = if bit { 0 } else { PROB_ONE as i32 - 1 };

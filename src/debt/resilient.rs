@@ -117,6 +117,7 @@ impl Layout {
             restore_at: None,
             cfl: None,
             fec: None,
+            priors: false,
         }
     }
 
@@ -302,7 +303,7 @@ pub fn encode_groups(img: &Image, layout: &Layout) -> Vec<u8> {
             .collect();
         let mine: Vec<_> = trunks.iter().skip(gi).step_by(g).cloned().collect();
         let budget = mine.iter().map(|r| r.len()).sum();
-        let payload = encode_bands(bands, budget).0;
+        let payload = encode_bands(bands, budget, false, None).0;
         let mut rest = &payload[..];
         for r in mine {
             let n = r.len().min(rest.len());

@@ -13,7 +13,6 @@ Examples:
   debt-encode --gray --scale 1 --bytes 250 < photo.png > tiny.debt
   debt-encode photo.png --lossless --bytes 10000000 -o exact.debt   (shorter when complete)
   debt-encode --sweep 250,500,1000,2000,8000 --csv trials.csv a.png b.png   compression trials
-  debt-encode photo.png --bytes 2000 --segments 4 --trunk-size 39 -o robust.debt   loss-resilient
   debt-encode photo.png --bytes 2000 --fec 15 --trunk-size 39 -o parity.debt   15 % parity trunks
 
 Exit codes: 0 ok, 2 bad usage or an unreadable image; a --sweep stopped by SIGINT or SIGTERM
@@ -93,9 +92,10 @@ pub struct Args {
     #[arg(long, value_parser = value::count(0, 7))]
     pub levels: Option<u64>,
 
-    /// Split the stream into K independently decodable segments (2 ..= 16, stripes of rows)
-    /// interleaved trunk by trunk: a lost trunk then blurs one stripe instead of ending the
-    /// image. Costs some quality when nothing is lost (see docs/debt-format.md).
+    /// Retired in favour of --fec, which beats it at 1, 5 and 10 % trunk loss
+    /// (docs/debt-format.md). Split the stream into K independently decodable segments (2 ..=
+    /// 16, stripes of rows) interleaved trunk by trunk: a lost trunk then blurs one stripe
+    /// instead of ending the image.
     #[arg(long, value_name = "K", value_parser = value::count(2, debt::MAX_SEGMENTS as u64))]
     pub segments: Option<u64>,
 
@@ -125,6 +125,13 @@ pub struct Args {
     /// feature it is a version 1 stream, as older decoders read.
     #[arg(long)]
     pub no_cfl: bool,
+
+    /// Start the coder's contexts at one half instead of the trained priors table
+    /// (src/debt/priors.rs). By default a lossy stream without --segments starts from the
+    /// table (version 5), which gains most in its first hundreds of bytes; with this flag and
+    /// no other feature it is a version 1 stream.
+    #[arg(long)]
+    pub no_priors: bool,
 }
 
 fn parse_rect(text: &str) -> Result<Rect, String> {
@@ -155,6 +162,7 @@ impl Args {
                 percent: percent as u32,
                 trunk_bytes: self.trunk_size.unwrap_or(39) as usize,
             }),
+            priors: !self.no_priors,
         }
     }
 }
