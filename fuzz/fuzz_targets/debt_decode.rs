@@ -9,7 +9,9 @@ use rovlink::debt::{Header, decode, decode_with_loss};
 fuzz_target!(|data: &[u8]| {
     // Keep each run fast: images up to 64 x 64 (the decoder's cost grows with the area).
     let Ok(header) = Header::read(data) else {
-        assert!(decode(data).is_err());
+        // Only a version 5 stream cut inside its features decodes without its whole header
+        // (to the flat picture of the size its base header states).
+        assert!(decode(data).is_err() || data[0] == 0xd5);
         return;
     };
     if header.width * header.height > 64 * 64 {

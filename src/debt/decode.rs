@@ -35,7 +35,18 @@ pub fn decode_trunks(data: &[u8], trunk_bytes: usize, lost: &[usize]) -> Result<
 /// A single-segment stream decodes up to its first lost byte; a segmented one loses, in each
 /// segment, the chunks from its first lost one on. The header must have arrived.
 pub fn decode_with_loss(data: &[u8], lost: &[Range<usize>]) -> Result<Image, Error> {
-    let header = Header::read(data)?;
+    let header = match Header::read(data) {
+        Ok(header) => header,
+        // A version 5 prefix that ends inside its features: the picture's size is known, so
+        // it decodes, as every prefix of a version 1 stream past its 5 bytes does.
+        Err(e @ Error::Truncated { .. }) => {
+            return match Header::base_of_features(data) {
+                Some(base) => decode_with_loss(&base, &[]),
+                None => Err(e),
+            };
+        }
+        Err(e) => return Err(e),
+    };
     let header_bytes = header.len();
     let first_lost = lost
         .iter()

@@ -23,7 +23,7 @@ pub const VERSION_RESTORED: u8 = 3;
 /// multipliers ([`Header::cfl`]) and, like version 3's, where a restoration filter starts (0:
 /// none).
 pub const VERSION_CHROMA: u8 = 4;
-/// Version 1's stream with optional features named by a features byte ([`Features`]): a
+/// Version 1's stream with optional features named by a features byte ([`features`]): a
 /// restoration filter, chroma predicted from luma, parity trunks. What this build writes
 /// whenever a stream has one of them; versions 3 and 4 are read only.
 pub const VERSION_FEATURES: u8 = 5;
@@ -368,6 +368,18 @@ impl Header {
             header.read_features(data, at, flags)?;
         }
         Ok(header)
+    }
+
+    /// For a version 5 stream cut inside its features (or their fields): its base header (5
+    /// bytes, 8 with a ROI) as a complete version 1 header, when that much arrived.
+    pub(super) fn base_of_features(data: &[u8]) -> Option<Vec<u8>> {
+        if data.first()? & 0x0f != VERSION_FEATURES {
+            return None;
+        }
+        let len = if data.get(4)? & 1 != 0 { 8 } else { 5 };
+        let mut base = data.get(..len)?.to_vec();
+        base[0] = MAGIC | VERSION;
+        Header::read(&base).ok().map(|_| base)
     }
 
     /// Reads a version 5 header's features byte at `at` and the fields it announces.
