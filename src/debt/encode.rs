@@ -3,6 +3,7 @@
 //! segment within the whole budget first, then shares the budget so that every segment stops
 //! at about the same pass, and interleaves their bytes trunk by trunk.
 
+use super::adl::{self, DirectionMap};
 use super::coder::{self, Band, BitCoder, Encoder};
 use super::colour::{downscale, to_components};
 use super::header::{Header, MAX_SEGMENTS, SegmentLayout, Segments};
@@ -85,6 +86,35 @@ fn finish_restored(out: &mut Vec<u8>, header: &Header, img: &Image) -> Result<()
 
 /// Encodes an image within `options.bytes` bytes.
 pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
+    encode_inner(img, options, None).map(|(stream, _)| stream)
+}
+
+/// Encodes an image within `options.bytes` bytes with its finest levels lifted along
+/// directions ([`adl`], a prototype): the stream's bit-planes take the budget less the
+/// directions' coded bytes ([`DirectionMap::to_bytes`]), and the directions come back beside
+/// the stream, for [`super::decode_with_directions`] (the header does not say the stream has
+/// them). Lossy streams without segments or restoration only.
+pub fn encode_with_directions(
+    img: &Image,
+    options: &EncodeOptions,
+    params: &adl::Params,
+) -> Result<(Vec<u8>, DirectionMap), Error> {
+    adl::check(
+        options.lossless,
+        options.segments.is_some(),
+        options.restore,
+    )?;
+    let (stream, map) = encode_inner(img, options, Some(params))?;
+    Ok((stream, map.expect("directions picked")))
+}
+
+/// [`encode`], with directional lifting when `directions` is set (see
+/// [`encode_with_directions`]), and the directions picked.
+fn encode_inner(
+    img: &Image,
+    options: &EncodeOptions,
+    directions: Option<&adl::Params>,
+) -> Result<(Vec<u8>, Option<DirectionMap>), Error> {
     if img.width == 0 || img.height == 0 || img.width > MAX_SIDE || img.height > MAX_SIDE {
         return Err(Error::Size {
             width: img.width,
@@ -185,7 +215,14 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
     }
     let (w, h) = header.coded_size();
     let mut planes = to_components(&coded, header.gray, header.lossless);
-    transform_planes(&mut planes, w, h, &header, true);
+    let map = match directions {
+        Some(params) => Some(adl::forward_planes(&mut planes, w, h, levels, params)),
+        None => {
+            transform_planes(&mut planes, w, h, &header, true);
+            None
+        }
+    };
+    let map_bytes = map.as_ref().map_or(0, |m| m.to_bytes().len());
     let mut header = header;
     if options.chroma_from_luma
         && options.bytes >= super::cfl::MIN_BUDGET_BYTES
@@ -204,13 +241,15 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
         } else {
             0
         };
-        let budget = options.bytes.saturating_sub(out.len() + trailer);
+        let budget = options
+            .bytes
+            .saturating_sub(out.len() + trailer + map_bytes);
         let (bands, _) = build_bands(&header, Some(&planes), 0, 1);
         out.extend_from_slice(&encode_bands(bands, budget).0);
         if restore {
             finish_restored(&mut out, &header, img)?;
         }
-        return Ok(out);
+        return Ok((out, map));
     };
     let count = layout.segments.count + 1;
     let header_bytes = header.len();
@@ -275,7 +314,7 @@ pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
     if all_complete {
         out.truncate(needed_end);
     }
-    Ok(out)
+    Ok((out, None))
 }
 
 /// Where each pass ends in a segment's stream, in bytes a decoder needs to have it all, indexed
