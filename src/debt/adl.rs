@@ -159,7 +159,7 @@ fn lift(data: &mut [f32], n: usize, m: usize, forward: bool, dir: &impl Fn(usize
     }
     let scale = |data: &mut [f32], low: f32, high: f32| {
         for (i, line) in data.chunks_exact_mut(m).enumerate() {
-            let s = if i % 2 == 0 { low } else { high };
+            let s = if i.is_multiple_of(2) { low } else { high };
             line.iter_mut().for_each(|x| *x *= s);
         }
     };
@@ -262,7 +262,13 @@ fn level(
     let (mut u_low, mut u_high) = (vec![0.0f32; ch * nw], vec![0.0f32; ch * (cw - nw)]);
     let nd = cw - nw;
     // Where row y of the level's output sits: low rows first.
-    let out_row = |y: usize| if y % 2 == 0 { y / 2 } else { nh + y / 2 };
+    let out_row = |y: usize| {
+        if y.is_multiple_of(2) {
+            y / 2
+        } else {
+            nh + y / 2
+        }
+    };
     if forward {
         for y in 0..ch {
             for x in 0..cw {
@@ -483,7 +489,7 @@ struct Contexts {
     index: [[Context; 8]; 2],
 }
 
-/// Visits a pass's directions with their prediction (the left block's, the block above for
+/// The prediction of block `i`'s direction in a pass (the left block's, the block above's in
 /// the first column, 0 for the first block) and whether the block above agrees with it.
 fn predictions(dirs: &[u8], columns: usize, i: usize) -> (u8, usize) {
     let (x, y) = (i % columns, i / columns);
