@@ -5,6 +5,7 @@
 
 use std::ops::Range;
 
+use super::adl::{self, DirectionMap};
 use super::coder::{self, BitCoder, Decoder};
 use super::colour::{YCBCR_TO_RGB, from_components, to_sample, upscale};
 use super::header::Header;
@@ -35,6 +36,21 @@ pub fn decode_trunks(data: &[u8], trunk_bytes: usize, lost: &[usize]) -> Result<
 /// A single-segment stream decodes up to its first lost byte; a segmented one loses, in each
 /// segment, the chunks from its first lost one on. The header must have arrived.
 pub fn decode_with_loss(data: &[u8], lost: &[Range<usize>]) -> Result<Image, Error> {
+    decode_inner(data, lost, None)
+}
+
+/// Decodes a stream of [`super::encode_with_directions`] (or any prefix of one) with the
+/// directions that came beside it.
+pub fn decode_with_directions(data: &[u8], directions: &DirectionMap) -> Result<Image, Error> {
+    decode_inner(data, &[], Some(directions))
+}
+
+/// [`decode_with_loss`], the lossy synthesis along `directions` when set.
+fn decode_inner(
+    data: &[u8],
+    lost: &[Range<usize>],
+    directions: Option<&DirectionMap>,
+) -> Result<Image, Error> {
     let header = match Header::read(data) {
         Ok(header) => header,
         // A version 5 prefix that ends inside its features: the picture's size is known, so
@@ -113,7 +129,10 @@ pub fn decode_with_loss(data: &[u8], lost: &[Range<usize>]) -> Result<Image, Err
         if let Some(m) = header.cfl {
             m.add_prediction(&mut coefficients, w, h, header.levels);
         }
-        synthesise_channels(&coefficients, w, h, &header)
+        match directions {
+            Some(map) => adl::synthesise(&coefficients, w, h, header.levels, map),
+            None => synthesise_channels(&coefficients, w, h, &header),
+        }
     };
     let img = upscale(img, header.width, header.height);
     // The restoration filter, when the whole of it arrived.

@@ -3,6 +3,7 @@
 //! segment within the whole budget first, then shares the budget so that every segment stops
 //! at about the same pass, and interleaves their bytes trunk by trunk.
 
+use super::adl::{self, DirectionMap};
 use super::coder::{self, Band, BitCoder, Decision, Encoder};
 use super::colour::{downscale, to_components};
 use super::fec::{self, Fec};
@@ -105,7 +106,7 @@ fn finish_restored(out: &mut Vec<u8>, header: &Header, img: &Image) -> Result<()
 /// Encodes an image within `options.bytes` bytes.
 pub fn encode(img: &Image, options: &EncodeOptions) -> Result<Vec<u8>, Error> {
     match options.fec {
-        None => encode_stream(img, options, None, None),
+        None => encode_stream(img, options, None, None, None).map(|(stream, _)| stream),
         Some(f) => encode_with_parity(img, options, f),
     }
 }
@@ -161,7 +162,7 @@ fn encode_with_parity(
             fec: None,
             ..options.clone()
         };
-        let mut out = encode_stream(img, &inner, Some(code), None)?;
+        let (mut out, _) = encode_stream(img, &inner, Some(code), None, None)?;
         let again = fec::parity_trunks(out.len().div_ceil(t) + parity, f.percent);
         if again < parity {
             parity = again;
@@ -188,19 +189,45 @@ fn encode_with_parity(
 /// the share of the budget its stream keeps.
 pub fn decisions(img: &Image, options: &EncodeOptions) -> Result<Vec<Vec<Decision>>, Error> {
     let mut log = Vec::new();
-    encode_stream(img, options, None, Some(&mut log))?;
+    encode_stream(img, options, None, Some(&mut log), None)?;
     Ok(log)
+}
+
+/// Encodes an image within `options.bytes` bytes with its finest levels lifted along
+/// directions ([`adl`], a prototype): the stream's bit-planes take the budget less the
+/// directions' coded bytes ([`DirectionMap::to_bytes`]), and the directions come back beside
+/// the stream, for [`super::decode_with_directions`] (the header does not say the stream has
+/// them). Lossy streams without segments, restoration or parity only.
+pub fn encode_with_directions(
+    img: &Image,
+    options: &EncodeOptions,
+    params: &adl::Params,
+) -> Result<(Vec<u8>, DirectionMap), Error> {
+    adl::check(
+        options.lossless,
+        options.segments.is_some() || options.fec.is_some(),
+        options.restore,
+    )?;
+    let (stream, map) = encode_stream(img, options, None, None, Some(params))?;
+    let map = map.ok_or(Error::Setting {
+        field: "directions",
+        expected: "a direction map for a directional stream",
+        found: 0,
+    })?;
+    Ok((stream, map))
 }
 
 /// [`encode`] without parity; `fec`, when given, is stated in the header (its protected length
 /// as the budget, until [`encode_with_parity`] writes the true one); each segment's decisions
-/// appended to `log` when given.
+/// appended to `log` when given; with directional lifting when `directions` is set (see
+/// [`encode_with_directions`]), and the directions picked.
 fn encode_stream(
     img: &Image,
     options: &EncodeOptions,
     fec: Option<Fec>,
     mut log: Option<&mut Vec<Vec<Decision>>>,
-) -> Result<Vec<u8>, Error> {
+    directions: Option<&adl::Params>,
+) -> Result<(Vec<u8>, Option<DirectionMap>), Error> {
     if img.width == 0 || img.height == 0 || img.width > MAX_SIDE || img.height > MAX_SIDE {
         return Err(Error::Size {
             width: img.width,
@@ -303,7 +330,14 @@ fn encode_stream(
     }
     let (w, h) = header.coded_size();
     let mut planes = to_components(&coded, header.gray, header.lossless);
-    transform_planes(&mut planes, w, h, &header, true);
+    let map = match directions {
+        Some(params) => Some(adl::forward_planes(&mut planes, w, h, levels, params)),
+        None => {
+            transform_planes(&mut planes, w, h, &header, true);
+            None
+        }
+    };
+    let map_bytes = map.as_ref().map_or(0, |m| m.to_bytes().len());
     let mut header = header;
     if options.chroma_from_luma
         && options.bytes >= super::cfl::MIN_BUDGET_BYTES
@@ -322,13 +356,15 @@ fn encode_stream(
         } else {
             0
         };
-        let budget = options.bytes.saturating_sub(out.len() + trailer);
+        let budget = options
+            .bytes
+            .saturating_sub(out.len() + trailer + map_bytes);
         let (bands, _) = build_bands(&header, Some(&planes), 0, 1);
         out.extend_from_slice(&encode_bands(bands, budget, header.priors, log).0);
         if restore {
             finish_restored(&mut out, &header, img)?;
         }
-        return Ok(out);
+        return Ok((out, map));
     };
     let count = layout.segments.count + 1;
     let header_bytes = header.len();
@@ -394,7 +430,7 @@ fn encode_stream(
     if all_complete {
         out.truncate(needed_end);
     }
-    Ok(out)
+    Ok((out, None))
 }
 
 /// Where each pass ends in a segment's stream, in bytes a decoder needs to have it all, indexed

@@ -25,6 +25,7 @@
 //! No-panic contract: [`decode`] returns an [`Error`] for a stream that is not DEBT and decodes
 //! any other bytes, truncated or corrupt, to some image without panicking.
 
+pub mod adl;
 pub mod cfl;
 pub mod coder;
 mod colour;
@@ -42,8 +43,8 @@ mod transform;
 pub mod trial;
 pub mod wavelet;
 
-pub use decode::{decode, decode_trunks, decode_with_loss};
-pub use encode::{EncodeOptions, FecOptions, decisions, encode};
+pub use decode::{decode, decode_trunks, decode_with_directions, decode_with_loss};
+pub use encode::{EncodeOptions, FecOptions, decisions, encode, encode_with_directions};
 pub use header::{
     Header, MAX_SEGMENTS, MIN_TRUNK_BYTES, SegmentLayout, Segments, VERSION, VERSION_CHROMA,
     VERSION_FEATURES, VERSION_SEGMENTED,
