@@ -142,12 +142,13 @@ fn encode_with_parity(
         });
     }
     let t = f.trunk_bytes;
-    let trunks = options.bytes / t;
+    // The header states at most 16 MiB of data: a larger budget is as good as unbounded.
+    let trunks = options.bytes.min(fec::MAX_DATA_BYTES) / t;
     let mut parity = fec::parity_trunks(trunks, f.percent);
-    if trunks < parity + 1 || (trunks - parity) * t > fec::MAX_DATA_BYTES {
+    if trunks < parity + 1 {
         return Err(Error::Setting {
             field: "fec budget",
-            expected: "room for a data and a parity trunk, at most 16 MiB of data",
+            expected: "room for a data and a parity trunk",
             found: options.bytes as u64,
         });
     }
