@@ -176,8 +176,6 @@ pub struct Repaired {
     pub lost: Vec<Range<usize>>,
     /// The code, when the stream has one and its layout was found.
     pub fec: Option<Fec>,
-    /// Data trunks the parity brought back.
-    pub recovered_trunks: usize,
 }
 
 impl Repaired {
@@ -211,31 +209,23 @@ pub fn repair(stream: &[u8], trunk_bytes: usize, lost: &[usize]) -> Repaired {
         ranges.sort_by_key(|r| r.start);
         ranges
     };
-    let plain = |fec: Option<Fec>| Repaired {
+    let plain = || Repaired {
         data: stream.to_vec(),
         lost: lost_ranges(stream.len()),
-        fec,
-        recovered_trunks: 0,
+        fec: None,
     };
-    let header_intact = |fec: &Fec| {
-        // The header must have arrived as it is for its word to count.
-        super::header::Header::read(stream)
-            .ok()
-            .filter(|h| h.fec == Some(*fec))
-            .is_some_and(|h| lost_ranges(stream.len()).iter().all(|r| r.start >= h.len()))
-    };
-    // The header as received, when none of its bytes were lost.
-    let stated = super::header::Header::read(stream)
-        .ok()
-        .and_then(|h| h.fec)
-        .filter(|fec| fec.trunk_bytes == trunk_bytes && header_intact(fec));
-    if let Some(fec) = stated {
-        return repair_with(stream, fec, lost);
-    }
-    if super::header::Header::read(stream).is_ok_and(|h| {
-        h.fec.is_none() && lost_ranges(stream.len()).iter().all(|r| r.start >= h.len())
-    }) {
-        return plain(None);
+    // The header as received, when none of its bytes were lost: its word counts.
+    if let Ok(header) = super::header::Header::read(stream)
+        && lost_ranges(stream.len())
+            .iter()
+            .all(|r| r.start >= header.len())
+    {
+        match header.fec {
+            Some(fec) if fec.trunk_bytes == trunk_bytes => return repair_with(stream, fec, lost),
+            None => return plain(),
+            // Stated for other trunks: search as if the header were lost.
+            Some(_) => {}
+        }
     }
     // The header was lost: try each layout the encoder's rule can give at this length.
     let total_trunks = stream.len().div_ceil(trunk_bytes);
@@ -272,7 +262,7 @@ pub fn repair(stream: &[u8], trunk_bytes: usize, lost: &[usize]) -> Repaired {
             return repair_with(stream, fec, lost);
         }
     }
-    plain(None)
+    plain()
 }
 
 /// The longest header a stream with parity can have (ROI, features, the most multipliers,
@@ -292,7 +282,6 @@ fn repair_blocks(stream: &[u8], fec: Fec, lost: &[usize], first_trunks: usize) -
     let mut data = stream.get(..fec.data_bytes).unwrap_or(stream).to_vec();
     data.resize(fec.data_bytes, 0);
     let mut missing: Vec<usize> = (0..k).filter(|&i| !arrived(i)).collect();
-    let mut recovered_trunks = 0;
     for b in 0..fec.blocks().min(first_trunks) {
         let (data_trunks, parity) = fec.block_trunks(b);
         let lost_here = data_trunks.iter().filter(|&&i| !arrived(i)).count();
@@ -323,7 +312,6 @@ fn repair_blocks(stream: &[u8], fec: Fec, lost: &[usize], first_trunks: usize) -
                 let len = range.len();
                 data[range].copy_from_slice(&shard[..len]);
                 missing.retain(|&m| m != i);
-                recovered_trunks += 1;
             }
         }
     }
@@ -343,7 +331,6 @@ fn repair_blocks(stream: &[u8], fec: Fec, lost: &[usize], first_trunks: usize) -
             .collect(),
         data,
         fec: Some(fec),
-        recovered_trunks,
     }
 }
 

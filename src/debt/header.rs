@@ -331,26 +331,10 @@ impl Header {
             header.check_trunk()?;
         }
         if version == VERSION_RESTORED || version == VERSION_CHROMA {
-            let Some(&[a, b, c]) = data.get(at..at + 3) else {
-                return Err(Error::Truncated {
-                    expected: at + 3,
-                    found: data.len(),
-                });
-            };
-            let restore_at = u32::from_be_bytes([0, a, b, c]) as usize;
+            let restore_at = read_offset(data, at)?;
             let mut end = at + 3;
             if version == VERSION_CHROMA {
-                if header.gray || header.lossless {
-                    return Err(Error::Setting {
-                        field: "version 4 flags",
-                        expected: "a lossy colour stream",
-                        found: u64::from(flags),
-                    });
-                }
-                let (w, h) = header.coded_size();
-                let m = Multipliers::read(&data[end..], end, w, h, header.levels)?;
-                end += m.len();
-                header.cfl = Some(m);
+                end = header.read_multipliers(data, end, flags, "version 4 flags")?;
             }
             // Version 4 says 0 when there is no filter.
             if version == VERSION_RESTORED || restore_at != 0 {
@@ -382,6 +366,29 @@ impl Header {
         Header::read(&base).ok().map(|_| base)
     }
 
+    /// Reads the chroma-from-luma multipliers at `at` (versions 4 and 5) into `cfl`, refusing
+    /// them in a grey or lossless stream (`field` names the setting in that error); returns
+    /// where they end.
+    fn read_multipliers(
+        &mut self,
+        data: &[u8],
+        at: usize,
+        flags: u8,
+        field: &'static str,
+    ) -> Result<usize, Error> {
+        if self.gray || self.lossless {
+            return Err(Error::Setting {
+                field,
+                expected: "a lossy colour stream",
+                found: u64::from(flags),
+            });
+        }
+        let (w, h) = self.coded_size();
+        let m = Multipliers::read(&data[at..], at, w, h, self.levels)?;
+        self.cfl = Some(m);
+        Ok(at + m.len())
+    }
+
     /// Reads a version 5 header's features byte at `at` and the fields it announces.
     fn read_features(&mut self, data: &[u8], at: usize, flags: u8) -> Result<(), Error> {
         let truncated = |expected: usize| Error::Truncated {
@@ -400,24 +407,11 @@ impl Header {
         self.priors = bits & features::PRIORS != 0;
         let mut restore_at = None;
         if bits & features::RESTORE != 0 {
-            let Some(&[a, b, c]) = data.get(end..end + 3) else {
-                return Err(truncated(end + 3));
-            };
-            restore_at = Some(u32::from_be_bytes([0, a, b, c]) as usize);
+            restore_at = Some(read_offset(data, end)?);
             end += 3;
         }
         if bits & features::CHROMA_FROM_LUMA != 0 {
-            if self.gray || self.lossless {
-                return Err(Error::Setting {
-                    field: "chroma from luma with flags",
-                    expected: "a lossy colour stream",
-                    found: u64::from(flags),
-                });
-            }
-            let (w, h) = self.coded_size();
-            let m = Multipliers::read(&data[end..], end, w, h, self.levels)?;
-            end += m.len();
-            self.cfl = Some(m);
+            end = self.read_multipliers(data, end, flags, "chroma from luma with flags")?;
         }
         if bits & features::FEC != 0 {
             let fec = Fec::read(data.get(end..).unwrap_or_default(), end)?;
@@ -497,6 +491,17 @@ impl Header {
     pub(super) fn components(&self) -> usize {
         if self.gray { 1 } else { 3 }
     }
+}
+
+/// The 24-bit big-endian offset at `at` (a restoration filter's start, versions 3 to 5).
+fn read_offset(data: &[u8], at: usize) -> Result<usize, Error> {
+    let Some(&[a, b, c]) = data.get(at..at + 3) else {
+        return Err(Error::Truncated {
+            expected: at + 3,
+            found: data.len(),
+        });
+    };
+    Ok(u32::from_be_bytes([0, a, b, c]) as usize)
 }
 
 #[cfg(test)]
