@@ -131,7 +131,7 @@ fn decode_inner(
         }
         match directions {
             Some(map) => adl::synthesise(&coefficients, w, h, header.levels, map),
-            None => synthesise_channels(&coefficients, w, h, &header),
+            None => synthesise_channels(&coefficients, w, h, &header, synthesis_threads(w * h)),
         }
     };
     let img = upscale(img, header.width, header.height);
@@ -163,35 +163,22 @@ fn scattered(coefficients: &[(u32, f32)], len: usize) -> Vec<f32> {
     plane
 }
 
-/// Writes channel `c` of the `N`-channel picture `data` from a synthesised plane: samples
-/// rounded and clamped a run at a time (vectorised), then stored at their stride.
-fn put_channel<const N: usize>(data: &mut [u8], plane: &[f32], c: usize) {
-    const RUN: usize = 256;
-    let (pixels, _) = data.as_chunks_mut::<N>();
-    let mut run = [0u8; RUN];
-    for (pixels, values) in pixels.chunks_mut(RUN).zip(plane.chunks(RUN)) {
-        for (q, &v) in run.iter_mut().zip(values) {
-            *q = to_sample(v + 128.0);
-        }
-        for (pixel, &q) in pixels.iter_mut().zip(&run) {
-            pixel[c] = q;
-        }
-    }
-}
-
-/// The lossy picture from its coefficients, one output channel at a time through one plane.
+/// The lossy picture from its coefficients, each output channel synthesised on its own.
 ///
 /// The 9/7 synthesis and YCbCr -> RGB are both linear, so each RGB channel is the synthesis of
 /// its own mix of the component coefficients (only the significant ones, a few thousand at
-/// narrow-link budgets), rounded and clamped once at the end. One plane and the picture are
-/// all the memory the decoder touches: a third of the page faults of three component planes
-/// and a separate colour conversion. Floating point differs from converting after synthesis
-/// in the last bits only (a sample may round the other way).
+/// narrow-link budgets), rounded and clamped once at the end: no separate colour conversion.
+/// The channels are independent, so with `threads` > 1 each channel but the first is
+/// synthesised on a thread of its own, and the three sample planes are interleaved at the end;
+/// the numbers are the same on any number of threads.
+/// Floating point differs from converting after synthesis in the last bits only (a sample may
+/// round the other way).
 fn synthesise_channels(
     coefficients: &[Vec<(u32, f32)>],
     width: usize,
     height: usize,
     header: &Header,
+    threads: usize,
 ) -> Image {
     const GREY: [[f32; 3]; 1] = [[1.0, 0.0, 0.0]];
     let mix: &[[f32; 3]] = match coefficients.len() {
@@ -200,44 +187,90 @@ fn synthesise_channels(
     };
     let channels = mix.len();
     let n = width * height;
-    // Written once per channel below; a fresh page's first access is a write (one fault).
-    let mut data = vec![0u8; n * channels];
-    let mut plane: Vec<f32> = Vec::new();
-    let mut scratch = Vec::new();
-    for (c, weights) in mix.iter().enumerate() {
-        plane.clear();
-        plane.resize(n, 0.0);
-        for (coefs, &weight) in coefficients.iter().zip(weights) {
-            if weight != 0.0 {
-                for &(i, v) in coefs {
-                    plane[i as usize] += weight * v;
-                }
+    let synthesise = |weights: &[f32; 3]| {
+        synthesise_channel(coefficients, weights, width, height, header.levels)
+    };
+    let planes: Vec<Vec<u8>> = if channels > 1 && threads > 1 {
+        std::thread::scope(|scope| {
+            let others: Vec<_> = mix[1..]
+                .iter()
+                .map(|weights| scope.spawn(move || synthesise(weights)))
+                .collect();
+            let first = synthesise(&mix[0]);
+            std::iter::once(first)
+                .chain(others.into_iter().map(|t| {
+                    t.join()
+                        .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+                }))
+                .collect()
+        })
+    } else {
+        mix.iter().map(synthesise).collect()
+    };
+    let data = match planes.as_slice() {
+        [r, g, b] => {
+            let mut data = vec![0u8; n * 3];
+            for (pixel, ((&r, &g), &b)) in data.chunks_exact_mut(3).zip(r.iter().zip(g).zip(b)) {
+                pixel.copy_from_slice(&[r, g, b]);
             }
+            data
         }
-        // The synthesis hands over each row as its last step: quantised straight into the
-        // picture, never written back into the plane.
-        let put_row = |r: usize, row: &[f32]| {
-            let pixels = &mut data[r * width * channels..(r + 1) * width * channels];
-            match channels {
-                1 => put_channel::<1>(pixels, row, c),
-                _ => put_channel::<3>(pixels, row, c),
-            }
-        };
-        wavelet::inverse_97_rows(
-            &mut plane,
-            width,
-            height,
-            header.levels,
-            &mut scratch,
-            put_row,
-        );
-    }
+        _ => planes.into_iter().next().unwrap_or_default(),
+    };
     Image {
         width,
         height,
         channels,
         data,
     }
+}
+
+/// Pictures of at least this many samples synthesise their channels in parallel (below it a
+/// thread costs more than it saves).
+const PARALLEL_SAMPLES: usize = 1 << 16;
+
+/// How many threads synthesise a picture of `samples` samples: the machine's cores from
+/// [`PARALLEL_SAMPLES`] on, else one.
+fn synthesis_threads(samples: usize) -> usize {
+    if samples < PARALLEL_SAMPLES {
+        return 1;
+    }
+    std::thread::available_parallelism().map_or(1, |t| t.get())
+}
+
+/// One output channel: the synthesis of the components' coefficients mixed by `weights`, its
+/// samples rounded and clamped as the last step of the synthesis hands each row over.
+fn synthesise_channel(
+    coefficients: &[Vec<(u32, f32)>],
+    weights: &[f32; 3],
+    width: usize,
+    height: usize,
+    levels: u32,
+) -> Vec<u8> {
+    // Zeroed by writing, as in [`scattered`].
+    let mut plane = Vec::new();
+    plane.resize(width * height, 0.0f32);
+    for (coefs, &weight) in coefficients.iter().zip(weights) {
+        if weight != 0.0 {
+            for &(i, v) in coefs {
+                plane[i as usize] += weight * v;
+            }
+        }
+    }
+    let mut samples = vec![0u8; width * height];
+    wavelet::inverse_97_rows(
+        &mut plane,
+        width,
+        height,
+        levels,
+        &mut Vec::new(),
+        |r, row| {
+            for (q, &v) in samples[r * width..(r + 1) * width].iter_mut().zip(row) {
+                *q = to_sample(v + 128.0);
+            }
+        },
+    );
+    samples
 }
 
 /// The magnitude a significant coefficient is rebuilt at from its known bits `mag`, `known`
@@ -329,7 +362,7 @@ mod tests {
                 coefficients.iter().map(|c| scattered(c, w * h)).collect();
             transform_planes(&mut planes, w, h, &header, false);
             let after = from_components(&planes, w, h, false);
-            let mixed = synthesise_channels(&coefficients, w, h, &header);
+            let mixed = synthesise_channels(&coefficients, w, h, &header, 1);
             assert_eq!(mixed.channels, after.channels);
             let differ = (mixed.data.iter().zip(&after.data))
                 .filter(|(a, b)| a != b)
@@ -345,6 +378,32 @@ mod tests {
                 channels == 3 || differ == 0,
                 "grey differs in {differ} samples"
             );
+        }
+    }
+
+    #[test]
+    fn channels_on_threads_are_the_same_bytes_as_on_one() {
+        let img = synthetic(301, 227, 3);
+        let options = EncodeOptions {
+            bytes: 4000,
+            ..EncodeOptions::default()
+        };
+        let stream = encode(&img, &options).unwrap();
+        let header = Header::read(&stream).unwrap();
+        let (w, h) = header.coded_size();
+        let mut coefficients = vec![Vec::new(); header.components()];
+        decode_part(
+            &header,
+            &stream[header.len()..],
+            (0, 1),
+            header.priors,
+            &mut coefficients,
+        );
+        let one = synthesise_channels(&coefficients, w, h, &header, 1);
+        for threads in [2, 3] {
+            let many = synthesise_channels(&coefficients, w, h, &header, threads);
+            assert_eq!((many.width, many.height, many.channels), (w, h, 3));
+            assert!(many.data == one.data, "{threads} threads differ from one");
         }
     }
 }
