@@ -9,7 +9,12 @@ interleaved; the table gives the median wall time of each and the ratio to OpenJ
 ROI: each underwater image resized to 640 wide is coded at 1000 bytes without and with a centred
 ROI (a quarter and a sixteenth of the area, shift 3 and 5); the table gives the ROI's PSNR.
 
-Usage: scripts/debt-bench.sh [--runs N] [--restore] [--no-roi]
+On a shared machine, --quiet-gate waits before each interleaved round until the CPUs were at
+least 90 % idle for a quarter of a second (giving up on a round after --gate-timeout seconds,
+when the round runs anyway and is counted as loaded), so that other work does not land in the
+medians; the line above the table says how many rounds ran quiet.
+
+Usage: scripts/debt-bench.sh [--runs N] [--restore] [--no-roi] [--quiet-gate]
 """
 import argparse
 import math
@@ -34,7 +39,29 @@ def timed(cmd):
     return time.perf_counter() - start
 
 
-def speed(tmp, runs, restore):
+def idle_fraction(seconds=0.25):
+    """The fraction of the machine's CPU time spent idle over the next `seconds`."""
+    def read():
+        with open("/proc/stat") as f:
+            values = [int(v) for v in f.readline().split()[1:]]
+        return values[3] + values[4], sum(values)
+    idle0, total0 = read()
+    time.sleep(seconds)
+    idle1, total1 = read()
+    return (idle1 - idle0) / max(1, total1 - total0)
+
+
+def wait_quiet(timeout_s):
+    """Waits until the machine was at least 90 % idle for a quarter of a second; False if it
+    never was within `timeout_s`."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if idle_fraction() >= 0.9:
+            return True
+    return False
+
+
+def speed(tmp, runs, restore, gate_timeout_s=None):
     src = os.path.join(tmp, "u616.ppm")
     Image.open(os.path.join(SHARED, "uieb-616.png")).convert("RGB").save(src)
     w, h = Image.open(src).size
@@ -45,7 +72,10 @@ def speed(tmp, runs, restore):
     times = {k: [] for k in keys}
     debt, j2k = os.path.join(tmp, "s.debt"), os.path.join(tmp, "s.j2k")
     debt3 = os.path.join(tmp, "s3.debt")
+    quiet = 0
     for _ in range(runs):
+        if gate_timeout_s is not None:
+            quiet += wait_quiet(gate_timeout_s)
         times["debt-encode"].append(timed([ENC, src, "--bytes", "6000", "-o", debt]))
         times["opj_compress"].append(timed(["opj_compress", "-i", src, "-o", j2k, "-r", f"{ratio:.3f}", "-I"]))
         times["debt-decode"].append(timed([DEC, debt, "-o", os.path.join(tmp, "d.ppm")]))
@@ -55,6 +85,8 @@ def speed(tmp, runs, restore):
             times["debt-decode (v3)"].append(timed([DEC, debt3, "-o", os.path.join(tmp, "d3.ppm")]))
     med = {k: statistics.median(v) * 1e3 for k, v in times.items()}
     print(f"speed: {w}x{h} RGB, DEBT {os.path.getsize(debt)} B, J2K {os.path.getsize(j2k)} B, {runs} runs, median ms")
+    if gate_timeout_s is not None:
+        print(f"  quiet gate: {quiet} of {runs} rounds started on a quiet machine")
     print(f"  {'encode':<8} DEBT {med['debt-encode']:7.1f}  OpenJPEG {med['opj_compress']:7.1f}  "
           f"ratio {med['debt-encode'] / med['opj_compress']:.2f} (bar <= 0.25)")
     print(f"  {'decode':<8} DEBT {med['debt-decode']:7.1f}  OpenJPEG {med['opj_decompress']:7.1f}  "
@@ -107,9 +139,13 @@ def main():
     ap.add_argument("--restore", action="store_true",
                     help="also time debt-encode --restore (version 3) and its decode in the same runs")
     ap.add_argument("--no-roi", action="store_true", help="skip the ROI table")
+    ap.add_argument("--quiet-gate", action="store_true",
+                    help="start each round only once the machine is quiet (see above)")
+    ap.add_argument("--gate-timeout", type=float, default=30.0, metavar="SECONDS",
+                    help="how long a round waits for quiet before it runs anyway (default 30)")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        speed(tmp, args.runs, args.restore)
+        speed(tmp, args.runs, args.restore, args.gate_timeout if args.quiet_gate else None)
         if not args.no_roi:
             roi(tmp)
 
