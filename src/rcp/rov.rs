@@ -30,7 +30,7 @@ use std::collections::VecDeque;
 use super::camera::{Camera, Cycle};
 use super::drive::DriveEvent;
 use super::drive::{Demand, Drive, DriveState, SimDrive};
-use super::{Event, ImageSettings, PoseSample, emit, trunks_of};
+use super::{Event, ImageSettings, PoseSample, TrunkCache, emit};
 use crate::debt;
 use crate::link::SimTime;
 use crate::vehicle::Command;
@@ -97,6 +97,8 @@ pub struct Rov {
     cfg: RovConfig,
     drive: Box<dyn Drive>,
     camera: Box<dyn Camera>,
+    /// The trunks of the pictures last encoded (a cycling camera repeats its pictures).
+    encoded: TrunkCache,
     /// The reason of the last failed capture, to report a failing camera once per reason.
     camera_failure: Option<String>,
     heading_hold_deg: Option<f64>,
@@ -141,6 +143,7 @@ impl Rov {
             settings: cfg.settings,
             drive,
             camera,
+            encoded: TrunkCache::default(),
             camera_failure: None,
             heading_hold_deg: None,
             eoid: false,
@@ -496,7 +499,7 @@ impl Rov {
                 return;
             }
         };
-        let trunks = trunks_of(&picture, &self.settings);
+        let trunks = self.encoded.trunks(&picture, &self.settings);
         if trunks.is_empty() {
             // A picture the codec refuses (e.g. larger than DEBT holds): nothing to send.
             self.image = None;
