@@ -203,8 +203,28 @@ impl Rov {
         }
     }
 
-    /// When [`Rov::poll`] wants to run next.
+    /// When [`Rov::poll`] wants to run next: the next vehicle step, or, while the link is up,
+    /// nothing is executed or held and the vehicle stays still under the sticks
+    /// ([`Drive::still_under`]), a step before the heartbeat timeout (nothing else changes
+    /// by itself until then; a frame received meanwhile catches the steps up first).
     pub fn poll_at(&self) -> SimTime {
+        if self.link_up
+            && self.executing.is_none()
+            && self.hold.is_none()
+            && self.drive.state().position_known
+            && self.drive.still_under(&self.demand(self.sticks()))
+        {
+            let timeout_s = self.cfg.heartbeat_timeout_s - self.cfg.step_s;
+            return self
+                .last_heartbeat
+                .after_secs(timeout_s)
+                .max(self.next_step);
+        }
+        self.next_step
+    }
+
+    /// When the next vehicle step is due ([`Rov::poll`] runs every step due by its time).
+    pub fn next_step_at(&self) -> SimTime {
         self.next_step
     }
 
@@ -318,16 +338,7 @@ impl Rov {
                 },
             }
         };
-        let demand = Demand {
-            command,
-            arm: self.arm,
-            nav: match command {
-                Command::GoTo { .. } => Nav::Guided,
-                Command::Thrust { .. } => self.nav,
-            },
-            heading_hold_deg: self.heading_hold_deg,
-            link_up: self.link_up,
-        };
+        let demand = self.demand(command);
         self.drive.step(now, self.cfg.step_s, &demand);
         self.events
             .extend(self.drive.take_events().into_iter().map(Event::Vehicle));
@@ -421,6 +432,20 @@ impl Rov {
             self.capture();
         }
         Some(self.reply(msg.rit))
+    }
+
+    /// What the drive is asked for under `command`.
+    fn demand(&self, command: Command) -> Demand {
+        Demand {
+            command,
+            arm: self.arm,
+            nav: match command {
+                Command::GoTo { .. } => Nav::Guided,
+                Command::Thrust { .. } => self.nav,
+            },
+            heading_hold_deg: self.heading_hold_deg,
+            link_up: self.link_up,
+        }
     }
 
     /// The joystick's thrust while armed, idle otherwise.
