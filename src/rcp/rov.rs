@@ -208,19 +208,27 @@ impl Rov {
     /// ([`Drive::still_under`]), a step before the heartbeat timeout (nothing else changes
     /// by itself until then; a frame received meanwhile catches the steps up first).
     pub fn poll_at(&self) -> SimTime {
-        if self.link_up
+        if self.still() {
+            return self.last_still_step().max(self.next_step);
+        }
+        self.next_step
+    }
+
+    /// True while nothing changes by itself but the position stack and, at its time, the
+    /// link's state: the link is up, nothing is executed or held, and the vehicle stays still
+    /// under the sticks ([`Drive::still_under`]).
+    fn still(&self) -> bool {
+        self.link_up
             && self.executing.is_none()
             && self.hold.is_none()
             && self.drive.state().position_known
             && self.drive.still_under(&self.demand(self.sticks()))
-        {
-            let timeout_s = self.cfg.heartbeat_timeout_s - self.cfg.step_s;
-            return self
-                .last_heartbeat
-                .after_secs(timeout_s)
-                .max(self.next_step);
-        }
-        self.next_step
+    }
+
+    /// A step before the heartbeat timeout: the last that a still ROV may leave unrun.
+    fn last_still_step(&self) -> SimTime {
+        let timeout_s = self.cfg.heartbeat_timeout_s - self.cfg.step_s;
+        self.last_heartbeat.after_secs(timeout_s)
     }
 
     /// When the next vehicle step is due ([`Rov::poll`] runs every step due by its time).
@@ -229,12 +237,47 @@ impl Rov {
     }
 
     /// Advances the vehicle to `now` and runs the recovery algorithm.
+    ///
+    /// While the ROV is still (after one step under the demand in force, so the drive has
+    /// it), the steps due are not run one by one: all they would do is stack the same position
+    /// every [`RovConfig::stack_period_s`], which is done at those steps' times alone.
     pub fn poll(&mut self, now: SimTime) {
         while self.next_step <= now {
             let t = self.next_step;
             self.step(t);
             self.next_step = t.after_secs(self.cfg.step_s);
+            if self.next_step <= now && self.still() {
+                self.rest_until(now.min(self.last_still_step()));
+            }
         }
+    }
+
+    /// Runs the still steps due by `last` at once: the position stacked at each step a push
+    /// is due, as the steps would.
+    fn rest_until(&mut self, last: SimTime) {
+        let step_ns = SimTime::ZERO.after_secs(self.cfg.step_s).0;
+        if step_ns == 0 || last < self.next_step {
+            return;
+        }
+        let first = self.next_step;
+        let end = SimTime(first.0 + (last.0 - first.0) / step_ns * step_ns);
+        let position_m = self.drive.state().position_m;
+        while self.next_push <= end {
+            // The first of the skipped steps at or after the push's time.
+            let after_ns = self.next_push.0.saturating_sub(first.0);
+            let at = SimTime(first.0 + after_ns.div_ceil(step_ns) * step_ns);
+            self.push(position_m);
+            self.next_push = at.after_secs(self.cfg.stack_period_s);
+        }
+        self.next_step = end.after_secs(self.cfg.step_s);
+    }
+
+    /// Stacks `position_m`, dropping the oldest when the stack is full.
+    fn push(&mut self, position_m: [f64; 3]) {
+        if self.stack.len() == self.cfg.stack_depth {
+            self.stack.pop_front();
+        }
+        self.stack.push_back(position_m);
     }
 
     fn step(&mut self, now: SimTime) {
@@ -259,10 +302,7 @@ impl Rov {
             self.hold = None;
         }
         if self.link_up && now >= self.next_push {
-            if self.stack.len() == self.cfg.stack_depth {
-                self.stack.pop_front();
-            }
-            self.stack.push_back(self.drive.state().position_m);
+            self.push(self.drive.state().position_m);
             self.next_push = now.after_secs(self.cfg.stack_period_s);
         }
         let command = if !self.link_up && !position_known {
@@ -675,6 +715,37 @@ mod tests {
             last = operator.last_status;
         }
         (last.expect("a status"), events)
+    }
+
+    #[test]
+    fn a_still_rov_run_late_is_the_rov_run_every_step() {
+        // One ROV polled at every 0.1 s step, one only when a frame comes (and at the end):
+        // heartbeats for 20 s, then none, so the link times out and backtracking starts.
+        let start = [1.0, 2.0, 3.0];
+        let mut stepped = Rov::new(RovConfig::default(), start, Vec::new());
+        let mut late = Rov::new(RovConfig::default(), start, Vec::new());
+        let mut operator = Operator::new(1, 640_000_000);
+        let step_ns = 100_000_000;
+        let mut t = SimTime::ZERO;
+        while t <= SimTime(40_000_000_000) {
+            stepped.poll(t);
+            if t.0.is_multiple_of(640_000_000) && t.0 < 20_000_000_000 {
+                let (frame, _) = operator.poll(t);
+                let reply = stepped.receive(t, &frame).expect("a reply to every slot");
+                assert_eq!(late.receive(t, &frame), Some(reply.clone()));
+                operator.receive(t, &reply);
+            }
+            t = SimTime(t.0 + step_ns);
+        }
+        late.poll(SimTime(t.0 - step_ns));
+        assert_eq!(late.take_events(), stepped.take_events());
+        assert!(!late.link_up());
+        assert_eq!(late.stack, stepped.stack);
+        assert_eq!(
+            (late.next_push, late.next_step),
+            (stepped.next_push, stepped.next_step)
+        );
+        assert_eq!(late.pose(40.0), stepped.pose(40.0));
     }
 
     const GOTO: Order = Order::GoTo {
