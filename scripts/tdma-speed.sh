@@ -8,14 +8,32 @@
 # the 1-hour default session and the 3-node relay scenario's hour of BIN and of ours, in
 # interleaved pairs, and prints the medians and ratios (issue 30's "no slower than before").
 #
-# Usage: scripts/tdma-speed.sh [--against BIN] [RUNS]   (default 7)
+# With --against BIN --week (issue 32), it also times the default session over a week
+# (--duration 604800) of ours and, since the week of an older binary may take minutes, one
+# day (--duration 86400) of BIN, scaled by 7 and labelled so; WEEK_RUNS runs of each (default
+# 1, interleaved, medians). It also measures the peak RSS (/usr/bin/time -f %M, KB) of ours for
+# one hour, one day and one week of the same session, which should be about equal (memory
+# flat in duration).
+#
+# Interface (for scripts/speed.sh and other callers):
+#   scripts/tdma-speed.sh [--against BIN [--week [--week-runs N]]] [RUNS]   (RUNS default 7)
+#   - builds ours (cargo build --release) first; the seeds are 1..RUNS (1..N for the week);
+#   - prints Markdown tables on standard output, nothing else: with --against, one row per
+#     session "| name | before s | after s | after / before |" (1 h single session, 3-node
+#     relay hour, and with --week "1 week single session (before: 7 x 1 day)"), then with
+#     --week "| peak RSS KB | 1 h | 1 day | 1 week |" and one row for ours;
+#   - exits 0 when every run succeeded, non-zero (set -e) when one failed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-against=
-if [ "${1:-}" = --against ]; then
-    against=$(realpath "$2")
-    shift 2
-fi
+against= week= week_runs=1
+while [ $# -gt 0 ]; do
+    case "$1" in
+    --against) against=$(realpath "$2"); shift 2 ;;
+    --week) week=1; shift ;;
+    --week-runs) week_runs=$2; shift 2 ;;
+    *) break ;;
+    esac
+done
 runs=${1:-7}
 cargo build --release --quiet --bin tdma-run --bin modem-bench
 work=$(mktemp -d)
@@ -31,15 +49,38 @@ if [ -n "$against" ]; then
         b3+=("$(seconds "$against" "${network[@]}" --seed "$k")")
         a3+=("$(seconds target/release/tdma-run "${network[@]}" --seed "$k")")
     done
-    python3 - "${b1[*]}" "${a1[*]}" "${b3[*]}" "${a3[*]}" <<'PY'
+    bw=() aw=()
+    if [ -n "$week" ]; then
+        for k in $(seq 1 "$week_runs"); do
+            day=$(seconds "$against" --sim --duration 86400 --metrics "$work/m.json" --seed "$k")
+            bw+=("$(python3 -c "import sys; print(7 * float(sys.argv[1]))" "$day")")
+            aw+=("$(seconds target/release/tdma-run --sim --duration 604800 --metrics "$work/m.json" --seed "$k")")
+        done
+    fi
+    python3 - "${b1[*]}" "${a1[*]}" "${b3[*]}" "${a3[*]}" "${bw[*]}" "${aw[*]}" <<'PY'
 import statistics, sys
-b1, a1, b3, a3 = ([float(v) for v in arg.split()] for arg in sys.argv[1:])
+b1, a1, b3, a3, bw, aw = ([float(v) for v in arg.split()] for arg in sys.argv[1:])
 print("| session (whole process, medians) | before s | after s | after / before |")
 print("|---|---|---|---|")
-for name, b, a in (("1 h single session", b1, a1), ("3-node relay hour", b3, a3)):
+rows = [("1 h single session", b1, a1), ("3-node relay hour", b3, a3)]
+if aw:
+    rows.append(("1 week single session (before: 7 x 1 day)", bw, aw))
+for name, b, a in rows:
     mb, ma = statistics.median(b), statistics.median(a)
     print(f"| {name} | {mb:.3f} | {ma:.3f} | {ma / mb:.2f} |")
 PY
+    if [ -n "$week" ]; then
+        rss=()
+        for duration in 3600 86400 604800; do
+            /usr/bin/time -f %M -o "$work/rss" target/release/tdma-run --sim --duration "$duration" \
+                --metrics "$work/m.json" --seed 1 >/dev/null 2>&1
+            rss+=("$(tail -n 1 "$work/rss")")
+        done
+        echo
+        echo "| peak RSS KB | 1 h | 1 day | 1 week |"
+        echo "|---|---|---|---|"
+        echo "| ours, --sim --seed 1 | ${rss[0]} | ${rss[1]} | ${rss[2]} |"
+    fi
     exit 0
 fi
 session=() anchor=()

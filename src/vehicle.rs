@@ -8,6 +8,13 @@
 //! NED metres from the origin, the heading in degrees from north, clockwise.
 //!
 //! The model is a plain state machine: [`Vehicle::step`] advances it by a time step.
+//! [`Vehicle::advance`] is the same step that also comes to rest: once the command asks for
+//! less than [`REST_MPS`] (and [`REST_DPS`] in yaw) and the velocities have decayed below
+//! that too, the rest of the lag's way is added in closed form and the velocities are set to
+//! zero; from then on a step under such a command changes nothing ([`Vehicle::rests_under`]),
+//! so a driver need not step a vehicle at rest at all. Against [`Vehicle::step`] alone (the
+//! exponential tail followed forever) a track differs by at most [`REST_TOLERANCE_M`] and
+//! [`REST_TOLERANCE_DEG`].
 
 /// What the vehicle is asked to do.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -63,6 +70,21 @@ pub const ARRIVAL_M: f64 = 0.25;
 
 /// Heading error within which a go-to counts as reached, degrees.
 pub const ARRIVAL_DEG: f64 = 5.0;
+
+/// Speed below which a vehicle comes to rest when its command asks for no more, m/s.
+pub const REST_MPS: f64 = 1e-6;
+
+/// Yaw rate below which a vehicle comes to rest when its command asks for no more, degrees/s.
+pub const REST_DPS: f64 = 1e-6;
+
+/// The most a track of [`Vehicle::advance`] differs from one of [`Vehicle::step`], m: what
+/// the lag and the go-to controller (25 % of the error per second) would still have moved at
+/// rest speeds, with a margin.
+pub const REST_TOLERANCE_M: f64 = 1e-5;
+
+/// The most a heading of [`Vehicle::advance`] differs from one of [`Vehicle::step`], degrees
+/// (heading hold turns at 0.9 degrees/s per degree of error).
+pub const REST_TOLERANCE_DEG: f64 = 1e-5;
 
 /// Wraps an angle difference into -180..180 degrees.
 pub fn angle_diff_deg(to: f64, from: f64) -> f64 {
@@ -137,8 +159,8 @@ impl Vehicle {
         thrust.map(|t| t.clamp(-100.0, 100.0))
     }
 
-    /// Advances the vehicle by `dt_s` under `command`.
-    pub fn step(&mut self, dt_s: f64, command: Command) {
+    /// The body velocities `command` asks for now (the frame and units of `velocity`).
+    pub fn target_velocity(&self, command: Command) -> [f64; 4] {
         let thrust = self.thrust_for(command);
         let limits = [
             self.max_speed_mps,
@@ -146,19 +168,61 @@ impl Vehicle {
             self.max_speed_mps,
             self.max_yaw_rate_dps,
         ];
+        std::array::from_fn(|k| thrust[k] / 100.0 * limits[k])
+    }
+
+    /// Advances the vehicle by `dt_s` under `command` (first-order lag, then Euler).
+    pub fn step(&mut self, dt_s: f64, command: Command) {
+        let target = self.target_velocity(command);
         let alpha = (dt_s / self.time_constant_s).min(1.0);
-        for k in 0..4 {
-            let target = thrust[k] / 100.0 * limits[k];
+        for (k, &target) in target.iter().enumerate() {
             self.commanded_velocity[k] = target;
             self.velocity[k] += (target - self.velocity[k]) * alpha;
         }
+        self.integrate(dt_s);
+    }
+
+    /// True when the vehicle is at rest (every velocity zero) and `command` asks for no more
+    /// than the rest speeds: [`Vehicle::advance`] would leave it as it is.
+    pub fn rests_under(&self, command: Command) -> bool {
+        self.velocity == [0.0; 4] && at_rest_speeds(self.target_velocity(command))
+    }
+
+    /// [`Vehicle::step`], coming to rest: a vehicle that [`Vehicle::rests_under`] `command`
+    /// stays as it is; one whose command and velocities fall below the rest speeds after the
+    /// step moves on by what the lag's geometric decay would still add (its closed-form sum)
+    /// and stops there.
+    pub fn advance(&mut self, dt_s: f64, command: Command) {
+        if self.rests_under(command) {
+            self.commanded_velocity = [0.0; 4];
+            return;
+        }
+        self.step(dt_s, command);
+        if at_rest_speeds(self.commanded_velocity) && at_rest_speeds(self.velocity) {
+            let alpha = (dt_s / self.time_constant_s).min(1.0);
+            if alpha > 0.0 {
+                // Each later step keeps (1 - alpha) of the velocity: sum over k >= 1.
+                self.integrate(dt_s * (1.0 - alpha) / alpha);
+            }
+            self.velocity = [0.0; 4];
+            self.commanded_velocity = [0.0; 4];
+        }
+    }
+
+    /// Moves at the current velocities for `duration_s`, the heading held over it.
+    fn integrate(&mut self, duration_s: f64) {
         let psi = self.heading_deg.to_radians();
         let [u, v, w, r] = self.velocity;
-        self.position_m[0] += (u * psi.cos() - v * psi.sin()) * dt_s;
-        self.position_m[1] += (u * psi.sin() + v * psi.cos()) * dt_s;
-        self.position_m[2] += w * dt_s;
-        self.heading_deg = (self.heading_deg + r * dt_s).rem_euclid(360.0);
+        self.position_m[0] += (u * psi.cos() - v * psi.sin()) * duration_s;
+        self.position_m[1] += (u * psi.sin() + v * psi.cos()) * duration_s;
+        self.position_m[2] += w * duration_s;
+        self.heading_deg = (self.heading_deg + r * duration_s).rem_euclid(360.0);
     }
+}
+
+/// True when body velocities are within [`REST_MPS`] (and [`REST_DPS`] in yaw) of zero.
+fn at_rest_speeds(velocity: [f64; 4]) -> bool {
+    velocity[..3].iter().all(|v| v.abs() <= REST_MPS) && velocity[3].abs() <= REST_DPS
 }
 
 #[cfg(test)]
@@ -227,5 +291,67 @@ mod tests {
             v.heading_deg
         );
         assert_eq!(angle_diff_deg(10.0, 350.0), 20.0);
+    }
+
+    /// A session's worth of commands: sticks, idle, a go-to, heading hold, idle again.
+    fn script() -> Vec<(usize, Option<f64>, Command)> {
+        let thrust = |surge, sway, heave, yaw| Command::Thrust {
+            surge,
+            sway,
+            heave,
+            yaw,
+        };
+        vec![
+            (300, None, thrust(0.0, 0.0, 0.0, 0.0)),
+            (150, None, thrust(80.0, -30.0, 20.0, 40.0)),
+            (600, None, thrust(0.0, 0.0, 0.0, 0.0)),
+            (
+                900,
+                None,
+                Command::GoTo {
+                    x: -3.0,
+                    y: 4.0,
+                    z: 2.0,
+                    heading_deg: 200.0,
+                },
+            ),
+            (700, Some(45.0), thrust(0.0, 0.0, 0.0, 0.0)),
+            (100, Some(45.0), thrust(50.0, 0.0, 0.0, 0.0)),
+            (1200, None, thrust(0.0, 0.0, 0.0, 0.0)),
+        ]
+    }
+
+    #[test]
+    fn coming_to_rest_keeps_the_track_of_plain_steps_within_the_tolerance() {
+        // Today's model (0.1 s steps, the lag's tail followed forever) against advance.
+        let (mut reference, mut resting) = (Vehicle::new([1.0, 2.0, 3.0]), None::<Vehicle>);
+        let mut vehicle = Vehicle::new([1.0, 2.0, 3.0]);
+        let (mut steps, mut skipped) = (0, 0);
+        for (count, hold, command) in script() {
+            reference.heading_hold_deg = hold;
+            vehicle.heading_hold_deg = hold;
+            for _ in 0..count {
+                reference.step(0.1, command);
+                if vehicle.rests_under(command) {
+                    skipped += 1;
+                    // At rest, nothing changes.
+                    let before = resting.get_or_insert_with(|| vehicle.clone()).clone();
+                    vehicle.advance(0.1, command);
+                    assert_eq!(vehicle, before);
+                } else {
+                    resting = None;
+                    vehicle.advance(0.1, command);
+                }
+                steps += 1;
+                let gap_m = crate::geometry::distance_m(vehicle.position_m, reference.position_m);
+                let gap_deg = angle_diff_deg(vehicle.heading_deg, reference.heading_deg).abs();
+                assert!(
+                    gap_m <= REST_TOLERANCE_M && gap_deg <= REST_TOLERANCE_DEG,
+                    "step {steps}: {gap_m} m, {gap_deg} degrees apart"
+                );
+            }
+        }
+        // Most of the idle time is spent at rest (the lag decays below 1e-6 m/s in ~13 s).
+        assert!(skipped > steps / 2, "{skipped} of {steps} steps at rest");
     }
 }

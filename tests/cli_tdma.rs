@@ -136,6 +136,19 @@ fn a_session_writes_metrics_and_one_event_per_frame() {
     );
 }
 
+/// The recovery scenario's flags but the waypoints' file: the buoy at the origin, the start
+/// 1 m from it.
+fn recovery(waypoints: &str) -> [&str; 6] {
+    [
+        "--waypoints",
+        waypoints,
+        "--buoy",
+        "0,0,0",
+        "--start",
+        "1,0,1",
+    ]
+}
+
 #[test]
 fn waypoints_past_the_range_lose_and_regain_the_link() {
     let dir = tempfile::tempdir().unwrap();
@@ -145,27 +158,60 @@ fn waypoints_past_the_range_lose_and_regain_the_link() {
         "t_s,x_m,y_m,z_m,heading_deg\n5,2,0,1,0\n40,8,0,1,0\n",
     )
     .unwrap();
-    let out = run(
-        TDMA_RUN,
-        &[
-            "--waypoints",
-            waypoints.to_str().unwrap(),
-            "--buoy",
-            "0,0,0",
-            "--start",
-            "1,0,1",
-            "--duration",
-            "200",
-            "--metrics",
-            metrics.to_str().unwrap(),
-        ],
-        b"",
-    );
+    let mut args = recovery(waypoints.to_str().unwrap()).to_vec();
+    args.extend(["--duration", "200", "--metrics", metrics.to_str().unwrap()]);
+    let out = run(TDMA_RUN, &args, b"");
     assert_eq!(out.code, 0, "{}", out.stderr);
     let m: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&metrics).unwrap()).unwrap();
     assert!(m["link_losses"].as_u64().unwrap() >= 1, "{m}");
     assert!(m["link_recoveries"].as_u64().unwrap() >= 1, "{m}");
+}
+
+#[test]
+fn sleeping_through_a_still_vehicles_steps_changes_no_result() {
+    // Without --track or --mcap the ROV end sleeps while the vehicle is still (issue 32); with
+    // --track it runs every 0.1 s step. Moves, rests, a link loss and its recovery: the same
+    // metrics and the same frames either way.
+    let dir = tempfile::tempdir().unwrap();
+    let waypoints = dir.path().join("wp.csv");
+    std::fs::write(
+        &waypoints,
+        "t_s,x_m,y_m,z_m,heading_deg\n5,2,0,1,0\n40,8,0,1,0\n150,1,1,1,90\n",
+    )
+    .unwrap();
+    let session = |name: &str, track: bool| {
+        let (metrics, events) = (
+            dir.path().join(format!("{name}.json")),
+            dir.path().join(format!("{name}.csv")),
+        );
+        let track_path = dir.path().join(format!("{name}-track.csv"));
+        let mut args = recovery(waypoints.to_str().unwrap()).to_vec();
+        args.extend([
+            "--ber",
+            "1e-4",
+            "--duration",
+            "300",
+            "--metrics",
+            metrics.to_str().unwrap(),
+            "--events",
+            events.to_str().unwrap(),
+        ]);
+        if track {
+            args.extend(["--track", track_path.to_str().unwrap()]);
+        }
+        let out = run(TDMA_RUN, &args, b"");
+        assert_eq!(out.code, 0, "{}", out.stderr);
+        let mut metrics = json(&metrics);
+        // The flags given differ (the outputs' names, --track): not a result.
+        metrics["params"] = serde_json::Value::Null;
+        (metrics, std::fs::read_to_string(&events).unwrap())
+    };
+    let (stepped, stepped_events) = session("stepped", true);
+    let (slept, slept_events) = session("slept", false);
+    assert!(stepped["link_losses"].as_u64().unwrap() >= 1, "{stepped}");
+    assert_eq!(stepped, slept);
+    assert_eq!(stepped_events, slept_events);
 }
 
 #[test]

@@ -8,6 +8,8 @@
 //! real autopilot (`rcp::mavlink`, in the application layer); either way the engine reads the vehicle's state back
 //! from [`Drive::state`] for the status it sends, for GoTo arrival and for the position stack
 //! of the recovery algorithm. Nothing here reads a clock: the time comes with each step.
+//! The built-in model comes to rest ([`Vehicle::advance`]), and says when a step would not
+//! move it ([`Drive::still_under`]), so that a simulation need not wake for such steps.
 
 use crate::link::SimTime;
 use crate::vehicle::{ARRIVAL_DEG, ARRIVAL_M, Command, Vehicle, angle_diff_deg};
@@ -123,6 +125,12 @@ pub trait Drive: Send {
     fn needs_hold(&self) -> bool {
         false
     }
+    /// True when a step under `demand` would not move the vehicle (nor turn it): a driver
+    /// may then leave it unstepped until something changes. The built-in model says so at
+    /// rest ([`Vehicle::rests_under`]); an autopilot, never (false).
+    fn still_under(&self, _demand: &Demand) -> bool {
+        false
+    }
     /// True when the GoTo to `target_m`, `heading_deg` is reached.
     fn reached(&self, target_m: [f64; 3], heading_deg: f64) -> bool {
         let state = self.state();
@@ -155,7 +163,13 @@ impl Drive for SimDrive {
         self.armed = demand.arm;
         self.nav = demand.nav;
         self.vehicle.heading_hold_deg = demand.heading_hold_deg;
-        self.vehicle.step(dt_s, demand.command);
+        self.vehicle.advance(dt_s, demand.command);
+    }
+
+    fn still_under(&self, demand: &Demand) -> bool {
+        let mut vehicle = self.vehicle.clone();
+        vehicle.heading_hold_deg = demand.heading_hold_deg;
+        vehicle.rests_under(demand.command)
     }
 
     fn state(&self) -> DriveState {

@@ -758,10 +758,14 @@ pub fn run<A: Air>(
         .map(|&a| (a, router(scenario, a, setup.duplicate_window_s)))
         .collect();
     let real_time = air.real_time();
+    let poses_every_step = observer.wants_poses();
     let vehicles = setup
         .vehicles
         .into_iter()
-        .map(|(a, ends)| {
+        .map(|(a, mut ends)| {
+            if let Some(rov) = ends.rov.as_mut() {
+                rov.poses_every_step = poses_every_step;
+            }
             let both = ends.operator.is_some() && ends.rov.is_some();
             let round_trips = (real_time && ends.operator.is_some()).then(RoundTrips::default);
             let vehicle = Vehicle {

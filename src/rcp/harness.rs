@@ -289,6 +289,11 @@ pub struct RovEnd {
     /// The high-level order of the last operator frame received, with its number.
     last_order: Option<(Order, bool, u64)>,
     next_number: u64,
+    /// True when every vehicle step's pose is wanted as it happens (a track, a log, a live
+    /// view): the end then runs at every step. Otherwise it sleeps while the vehicle is still
+    /// ([`Rov::poll_at`]): the steps slept through run when it next runs or when a frame
+    /// arrives (the same steps, the same results), and not every one's pose is shown.
+    pub poses_every_step: bool,
 }
 
 impl RovEnd {
@@ -298,18 +303,24 @@ impl RovEnd {
             engine,
             last_order: None,
             next_number: 0,
+            poses_every_step: true,
         }
     }
 
-    /// When the next vehicle step is due.
+    /// When the end wants to run next: the next vehicle step, or with
+    /// [`RovEnd::poses_every_step`] off, [`Rov::poll_at`].
     pub fn next_at(&self) -> SimTime {
-        self.engine.poll_at()
+        if self.poses_every_step {
+            self.engine.next_step_at()
+        } else {
+            self.engine.poll_at()
+        }
     }
 
     /// Runs every vehicle step due by `now`; each step's pose goes to the observer.
     pub fn poll(&mut self, now: SimTime, out: &mut Out<'_>) {
-        while self.engine.poll_at() <= now {
-            let step = self.engine.poll_at();
+        while self.engine.next_step_at() <= now {
+            let step = self.engine.next_step_at();
             self.engine.poll(step);
             self.flush(step, None, out);
             out.pose(&self.engine.pose(step.as_secs_f64()));

@@ -238,6 +238,12 @@ pub trait Observer {
     fn failed(&self) -> bool {
         false
     }
+    /// True when [`Observer::pose`] must come at every vehicle step as it happens (a track,
+    /// a log, a live view); false lets a simulation sleep through the steps of a still
+    /// vehicle, running them late (the same results) without showing each one's pose.
+    fn wants_poses(&self) -> bool {
+        true
+    }
 }
 
 /// Several observers as one: each sees everything, in turn; it has failed when one has.
@@ -271,12 +277,20 @@ impl Observer for Tee<'_> {
     fn failed(&self) -> bool {
         self.0.iter().any(|o| o.failed())
     }
+
+    fn wants_poses(&self) -> bool {
+        self.0.iter().any(|o| o.wants_poses())
+    }
 }
 
 /// An observer that observes nothing.
 pub struct Quiet;
 
-impl Observer for Quiet {}
+impl Observer for Quiet {
+    fn wants_poses(&self) -> bool {
+        false
+    }
+}
 
 /// One direction's running figures.
 #[derive(Default)]

@@ -30,7 +30,7 @@ use std::collections::VecDeque;
 use super::camera::{Camera, Cycle};
 use super::drive::DriveEvent;
 use super::drive::{Demand, Drive, DriveState, SimDrive};
-use super::{Event, ImageSettings, PoseSample, emit, trunks_of};
+use super::{Event, ImageSettings, PoseSample, TrunkCache, emit};
 use crate::debt;
 use crate::link::SimTime;
 use crate::vehicle::Command;
@@ -97,6 +97,8 @@ pub struct Rov {
     cfg: RovConfig,
     drive: Box<dyn Drive>,
     camera: Box<dyn Camera>,
+    /// The trunks of the pictures last encoded (a cycling camera repeats its pictures).
+    encoded: TrunkCache,
     /// The reason of the last failed capture, to report a failing camera once per reason.
     camera_failure: Option<String>,
     heading_hold_deg: Option<f64>,
@@ -141,6 +143,7 @@ impl Rov {
             settings: cfg.settings,
             drive,
             camera,
+            encoded: TrunkCache::default(),
             camera_failure: None,
             heading_hold_deg: None,
             eoid: false,
@@ -200,18 +203,81 @@ impl Rov {
         }
     }
 
-    /// When [`Rov::poll`] wants to run next.
+    /// When [`Rov::poll`] wants to run next: the next vehicle step, or, while the link is up,
+    /// nothing is executed or held and the vehicle stays still under the sticks
+    /// ([`Drive::still_under`]), a step before the heartbeat timeout (nothing else changes
+    /// by itself until then; a frame received meanwhile catches the steps up first).
     pub fn poll_at(&self) -> SimTime {
+        if self.still() {
+            return self.last_still_step().max(self.next_step);
+        }
+        self.next_step
+    }
+
+    /// True while nothing changes by itself but the position stack and, at its time, the
+    /// link's state: the link is up, nothing is executed or held, and the vehicle stays still
+    /// under the sticks ([`Drive::still_under`]).
+    fn still(&self) -> bool {
+        self.link_up
+            && self.executing.is_none()
+            && self.hold.is_none()
+            && self.drive.state().position_known
+            && self.drive.still_under(&self.demand(self.sticks()))
+    }
+
+    /// A step before the heartbeat timeout: the last that a still ROV may leave unrun.
+    fn last_still_step(&self) -> SimTime {
+        let timeout_s = self.cfg.heartbeat_timeout_s - self.cfg.step_s;
+        self.last_heartbeat.after_secs(timeout_s)
+    }
+
+    /// When the next vehicle step is due ([`Rov::poll`] runs every step due by its time).
+    pub fn next_step_at(&self) -> SimTime {
         self.next_step
     }
 
     /// Advances the vehicle to `now` and runs the recovery algorithm.
+    ///
+    /// While the ROV is still (after one step under the demand in force, so the drive has
+    /// it), the steps due are not run one by one: all they would do is stack the same position
+    /// every [`RovConfig::stack_period_s`], which is done at those steps' times alone.
     pub fn poll(&mut self, now: SimTime) {
         while self.next_step <= now {
             let t = self.next_step;
             self.step(t);
             self.next_step = t.after_secs(self.cfg.step_s);
+            if self.next_step <= now && self.still() {
+                self.rest_until(now.min(self.last_still_step()));
+            }
         }
+    }
+
+    /// Runs the still steps due by `last` at once: the position stacked at each step a push
+    /// is due, as the steps would.
+    fn rest_until(&mut self, last: SimTime) {
+        let step_ns = SimTime::ZERO.after_secs(self.cfg.step_s).0;
+        if step_ns == 0 || last < self.next_step {
+            return;
+        }
+        let first = self.next_step;
+        let end = SimTime(first.0 + (last.0 - first.0) / step_ns * step_ns);
+        let position_m = self.drive.state().position_m;
+        while self.next_push <= end {
+            // The first of the skipped steps at or after the push's time.
+            let after_ns = self.next_push.0.saturating_sub(first.0);
+            let at = SimTime(first.0 + after_ns.div_ceil(step_ns) * step_ns);
+            self.push(position_m);
+            self.next_push = at.after_secs(self.cfg.stack_period_s);
+        }
+        self.next_step = end.after_secs(self.cfg.step_s);
+    }
+
+    /// Stacks `position_m`, dropping the oldest when the stack is full.
+    fn push(&mut self, position_m: [f64; 3]) {
+        if self.stack.len() == self.cfg.stack_depth {
+            self.stack.pop_front();
+        }
+        self.stack.push_back(position_m);
     }
 
     fn step(&mut self, now: SimTime) {
@@ -236,10 +302,7 @@ impl Rov {
             self.hold = None;
         }
         if self.link_up && now >= self.next_push {
-            if self.stack.len() == self.cfg.stack_depth {
-                self.stack.pop_front();
-            }
-            self.stack.push_back(self.drive.state().position_m);
+            self.push(self.drive.state().position_m);
             self.next_push = now.after_secs(self.cfg.stack_period_s);
         }
         let command = if !self.link_up && !position_known {
@@ -315,16 +378,7 @@ impl Rov {
                 },
             }
         };
-        let demand = Demand {
-            command,
-            arm: self.arm,
-            nav: match command {
-                Command::GoTo { .. } => Nav::Guided,
-                Command::Thrust { .. } => self.nav,
-            },
-            heading_hold_deg: self.heading_hold_deg,
-            link_up: self.link_up,
-        };
+        let demand = self.demand(command);
         self.drive.step(now, self.cfg.step_s, &demand);
         self.events
             .extend(self.drive.take_events().into_iter().map(Event::Vehicle));
@@ -420,6 +474,20 @@ impl Rov {
         Some(self.reply(msg.rit))
     }
 
+    /// What the drive is asked for under `command`.
+    fn demand(&self, command: Command) -> Demand {
+        Demand {
+            command,
+            arm: self.arm,
+            nav: match command {
+                Command::GoTo { .. } => Nav::Guided,
+                Command::Thrust { .. } => self.nav,
+            },
+            heading_hold_deg: self.heading_hold_deg,
+            link_up: self.link_up,
+        }
+    }
+
     /// The joystick's thrust while armed, idle otherwise.
     fn sticks(&self) -> Command {
         if self.arm {
@@ -496,7 +564,7 @@ impl Rov {
                 return;
             }
         };
-        let trunks = trunks_of(&picture, &self.settings);
+        let trunks = self.encoded.trunks(&picture, &self.settings);
         if trunks.is_empty() {
             // A picture the codec refuses (e.g. larger than DEBT holds): nothing to send.
             self.image = None;
@@ -647,6 +715,37 @@ mod tests {
             last = operator.last_status;
         }
         (last.expect("a status"), events)
+    }
+
+    #[test]
+    fn a_still_rov_run_late_is_the_rov_run_every_step() {
+        // One ROV polled at every 0.1 s step, one only when a frame comes (and at the end):
+        // heartbeats for 20 s, then none, so the link times out and backtracking starts.
+        let start = [1.0, 2.0, 3.0];
+        let mut stepped = Rov::new(RovConfig::default(), start, Vec::new());
+        let mut late = Rov::new(RovConfig::default(), start, Vec::new());
+        let mut operator = Operator::new(1, 640_000_000);
+        let step_ns = 100_000_000;
+        let mut t = SimTime::ZERO;
+        while t <= SimTime(40_000_000_000) {
+            stepped.poll(t);
+            if t.0.is_multiple_of(640_000_000) && t.0 < 20_000_000_000 {
+                let (frame, _) = operator.poll(t);
+                let reply = stepped.receive(t, &frame).expect("a reply to every slot");
+                assert_eq!(late.receive(t, &frame), Some(reply.clone()));
+                operator.receive(t, &reply);
+            }
+            t = SimTime(t.0 + step_ns);
+        }
+        late.poll(SimTime(t.0 - step_ns));
+        assert_eq!(late.take_events(), stepped.take_events());
+        assert!(!late.link_up());
+        assert_eq!(late.stack, stepped.stack);
+        assert_eq!(
+            (late.next_push, late.next_step),
+            (stepped.next_push, stepped.next_step)
+        );
+        assert_eq!(late.pose(40.0), stepped.pose(40.0));
     }
 
     const GOTO: Order = Order::GoTo {

@@ -439,6 +439,10 @@ impl Observer for Recorder {
         }
     }
 
+    fn wants_poses(&self) -> bool {
+        self.mcap.is_some() || self.track.is_some()
+    }
+
     fn failed(&self) -> bool {
         self.error.is_some()
             || self.mcap.as_ref().is_some_and(Log::failed)

@@ -180,4 +180,8 @@ impl Observer for Both<'_> {
     fn failed(&self) -> bool {
         self.0.failed()
     }
+
+    fn wants_poses(&self) -> bool {
+        self.0.wants_poses()
+    }
 }

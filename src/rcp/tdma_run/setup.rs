@@ -37,6 +37,10 @@ impl Observer for Stderr {
     fn warning(&mut self, _t_s: f64, text: &str) {
         say!("{text}");
     }
+
+    fn wants_poses(&self) -> bool {
+        false
+    }
 }
 
 /// The field flags that apply only to one end.
