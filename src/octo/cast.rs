@@ -51,6 +51,39 @@ impl RaySink for KeySet {
     }
 }
 
+/// The cells of a scan's rays, ray by ray, to be inserted into a [`KeySet`] later.
+#[derive(Default)]
+struct RayList {
+    keys: Vec<Key>,
+    /// Where each ray's cells end in `keys`.
+    ends: Vec<usize>,
+}
+
+impl RaySink for RayList {
+    #[inline(always)]
+    fn add(&mut self, k: Key) {
+        self.keys.push(k);
+    }
+    fn end_ray(&mut self) {
+        self.ends.push(self.keys.len());
+    }
+}
+
+impl RayList {
+    /// Inserts the rays into `set` as if they had been cast into it.
+    fn insert_into(&self, set: &mut KeySet) {
+        let mut start = 0;
+        for &end in &self.ends {
+            set.begin_ray();
+            for &k in &self.keys[start..end] {
+                set.add(k);
+            }
+            set.end_ray();
+            start = end;
+        }
+    }
+}
+
 /// One update of a voxel: its depth-16 Morton code and whether a point ended in it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct Upd {
@@ -118,8 +151,8 @@ type CastPart = (Vec<u64>, Vec<(u64, ColorSlot)>, usize, usize);
 
 impl ScanCaster {
     /// A caster for a tree of voxel edge `resolution_m`, coloured or not, casting a plain scan
-    /// on up to `threads` threads (a coloured scan is cast on the caller's: the order of its
-    /// cells is the order of the points).
+    /// on up to `threads` threads, a coloured one on up to two (its cells still inserted in the
+    /// order of the points).
     pub fn new(resolution_m: f64, colored: bool, threads: usize) -> Self {
         ScanCaster {
             grid: Grid::new(resolution_m),
@@ -131,12 +164,12 @@ impl ScanCaster {
         }
     }
 
-    /// Threads a plain scan is cast on.
+    /// Threads a scan is cast on, at most.
     pub fn threads(&self) -> usize {
         self.threads
     }
 
-    /// Sets the threads a plain scan is cast on (at least 1).
+    /// Sets the threads a scan is cast on, at most (at least 1).
     pub fn set_threads(&mut self, threads: usize) {
         self.threads = threads.max(1);
     }
@@ -321,7 +354,8 @@ impl ScanCaster {
 
     /// A coloured scan, cell by cell in the order OctoMap's `insertPointCloud` updates them:
     /// its free `KeySet` less the occupied cells, then the occupied `KeySet` (see [`KeySet`]).
-    /// One thread: the sets' order is that of the points.
+    /// With more than one thread, half the rays are cast on a second thread and inserted after
+    /// the first half's: the sets' order is still that of the points.
     fn prepare_octomap_order(
         &mut self,
         pts: &[[f32; 3]],
@@ -337,20 +371,56 @@ impl ScanCaster {
         let mut free = std::mem::take(&mut self.free_keys);
         free.set_window(self.window.0, self.window.1);
         let mut occ: Vec<(u64, ColorSlot)> = Vec::with_capacity(pts.len());
-        let cast = self.cast(
-            pts,
-            0,
-            origin,
-            colors,
-            max_range_m,
-            &mut free,
-            &mut occ,
-            stop,
-        );
-        let Some((skipped, beyond)) = cast else {
+        // With a second thread, it casts the second half of the rays while this one casts the
+        // first into the set; then the second half's rays go in, in order.
+        let split = if self.threads > 1 && pts.len() >= 2 * POINTS_PER_THREAD_MIN {
+            pts.len() / 2
+        } else {
+            pts.len()
+        };
+        let this = &*self;
+        let (first, second) = std::thread::scope(|sc| {
+            let second = (split < pts.len()).then(|| {
+                sc.spawn(move || {
+                    let mut rays = RayList::default();
+                    let mut o = Vec::with_capacity(pts.len() - split);
+                    let (s, b) = this.cast(
+                        &pts[split..],
+                        split,
+                        origin,
+                        colors,
+                        max_range_m,
+                        &mut rays,
+                        &mut o,
+                        stop,
+                    )?;
+                    Some((rays, o, s, b))
+                })
+            });
+            let first = this.cast(
+                &pts[..split],
+                0,
+                origin,
+                colors,
+                max_range_m,
+                &mut free,
+                &mut occ,
+                stop,
+            );
+            let second = match second {
+                Some(h) => h.join().ok().flatten(),
+                None => Some((RayList::default(), Vec::new(), 0, 0)),
+            };
+            (first, second)
+        });
+        let (Some((mut skipped, mut beyond)), Some((rays, o, s, b))) = (first, second) else {
             self.free_keys = free;
             return None;
         };
+        rays.insert_into(&mut free);
+        occ.extend(o);
+        skipped += s;
+        beyond += b;
         p.points_skipped = skipped;
         p.points_beyond_range = beyond;
         let mut occupied = KeySet::new();

@@ -21,7 +21,7 @@
 //! once and pruned once, after all its children are final. Because every voxel is updated at
 //! most once per scan and pruning always ends in the same fully pruned tree, the outcome is
 //! OctoMap's. That holds for log-odds, not for colours: a coloured tree is updated voxel by
-//! voxel in OctoMap's own order ([`super::hashorder`]), on one thread.
+//! voxel in OctoMap's own order ([`super::hashorder`]).
 //!
 //! Colour is OctoMap 1.9's `ColorOcTree`, driven by the calls a colour mapper makes after each
 //! `insertPointCloud`: `search` the node that holds each point's voxel and, when the point's
@@ -233,9 +233,8 @@ impl OcTree {
         self.grid.key_to_coord(k)
     }
 
-    /// Sets how many threads cast a plain scan's rays (1: none besides the caller). A coloured
-    /// tree's scan is cast on the caller's thread: the order of its cells is the order of the
-    /// points.
+    /// Sets how many threads cast a scan's rays (1: none besides the caller; a coloured tree's
+    /// scan uses two at most, and its cells keep the order of the points).
     pub fn set_threads(&mut self, threads: usize) {
         self.caster.set_threads(threads);
     }
