@@ -1,28 +1,53 @@
 #!/usr/bin/env bash
-# octo-delta build against OctoMap's graph2tree on the same .graph, in the same run: whole-process
-# wall time and peak memory (median of RUNS), at 0.1 and 0.15 m, and whether the maps are the same
-# (.ot and .bt byte for byte, compare_octrees' KLD). graph2tree also prints its own insertion
-# time; ours is printed by octo-delta (both medians are shown).
+# octo-delta build against OctoMap's graph2tree on the same survey, in the same run (the tools
+# interleaved, so drifts in the machine's load hit both alike): whole-process wall time and peak
+# memory, medians of RUNS, with octo-delta on 1 and on 2 threads, plain and coloured; and whether
+# the maps are the same (.ot and .bt byte for byte against graph2tree's, compare_octrees' KLD;
+# the coloured maps of 1 and 2 threads against each other). graph2tree's own insertion time and
+# octo-delta's are shown too.
 #
-# Usage: scripts/octo-bench.sh [GRAPH] [RUNS]
-#   GRAPH: a scan graph (default: octo-delta's synthetic survey, 80 scans, ~1M points)
-#   RUNS:  repetitions per tool and resolution (default 5)
+# Usage: scripts/octo-bench.sh [--scans N] [--res R[,R...]] [--runs K] [--graph FILE] [--table]
+#        scripts/octo-bench.sh [GRAPH] [RUNS]          (the older form)
+#   --scans N   scans of octo-delta's synthetic survey (default 80: ~1M points; 12 288 a scan)
+#   --res R     voxel edges in m, comma-separated (default 0.1,0.15)
+#   --runs K    repetitions per tool, thread count and resolution (default 5)
+#   --graph F   a scan graph instead of the synthetic survey (no coloured rows then)
+#   --table     print only the table and the identity lines (for scripts/speed.sh)
+# Example: scripts/octo-bench.sh --scans 40 --res 0.1 --runs 5 --table
 # Needs graph2tree and compare_octrees (Debian: apt-get install octomap-tools) and python3.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-runs=${2:-5}
+runs=5 scans="" graph="" table=0 resolutions="0.1,0.15"
+positional=()
+while [ $# -gt 0 ]; do
+    case $1 in
+        --scans) scans=$2; shift 2 ;;
+        --res) resolutions=$2; shift 2 ;;
+        --runs) runs=$2; shift 2 ;;
+        --graph) graph=$2; shift 2 ;;
+        --table) table=1; shift ;;
+        -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d' | sed 's/^# \{0,1\}//'; exit 0 ;;
+        -*) echo "octo-bench: unknown option $1 (see --help)" >&2; exit 2 ;;
+        *) positional+=("$1"); shift ;;
+    esac
+done
+[ ${#positional[@]} -ge 1 ] && graph=${positional[0]}
+[ ${#positional[@]} -ge 2 ] && runs=${positional[1]}
+log() { [ "$table" = 1 ] || echo "octo-bench: $*" >&2; }
+for tool in graph2tree compare_octrees; do
+    command -v $tool >/dev/null || { echo "octo-bench: $tool missing: apt-get install octomap-tools" >&2; exit 2; }
+done
 cargo build --release --quiet --bin octo-delta
 bin=target/release/octo-delta
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-graph=${1:-}
+colored=""
 if [ -z "$graph" ]; then
     graph=$work/survey.graph
-    "$bin" synth -o "$graph"
+    colored=$work/survey.mcap
+    "$bin" synth ${scans:+--scans "$scans"} -o "$graph"
+    "$bin" synth ${scans:+--scans "$scans"} -o "$colored"
 fi
-for tool in graph2tree compare_octrees; do
-    command -v $tool >/dev/null || { echo "octo-bench: $tool missing: apt-get install octomap-tools" >&2; exit 2; }
-done
 measure() { # label, then the command; appends "label wall_s peak_kb insert_s" to $work/rows
     local label=$1; shift
     /usr/bin/time -f "%e %M" -o "$work/time" "$@" >"$work/out" 2>"$work/err" || { cat "$work/err" >&2; exit 1; }
@@ -32,42 +57,56 @@ measure() { # label, then the command; appends "label wall_s peak_kb insert_s" t
     echo "$label $(cat "$work/time") ${insert:-nan}" >> "$work/rows"
 }
 : > "$work/rows"
-for res in 0.1 0.15; do
+for res in ${resolutions//,/ }; do
+    log "res $res: $runs runs"
     for k in $(seq 1 "$runs"); do
-        # Alternate the tools so drifts in the machine's load hit both alike.
         measure "graph2tree@$res" graph2tree -i "$graph" -o "$work/ref$res.bt" -res "$res"
-        measure "ours-1thread@$res" "$bin" build "$graph" --res "$res" --no-color --threads 1 -o "$work/d.odl" --ot "$work/ours$res.ot" --bt "$work/ours$res.bt"
-        measure "ours@$res" "$bin" build "$graph" --res "$res" --no-color -o "$work/d.odl"
+        for t in 1 2; do
+            measure "plain$t@$res" "$bin" build "$graph" --res "$res" --no-color --threads $t -o "$work/d.odl" --ot "$work/ours$t-$res.ot" --bt "$work/ours$t-$res.bt"
+            if [ -n "$colored" ]; then
+                measure "colored$t@$res" "$bin" build "$colored" --res "$res" --threads $t -o "$work/c$t.odl" --ot "$work/col$t-$res.ot"
+            fi
+        done
     done
-    same_ot=$(cmp -s "$work/ours$res.ot" "$work/ref$res.bt.ot" && echo yes || echo NO)
-    same_bt=$(cmp -s "$work/ours$res.bt" "$work/ref$res.bt" && echo yes || echo NO)
-    kld=$(compare_octrees "$work/ours$res.ot" "$work/ref$res.bt.ot" 2>&1 | grep -o "KLD: .*" | tail -1)
-    echo "same@$res $same_ot $same_bt ${kld#KLD: }" >> "$work/rows"
+    same() { cmp -s "$1" "$2" && echo yes || echo NO; }
+    kld=$(compare_octrees "$work/ours2-$res.ot" "$work/ref$res.bt.ot" 2>&1 | grep -o "KLD: .*" | tail -1)
+    col="-"
+    [ -z "$colored" ] || col=$(same "$work/col1-$res.ot" "$work/col2-$res.ot")
+    echo "same@$res $(same "$work/ours1-$res.bt" "$work/ref$res.bt") $(same "$work/ours2-$res.bt" "$work/ref$res.bt") $(same "$work/ours1-$res.ot" "$work/ref$res.bt.ot") $(same "$work/ours2-$res.ot" "$work/ref$res.bt.ot") $col ${kld#KLD: }" >> "$work/rows"
 done
 points=$("$bin" build "$graph" --res 0.1 --no-color -o "$work/d.odl" 2>&1 | grep -o "[0-9]* scans, [0-9]* points")
-python3 - "$work/rows" "$points" "$(nproc)" <<'PY'
+python3 - "$work/rows" "$points" "$(nproc)" "$resolutions" "$runs" <<'PY'
 import statistics, sys
 rows = [l.split() for l in open(sys.argv[1])]
-print(f"input: {sys.argv[2]}; machine: {sys.argv[3]} cores; medians of the runs")
+print(f"input: {sys.argv[2]}; machine: {sys.argv[3]} cores; medians of {sys.argv[5]} runs")
 print()
-print("| res | tool | wall s | peak MB | insert s | wall vs graph2tree | peak vs graph2tree |")
-print("|---|---|---|---|---|---|---|")
+print("| res m | tool | wall s | peak MB | insert s | graph2tree / this (wall) |")
+print("|---|---|---|---|---|---|")
+names = {
+    "graph2tree": "graph2tree",
+    "plain1": "octo-delta --no-color --threads 1",
+    "plain2": "octo-delta --no-color --threads 2",
+    "colored1": "octo-delta coloured --threads 1",
+    "colored2": "octo-delta coloured --threads 2",
+}
 same = {}
-for res in ("0.1", "0.15"):
+for res in sys.argv[4].split(","):
     m = {}
-    for tool in ("graph2tree", "ours-1thread", "ours"):
+    for tool in names:
         r = [x for x in rows if x[0] == f"{tool}@{res}"]
+        if not r:
+            continue
         wall = statistics.median(float(x[1]) for x in r)
         peak = statistics.median(float(x[2]) for x in r) / 1024
         ins = statistics.median(float(x[3]) for x in r)
         m[tool] = (wall, peak, ins)
+    g = m["graph2tree"][0]
     for tool, (wall, peak, ins) in m.items():
-        g = m["graph2tree"]
-        name = {"graph2tree": "graph2tree", "ours-1thread": "octo-delta --threads 1", "ours": "octo-delta (all cores)"}[tool]
-        print(f"| {res} | {name} | {wall:.3f} | {peak:.1f} | {ins:.3f} | {g[0] / wall:.2f}x faster | {peak / g[1]:.2f} |")
-    s = [x for x in rows if x[0] == f"same@{res}"][0]
-    same[res] = s[1:]
+        print(f"| {res} | {names[tool]} | {wall:.3f} | {peak:.1f} | {ins:.3f} | {g / wall:.2f}x |")
+    same[res] = [x for x in rows if x[0] == f"same@{res}"][0][1:]
 print()
-for res, (ot, bt, *kld) in same.items():
-    print(f"res {res}: .ot identical: {ot}, .bt identical: {bt}, compare_octrees KLD: {' '.join(kld)}")
+for res, (bt1, bt2, ot1, ot2, col, *kld) in same.items():
+    print(f"res {res}: .bt identical to graph2tree's: {bt1} (1 thread), {bt2} (2 threads); "
+          f".ot: {ot1}, {ot2}; compare_octrees KLD: {' '.join(kld)}; "
+          f"coloured .ot 1 vs 2 threads identical: {col}")
 PY

@@ -7,6 +7,10 @@
 //! block). Inside a block the bit index is the cell's 9-bit Morton code, so draining sorts only
 //! the blocks, not the cells: a key's Morton code is its block's Morton code followed by the
 //! cell's.
+//!
+//! A scan's cells lie in a small box (the sensor and its points): given that box
+//! ([`CellSet::set_window`]), blocks inside it are found by their place in a dense table instead,
+//! and only the blocks outside it go through the hash map.
 
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
@@ -51,6 +55,36 @@ const LOCAL: [u16; 512] = {
     t
 };
 
+/// Most blocks of 8 x 8 x 8 cells a window's table holds (4 bytes each).
+const WINDOW_BLOCKS_MAX: u64 = 1 << 20;
+
+/// No block (in a window's table).
+const ABSENT: u32 = u32::MAX;
+
+/// A box of blocks whose indices are kept in a dense table.
+#[derive(Clone, Default)]
+struct Window {
+    /// Lowest block coordinate on each axis.
+    low: [u32; 3],
+    /// Blocks along each axis.
+    size: [u32; 3],
+    /// Index into `blocks` of each block of the box (x fastest), or [`ABSENT`].
+    slots: Vec<u32>,
+}
+
+impl Window {
+    /// The table slot of block coordinates `b`, if inside the box.
+    #[inline(always)]
+    fn slot(&self, b: [u32; 3]) -> Option<usize> {
+        let x = b[0].wrapping_sub(self.low[0]);
+        let y = b[1].wrapping_sub(self.low[1]);
+        let z = b[2].wrapping_sub(self.low[2]);
+        (x < self.size[0] && y < self.size[1] && z < self.size[2]).then(|| {
+            (x as usize) + self.size[0] as usize * (y as usize + self.size[1] as usize * z as usize)
+        })
+    }
+}
+
 /// A set of keys, drained in Morton order.
 #[derive(Clone)]
 pub struct CellSet {
@@ -58,6 +92,7 @@ pub struct CellSet {
     blocks: Vec<(u64, [u64; 8])>,
     last: u64,
     last_idx: u32,
+    window: Window,
 }
 
 impl Default for CellSet {
@@ -74,7 +109,27 @@ impl CellSet {
             blocks: Vec::new(),
             last: u64::MAX,
             last_idx: 0,
+            window: Window::default(),
         }
+    }
+
+    /// Keeps the blocks of the cells from `low` to `high` (inclusive, each axis) in a dense
+    /// table (unless the box is too large): a speed hint, the set holds any key. Empties the set.
+    pub fn set_window(&mut self, low: Key, high: Key) {
+        self.clear();
+        let lo = low.map(|k| (k >> 3) as u32);
+        let hi = high.map(|k| (k >> 3) as u32);
+        let size = [0, 1, 2].map(|i| (hi[i] + 1).saturating_sub(lo[i]));
+        let blocks: u64 = size.iter().map(|&n| n as u64).product();
+        let w = &mut self.window;
+        w.slots.clear();
+        if blocks == 0 || blocks > WINDOW_BLOCKS_MAX {
+            w.size = [0; 3];
+            return;
+        }
+        w.low = lo;
+        w.size = size;
+        w.slots.resize(blocks as usize, ABSENT);
     }
 
     /// Adds a key.
@@ -86,10 +141,20 @@ impl CellSet {
     /// Adds a key; true if it was not in the set.
     #[inline(always)]
     pub fn insert_new(&mut self, k: Key) -> bool {
-        let block = (k[0] >> 3) as u64 | ((k[1] >> 3) as u64) << 13 | ((k[2] >> 3) as u64) << 26;
+        let b = k.map(|c| (c >> 3) as u32);
+        let block = b[0] as u64 | (b[1] as u64) << 13 | (b[2] as u64) << 26;
         if block != self.last {
             let next = self.blocks.len() as u32;
-            let idx = *self.index.entry(block).or_insert(next);
+            let idx = match self.window.slot(b) {
+                Some(slot) => {
+                    let idx = &mut self.window.slots[slot];
+                    if *idx == ABSENT {
+                        *idx = next;
+                    }
+                    *idx
+                }
+                None => *self.index.entry(block).or_insert(next),
+            };
             if idx == next {
                 self.blocks.push((block, [0; 8]));
             }
@@ -135,8 +200,14 @@ impl CellSet {
         self.clear();
     }
 
-    /// Empties the set.
+    /// Empties the set (its window stays).
     pub fn clear(&mut self) {
+        for &(block, _) in &self.blocks {
+            let b = [block & 0x1fff, (block >> 13) & 0x1fff, block >> 26].map(|c| c as u32);
+            if let Some(slot) = self.window.slot(b) {
+                self.window.slots[slot] = ABSENT;
+            }
+        }
         self.index.clear();
         self.blocks.clear();
         self.last = u64::MAX;
@@ -171,5 +242,34 @@ mod tests {
         got.clear();
         s.drain_sorted(&mut got);
         assert_eq!(got, vec![morton([1, 2, 3])]);
+    }
+
+    #[test]
+    fn a_window_changes_nothing_but_speed() {
+        let mut rng = crate::link::Rng::new(9, 0);
+        let keys: Vec<Key> = (0..20_000)
+            .map(|_| [0, 1, 2].map(|_| 32700 + (rng.next_u32() % 140) as u16))
+            .collect();
+        let mut plain = CellSet::new();
+        let mut windowed = CellSet::new();
+        // Keys inside the window and outside it, on every side.
+        windowed.set_window([32740; 3], [32800; 3]);
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        for round in 0..2 {
+            for &k in &keys {
+                assert_eq!(plain.insert_new(k), windowed.insert_new(k));
+            }
+            plain.drain_sorted(&mut a);
+            windowed.drain_sorted(&mut b);
+            assert_eq!(a, b, "round {round}");
+        }
+        // A box too large for a table: the hash map holds everything.
+        windowed.set_window([0; 3], [u16::MAX; 3]);
+        for &k in &keys {
+            windowed.insert(k);
+        }
+        b.clear();
+        windowed.drain_sorted(&mut b);
+        assert_eq!(a[a.len() / 2..], b[..]);
     }
 }

@@ -24,6 +24,7 @@
 //! [`ParseError`] that carries the byte offset (or line) where the input stopped making sense.
 
 pub mod bag;
+pub mod cast;
 pub mod cellset;
 pub mod cloud;
 pub mod delta;

@@ -21,7 +21,7 @@
 //! once and pruned once, after all its children are final. Because every voxel is updated at
 //! most once per scan and pruning always ends in the same fully pruned tree, the outcome is
 //! OctoMap's. That holds for log-odds, not for colours: a coloured tree is updated voxel by
-//! voxel in OctoMap's own order ([`super::hashorder`]), on one thread.
+//! voxel in OctoMap's own order ([`super::hashorder`]).
 //!
 //! Colour is OctoMap 1.9's `ColorOcTree`, driven by the calls a colour mapper makes after each
 //! `insertPointCloud`: `search` the node that holds each point's voxel and, when the point's
@@ -42,42 +42,17 @@
 //!
 //! Nothing here panics on any input: points and colours of any value are inserted or skipped.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 
 use super::Scan;
-use super::cellset::CellSet;
-use super::hashorder::KeySet;
-use super::math::{
-    Grid, NO_COLOR, RaySink, brighter, color_slot, end_at_range, mean_color, norm_f32, push_voxels,
-    slot_order,
-};
+use super::cast::Upd;
+pub use super::cast::{PreparedScan, ScanCaster};
+use super::math::{Grid, NO_COLOR, brighter, color_slot, mean_color, push_voxels};
 
 pub use super::math::{
     ColorSlot, KEY_CENTER, Key, Params, TREE_DEPTH, WHITE, brightness_key, logodds, luma, morton,
     probability, unmorton, world_points,
 };
-
-impl RaySink for CellSet {
-    fn add(&mut self, k: Key) {
-        self.insert(k);
-    }
-}
-
-/// OctoMap inserts each ray's cells into its free `KeySet` with one range insert.
-impl RaySink for KeySet {
-    fn begin_ray(&mut self) {
-        self.begin_range();
-    }
-    fn add(&mut self, k: Key) {
-        self.add_to_range(k);
-    }
-    fn end_ray(&mut self) {
-        self.end_range();
-    }
-}
-
-/// How many points a scan's rays are cast between two looks at the stop flag.
-const STOP_CHECK_POINTS: usize = 2048;
 
 const NONE: u32 = u32::MAX;
 
@@ -130,12 +105,6 @@ pub struct ScanUpdate {
     pub changes: Vec<Change>,
 }
 
-#[derive(Clone, Copy)]
-struct Upd {
-    code: u64,
-    hit: bool,
-}
-
 /// What one scan's structural pass found besides the occupancy flips: voxels whose colour may
 /// have changed (a pruned node took its children's mean colour).
 #[derive(Default)]
@@ -177,9 +146,7 @@ pub struct OcTree {
     colors: Option<Vec<[ColorSlot; 8]>>,
     free_list: Vec<u32>,
     nodes: usize,
-    threads: usize,
-    scratch: CellSet,
-    free_keys: KeySet,
+    caster: ScanCaster,
 }
 
 impl std::fmt::Debug for OcTree {
@@ -209,9 +176,7 @@ impl OcTree {
             colors: None,
             free_list: Vec::new(),
             nodes: 0,
-            threads: 1,
-            scratch: CellSet::new(),
-            free_keys: KeySet::new(),
+            caster: ScanCaster::new(resolution_m, false, 1),
         }
     }
 
@@ -268,58 +233,29 @@ impl OcTree {
         self.grid.key_to_coord(k)
     }
 
-    /// Sets how many threads cast a scan's rays (1: none besides the caller). A coloured tree
-    /// casts on the caller's thread: the order of its cells is the order of the points.
+    /// Sets how many threads cast a scan's rays (1: none besides the caller; a coloured tree's
+    /// scan uses two at most, and its cells keep the order of the points).
     pub fn set_threads(&mut self, threads: usize) {
-        self.threads = threads.max(1);
+        self.caster.set_threads(threads);
     }
 
-    /// The rays of `pts[range]`: free cells into `free`, end cells (with colour) into `occ`.
-    #[allow(clippy::too_many_arguments)]
-    fn cast(
-        &self,
-        pts: &[[f32; 3]],
-        first: usize,
-        origin: [f32; 3],
-        colors: Option<&[[u8; 3]]>,
-        max_range_m: Option<f64>,
-        free: &mut impl RaySink,
-        occ: &mut Vec<(u64, ColorSlot)>,
-        stop: Option<&AtomicBool>,
-    ) -> Option<(usize, usize)> {
-        let (mut skipped, mut beyond) = (0, 0);
-        for (j, &p) in pts.iter().enumerate() {
-            if j % STOP_CHECK_POINTS == 0 && stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
-                return None;
-            }
-            let i = first + j;
-            if !(p[0].is_finite() && p[1].is_finite() && p[2].is_finite()) {
-                // OctoMap casts no ray for it either (its key is out of range).
-                skipped += 1;
-                continue;
-            }
-            let diff = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
-            let within = max_range_m.is_none_or(|r| r < 0.0 || norm_f32(diff) <= r);
-            if within {
-                free.begin_ray();
-                self.grid.ray_keys(origin, p, free);
-                free.end_ray();
-                match self.key_of(p) {
-                    Some(k) => {
-                        let color = color_slot(colors.and_then(|c| c.get(i)).copied());
-                        occ.push((morton(k), color));
-                    }
-                    None => skipped += 1,
-                }
-            } else {
-                beyond += 1;
-                let end = end_at_range(origin, diff, max_range_m.unwrap_or(0.0));
-                free.begin_ray();
-                self.grid.ray_keys(origin, end, free);
-                free.end_ray();
-            }
+    /// A caster for this tree's scans (its resolution, kind and threads), to cast them on
+    /// another thread ([`ScanCaster::prepare`]) and apply them here ([`OcTree::apply_scan`]).
+    pub fn caster(&self) -> ScanCaster {
+        ScanCaster::new(
+            self.resolution_m(),
+            self.is_colored(),
+            self.caster.threads(),
+        )
+    }
+
+    /// The tree's own caster (what [`insert_scan`](Self::insert_scan) casts with), its kind
+    /// made the tree's.
+    pub fn caster_mut(&mut self) -> &mut ScanCaster {
+        if self.caster.is_colored() != self.is_colored() {
+            self.caster = self.caster();
         }
-        Some((skipped, beyond))
+        &mut self.caster
     }
 
     /// Inserts one scan as `graph2tree` does (`insertPointCloud` with the scan's pose, no lazy
@@ -339,192 +275,48 @@ impl OcTree {
         max_range_m: Option<f64>,
         stop: &AtomicBool,
     ) -> Option<ScanUpdate> {
-        let (pts, origin) = world_points(scan);
-        let mut report = ScanUpdate {
-            points: pts.len(),
-            ..ScanUpdate::default()
-        };
-        if self.colors.is_some() {
-            self.insert_in_octomap_order(
-                &pts,
-                origin,
-                scan.colors.as_deref(),
-                max_range_m,
-                stop,
-                &mut report,
-            )?;
-            return Some(report);
-        }
-        let colors = None;
-        let mut free: Vec<u64> = Vec::new();
-        let mut occ: Vec<(u64, ColorSlot)> = Vec::with_capacity(pts.len());
-        // At least 4096 points a thread, at most 64 threads.
-        let threads = self.threads.min(pts.len() / 4096).clamp(1, 64);
-        if threads <= 1 {
-            let mut set = std::mem::take(&mut self.scratch);
-            let cast = self.cast(
-                &pts,
-                0,
-                origin,
-                colors,
-                max_range_m,
-                &mut set,
-                &mut occ,
-                Some(stop),
-            );
-            let Some((s, b)) = cast else {
-                set.clear();
-                self.scratch = set;
-                return None;
-            };
-            set.drain_sorted(&mut free);
-            self.scratch = set;
-            report.points_skipped = s;
-            report.points_beyond_range = b;
-        } else {
-            let chunk = pts.len().div_ceil(threads);
-            let this = &*self;
-            let parts: Vec<Option<CastPart>> = std::thread::scope(|sc| {
-                let handles: Vec<_> = pts
-                    .chunks(chunk)
-                    .enumerate()
-                    .map(|(n, part)| {
-                        sc.spawn(move || {
-                            let mut set = CellSet::new();
-                            let mut o = Vec::with_capacity(part.len());
-                            let (s, b) = this.cast(
-                                part,
-                                n * chunk,
-                                origin,
-                                colors,
-                                max_range_m,
-                                &mut set,
-                                &mut o,
-                                Some(stop),
-                            )?;
-                            let mut f = Vec::new();
-                            set.drain_sorted(&mut f);
-                            Some((f, o, s, b))
-                        })
-                    })
-                    .collect();
-                handles
-                    .into_iter()
-                    .map(|h| h.join().unwrap_or_else(|_| Some(CastPart::default())))
-                    .collect()
-            });
-            let parts: Vec<CastPart> = parts.into_iter().collect::<Option<_>>()?;
-            let mut lists = Vec::with_capacity(parts.len());
-            for (f, o, s, b) in parts {
-                lists.push(f);
-                occ.extend(o);
-                report.points_skipped += s;
-                report.points_beyond_range += b;
-            }
-            free = merge_sorted(lists);
-        }
-        // Per voxel, the brightest colour first (set before unset): `brightness_key` is a total
-        // order, so equal keys are equal colours and the unstable sort decides nothing.
-        occ.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(slot_order(b.1).cmp(&slot_order(a.1))));
-        occ.dedup_by_key(|e| e.0);
-        // Merge: a voxel hit by a point is updated as occupied only.
-        let mut ups = Vec::with_capacity(free.len() + occ.len());
-        let (mut i, mut j) = (0, 0);
-        while i < free.len() || j < occ.len() {
-            if j >= occ.len() || (i < free.len() && free[i] < occ[j].0) {
-                ups.push(Upd {
-                    code: free[i],
-                    hit: false,
-                });
-                i += 1;
-            } else {
-                if i < free.len() && free[i] == occ[j].0 {
-                    i += 1;
-                }
-                ups.push(Upd {
-                    code: occ[j].0,
-                    hit: true,
-                });
-                j += 1;
-            }
-        }
-        report.occupied_voxels = occ.len();
-        report.free_voxels = ups.len() - occ.len();
-        if !ups.is_empty() {
-            let created = self.ensure_root();
-            let mut log = PassLog::default();
-            self.apply(0, 0, 0, &ups, created, &mut log);
-            report.changes = log.flips;
-        }
-        Some(report)
+        let prepared = self.caster_mut().prepare(scan, max_range_m, stop)?;
+        Some(self.apply_scan(&prepared))
     }
 
-    /// A coloured tree's scan, cell by cell in the order OctoMap's `insertPointCloud` updates
-    /// them (its free `KeySet`, less the occupied cells, then the occupied `KeySet`; see
-    /// [`KeySet`]), each update OctoMap's `updateNode` (pruning the path after it), then the
-    /// colour calls. The order only matters for colours (a node pruned and expanded again in
-    /// one scan), so plain trees take the faster sorted pass. One thread: the sets' order is
-    /// that of the points.
-    fn insert_in_octomap_order(
-        &mut self,
-        pts: &[[f32; 3]],
-        origin: [f32; 3],
-        colors: Option<&[[u8; 3]]>,
-        max_range_m: Option<f64>,
-        stop: &AtomicBool,
-        report: &mut ScanUpdate,
-    ) -> Option<()> {
-        let mut free = std::mem::take(&mut self.free_keys);
-        free.clear();
-        let mut occ: Vec<(u64, ColorSlot)> = Vec::with_capacity(pts.len());
-        let cast = self.cast(
-            pts,
-            0,
-            origin,
-            colors,
-            max_range_m,
-            &mut free,
-            &mut occ,
-            Some(stop),
-        );
-        let Some((skipped, beyond)) = cast else {
-            self.free_keys = free;
-            return None;
+    /// Applies a scan cast by [`ScanCaster::prepare`] (for a tree of this resolution): a plain
+    /// tree in one recursive pass over the cells in Morton order, a coloured tree cell by cell
+    /// in the order they were prepared in, each update OctoMap's `updateNode` (pruning the path
+    /// after it), then the colour calls. A scan prepared for the other kind of tree gives the
+    /// same log-odds (the order decides colours only).
+    pub fn apply_scan(&mut self, scan: &PreparedScan) -> ScanUpdate {
+        let mut report = ScanUpdate {
+            points: scan.points,
+            points_skipped: scan.points_skipped,
+            points_beyond_range: scan.points_beyond_range,
+            free_voxels: scan.free_voxels(),
+            occupied_voxels: scan.occupied_voxels(),
+            changes: Vec::new(),
         };
-        report.points_skipped = skipped;
-        report.points_beyond_range = beyond;
-        let mut occupied = KeySet::new();
-        for &(code, _) in &occ {
-            occupied.insert(unmorton(code));
+        if scan.ups.is_empty() {
+            return report;
         }
+        let created = self.ensure_root();
         let mut log = PassLog::default();
-        let mut created = false;
-        if !free.is_empty() || !occupied.is_empty() {
-            created = self.ensure_root();
+        if self.colors.is_none() {
+            if scan.octomap_order {
+                let mut ups = scan.ups.clone();
+                ups.sort_unstable_by_key(|u| u.code);
+                self.apply(0, 0, 0, &ups, created, &mut log);
+            } else {
+                self.apply(0, 0, 0, &scan.ups, created, &mut log);
+            }
+            report.changes = log.flips;
+            return report;
         }
-        let mut free_count = 0;
-        let ups = free
-            .iter()
-            .filter(|k| !occupied.contains(*k))
-            .map(|k| (k, false))
-            .chain(occupied.iter().map(|k| (k, true)));
-        for (k, hit) in ups {
-            free_count += !hit as usize;
-            let u = Upd {
-                code: morton(k),
-                hit,
-            };
-            self.update_voxel(&u, created, &mut log);
+        let mut created = created;
+        for u in &scan.ups {
+            self.update_voxel(u, created, &mut log);
             created = false;
         }
-        self.free_keys = free;
-        report.free_voxels = free_count;
-        report.occupied_voxels = occupied.len();
-        occ.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(slot_order(b.1).cmp(&slot_order(a.1))));
-        occ.dedup_by_key(|e| e.0);
         log.flips.sort_unstable_by_key(|c| c.code);
-        report.changes = self.color_pass(&occ, log);
-        Some(())
+        report.changes = self.color_pass(&scan.hits, log);
+        report
     }
 
     /// The colour calls after a scan's occupancy updates (`ColorOcTree`'s `search` and
@@ -1125,36 +917,6 @@ impl OcTree {
     }
 }
 
-/// One thread's share of a scan: free codes (sorted), end cells, points skipped and beyond range.
-type CastPart = (Vec<u64>, Vec<(u64, ColorSlot)>, usize, usize);
-
-/// Merges ascending lists into one ascending list without duplicates.
-fn merge_sorted(mut lists: Vec<Vec<u64>>) -> Vec<u64> {
-    while lists.len() > 1 {
-        let b = lists.pop().unwrap_or_default();
-        let a = lists.pop().unwrap_or_default();
-        let mut m = Vec::with_capacity(a.len() + b.len());
-        let (mut i, mut j) = (0, 0);
-        while i < a.len() && j < b.len() {
-            if a[i] < b[j] {
-                m.push(a[i]);
-                i += 1;
-            } else if b[j] < a[i] {
-                m.push(b[j]);
-                j += 1;
-            } else {
-                m.push(a[i]);
-                i += 1;
-                j += 1;
-            }
-        }
-        m.extend_from_slice(&a[i..]);
-        m.extend_from_slice(&b[j..]);
-        lists.push(m);
-    }
-    lists.pop().unwrap_or_default()
-}
-
 /// A node of the tree (a handle, valid until the tree changes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct NodeRef {
@@ -1166,6 +928,8 @@ pub struct NodeRef {
 mod tests {
     use super::*;
     use crate::octo::Pose;
+    use crate::octo::cellset::CellSet;
+    use crate::octo::math::norm_f32;
 
     #[test]
     fn keys_follow_octomap_and_refuse_out_of_range() {

@@ -6,6 +6,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
 use std::time::Instant;
 
 use serde::Serialize;
@@ -13,7 +14,9 @@ use serde::Serialize;
 use super::inputs::{ScanSource, open_scans, with_origin};
 use super::{BuildConfig, PipelineError};
 use crate::io::IoError;
-use crate::octo::delta::{self, Sender};
+use crate::octo::Scan;
+use crate::octo::cast::PreparedScan;
+use crate::octo::delta::{self, Sender, ViewSpec};
 use crate::octo::recording::{Item, Recording, RecordingError};
 use crate::octo::tree::OcTree;
 use crate::octo::{files, transfer};
@@ -186,10 +189,106 @@ impl Built {
     }
 }
 
+/// Where each scan's message goes once the scan is in the map: the delta stream, the stats sink
+/// and the progress hook.
+struct Emitter<'w> {
+    spec: ViewSpec,
+    sender: Sender,
+    stream: &'w mut dyn Write,
+    stream_name: &'w str,
+    header_bytes: u64,
+    cum_bt_bytes: u64,
+    cum_ot_bytes: u64,
+}
+
+impl Emitter<'_> {
+    fn write(&mut self, bytes: &[u8]) -> Result<(), PipelineError> {
+        self.stream
+            .write_all(bytes)
+            .and_then(|()| self.stream.flush())
+            .map_err(|source| {
+                IoError::Write {
+                    name: self.stream_name.to_string(),
+                    source,
+                }
+                .into()
+            })
+    }
+
+    /// Applies a cast scan to `tree` (`None`: the stop flag ended its casting, and the build),
+    /// writes its message and reports it; `started` is when the caller began waiting for it.
+    fn emit(
+        &mut self,
+        tree: &mut OcTree,
+        prepared: Option<PreparedScan>,
+        started: Instant,
+        report: &mut BuildReport,
+        hooks: &mut Hooks<'_>,
+        known: u64,
+    ) -> Result<bool, PipelineError> {
+        let Some(prepared) = prepared else {
+            report.interrupted = true;
+            return Ok(false);
+        };
+        let up = tree.apply_scan(&prepared);
+        let d = self.sender.delta(tree, &up.changes);
+        let msg = delta::encode_delta(&self.spec, report.scans, &d);
+        let dt = started.elapsed().as_secs_f64();
+        report.insert_s += dt;
+        self.write(&msg)?;
+        report.points += up.points;
+        report.points_skipped += up.points_skipped;
+        report.points_beyond_range += up.points_beyond_range;
+        report.stream_bytes += msg.len() as u64;
+        report.messages.push((report.scans, msg.len()));
+        if let Some(sink) = hooks.stats.as_mut() {
+            let full_bt_bytes = files::write_bt(tree).len() as u64;
+            let full_ot_bytes = files::ot_size(tree) as u64;
+            self.cum_bt_bytes += full_bt_bytes;
+            self.cum_ot_bytes += full_ot_bytes;
+            sink(&StatsRow {
+                scan: report.scans,
+                points: up.points,
+                delta_bytes: msg.len(),
+                fine_occupied: d.fine_occupied.len(),
+                fine_free: d.fine_free.len(),
+                coarse_occupied: d.coarse_occupied.len(),
+                coarse_free: d.coarse_free.len(),
+                full_bt_bytes,
+                full_ot_bytes,
+                cum_delta_bytes: report.stream_bytes - self.header_bytes,
+                cum_full_bt_bytes: self.cum_bt_bytes,
+                cum_full_ot_bytes: self.cum_ot_bytes,
+                points_skipped: up.points_skipped,
+                insert_ms: (dt * 1e6).round() / 1e3,
+            })
+            .map_err(PipelineError::Sink)?;
+        }
+        report.scans += 1;
+        if let Some(p) = hooks.progress.as_mut() {
+            p(report.scans as u64, known);
+        }
+        Ok(true)
+    }
+}
+
+/// The thread that casts the next scan while the caller applies the last one: scans in, cast
+/// scans out, in order.
+struct CastThread {
+    scans: mpsc::Sender<Scan>,
+    cast: mpsc::Receiver<Option<PreparedScan>>,
+    /// Scans sent and not yet received.
+    in_flight: usize,
+}
+
 /// Builds the map from the scans of `inputs` (in order; `-` is standard input) and writes the
 /// delta stream to `stream` (named `stream_name` in errors): the header, then one message per
 /// scan as soon as it is made. The map keeps colours when the first scan has them, unless
 /// [`BuildConfig::no_color`].
+///
+/// With more than one thread ([`BuildConfig::threads`]), a scan's rays are cast on another
+/// thread while the previous scan goes into the map (and a plain scan's rays on several): the
+/// map and the stream are the same as with one thread, byte for byte.
 ///
 /// When `hooks.stop` is set the build ends before the next scan (or inside a scan, before it
 /// changes the map): the stream then holds whole messages for every scan in the map, and
@@ -204,28 +303,88 @@ pub fn build(
 ) -> Result<Built, PipelineError> {
     let spec = cfg.validate()?;
     let started = Instant::now();
-    let write = |w: &mut dyn Write, bytes: &[u8]| {
-        w.write_all(bytes)
-            .and_then(|()| w.flush())
-            .map_err(|source| IoError::Write {
-                name: stream_name.to_string(),
-                source,
-            })
-    };
     let threads = cfg
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get().min(8)));
-    let origin = cfg.origin_m.map(|o| o.map(|c| c as f32));
     let mut sender = Sender::new(spec);
     sender.set_color_updates(cfg.color_updates);
     let header = delta::encode_header(&spec);
-    write(stream, &header)?;
+    let mut out = Emitter {
+        spec,
+        sender,
+        stream,
+        stream_name,
+        header_bytes: header.len() as u64,
+        cum_bt_bytes: 0,
+        cum_ot_bytes: 0,
+    };
+    out.write(&header)?;
     let mut report = BuildReport {
         stream_bytes: header.len() as u64,
         ..BuildReport::default()
     };
     let mut tree: Option<OcTree> = None;
-    let (mut cum_bt, mut cum_ot, mut known) = (0u64, 0u64, 0u64);
+    std::thread::scope(|scope| {
+        build_in(
+            cfg,
+            inputs,
+            threads,
+            &mut out,
+            &mut tree,
+            &mut report,
+            hooks,
+            scope,
+        )
+    })?;
+    report.elapsed_s = started.elapsed().as_secs_f64();
+    let tree = tree.unwrap_or_else(|| OcTree::new(cfg.resolution_m));
+    Ok(Built { tree, report })
+}
+
+/// The scans cast and not yet in the map, in order, each applied; false if the build stopped
+/// (the rest dropped).
+fn drain(
+    out: &mut Emitter<'_>,
+    caster: &mut Option<CastThread>,
+    tree: &mut Option<OcTree>,
+    report: &mut BuildReport,
+    hooks: &mut Hooks<'_>,
+    known: u64,
+) -> Result<bool, PipelineError> {
+    let (Some(c), Some(tree)) = (caster.as_mut(), tree.as_mut()) else {
+        return Ok(true);
+    };
+    while c.in_flight > 0 {
+        if hooks.stop.load(Ordering::Relaxed) {
+            report.interrupted = true;
+            return Ok(false);
+        }
+        let t0 = Instant::now();
+        let prepared = c.cast.recv().ok().flatten();
+        c.in_flight -= 1;
+        if !out.emit(tree, prepared, t0, report, hooks, known)? {
+            return Ok(false);
+        }
+    }
+    Ok(true)
+}
+
+/// [`build`]'s loop over the inputs and their scans; a casting thread, if any, in `scope`.
+#[allow(clippy::too_many_arguments)]
+fn build_in<'scope, 'h: 'scope>(
+    cfg: &BuildConfig,
+    inputs: &[PathBuf],
+    threads: usize,
+    out: &mut Emitter<'_>,
+    tree_slot: &mut Option<OcTree>,
+    report: &mut BuildReport,
+    hooks: &mut Hooks<'h>,
+    scope: &'scope std::thread::Scope<'scope, '_>,
+) -> Result<(), PipelineError> {
+    let origin = cfg.origin_m.map(|o| o.map(|c| c as f32));
+    let max_range_m = cfg.max_range_m;
+    let mut known = 0u64;
+    let mut caster: Option<CastThread> = None;
     'inputs: for path in inputs {
         if hooks.stop.load(Ordering::Relaxed) {
             report.interrupted = true;
@@ -290,11 +449,15 @@ pub fn build(
                     continue;
                 }
                 Ok(Item::Scan(scan)) => scan,
-                Err(e) => return Err(e),
+                Err(e) => {
+                    // The scans before the bad one go into the map and the stream first.
+                    drain(out, &mut caster, tree_slot, report, hooks, known)?;
+                    return Err(e);
+                }
             };
             posed += 1;
             let scan = with_origin(scan, origin);
-            let tree = tree.get_or_insert_with(|| {
+            let tree = tree_slot.get_or_insert_with(|| {
                 let mut t = OcTree::new(cfg.resolution_m);
                 t.set_threads(threads);
                 if scan.colors.is_some() && !cfg.no_color {
@@ -302,48 +465,54 @@ pub fn build(
                 }
                 t
             });
-            let t0 = Instant::now();
-            let Some(up) = tree.insert_scan_until(&scan, cfg.max_range_m, hooks.stop) else {
+            if threads > 1 && caster.is_none() {
+                let (scans, scans_in) = mpsc::channel::<Scan>();
+                let (cast_out, cast) = mpsc::channel();
+                let mut c = tree.caster();
+                scope.spawn(move || {
+                    for scan in scans_in {
+                        if cast_out.send(c.prepare(&scan, max_range_m, stop)).is_err() {
+                            break;
+                        }
+                    }
+                });
+                caster = Some(CastThread {
+                    scans,
+                    cast,
+                    in_flight: 0,
+                });
+            }
+            let Some(c) = caster.as_mut() else {
+                let t0 = Instant::now();
+                let prepared = tree.caster_mut().prepare(&scan, max_range_m, stop);
+                if !out.emit(tree, prepared, t0, report, hooks, known)? {
+                    break 'inputs;
+                }
+                continue;
+            };
+            if c.scans.send(scan).is_err() {
+                // The casting thread is gone (it panicked): the scan is lost, the build stops.
                 report.interrupted = true;
                 break 'inputs;
-            };
-            let d = sender.delta(tree, &up.changes);
-            let msg = delta::encode_delta(&spec, report.scans, &d);
-            let dt = t0.elapsed().as_secs_f64();
-            report.insert_s += dt;
-            write(stream, &msg)?;
-            report.points += up.points;
-            report.points_skipped += up.points_skipped;
-            report.points_beyond_range += up.points_beyond_range;
-            report.stream_bytes += msg.len() as u64;
-            report.messages.push((report.scans, msg.len()));
-            if let Some(sink) = hooks.stats.as_mut() {
-                let full_bt_bytes = files::write_bt(tree).len() as u64;
-                let full_ot_bytes = files::ot_size(tree) as u64;
-                cum_bt += full_bt_bytes;
-                cum_ot += full_ot_bytes;
-                sink(&StatsRow {
-                    scan: report.scans,
-                    points: up.points,
-                    delta_bytes: msg.len(),
-                    fine_occupied: d.fine_occupied.len(),
-                    fine_free: d.fine_free.len(),
-                    coarse_occupied: d.coarse_occupied.len(),
-                    coarse_free: d.coarse_free.len(),
-                    full_bt_bytes,
-                    full_ot_bytes,
-                    cum_delta_bytes: report.stream_bytes - header.len() as u64,
-                    cum_full_bt_bytes: cum_bt,
-                    cum_full_ot_bytes: cum_ot,
-                    points_skipped: up.points_skipped,
-                    insert_ms: (dt * 1e6).round() / 1e3,
-                })
-                .map_err(PipelineError::Sink)?;
             }
-            report.scans += 1;
-            if let Some(p) = hooks.progress.as_mut() {
-                p(report.scans as u64, known);
+            c.in_flight += 1;
+            // One scan being cast while the one before goes into the map.
+            if c.in_flight > 1 {
+                if stop.load(Ordering::Relaxed) {
+                    report.interrupted = true;
+                    break 'inputs;
+                }
+                let t0 = Instant::now();
+                let prepared = c.cast.recv().ok().flatten();
+                c.in_flight -= 1;
+                if !out.emit(tree, prepared, t0, report, hooks, known)? {
+                    break 'inputs;
+                }
             }
+        }
+        // An input's scans are all in the map before the next input is opened.
+        if !drain(out, &mut caster, tree_slot, report, hooks, known)? {
+            break 'inputs;
         }
         if let Some(rec) = &recording {
             // A bag that says it has clouds but gives none (its metadata.yaml lists a topic its
@@ -374,9 +543,7 @@ pub fn build(
                 .extend(rec.notes.iter().map(|n| format!("{name}: {n}")));
         }
     }
-    report.elapsed_s = started.elapsed().as_secs_f64();
-    let tree = tree.unwrap_or_else(|| OcTree::new(cfg.resolution_m));
-    Ok(Built { tree, report })
+    Ok(())
 }
 
 /// One row of `--arrivals`: when a scan's message reached the operator over the link.
@@ -486,21 +653,66 @@ mod tests {
             origin_m: Some([0.0; 3]),
             ..BuildConfig::default()
         };
-        let never = AtomicBool::new(false);
-        let mut out = Vec::new();
-        let built = build(
-            &cfg,
-            &[t],
-            &mut out,
-            "mem",
-            &mut Hooks {
-                stop: &never,
-                stats: None,
-                progress: None,
-            },
-        )
-        .unwrap();
+        let (built, _) = build_uninterrupted(&cfg, &t);
         assert_eq!((built.report.scans, built.report.points), (1, 1));
         assert!(!built.report.interrupted);
+    }
+
+    /// A build of `input` with no stop, no sink, no progress: the map and the stream.
+    fn build_uninterrupted(cfg: &BuildConfig, input: &Path) -> (Built, Vec<u8>) {
+        let never = AtomicBool::new(false);
+        let mut out = Vec::new();
+        let mut hooks = Hooks {
+            stop: &never,
+            stats: None,
+            progress: None,
+        };
+        let built = build(cfg, &[input.to_path_buf()], &mut out, "mem", &mut hooks).unwrap();
+        (built, out)
+    }
+
+    /// The stream, .bt and .ot of a build of `input` on `threads` threads.
+    fn built_bytes(input: &Path, threads: usize) -> (Vec<u8>, Vec<u8>, Vec<u8>) {
+        let cfg = BuildConfig {
+            resolution_m: 0.1,
+            threads: Some(threads),
+            ..BuildConfig::default()
+        };
+        let (built, out) = build_uninterrupted(&cfg, input);
+        assert_eq!(built.report.scans, 6);
+        (
+            out,
+            files::write_bt(&built.tree),
+            files::write_ot(&built.tree),
+        )
+    }
+
+    #[test]
+    fn two_threads_build_the_same_bytes_as_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let params = crate::octo::synth::SurveyParams {
+            scans: 6,
+            ..Default::default()
+        };
+        for (name, mcap) in [("s.graph", false), ("s.mcap", true)] {
+            let path = dir.path().join(name);
+            let bytes = crate::octo::pipeline::commands::synth(&params, mcap).unwrap();
+            std::fs::write(&path, bytes).unwrap();
+            let one = built_bytes(&path, 1);
+            // The coloured map is a ColorOcTree, the plain one an OcTree.
+            assert_eq!(
+                String::from_utf8_lossy(&one.2[..200]).contains("id ColorOcTree"),
+                mcap
+            );
+            for threads in [2, 3] {
+                let more = built_bytes(&path, threads);
+                assert!(
+                    one.0 == more.0,
+                    "{name}: streams differ at {threads} threads"
+                );
+                assert!(one.1 == more.1, "{name}: .bt differ at {threads} threads");
+                assert!(one.2 == more.2, "{name}: .ot differ at {threads} threads");
+            }
+        }
     }
 }

@@ -1,0 +1,500 @@
+//! A scan made ready for the tree: its rays cast, its cells discretised and put in the order the
+//! tree will update them ([`ScanCaster::prepare`]), with nothing read from the tree. The tree
+//! then applies a [`PreparedScan`] ([`super::tree::OcTree::apply_scan`]).
+//!
+//! Casting depends only on the scan and the grid, so the next scan can be cast on one thread
+//! while the tree applies the previous one on another (`octo-delta build` does so), and the
+//! sequence of updates, and hence the map, is the same as casting and applying in turn.
+//!
+//! Two orders, as [`super::tree`] explains: a plain tree takes the scan's cells in Morton order
+//! (free cells less the hit ones, and the hit ones, merged), which its one recursive pass needs;
+//! a coloured tree takes them in OctoMap's `insertPointCloud` order (the free [`KeySet`] less
+//! the occupied cells, then the occupied `KeySet`), which decides its colours.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use super::Scan;
+use super::cellset::CellSet;
+use super::hashorder::KeySet;
+use super::math::{
+    ColorSlot, Grid, Key, RaySink, color_slot, end_at_range, morton, norm_f32, slot_order,
+    world_points,
+};
+
+/// How many points a scan's rays are cast between two looks at the stop flag.
+const STOP_CHECK_POINTS: usize = 2048;
+
+/// Fewest points a casting thread gets.
+const POINTS_PER_THREAD_MIN: usize = 4096;
+
+/// Most threads casting one scan.
+const CAST_THREADS_MAX: usize = 64;
+
+impl RaySink for CellSet {
+    #[inline(always)]
+    fn add(&mut self, k: Key) {
+        self.insert(k);
+    }
+}
+
+/// OctoMap inserts each ray's cells into its free `KeySet` with one range insert.
+impl RaySink for KeySet {
+    fn begin_ray(&mut self) {
+        self.begin_range();
+    }
+    #[inline(always)]
+    fn add(&mut self, k: Key) {
+        self.add_to_range(k);
+    }
+    fn end_ray(&mut self) {
+        self.end_range();
+    }
+}
+
+/// The cells of a scan's rays, ray by ray, to be inserted into a [`KeySet`] later.
+#[derive(Default)]
+struct RayList {
+    keys: Vec<Key>,
+    /// Where each ray's cells end in `keys`.
+    ends: Vec<usize>,
+}
+
+impl RaySink for RayList {
+    #[inline(always)]
+    fn add(&mut self, k: Key) {
+        self.keys.push(k);
+    }
+    fn end_ray(&mut self) {
+        self.ends.push(self.keys.len());
+    }
+}
+
+impl RayList {
+    /// Inserts the rays into `set` as if they had been cast into it.
+    fn insert_into(&self, set: &mut KeySet) {
+        let mut start = 0;
+        for &end in &self.ends {
+            set.begin_ray();
+            for &k in &self.keys[start..end] {
+                set.add(k);
+            }
+            set.end_ray();
+            start = end;
+        }
+    }
+}
+
+/// One update of a voxel: its depth-16 Morton code and whether a point ended in it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Upd {
+    /// Morton code of the voxel.
+    pub(crate) code: u64,
+    /// Hit (occupied) rather than crossed (free).
+    pub(crate) hit: bool,
+}
+
+/// A scan cast and ordered, ready for [`super::tree::OcTree::apply_scan`].
+#[derive(Debug, Clone, Default)]
+pub struct PreparedScan {
+    /// The updates, in the order the tree makes them.
+    pub(crate) ups: Vec<Upd>,
+    /// Each hit voxel once, in Morton order, with its brightest point's colour.
+    pub(crate) hits: Vec<(u64, ColorSlot)>,
+    /// Whether `ups` is in OctoMap's order (a coloured tree's) rather than Morton order.
+    pub(crate) octomap_order: bool,
+    /// Points in the scan.
+    pub(crate) points: usize,
+    /// Points skipped: not finite, or outside the key range.
+    pub(crate) points_skipped: usize,
+    /// Points beyond the maximum range.
+    pub(crate) points_beyond_range: usize,
+}
+
+impl PreparedScan {
+    /// Distinct voxels the scan updates as occupied.
+    pub fn occupied_voxels(&self) -> usize {
+        self.hits.len()
+    }
+
+    /// Distinct voxels the scan updates as free.
+    pub fn free_voxels(&self) -> usize {
+        self.ups.len() - self.hits.len()
+    }
+}
+
+/// Casts scans for a tree of one resolution and kind (plain or coloured), keeping its scratch
+/// sets from scan to scan.
+#[derive(Clone)]
+pub struct ScanCaster {
+    grid: Grid,
+    colored: bool,
+    threads: usize,
+    scratch: CellSet,
+    free_keys: KeySet,
+    /// The key box of the scan being cast (its sensor and points).
+    window: (Key, Key),
+}
+
+impl std::fmt::Debug for ScanCaster {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ScanCaster")
+            .field("resolution_m", &self.grid.resolution_m())
+            .field("colored", &self.colored)
+            .field("threads", &self.threads)
+            .finish()
+    }
+}
+
+/// One thread's share of a plain scan: free codes (sorted), end cells, points skipped and
+/// beyond range.
+type CastPart = (Vec<u64>, Vec<(u64, ColorSlot)>, usize, usize);
+
+impl ScanCaster {
+    /// A caster for a tree of voxel edge `resolution_m`, coloured or not, casting a plain scan
+    /// on up to `threads` threads, a coloured one on up to two (its cells still inserted in the
+    /// order of the points).
+    pub fn new(resolution_m: f64, colored: bool, threads: usize) -> Self {
+        ScanCaster {
+            grid: Grid::new(resolution_m),
+            colored,
+            threads: threads.max(1),
+            scratch: CellSet::new(),
+            free_keys: KeySet::new(),
+            window: ([0; 3], [0; 3]),
+        }
+    }
+
+    /// Threads a scan is cast on, at most.
+    pub fn threads(&self) -> usize {
+        self.threads
+    }
+
+    /// Sets the threads a scan is cast on, at most (at least 1).
+    pub fn set_threads(&mut self, threads: usize) {
+        self.threads = threads.max(1);
+    }
+
+    /// Whether the scans are cast for a coloured tree.
+    pub fn is_colored(&self) -> bool {
+        self.colored
+    }
+
+    /// Casts `scan` as `graph2tree` does (`insertPointCloud` with the scan's pose, no lazy
+    /// evaluation, no discretisation), with an optional maximum range; `None` when `stop` is
+    /// set before its rays are cast (checked every few thousand points).
+    pub fn prepare(
+        &mut self,
+        scan: &Scan,
+        max_range_m: Option<f64>,
+        stop: &AtomicBool,
+    ) -> Option<PreparedScan> {
+        let (pts, origin) = world_points(scan);
+        self.window = key_box(&self.grid, origin, &pts);
+        let colors = if self.colored {
+            scan.colors.as_deref()
+        } else {
+            None
+        };
+        let mut p = if self.colored {
+            self.prepare_octomap_order(&pts, origin, colors, max_range_m, stop)?
+        } else {
+            self.prepare_sorted(&pts, origin, max_range_m, stop)?
+        };
+        p.points = pts.len();
+        Some(p)
+    }
+
+    /// The rays of `pts` (the points from index `first` of the scan): free cells into `free`,
+    /// end cells (with colour) into `occ`; points skipped and beyond range.
+    #[allow(clippy::too_many_arguments)]
+    fn cast(
+        &self,
+        pts: &[[f32; 3]],
+        first: usize,
+        origin: [f32; 3],
+        colors: Option<&[[u8; 3]]>,
+        max_range_m: Option<f64>,
+        free: &mut impl RaySink,
+        occ: &mut Vec<(u64, ColorSlot)>,
+        stop: &AtomicBool,
+    ) -> Option<(usize, usize)> {
+        let (mut skipped, mut beyond) = (0, 0);
+        for (j, &p) in pts.iter().enumerate() {
+            if j % STOP_CHECK_POINTS == 0 && stop.load(Ordering::Relaxed) {
+                return None;
+            }
+            let i = first + j;
+            if !(p[0].is_finite() && p[1].is_finite() && p[2].is_finite()) {
+                // OctoMap casts no ray for it either (its key is out of range).
+                skipped += 1;
+                continue;
+            }
+            let diff = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
+            let within = max_range_m.is_none_or(|r| r < 0.0 || norm_f32(diff) <= r);
+            if within {
+                free.begin_ray();
+                self.grid.ray_keys(origin, p, free);
+                free.end_ray();
+                match self.grid.key_of(p) {
+                    Some(k) => {
+                        let color = color_slot(colors.and_then(|c| c.get(i)).copied());
+                        occ.push((morton(k), color));
+                    }
+                    None => skipped += 1,
+                }
+            } else {
+                beyond += 1;
+                let end = end_at_range(origin, diff, max_range_m.unwrap_or(0.0));
+                free.begin_ray();
+                self.grid.ray_keys(origin, end, free);
+                free.end_ray();
+            }
+        }
+        Some((skipped, beyond))
+    }
+
+    /// A plain scan: free and hit cells merged in Morton order (a voxel hit by a point is
+    /// updated as occupied only), cast on up to `threads` threads.
+    fn prepare_sorted(
+        &mut self,
+        pts: &[[f32; 3]],
+        origin: [f32; 3],
+        max_range_m: Option<f64>,
+        stop: &AtomicBool,
+    ) -> Option<PreparedScan> {
+        let mut p = PreparedScan::default();
+        let mut free: Vec<u64> = Vec::new();
+        let mut occ: Vec<(u64, ColorSlot)> = Vec::with_capacity(pts.len());
+        let threads = self
+            .threads
+            .min(pts.len() / POINTS_PER_THREAD_MIN)
+            .clamp(1, CAST_THREADS_MAX);
+        if threads <= 1 {
+            let mut set = std::mem::take(&mut self.scratch);
+            set.set_window(self.window.0, self.window.1);
+            let cast = self.cast(pts, 0, origin, None, max_range_m, &mut set, &mut occ, stop);
+            let Some((s, b)) = cast else {
+                set.clear();
+                self.scratch = set;
+                return None;
+            };
+            set.drain_sorted(&mut free);
+            self.scratch = set;
+            p.points_skipped = s;
+            p.points_beyond_range = b;
+        } else {
+            let chunk = pts.len().div_ceil(threads);
+            let this = &*self;
+            let parts: Vec<Option<CastPart>> = std::thread::scope(|sc| {
+                let handles: Vec<_> = pts
+                    .chunks(chunk)
+                    .enumerate()
+                    .map(|(n, part)| {
+                        sc.spawn(move || {
+                            let mut set = CellSet::new();
+                            set.set_window(this.window.0, this.window.1);
+                            let mut o = Vec::with_capacity(part.len());
+                            let (s, b) = this.cast(
+                                part,
+                                n * chunk,
+                                origin,
+                                None,
+                                max_range_m,
+                                &mut set,
+                                &mut o,
+                                stop,
+                            )?;
+                            let mut f = Vec::new();
+                            set.drain_sorted(&mut f);
+                            Some((f, o, s, b))
+                        })
+                    })
+                    .collect();
+                handles
+                    .into_iter()
+                    .map(|h| h.join().unwrap_or_else(|_| Some(CastPart::default())))
+                    .collect()
+            });
+            let parts: Vec<CastPart> = parts.into_iter().collect::<Option<_>>()?;
+            let mut lists = Vec::with_capacity(parts.len());
+            for (f, o, s, b) in parts {
+                lists.push(f);
+                occ.extend(o);
+                p.points_skipped += s;
+                p.points_beyond_range += b;
+            }
+            free = merge_sorted(lists);
+        }
+        brightest_per_voxel(&mut occ);
+        // Merge: a voxel hit by a point is updated as occupied only.
+        let mut ups = Vec::with_capacity(free.len() + occ.len());
+        let (mut i, mut j) = (0, 0);
+        while i < free.len() || j < occ.len() {
+            if j >= occ.len() || (i < free.len() && free[i] < occ[j].0) {
+                ups.push(Upd {
+                    code: free[i],
+                    hit: false,
+                });
+                i += 1;
+            } else {
+                if i < free.len() && free[i] == occ[j].0 {
+                    i += 1;
+                }
+                ups.push(Upd {
+                    code: occ[j].0,
+                    hit: true,
+                });
+                j += 1;
+            }
+        }
+        p.ups = ups;
+        p.hits = occ;
+        Some(p)
+    }
+
+    /// A coloured scan, cell by cell in the order OctoMap's `insertPointCloud` updates them:
+    /// its free `KeySet` less the occupied cells, then the occupied `KeySet` (see [`KeySet`]).
+    /// With more than one thread, half the rays are cast on a second thread and inserted after
+    /// the first half's: the sets' order is still that of the points.
+    fn prepare_octomap_order(
+        &mut self,
+        pts: &[[f32; 3]],
+        origin: [f32; 3],
+        colors: Option<&[[u8; 3]]>,
+        max_range_m: Option<f64>,
+        stop: &AtomicBool,
+    ) -> Option<PreparedScan> {
+        let mut p = PreparedScan {
+            octomap_order: true,
+            ..PreparedScan::default()
+        };
+        let mut free = std::mem::take(&mut self.free_keys);
+        free.set_window(self.window.0, self.window.1);
+        let mut occ: Vec<(u64, ColorSlot)> = Vec::with_capacity(pts.len());
+        // With a second thread, it casts the second half of the rays while this one casts the
+        // first into the set; then the second half's rays go in, in order.
+        let split = if self.threads > 1 && pts.len() >= 2 * POINTS_PER_THREAD_MIN {
+            pts.len() / 2
+        } else {
+            pts.len()
+        };
+        let this = &*self;
+        let (first, second) = std::thread::scope(|sc| {
+            let second = (split < pts.len()).then(|| {
+                sc.spawn(move || {
+                    let mut rays = RayList::default();
+                    let mut o = Vec::with_capacity(pts.len() - split);
+                    let (s, b) = this.cast(
+                        &pts[split..],
+                        split,
+                        origin,
+                        colors,
+                        max_range_m,
+                        &mut rays,
+                        &mut o,
+                        stop,
+                    )?;
+                    Some((rays, o, s, b))
+                })
+            });
+            let first = this.cast(
+                &pts[..split],
+                0,
+                origin,
+                colors,
+                max_range_m,
+                &mut free,
+                &mut occ,
+                stop,
+            );
+            let second = match second {
+                Some(h) => h.join().ok().flatten(),
+                None => Some((RayList::default(), Vec::new(), 0, 0)),
+            };
+            (first, second)
+        });
+        let (Some((mut skipped, mut beyond)), Some((rays, o, s, b))) = (first, second) else {
+            self.free_keys = free;
+            return None;
+        };
+        rays.insert_into(&mut free);
+        occ.extend(o);
+        skipped += s;
+        beyond += b;
+        p.points_skipped = skipped;
+        p.points_beyond_range = beyond;
+        let mut occupied = KeySet::new();
+        occupied.set_window(self.window.0, self.window.1);
+        for &(code, _) in &occ {
+            occupied.insert(super::math::unmorton(code));
+        }
+        let mut ups = Vec::with_capacity(free.len() + occupied.len());
+        ups.extend(free.iter().filter(|k| !occupied.contains(*k)).map(|k| Upd {
+            code: morton(k),
+            hit: false,
+        }));
+        ups.extend(occupied.iter().map(|k| Upd {
+            code: morton(k),
+            hit: true,
+        }));
+        self.free_keys = free;
+        brightest_per_voxel(&mut occ);
+        p.ups = ups;
+        p.hits = occ;
+        Some(p)
+    }
+}
+
+/// The box of keys (lowest, highest on each axis) holding `origin` and the finite `pts`, the
+/// range's ends where they are outside it: where a scan's rays run.
+fn key_box(grid: &Grid, origin: [f32; 3], pts: &[[f32; 3]]) -> (Key, Key) {
+    let (mut low, mut high) = (origin, origin);
+    for p in pts {
+        if p.iter().all(|c| c.is_finite()) {
+            for i in 0..3 {
+                low[i] = low[i].min(p[i]);
+                high[i] = high[i].max(p[i]);
+            }
+        }
+    }
+    let key = |c: f32, outside: u16| grid.coord_to_key(c).unwrap_or(outside);
+    (
+        [0, 1, 2].map(|i| key(low[i], 0)),
+        [0, 1, 2].map(|i| key(high[i], u16::MAX)),
+    )
+}
+
+/// Sorts end cells by voxel and keeps each voxel once, with its brightest colour (set before
+/// unset): `brightness_key` is a total order, so equal keys are equal colours and the unstable
+/// sort decides nothing.
+fn brightest_per_voxel(occ: &mut Vec<(u64, ColorSlot)>) {
+    occ.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(slot_order(b.1).cmp(&slot_order(a.1))));
+    occ.dedup_by_key(|e| e.0);
+}
+
+/// Merges ascending lists into one ascending list without duplicates.
+fn merge_sorted(mut lists: Vec<Vec<u64>>) -> Vec<u64> {
+    while lists.len() > 1 {
+        let b = lists.pop().unwrap_or_default();
+        let a = lists.pop().unwrap_or_default();
+        let mut m = Vec::with_capacity(a.len() + b.len());
+        let (mut i, mut j) = (0, 0);
+        while i < a.len() && j < b.len() {
+            if a[i] < b[j] {
+                m.push(a[i]);
+                i += 1;
+            } else if b[j] < a[i] {
+                m.push(b[j]);
+                j += 1;
+            } else {
+                m.push(a[i]);
+                i += 1;
+                j += 1;
+            }
+        }
+        m.extend_from_slice(&a[i..]);
+        m.extend_from_slice(&b[j..]);
+        lists.push(m);
+    }
+    lists.pop().unwrap_or_default()
+}
