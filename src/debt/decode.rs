@@ -131,7 +131,9 @@ fn decode_inner(
         }
         match directions {
             Some(map) => adl::synthesise(&coefficients, w, h, header.levels, map),
-            None => synthesise_channels(&coefficients, w, h, &header, synthesis_threads(w * h)),
+            None => {
+                synthesise_channels(&coefficients, w, h, header.levels, synthesis_threads(w * h))
+            }
         }
     };
     let img = upscale(img, header.width, header.height);
@@ -177,7 +179,7 @@ fn synthesise_channels(
     coefficients: &[Vec<(u32, f32)>],
     width: usize,
     height: usize,
-    header: &Header,
+    levels: u32,
     threads: usize,
 ) -> Image {
     const GREY: [[f32; 3]; 1] = [[1.0, 0.0, 0.0]];
@@ -187,9 +189,8 @@ fn synthesise_channels(
     };
     let channels = mix.len();
     let n = width * height;
-    let synthesise = |weights: &[f32; 3]| {
-        synthesise_channel(coefficients, weights, width, height, header.levels)
-    };
+    let synthesise =
+        |weights: &[f32; 3]| synthesise_channel(coefficients, weights, width, height, levels);
     let planes: Vec<Vec<u8>> = if channels > 1 && threads > 1 {
         std::thread::scope(|scope| {
             let others: Vec<_> = mix[1..]
@@ -339,30 +340,36 @@ mod tests {
     use crate::debt::encode;
     use crate::debt::tests::synthetic;
 
+    /// `img` encoded to `bytes` with the default options, its header and the significant
+    /// coefficients the decoder gathers from the whole stream.
+    fn coefficients_of(img: &Image, bytes: usize) -> (Header, Vec<Vec<(u32, f32)>>) {
+        let options = EncodeOptions {
+            bytes,
+            ..EncodeOptions::default()
+        };
+        let stream = encode(img, &options).unwrap();
+        let header = Header::read(&stream).unwrap();
+        let mut coefficients = vec![Vec::new(); header.components()];
+        decode_part(
+            &header,
+            &stream[header.len()..],
+            (0, 1),
+            header.priors,
+            &mut coefficients,
+        );
+        (header, coefficients)
+    }
+
     #[test]
     fn channels_synthesised_from_mixed_coefficients_match_converting_after_synthesis() {
         for (channels, bytes) in [(3, 300), (3, 3000), (3, 30000), (1, 3000)] {
-            let img = synthetic(97, 61, channels);
-            let options = EncodeOptions {
-                bytes,
-                ..EncodeOptions::default()
-            };
-            let stream = encode(&img, &options).unwrap();
-            let header = Header::read(&stream).unwrap();
+            let (header, coefficients) = coefficients_of(&synthetic(97, 61, channels), bytes);
             let (w, h) = header.coded_size();
-            let mut coefficients = vec![Vec::new(); header.components()];
-            decode_part(
-                &header,
-                &stream[header.len()..],
-                (0, 1),
-                false,
-                &mut coefficients,
-            );
             let mut planes: Vec<Vec<f32>> =
                 coefficients.iter().map(|c| scattered(c, w * h)).collect();
             transform_planes(&mut planes, w, h, &header, false);
             let after = from_components(&planes, w, h, false);
-            let mixed = synthesise_channels(&coefficients, w, h, &header, 1);
+            let mixed = synthesise_channels(&coefficients, w, h, header.levels, 1);
             assert_eq!(mixed.channels, after.channels);
             let differ = (mixed.data.iter().zip(&after.data))
                 .filter(|(a, b)| a != b)
@@ -383,25 +390,11 @@ mod tests {
 
     #[test]
     fn channels_on_threads_are_the_same_bytes_as_on_one() {
-        let img = synthetic(301, 227, 3);
-        let options = EncodeOptions {
-            bytes: 4000,
-            ..EncodeOptions::default()
-        };
-        let stream = encode(&img, &options).unwrap();
-        let header = Header::read(&stream).unwrap();
+        let (header, coefficients) = coefficients_of(&synthetic(301, 227, 3), 4000);
         let (w, h) = header.coded_size();
-        let mut coefficients = vec![Vec::new(); header.components()];
-        decode_part(
-            &header,
-            &stream[header.len()..],
-            (0, 1),
-            header.priors,
-            &mut coefficients,
-        );
-        let one = synthesise_channels(&coefficients, w, h, &header, 1);
+        let one = synthesise_channels(&coefficients, w, h, header.levels, 1);
         for threads in [2, 3] {
-            let many = synthesise_channels(&coefficients, w, h, &header, threads);
+            let many = synthesise_channels(&coefficients, w, h, header.levels, threads);
             assert_eq!((many.width, many.height, many.channels), (w, h, 3));
             assert!(many.data == one.data, "{threads} threads differ from one");
         }
