@@ -7,7 +7,9 @@
 //! sequence of updates, and hence the map, is the same as casting and applying in turn.
 //!
 //! Two orders, as [`super::tree`] explains: a plain tree takes the scan's cells in Morton order
-//! (free cells less the hit ones, and the hit ones, merged), which its one recursive pass needs;
+//! (free cells less the hit ones, and the hit ones, merged), which its one recursive pass needs
+//! (cast with [`super::lanes`], many rays side by side into bit tables of the scan's key box,
+//! or, for a box too large for those tables, ray by ray into a [`CellSet`]);
 //! a coloured tree takes them in OctoMap's `insertPointCloud` order (the free [`KeySet`] less
 //! the occupied cells, then the occupied `KeySet`), which decides its colours.
 
@@ -16,13 +18,17 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use super::Scan;
 use super::cellset::CellSet;
 use super::hashorder::KeySet;
+use super::lanes::{BoxBits, OVERSHOOT_CELLS, walk_lanes};
 use super::math::{
-    ColorSlot, Grid, Key, RaySink, color_slot, end_at_range, morton, norm_f32, slot_order,
-    world_points,
+    ColorSlot, Grid, Key, NO_COLOR, RaySink, RayStart, color_slot, end_at_range, morton, norm_f32,
+    slot_order, world_points,
 };
 
 /// How many points a scan's rays are cast between two looks at the stop flag.
 const STOP_CHECK_POINTS: usize = 2048;
+
+/// Points in a run of a thread's share of a scan.
+const SHARE_POINTS: usize = 256;
 
 /// Fewest points a casting thread gets.
 const POINTS_PER_THREAD_MIN: usize = 4096;
@@ -133,6 +139,8 @@ pub struct ScanCaster {
     free_keys: KeySet,
     /// The key box of the scan being cast (its sensor and points).
     window: (Key, Key),
+    /// Each casting thread's free and hit cells, when the scan's box is small enough.
+    boxes: Vec<(BoxBits, BoxBits)>,
 }
 
 impl std::fmt::Debug for ScanCaster {
@@ -161,6 +169,7 @@ impl ScanCaster {
             scratch: CellSet::new(),
             free_keys: KeySet::new(),
             window: ([0; 3], [0; 3]),
+            boxes: Vec::new(),
         }
     }
 
@@ -262,6 +271,21 @@ impl ScanCaster {
         max_range_m: Option<f64>,
         stop: &AtomicBool,
     ) -> Option<PreparedScan> {
+        match self.prepare_lanes(pts, origin, max_range_m, stop) {
+            Lanes::Done(p) => Some(p),
+            Lanes::Stopped => None,
+            Lanes::Unfit => self.prepare_cellset(pts, origin, max_range_m, stop),
+        }
+    }
+
+    /// A plain scan cast ray by ray into [`CellSet`]s, for any key box.
+    fn prepare_cellset(
+        &mut self,
+        pts: &[[f32; 3]],
+        origin: [f32; 3],
+        max_range_m: Option<f64>,
+        stop: &AtomicBool,
+    ) -> Option<PreparedScan> {
         let mut p = PreparedScan::default();
         let mut free: Vec<u64> = Vec::new();
         let mut occ: Vec<(u64, ColorSlot)> = Vec::with_capacity(pts.len());
@@ -350,6 +374,141 @@ impl ScanCaster {
         p.ups = ups;
         p.hits = occ;
         Some(p)
+    }
+
+    /// A plain scan cast with [`walk_lanes`] into bit tables of its key box, on up to `threads`
+    /// threads; [`Lanes::Unfit`] when the box is too large or at the key range's edge, or a ray
+    /// left it (the caller then casts the scan the general way).
+    fn prepare_lanes(
+        &mut self,
+        pts: &[[f32; 3]],
+        origin: [f32; 3],
+        max_range_m: Option<f64>,
+        stop: &AtomicBool,
+    ) -> Lanes {
+        let (low, high) = self.window;
+        let pad = OVERSHOOT_CELLS;
+        if low.iter().any(|&k| k < pad) || high.iter().any(|&k| k > u16::MAX - pad) {
+            return Lanes::Unfit;
+        }
+        let (low, high) = (low.map(|k| k - pad), high.map(|k| k + pad));
+        let threads = self
+            .threads
+            .min(pts.len() / POINTS_PER_THREAD_MIN)
+            .clamp(1, CAST_THREADS_MAX);
+        let mut boxes = std::mem::take(&mut self.boxes);
+        boxes.resize_with(threads, Default::default);
+        for (f, h) in &mut boxes {
+            if !(f.reset(low, high) && h.reset(low, high)) {
+                self.boxes = boxes;
+                return Lanes::Unfit;
+            }
+        }
+        let this = &*self;
+        let counts: Vec<Option<(usize, usize)>> = std::thread::scope(|sc| {
+            let mut parts = boxes.iter_mut().enumerate();
+            let first = parts.next();
+            let handles: Vec<_> = parts
+                .map(|(n, (f, h))| {
+                    sc.spawn(move || {
+                        this.cast_lanes(pts, (n, threads), origin, max_range_m, f, h, stop)
+                    })
+                })
+                .collect();
+            let mut counts = vec![first.map_or(Some((0, 0)), |(_, (f, h))| {
+                this.cast_lanes(pts, (0, threads), origin, max_range_m, f, h, stop)
+            })];
+            counts.extend(handles.into_iter().map(|h| h.join().unwrap_or(None)));
+            counts
+        });
+        let result = match counts.into_iter().collect::<Option<Vec<_>>>() {
+            None => Lanes::Stopped,
+            Some(_) if boxes.iter().any(|(f, h)| f.missed() || h.missed()) => Lanes::Unfit,
+            Some(counts) => {
+                let (first, rest) = boxes.split_at_mut(1);
+                let (free, hits) = &mut first[0];
+                for (f, h) in rest.iter() {
+                    free.union_with(f);
+                    hits.union_with(h);
+                }
+                let mut merged = Vec::new();
+                free.merged_codes(hits, &mut merged);
+                let ups: Vec<Upd> = merged
+                    .iter()
+                    .map(|&(code, hit)| Upd { code, hit })
+                    .collect();
+                let hits = ups
+                    .iter()
+                    .filter(|u| u.hit)
+                    .map(|u| (u.code, NO_COLOR))
+                    .collect();
+                Lanes::Done(PreparedScan {
+                    ups,
+                    hits,
+                    points_skipped: counts.iter().map(|c| c.0).sum(),
+                    points_beyond_range: counts.iter().map(|c| c.1).sum(),
+                    ..PreparedScan::default()
+                })
+            }
+        };
+        self.boxes = boxes;
+        result
+    }
+
+    /// The rays of share `part.0` of `part.1` of `pts` (runs of [`SHARE_POINTS`] points dealt
+    /// in turn, so that each share spans the whole image), [`walk_lanes`] at a time: free
+    /// cells into `free`, end cells into `hits`; points skipped and beyond range, or `None`
+    /// when `stop` was set.
+    #[allow(clippy::too_many_arguments)]
+    fn cast_lanes(
+        &self,
+        pts: &[[f32; 3]],
+        part: (usize, usize),
+        origin: [f32; 3],
+        max_range_m: Option<f64>,
+        free: &mut BoxBits,
+        hits: &mut BoxBits,
+        stop: &AtomicBool,
+    ) -> Option<(usize, usize)> {
+        let (mut skipped, mut beyond, mut stopped) = (0, 0, false);
+        let (share, shares) = part;
+        let mut next = share * SHARE_POINTS;
+        let grid = &self.grid;
+        let origin_key = grid.key_of(origin);
+        let mut walks = std::iter::from_fn(|| {
+            while let Some(&p) = pts.get(next) {
+                if next.is_multiple_of(SHARE_POINTS) && stop.load(Ordering::Relaxed) {
+                    stopped = true;
+                    return None;
+                }
+                next += 1;
+                if next.is_multiple_of(SHARE_POINTS) {
+                    next += (shares - 1) * SHARE_POINTS;
+                }
+                if !(p[0].is_finite() && p[1].is_finite() && p[2].is_finite()) {
+                    skipped += 1;
+                    continue;
+                }
+                let diff = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
+                let within = max_range_m.is_none_or(|r| r < 0.0 || norm_f32(diff) <= r);
+                let end = if within {
+                    match grid.key_of(p) {
+                        Some(k) => hits.insert(k),
+                        None => skipped += 1,
+                    }
+                    p
+                } else {
+                    beyond += 1;
+                    end_at_range(origin, diff, max_range_m.unwrap_or(0.0))
+                };
+                if let RayStart::Walk(w) = grid.ray_start_keyed(origin_key, origin, end) {
+                    return Some(w);
+                }
+            }
+            None
+        });
+        walk_lanes(&mut walks, &mut |k| free.insert(k));
+        (!stopped).then_some((skipped, beyond))
     }
 
     /// A coloured scan, cell by cell in the order OctoMap's `insertPointCloud` updates them:
@@ -445,6 +604,16 @@ impl ScanCaster {
     }
 }
 
+/// How [`ScanCaster::prepare_lanes`] went.
+enum Lanes {
+    /// The scan, cast.
+    Done(PreparedScan),
+    /// The stop flag was set.
+    Stopped,
+    /// The scan does not suit the bit tables: cast it the general way.
+    Unfit,
+}
+
 /// The box of keys (lowest, highest on each axis) holding `origin` and the finite `pts`, the
 /// range's ends where they are outside it: where a scan's rays run.
 fn key_box(grid: &Grid, origin: [f32; 3], pts: &[[f32; 3]]) -> (Key, Key) {
@@ -497,4 +666,65 @@ fn merge_sorted(mut lists: Vec<Vec<u64>>) -> Vec<u64> {
         lists.push(m);
     }
     lists.pop().unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::octo::synth::{SurveyParams, survey};
+
+    /// A plain scan cast with the lanes (on one and on three threads) gives the updates of the
+    /// general cast, with a maximum range or not, with points that are not finite; a scan with
+    /// a point outside the key range goes the general way.
+    #[test]
+    fn lanes_cast_the_scan_the_general_way_casts_it() {
+        let params = SurveyParams {
+            scans: 3,
+            ..SurveyParams::default()
+        };
+        let mut scans = survey(&params);
+        scans[1].points[17] = [f32::NAN, 0.0, 1.0];
+        scans[1].points[18] = [0.0, f32::INFINITY, 1.0];
+        let mut outside = scans[2].clone();
+        outside.points[5] = [1e6, 0.0, 1.0];
+        scans.push(outside);
+        let stop = AtomicBool::new(false);
+        for scan in &scans {
+            for range in [None, Some(2.5)] {
+                let mut general = ScanCaster::new(0.1, false, 1);
+                let (pts, origin) = world_points(scan);
+                general.window = key_box(&general.grid, origin, &pts);
+                let want = general
+                    .prepare_cellset(&pts, origin, range, &stop)
+                    .expect("not stopped");
+                assert!(want.ups.len() > 1000);
+                for threads in [1, 3] {
+                    let mut lanes = ScanCaster::new(0.1, false, threads);
+                    let got = lanes.prepare(scan, range, &stop).expect("not stopped");
+                    assert_eq!(got.ups, want.ups, "{threads} threads, range {range:?}");
+                    assert_eq!(got.hits, want.hits);
+                    assert_eq!(got.points_skipped, want.points_skipped);
+                    assert_eq!(got.points_beyond_range, want.points_beyond_range);
+                }
+            }
+        }
+        let mut c = ScanCaster::new(0.1, false, 1);
+        let (pts, origin) = world_points(&scans[3]);
+        c.window = key_box(&c.grid, origin, &pts);
+        assert!(matches!(
+            c.prepare_lanes(&pts, origin, None, &stop),
+            Lanes::Unfit
+        ));
+        let (pts, origin) = world_points(&scans[2]);
+        c.window = key_box(&c.grid, origin, &pts);
+        assert!(matches!(
+            c.prepare_lanes(&pts, origin, None, &stop),
+            Lanes::Done(_)
+        ));
+        stop.store(true, Ordering::Relaxed);
+        assert!(matches!(
+            c.prepare_lanes(&pts, origin, None, &stop),
+            Lanes::Stopped
+        ));
+    }
 }

@@ -15,6 +15,7 @@
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 
+use super::math::local_morton;
 use super::tree::{Key, morton};
 
 /// A multiplicative hash for integer keys (the keys are block coordinates, not attacker input).
@@ -40,16 +41,7 @@ const LOCAL: [u16; 512] = {
     let mut t = [0u16; 512];
     let mut i = 0;
     while i < 512 {
-        let (x, y, z) = (i & 7, (i >> 3) & 7, (i >> 6) & 7);
-        let mut m = 0;
-        let mut b = 0;
-        while b < 3 {
-            m |= ((x >> b) & 1) << (3 * b);
-            m |= ((y >> b) & 1) << (3 * b + 1);
-            m |= ((z >> b) & 1) << (3 * b + 2);
-            b += 1;
-        }
-        t[i] = m as u16;
+        t[i] = local_morton(i, 3);
         i += 1;
     }
     t

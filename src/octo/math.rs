@@ -177,7 +177,7 @@ impl Grid {
 
     /// OctoMap's `coordToKeyChecked` for one axis: `None` outside the key range.
     pub fn coord_to_key(&self, c: f32) -> Option<u16> {
-        let scaled = (self.resolution_factor * c as f64).floor();
+        let scaled = floor(self.resolution_factor * c as f64);
         if !(scaled.is_finite()) {
             return None;
         }
@@ -208,18 +208,45 @@ impl Grid {
     /// origin's cell up to, not including, the end's cell. `false` when either end is outside
     /// the key range.
     pub(crate) fn ray_keys(&self, origin: [f32; 3], end: [f32; 3], out: &mut impl RaySink) -> bool {
-        let (Some(ko), Some(ke)) = (self.key_of(origin), self.key_of(end)) else {
-            return false;
+        match self.ray_start(origin, end) {
+            RayStart::Outside => false,
+            RayStart::Empty => true,
+            RayStart::Walk(mut w) => {
+                out.add(w.key);
+                while let Some(k) = w.step() {
+                    out.add(k);
+                }
+                true
+            }
+        }
+    }
+
+    /// The start of the walk of the ray from `origin` to `end`: OctoMap's set-up of
+    /// `computeRayKeys`, up to its first cell.
+    #[inline]
+    pub(crate) fn ray_start(&self, origin: [f32; 3], end: [f32; 3]) -> RayStart {
+        self.ray_start_keyed(self.key_of(origin), origin, end)
+    }
+
+    /// [`Grid::ray_start`] with the origin's key given (`key_of(origin)`), for many rays from
+    /// one origin.
+    #[inline]
+    pub(crate) fn ray_start_keyed(
+        &self,
+        origin_key: Option<Key>,
+        origin: [f32; 3],
+        end: [f32; 3],
+    ) -> RayStart {
+        let (Some(ko), Some(ke)) = (origin_key, self.key_of(end)) else {
+            return RayStart::Outside;
         };
         if ko == ke {
-            return true;
+            return RayStart::Empty;
         }
-        out.add(ko);
         let (dir, length) = ray_direction(origin, end);
         let mut step = [0i32; 3];
         let mut t_max = [f64::MAX; 3];
         let mut t_delta = [f64::MAX; 3];
-        let cur = ko;
         for i in 0..3 {
             if dir[i] > 0.0 {
                 step[i] = 1;
@@ -227,7 +254,7 @@ impl Grid {
                 step[i] = -1;
             }
             if step[i] != 0 {
-                let mut border = self.key_to_coord(cur[i]);
+                let mut border = self.key_to_coord(ko[i]);
                 border += (step[i] as f64 * self.resolution_m * 0.5) as f32 as f64;
                 t_max[i] = (border - origin[i] as f64) / dir[i];
                 t_delta[i] = self.resolution_m / dir[i].abs();
@@ -237,45 +264,120 @@ impl Grid {
         // steps as the keys differ along the three axes; a few more allow for rounding. The
         // bound makes the walk end for any input, whatever the arithmetic above gave.
         let key_steps: u32 = (0..3).map(|i| ko[i].abs_diff(ke[i]) as u32).sum();
-        let mut steps_left = key_steps + 3;
+        RayStart::Walk(RayWalk {
+            t_max,
+            t_delta,
+            step: step.map(|s| s as i16 as u16),
+            key: ko,
+            end: ke,
+            length,
+            steps_left: key_steps + 3,
+        })
+    }
+}
+
+/// The Morton code of cell `i` of a cube of `2^bits` cells a side, where
+/// `i = x | y << bits | z << 2 bits` (a table entry of a block whose cells are kept in Morton
+/// order).
+pub(crate) const fn local_morton(i: usize, bits: usize) -> u16 {
+    let side = (1 << bits) - 1;
+    let (x, y, z) = (i & side, (i >> bits) & side, (i >> (2 * bits)) & side);
+    let mut m = 0;
+    let mut b = 0;
+    while b < bits {
+        m |= ((x >> b) & 1) << (3 * b);
+        m |= ((y >> b) & 1) << (3 * b + 1);
+        m |= ((z >> b) & 1) << (3 * b + 2);
+        b += 1;
+    }
+    m as u16
+}
+
+/// `v.floor()`, inlined: without SSE4.1 the standard one is a call into the C library, and
+/// keys are computed twice a ray.
+#[inline(always)]
+fn floor(v: f64) -> f64 {
+    // Below 2^52 in magnitude the conversion truncates exactly; larger values, infinities and
+    // NaN are their own floor or go to the library.
+    if v.abs() < 4_503_599_627_370_496.0 {
+        let t = v as i64 as f64;
+        if t > v { t - 1.0 } else { t }
+    } else {
+        v.floor()
+    }
+}
+
+/// How a ray's walk starts ([`Grid::ray_start`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum RayStart {
+    /// An end is outside the key range: no cells (OctoMap's `computeRayKeys` fails).
+    Outside,
+    /// Both ends in one cell: no free cells.
+    Empty,
+    /// The walk, at its first cell.
+    Walk(RayWalk),
+}
+
+/// A ray's 3D DDA walk in progress: OctoMap's `computeRayKeys` loop, one cell at a time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct RayWalk {
+    /// Ray parameter (m along the ray) of the next cell border on each axis.
+    pub(crate) t_max: [f64; 3],
+    /// Ray parameter between two borders on each axis.
+    pub(crate) t_delta: [f64; 3],
+    /// Key step on each axis: 1, 0 or -1 (as `u16`, added with wrapping).
+    pub(crate) step: [u16; 3],
+    /// The current cell.
+    pub(crate) key: Key,
+    /// The end's cell.
+    pub(crate) end: Key,
+    /// Ray length, m.
+    pub(crate) length: f64,
+    /// Steps the walk may still take (the bound that makes it end).
+    pub(crate) steps_left: u32,
+}
+
+impl RayWalk {
+    /// The next free cell, `None` once the walk has ended (at the end's cell, past the length,
+    /// or at the step bound).
+    #[inline(always)]
+    pub(crate) fn step(&mut self) -> Option<Key> {
         // One variable per axis (not arrays indexed by the moving axis): the loop then keeps
         // everything in registers.
-        let [mut tx, mut ty, mut tz] = t_max;
-        let [dx, dy, dz] = t_delta;
-        let [sx, sy, sz] = step.map(|s| s as i16 as u16);
-        let [mut kx, mut ky, mut kz] = cur;
-        let [ex, ey, ez] = ke;
-        loop {
-            // OctoMap's choice of axis, ties included.
-            if tx < ty {
-                if tx < tz {
-                    kx = kx.wrapping_add(sx);
-                    tx += dx;
-                } else {
-                    kz = kz.wrapping_add(sz);
-                    tz += dz;
-                }
-            } else if ty < tz {
-                ky = ky.wrapping_add(sy);
-                ty += dy;
+        let [tx, ty, tz] = &mut self.t_max;
+        let [dx, dy, dz] = self.t_delta;
+        let [sx, sy, sz] = self.step;
+        let [kx, ky, kz] = &mut self.key;
+        // OctoMap's choice of axis, ties included.
+        if *tx < *ty {
+            if *tx < *tz {
+                *kx = kx.wrapping_add(sx);
+                *tx += dx;
             } else {
-                kz = kz.wrapping_add(sz);
-                tz += dz;
+                *kz = kz.wrapping_add(sz);
+                *tz += dz;
             }
-            if kx == ex && ky == ey && kz == ez {
-                return true;
-            }
-            let m = if ty < tx { ty } else { tx };
-            let dist = if tz < m { tz } else { m };
-            if dist > length {
-                return true;
-            }
-            steps_left -= 1;
-            if steps_left == 0 {
-                return true;
-            }
-            out.add([kx, ky, kz]);
+        } else if *ty < *tz {
+            *ky = ky.wrapping_add(sy);
+            *ty += dy;
+        } else {
+            *kz = kz.wrapping_add(sz);
+            *tz += dz;
         }
+        if self.key == self.end {
+            return None;
+        }
+        let [tx, ty, tz] = self.t_max;
+        let m = if ty < tx { ty } else { tx };
+        let dist = if tz < m { tz } else { m };
+        if dist > self.length {
+            return None;
+        }
+        self.steps_left -= 1;
+        if self.steps_left == 0 {
+            return None;
+        }
+        Some(self.key)
     }
 }
 
@@ -409,6 +511,38 @@ mod tests {
             logodds(probability(p.clamp_min_log as f64)),
             p.clamp_min_log
         );
+    }
+
+    #[test]
+    fn inlined_floor_is_the_standard_floor() {
+        let mut rng = crate::link::Rng::new(11, 0);
+        let mut values = vec![
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            -1.0,
+            1.0,
+            -1e-300,
+            4_503_599_627_370_495.5,
+            -4_503_599_627_370_495.5,
+            4_503_599_627_370_496.0,
+            -4_503_599_627_370_497.0,
+            1e300,
+            -1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::MAX,
+            f64::MIN,
+        ];
+        values.extend((0..10_000).map(|_| {
+            let u = rng.next_u32() as f64 / u32::MAX as f64;
+            (u - 0.5) * 10f64.powi((rng.next_u32() % 40) as i32 - 10)
+        }));
+        for v in values {
+            assert_eq!(floor(v), v.floor(), "{v}");
+        }
+        assert!(floor(f64::NAN).is_nan());
     }
 
     #[test]

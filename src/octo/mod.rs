@@ -31,6 +31,7 @@ pub mod delta;
 pub mod files;
 pub mod graph;
 pub mod hashorder;
+mod lanes;
 pub mod math;
 pub mod pipeline;
 pub mod recording;

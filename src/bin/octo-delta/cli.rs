@@ -225,7 +225,8 @@ pub struct BuildArgs {
     )]
     pub seed: u64,
 
-    /// Threads casting each scan's rays [default: the machine's cores, at most 8].
+    /// Threads casting scans' rays, a scan each, while the map takes the last one
+    /// [default: the machine's cores, at most 8].
     #[arg(long, value_name = "N", value_parser = value::CountParser {
         min: 1, max: THREADS_MAX as u64, unit: "threads" }, allow_hyphen_values = true)]
     pub threads: Option<u64>,

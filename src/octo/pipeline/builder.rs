@@ -15,7 +15,7 @@ use super::inputs::{ScanSource, open_scans, with_origin};
 use super::{BuildConfig, PipelineError};
 use crate::io::IoError;
 use crate::octo::Scan;
-use crate::octo::cast::PreparedScan;
+use crate::octo::cast::{PreparedScan, ScanCaster};
 use crate::octo::delta::{self, Sender, ViewSpec};
 use crate::octo::recording::{Item, Recording, RecordingError};
 use crate::octo::tree::OcTree;
@@ -272,13 +272,70 @@ impl Emitter<'_> {
     }
 }
 
-/// The thread that casts the next scan while the caller applies the last one: scans in, cast
-/// scans out, in order.
-struct CastThread {
-    scans: mpsc::Sender<Scan>,
-    cast: mpsc::Receiver<Option<PreparedScan>>,
+/// The threads that cast the next scans while the caller applies the last one: scans in, dealt
+/// to the threads in turn, cast scans out in the same order.
+struct CastThreads {
+    /// Each thread's way in (scans) and out (the scans cast).
+    workers: Vec<(mpsc::Sender<Scan>, mpsc::Receiver<Option<PreparedScan>>)>,
+    /// Scans sent so far.
+    sent: usize,
+    /// Cast scans received so far.
+    received: usize,
+}
+
+impl CastThreads {
+    /// `n` casting threads in `scope`, each with a copy of `caster` (casting a scan on one
+    /// thread), stopping inside a scan when `stop` is set.
+    fn spawn<'scope>(
+        n: usize,
+        caster: &ScanCaster,
+        max_range_m: Option<f64>,
+        stop: &'scope AtomicBool,
+        scope: &'scope std::thread::Scope<'scope, '_>,
+    ) -> Self {
+        let workers = (0..n.max(1))
+            .map(|_| {
+                let (scans, scans_in) = mpsc::channel::<Scan>();
+                let (cast_out, cast) = mpsc::channel();
+                let mut c = caster.clone();
+                c.set_threads(1);
+                scope.spawn(move || {
+                    for scan in scans_in {
+                        if cast_out.send(c.prepare(&scan, max_range_m, stop)).is_err() {
+                            break;
+                        }
+                    }
+                });
+                (scans, cast)
+            })
+            .collect();
+        CastThreads {
+            workers,
+            sent: 0,
+            received: 0,
+        }
+    }
+
     /// Scans sent and not yet received.
-    in_flight: usize,
+    fn in_flight(&self) -> usize {
+        self.sent - self.received
+    }
+
+    /// Sends the next scan to its thread; false if that thread is gone (it panicked).
+    fn send(&mut self, scan: Scan) -> bool {
+        let (scans, _) = &self.workers[self.sent % self.workers.len()];
+        let ok = scans.send(scan).is_ok();
+        self.sent += ok as usize;
+        ok
+    }
+
+    /// The next scan cast, in the order sent (`None`: stopped inside it, or its thread is
+    /// gone).
+    fn recv(&mut self) -> Option<PreparedScan> {
+        let (_, cast) = &self.workers[self.received % self.workers.len()];
+        self.received += 1;
+        cast.recv().ok().flatten()
+    }
 }
 
 /// Builds the map from the scans of `inputs` (in order; `-` is standard input) and writes the
@@ -286,9 +343,9 @@ struct CastThread {
 /// scan as soon as it is made. The map keeps colours when the first scan has them, unless
 /// [`BuildConfig::no_color`].
 ///
-/// With more than one thread ([`BuildConfig::threads`]), a scan's rays are cast on another
-/// thread while the previous scan goes into the map (and a plain scan's rays on several): the
-/// map and the stream are the same as with one thread, byte for byte.
+/// With more than one thread ([`BuildConfig::threads`]), the next scans are cast on that many
+/// threads, a scan each, while the previous scan goes into the map: the map and the stream are
+/// the same as with one thread, byte for byte.
 ///
 /// When `hooks.stop` is set the build ends before the next scan (or inside a scan, before it
 /// changes the map): the stream then holds whole messages for every scan in the map, and
@@ -345,7 +402,7 @@ pub fn build(
 /// (the rest dropped).
 fn drain(
     out: &mut Emitter<'_>,
-    caster: &mut Option<CastThread>,
+    caster: &mut Option<CastThreads>,
     tree: &mut Option<OcTree>,
     report: &mut BuildReport,
     hooks: &mut Hooks<'_>,
@@ -354,14 +411,13 @@ fn drain(
     let (Some(c), Some(tree)) = (caster.as_mut(), tree.as_mut()) else {
         return Ok(true);
     };
-    while c.in_flight > 0 {
+    while c.in_flight() > 0 {
         if hooks.stop.load(Ordering::Relaxed) {
             report.interrupted = true;
             return Ok(false);
         }
         let t0 = Instant::now();
-        let prepared = c.cast.recv().ok().flatten();
-        c.in_flight -= 1;
+        let prepared = c.recv();
         if !out.emit(tree, prepared, t0, report, hooks, known)? {
             return Ok(false);
         }
@@ -384,7 +440,7 @@ fn build_in<'scope, 'h: 'scope>(
     let origin = cfg.origin_m.map(|o| o.map(|c| c as f32));
     let max_range_m = cfg.max_range_m;
     let mut known = 0u64;
-    let mut caster: Option<CastThread> = None;
+    let mut caster: Option<CastThreads> = None;
     'inputs: for path in inputs {
         if hooks.stop.load(Ordering::Relaxed) {
             report.interrupted = true;
@@ -466,21 +522,13 @@ fn build_in<'scope, 'h: 'scope>(
                 t
             });
             if threads > 1 && caster.is_none() {
-                let (scans, scans_in) = mpsc::channel::<Scan>();
-                let (cast_out, cast) = mpsc::channel();
-                let mut c = tree.caster();
-                scope.spawn(move || {
-                    for scan in scans_in {
-                        if cast_out.send(c.prepare(&scan, max_range_m, stop)).is_err() {
-                            break;
-                        }
-                    }
-                });
-                caster = Some(CastThread {
-                    scans,
-                    cast,
-                    in_flight: 0,
-                });
+                caster = Some(CastThreads::spawn(
+                    threads,
+                    &tree.caster(),
+                    max_range_m,
+                    stop,
+                    scope,
+                ));
             }
             let Some(c) = caster.as_mut() else {
                 let t0 = Instant::now();
@@ -490,21 +538,19 @@ fn build_in<'scope, 'h: 'scope>(
                 }
                 continue;
             };
-            if c.scans.send(scan).is_err() {
-                // The casting thread is gone (it panicked): the scan is lost, the build stops.
+            if !c.send(scan) {
+                // A casting thread is gone (it panicked): the scan is lost, the build stops.
                 report.interrupted = true;
                 break 'inputs;
             }
-            c.in_flight += 1;
-            // One scan being cast while the one before goes into the map.
-            if c.in_flight > 1 {
+            // A scan being cast on each thread while the one before goes into the map.
+            if c.in_flight() > c.workers.len() {
                 if stop.load(Ordering::Relaxed) {
                     report.interrupted = true;
                     break 'inputs;
                 }
                 let t0 = Instant::now();
-                let prepared = c.cast.recv().ok().flatten();
-                c.in_flight -= 1;
+                let prepared = c.recv();
                 if !out.emit(tree, prepared, t0, report, hooks, known)? {
                     break 'inputs;
                 }
