@@ -459,8 +459,49 @@ impl ScanCaster {
     /// in turn, so that each share spans the whole image), [`walk_lanes`] at a time: free
     /// cells into `free`, end cells into `hits`; points skipped and beyond range, or `None`
     /// when `stop` was set.
+    ///
+    /// On a processor with AVX-512 or AVX2 the same code runs compiled for it (the lanes'
+    /// arithmetic in wider registers): the same operations on the same `f64`s, hence the same
+    /// cells (the compiler fuses no multiply-add unless told to).
     #[allow(clippy::too_many_arguments)]
     fn cast_lanes(
+        &self,
+        pts: &[[f32; 3]],
+        part: (usize, usize),
+        origin: [f32; 3],
+        max_range_m: Option<f64>,
+        free: &mut BoxBits,
+        hits: &mut BoxBits,
+        stop: &AtomicBool,
+    ) -> Option<(usize, usize)> {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512vl")
+            && std::arch::is_x86_feature_detected!("avx512bw")
+            && std::arch::is_x86_feature_detected!("avx512dq")
+        {
+            // SAFETY: `cast_lanes_avx512` only needs the processor to have these four, checked
+            // above.
+            #[allow(unsafe_code)]
+            return unsafe {
+                self.cast_lanes_avx512(pts, part, origin, max_range_m, free, hits, stop)
+            };
+        }
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: `cast_lanes_avx2` only needs the processor to have AVX2, checked above.
+            #[allow(unsafe_code)]
+            return unsafe {
+                self.cast_lanes_avx2(pts, part, origin, max_range_m, free, hits, stop)
+            };
+        }
+        self.cast_lanes_body(pts, part, origin, max_range_m, free, hits, stop)
+    }
+
+    /// [`ScanCaster::cast_lanes`]'s work, inlined into each of its compilations.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn cast_lanes_body(
         &self,
         pts: &[[f32; 3]],
         part: (usize, usize),
@@ -491,17 +532,19 @@ impl ScanCaster {
                 }
                 let diff = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
                 let within = max_range_m.is_none_or(|r| r < 0.0 || norm_f32(diff) <= r);
-                let end = if within {
-                    match grid.key_of(p) {
+                let (end, end_key) = if within {
+                    let k = grid.key_of(p);
+                    match k {
                         Some(k) => hits.insert(k),
                         None => skipped += 1,
                     }
-                    p
+                    (p, k)
                 } else {
                     beyond += 1;
-                    end_at_range(origin, diff, max_range_m.unwrap_or(0.0))
+                    let end = end_at_range(origin, diff, max_range_m.unwrap_or(0.0));
+                    (end, grid.key_of(end))
                 };
-                if let RayStart::Walk(w) = grid.ray_start_keyed(origin_key, origin, end) {
+                if let RayStart::Walk(w) = grid.ray_start_keyed(origin_key, end_key, origin, end) {
                     return Some(w);
                 }
             }
@@ -603,6 +646,35 @@ impl ScanCaster {
         Some(p)
     }
 }
+
+/// Compilations of [`ScanCaster::cast_lanes`]'s work for wider vector registers, which only a
+/// processor with `$features` may run (the callers check).
+macro_rules! compiled_for {
+    ($($name:ident: $features:literal),*) => {
+        impl ScanCaster {
+            $(
+                #[doc = concat!("[`ScanCaster::cast_lanes`] compiled for ", $features, ".")]
+                #[cfg(target_arch = "x86_64")]
+                #[target_feature(enable = $features)]
+                #[allow(clippy::too_many_arguments)]
+                fn $name(
+                    &self,
+                    pts: &[[f32; 3]],
+                    part: (usize, usize),
+                    origin: [f32; 3],
+                    max_range_m: Option<f64>,
+                    free: &mut BoxBits,
+                    hits: &mut BoxBits,
+                    stop: &AtomicBool,
+                ) -> Option<(usize, usize)> {
+                    self.cast_lanes_body(pts, part, origin, max_range_m, free, hits, stop)
+                }
+            )*
+        }
+    };
+}
+
+compiled_for!(cast_lanes_avx2: "avx2", cast_lanes_avx512: "avx512f,avx512vl,avx512bw,avx512dq");
 
 /// How [`ScanCaster::prepare_lanes`] went.
 enum Lanes {
@@ -706,6 +778,52 @@ mod tests {
                     assert_eq!(got.points_skipped, want.points_skipped);
                     assert_eq!(got.points_beyond_range, want.points_beyond_range);
                 }
+            }
+        }
+        // Each compilation of the lanes this processor can run gives the same cells.
+        let c = ScanCaster::new(0.1, false, 1);
+        let (pts, origin) = world_points(&scans[1]);
+        let (low, high) = key_box(&c.grid, origin, &pts);
+        let (low, high) = (low.map(|k| k - 4), high.map(|k| k + 4));
+        type Compiled = fn(&ScanCaster, &[[f32; 3]], [f32; 3], &mut BoxBits, &mut BoxBits);
+        let mut compiled: Vec<(&str, Compiled)> = vec![("plain", |c, pts, o, f, h| {
+            c.cast_lanes_body(pts, (0, 1), o, Some(2.5), f, h, &AtomicBool::new(false));
+        })];
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            compiled.push(("avx2", |c, pts, o, f, h| {
+                // SAFETY: the processor has AVX2 (checked above).
+                #[allow(unsafe_code)]
+                unsafe {
+                    c.cast_lanes_avx2(pts, (0, 1), o, Some(2.5), f, h, &AtomicBool::new(false));
+                }
+            }));
+        }
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512vl")
+            && std::arch::is_x86_feature_detected!("avx512bw")
+            && std::arch::is_x86_feature_detected!("avx512dq")
+        {
+            compiled.push(("avx512", |c, pts, o, f, h| {
+                // SAFETY: the processor has the four AVX-512 parts (checked above).
+                #[allow(unsafe_code)]
+                unsafe {
+                    c.cast_lanes_avx512(pts, (0, 1), o, Some(2.5), f, h, &AtomicBool::new(false));
+                }
+            }));
+        }
+        let mut first: Option<Vec<(u64, bool)>> = None;
+        for (name, cast) in compiled {
+            let mut free = BoxBits::new(low, high).expect("small box");
+            let mut hits = BoxBits::new(low, high).expect("small box");
+            cast(&c, &pts, origin, &mut free, &mut hits);
+            let mut cells = Vec::new();
+            free.merged_codes(&hits, &mut cells);
+            assert!(cells.len() > 1000);
+            match &first {
+                None => first = Some(cells),
+                Some(want) => assert_eq!(&cells, want, "{name}"),
             }
         }
         let mut c = ScanCaster::new(0.1, false, 1);

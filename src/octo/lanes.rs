@@ -194,6 +194,7 @@ struct Lanes {
 }
 
 impl Lanes {
+    #[inline(always)]
     fn new() -> Self {
         Lanes {
             tx: [0.0; LANES],
@@ -216,6 +217,7 @@ impl Lanes {
         }
     }
 
+    #[inline(always)]
     fn load(&mut self, l: usize, w: &RayWalk) {
         [self.tx[l], self.ty[l], self.tz[l]] = w.t_max;
         [self.dx[l], self.dy[l], self.dz[l]] = w.t_delta;
@@ -285,6 +287,7 @@ fn mask64(b: bool) -> u64 {
 /// Walks every ray of `walks` (each started at its first cell, which it puts in `out` first),
 /// [`LANES`] at a time, putting each cell a ray crosses into `out`: the same cells as walking
 /// each with [`RayWalk::step`], interleaved.
+#[inline(always)]
 pub(crate) fn walk_lanes(walks: &mut impl Iterator<Item = RayWalk>, out: &mut impl FnMut(Key)) {
     let mut lanes = Lanes::new();
     let mut live = 0u32;

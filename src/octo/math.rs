@@ -176,6 +176,7 @@ impl Grid {
     }
 
     /// OctoMap's `coordToKeyChecked` for one axis: `None` outside the key range.
+    #[inline(always)]
     pub fn coord_to_key(&self, c: f32) -> Option<u16> {
         let scaled = floor(self.resolution_factor * c as f64);
         if !(scaled.is_finite()) {
@@ -191,6 +192,7 @@ impl Grid {
     }
 
     /// The key of a point, `None` outside the key range.
+    #[inline(always)]
     pub fn key_of(&self, p: [f32; 3]) -> Option<Key> {
         Some([
             self.coord_to_key(p[0])?,
@@ -225,19 +227,20 @@ impl Grid {
     /// `computeRayKeys`, up to its first cell.
     #[inline]
     pub(crate) fn ray_start(&self, origin: [f32; 3], end: [f32; 3]) -> RayStart {
-        self.ray_start_keyed(self.key_of(origin), origin, end)
+        self.ray_start_keyed(self.key_of(origin), self.key_of(end), origin, end)
     }
 
-    /// [`Grid::ray_start`] with the origin's key given (`key_of(origin)`), for many rays from
-    /// one origin.
-    #[inline]
+    /// [`Grid::ray_start`] with the keys of both ends given (`key_of(origin)`,
+    /// `key_of(end)`), for many rays from one origin whose end keys are needed anyway.
+    #[inline(always)]
     pub(crate) fn ray_start_keyed(
         &self,
         origin_key: Option<Key>,
+        end_key: Option<Key>,
         origin: [f32; 3],
         end: [f32; 3],
     ) -> RayStart {
-        let (Some(ko), Some(ke)) = (origin_key, self.key_of(end)) else {
+        let (Some(ko), Some(ke)) = (origin_key, end_key) else {
             return RayStart::Outside;
         };
         if ko == ke {
@@ -444,6 +447,7 @@ pub fn world_points(scan: &Scan) -> (Vec<[f32; 3]>, [f32; 3]) {
 }
 
 /// The length of `v`: squared in `f32`, as OctoMap does, the root in `f64`.
+#[inline(always)]
 pub(crate) fn norm_f32(v: [f32; 3]) -> f64 {
     ((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) as f64).sqrt()
 }
@@ -456,6 +460,7 @@ pub(crate) fn norm_f32(v: [f32; 3]) -> f64 {
 /// overflows to infinity, and the direction comes out infinite or NaN (OctoMap's own ray walk
 /// then never ends). There, and only there, both are computed in `f64` from the differences
 /// scaled by their largest component, which neither underflows nor overflows.
+#[inline(always)]
 pub(crate) fn ray_direction(origin: [f32; 3], end: [f32; 3]) -> ([f64; 3], f64) {
     let mut dir = [end[0] - origin[0], end[1] - origin[1], end[2] - origin[2]];
     let length = norm_f32(dir) as f32;
