@@ -3,10 +3,11 @@
 //! at between scans and inside them; what it did ([`BuildReport`], [`Built`]: figures and the
 //! summary line), and when each message reached the operator over a link ([`arrival_rows`]).
 
+use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc;
+use std::sync::{Arc, Mutex, mpsc};
 use std::time::Instant;
 
 use serde::Serialize;
@@ -272,11 +273,17 @@ impl Emitter<'_> {
     }
 }
 
-/// The threads that cast the next scans while the caller applies the last one: scans in, dealt
-/// to the threads in turn, cast scans out in the same order.
+/// The threads that cast the next scans while the caller applies the last one: scans in, each
+/// taken by the first thread free, cast scans out in the order they went in.
 struct CastThreads {
-    /// Each thread's way in (scans) and out (the scans cast).
-    workers: Vec<(mpsc::Sender<Scan>, mpsc::Receiver<Option<PreparedScan>>)>,
+    /// The scans to cast, numbered.
+    scans: mpsc::Sender<(usize, Scan)>,
+    /// The scans cast, numbered, in the order they were done.
+    cast: mpsc::Receiver<(usize, Option<PreparedScan>)>,
+    /// Scans cast before an earlier one, by number.
+    early: BTreeMap<usize, Option<PreparedScan>>,
+    /// Casting threads.
+    threads: usize,
     /// Scans sent so far.
     sent: usize,
     /// Cast scans received so far.
@@ -293,24 +300,36 @@ impl CastThreads {
         stop: &'scope AtomicBool,
         scope: &'scope std::thread::Scope<'scope, '_>,
     ) -> Self {
-        let workers = (0..n.max(1))
-            .map(|_| {
-                let (scans, scans_in) = mpsc::channel::<Scan>();
-                let (cast_out, cast) = mpsc::channel();
-                let mut c = caster.clone();
-                c.set_threads(1);
-                scope.spawn(move || {
-                    for scan in scans_in {
-                        if cast_out.send(c.prepare(&scan, max_range_m, stop)).is_err() {
-                            break;
-                        }
+        let (scans, scans_in) = mpsc::channel::<(usize, Scan)>();
+        let (cast_out, cast) = mpsc::channel();
+        let scans_in = Arc::new(Mutex::new(scans_in));
+        for _ in 0..n.max(1) {
+            let mut c = caster.clone();
+            c.set_threads(1);
+            let (scans_in, cast_out) = (Arc::clone(&scans_in), cast_out.clone());
+            scope.spawn(move || {
+                loop {
+                    // Another thread panicking while it waited leaves the lock poisoned: the
+                    // queue is still whole.
+                    let next = match scans_in.lock() {
+                        Ok(q) => q.recv(),
+                        Err(poisoned) => poisoned.into_inner().recv(),
+                    };
+                    let Ok((i, scan)) = next else { break };
+                    if cast_out
+                        .send((i, c.prepare(&scan, max_range_m, stop)))
+                        .is_err()
+                    {
+                        break;
                     }
-                });
-                (scans, cast)
-            })
-            .collect();
+                }
+            });
+        }
         CastThreads {
-            workers,
+            scans,
+            cast,
+            early: BTreeMap::new(),
+            threads: n.max(1),
             sent: 0,
             received: 0,
         }
@@ -321,20 +340,30 @@ impl CastThreads {
         self.sent - self.received
     }
 
-    /// Sends the next scan to its thread; false if that thread is gone (it panicked).
+    /// Sends the next scan to be cast; false if the threads are gone (they panicked).
     fn send(&mut self, scan: Scan) -> bool {
-        let (scans, _) = &self.workers[self.sent % self.workers.len()];
-        let ok = scans.send(scan).is_ok();
+        let ok = self.scans.send((self.sent, scan)).is_ok();
         self.sent += ok as usize;
         ok
     }
 
-    /// The next scan cast, in the order sent (`None`: stopped inside it, or its thread is
+    /// The next scan cast, in the order sent (`None`: stopped inside it, or the threads are
     /// gone).
     fn recv(&mut self) -> Option<PreparedScan> {
-        let (_, cast) = &self.workers[self.received % self.workers.len()];
+        let want = self.received;
         self.received += 1;
-        cast.recv().ok().flatten()
+        loop {
+            if let Some(p) = self.early.remove(&want) {
+                return p;
+            }
+            match self.cast.recv() {
+                Ok((i, p)) if i == want => return p,
+                Ok((i, p)) => {
+                    self.early.insert(i, p);
+                }
+                Err(_) => return None,
+            }
+        }
     }
 }
 
@@ -544,7 +573,7 @@ fn build_in<'scope, 'h: 'scope>(
                 break 'inputs;
             }
             // A scan being cast on each thread while the one before goes into the map.
-            if c.in_flight() > c.workers.len() {
+            if c.in_flight() > c.threads {
                 if stop.load(Ordering::Relaxed) {
                     report.interrupted = true;
                     break 'inputs;
