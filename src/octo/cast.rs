@@ -228,38 +228,53 @@ impl ScanCaster {
         stop: &AtomicBool,
     ) -> Option<(usize, usize)> {
         let (mut skipped, mut beyond) = (0, 0);
+        let origin_key = self.grid.key_of(origin);
         for (j, &p) in pts.iter().enumerate() {
             if j % STOP_CHECK_POINTS == 0 && stop.load(Ordering::Relaxed) {
                 return None;
             }
-            let i = first + j;
-            if !(p[0].is_finite() && p[1].is_finite() && p[2].is_finite()) {
-                // OctoMap casts no ray for it either (its key is out of range).
+            let Some(ray) = self.ray_end(p, origin, max_range_m) else {
                 skipped += 1;
                 continue;
-            }
-            let diff = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
-            let within = max_range_m.is_none_or(|r| r < 0.0 || norm_f32(diff) <= r);
-            if within {
-                free.begin_ray();
-                self.grid.ray_keys(origin, p, free);
-                free.end_ray();
-                match self.grid.key_of(p) {
-                    Some(k) => {
-                        let color = color_slot(colors.and_then(|c| c.get(i)).copied());
-                        occ.push((morton(k), color));
-                    }
-                    None => skipped += 1,
+            };
+            free.begin_ray();
+            self.grid
+                .ray_start_keyed(origin_key, ray.end_key, origin, ray.end)
+                .walk_into(free);
+            free.end_ray();
+            match (ray.hit, ray.end_key) {
+                (true, Some(k)) => {
+                    let color = color_slot(colors.and_then(|c| c.get(first + j)).copied());
+                    occ.push((morton(k), color));
                 }
-            } else {
-                beyond += 1;
-                let end = end_at_range(origin, diff, max_range_m.unwrap_or(0.0));
-                free.begin_ray();
-                self.grid.ray_keys(origin, end, free);
-                free.end_ray();
+                (true, None) => skipped += 1,
+                (false, _) => beyond += 1,
             }
         }
         Some((skipped, beyond))
+    }
+
+    /// Where the ray of point `p` (in the map frame) ends, as `insertPointCloud` decides: at
+    /// the point, a hit; or, beyond `max_range_m` (a negative one is none), cut at that range
+    /// and no hit. `None` for a point that is not finite (no ray; OctoMap casts none either,
+    /// its key being out of range).
+    #[inline(always)]
+    fn ray_end(&self, p: [f32; 3], origin: [f32; 3], max_range_m: Option<f64>) -> Option<RayEnd> {
+        if !(p[0].is_finite() && p[1].is_finite() && p[2].is_finite()) {
+            return None;
+        }
+        let diff = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
+        let within = max_range_m.is_none_or(|r| r < 0.0 || norm_f32(diff) <= r);
+        let end = if within {
+            p
+        } else {
+            end_at_range(origin, diff, max_range_m.unwrap_or(0.0))
+        };
+        Some(RayEnd {
+            end,
+            end_key: self.grid.key_of(end),
+            hit: within,
+        })
     }
 
     /// A plain scan: free and hit cells merged in Morton order (a voxel hit by a point is
@@ -405,19 +420,21 @@ impl ScanCaster {
             }
         }
         let this = &*self;
+        let share = |n| LaneShare {
+            pts,
+            part: (n, threads),
+            origin,
+            max_range_m,
+            stop,
+        };
         let counts: Vec<Option<(usize, usize)>> = std::thread::scope(|sc| {
             let mut parts = boxes.iter_mut().enumerate();
             let first = parts.next();
             let handles: Vec<_> = parts
-                .map(|(n, (f, h))| {
-                    sc.spawn(move || {
-                        this.cast_lanes(pts, (n, threads), origin, max_range_m, f, h, stop)
-                    })
-                })
+                .map(|(n, (f, h))| sc.spawn(move || this.cast_lanes(share(n), f, h)))
                 .collect();
-            let mut counts = vec![first.map_or(Some((0, 0)), |(_, (f, h))| {
-                this.cast_lanes(pts, (0, threads), origin, max_range_m, f, h, stop)
-            })];
+            let mut counts =
+                vec![first.map_or(Some((0, 0)), |(_, (f, h))| this.cast_lanes(share(0), f, h))];
             counts.extend(handles.into_iter().map(|h| h.join().unwrap_or(None)));
             counts
         });
@@ -431,20 +448,16 @@ impl ScanCaster {
                     free.union_with(f);
                     hits.union_with(h);
                 }
-                let mut merged = Vec::new();
-                free.merged_codes(hits, &mut merged);
-                let ups: Vec<Upd> = merged
-                    .iter()
-                    .map(|&(code, hit)| Upd { code, hit })
-                    .collect();
-                let hits = ups
-                    .iter()
-                    .filter(|u| u.hit)
-                    .map(|u| (u.code, NO_COLOR))
-                    .collect();
+                let (mut ups, mut hit_cells) = (Vec::new(), Vec::new());
+                free.merged_codes(hits, |code, hit| {
+                    ups.push(Upd { code, hit });
+                    if hit {
+                        hit_cells.push((code, NO_COLOR));
+                    }
+                });
                 Lanes::Done(PreparedScan {
                     ups,
-                    hits,
+                    hits: hit_cells,
                     points_skipped: counts.iter().map(|c| c.0).sum(),
                     points_beyond_range: counts.iter().map(|c| c.1).sum(),
                     ..PreparedScan::default()
@@ -455,62 +468,50 @@ impl ScanCaster {
         result
     }
 
-    /// The rays of share `part.0` of `part.1` of `pts` (runs of [`SHARE_POINTS`] points dealt
-    /// in turn, so that each share spans the whole image), [`walk_lanes`] at a time: free
-    /// cells into `free`, end cells into `hits`; points skipped and beyond range, or `None`
-    /// when `stop` was set.
+    /// The rays of one share of a scan ([`LaneShare`]), [`walk_lanes`] at a time: free cells
+    /// into `free`, end cells into `hits`; points skipped and beyond range, or `None` when the
+    /// stop flag was set.
     ///
     /// On a processor with AVX-512 or AVX2 the same code runs compiled for it (the lanes'
     /// arithmetic in wider registers): the same operations on the same `f64`s, hence the same
     /// cells (the compiler fuses no multiply-add unless told to).
-    #[allow(clippy::too_many_arguments)]
     fn cast_lanes(
         &self,
-        pts: &[[f32; 3]],
-        part: (usize, usize),
-        origin: [f32; 3],
-        max_range_m: Option<f64>,
+        share: LaneShare<'_>,
         free: &mut BoxBits,
         hits: &mut BoxBits,
-        stop: &AtomicBool,
     ) -> Option<(usize, usize)> {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx512f")
-            && std::arch::is_x86_feature_detected!("avx512vl")
-            && std::arch::is_x86_feature_detected!("avx512bw")
-            && std::arch::is_x86_feature_detected!("avx512dq")
-        {
-            // SAFETY: `cast_lanes_avx512` only needs the processor to have these four, checked
-            // above.
+        if has_avx512() {
+            // SAFETY: `cast_lanes_avx512` only needs the processor to have AVX-512's four
+            // parts it names, checked above.
             #[allow(unsafe_code)]
-            return unsafe {
-                self.cast_lanes_avx512(pts, part, origin, max_range_m, free, hits, stop)
-            };
+            return unsafe { self.cast_lanes_avx512(share, free, hits) };
         }
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: `cast_lanes_avx2` only needs the processor to have AVX2, checked above.
             #[allow(unsafe_code)]
-            return unsafe {
-                self.cast_lanes_avx2(pts, part, origin, max_range_m, free, hits, stop)
-            };
+            return unsafe { self.cast_lanes_avx2(share, free, hits) };
         }
-        self.cast_lanes_body(pts, part, origin, max_range_m, free, hits, stop)
+        self.cast_lanes_body(share, free, hits)
     }
 
     /// [`ScanCaster::cast_lanes`]'s work, inlined into each of its compilations.
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
     fn cast_lanes_body(
         &self,
-        pts: &[[f32; 3]],
-        part: (usize, usize),
-        origin: [f32; 3],
-        max_range_m: Option<f64>,
+        share: LaneShare<'_>,
         free: &mut BoxBits,
         hits: &mut BoxBits,
-        stop: &AtomicBool,
     ) -> Option<(usize, usize)> {
+        let LaneShare {
+            pts,
+            part,
+            origin,
+            max_range_m,
+            stop,
+        } = share;
         let (mut skipped, mut beyond, mut stopped) = (0, 0, false);
         let (share, shares) = part;
         let mut next = share * SHARE_POINTS;
@@ -526,25 +527,17 @@ impl ScanCaster {
                 if next.is_multiple_of(SHARE_POINTS) {
                     next += (shares - 1) * SHARE_POINTS;
                 }
-                if !(p[0].is_finite() && p[1].is_finite() && p[2].is_finite()) {
+                let Some(ray) = self.ray_end(p, origin, max_range_m) else {
                     skipped += 1;
                     continue;
-                }
-                let diff = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
-                let within = max_range_m.is_none_or(|r| r < 0.0 || norm_f32(diff) <= r);
-                let (end, end_key) = if within {
-                    let k = grid.key_of(p);
-                    match k {
-                        Some(k) => hits.insert(k),
-                        None => skipped += 1,
-                    }
-                    (p, k)
-                } else {
-                    beyond += 1;
-                    let end = end_at_range(origin, diff, max_range_m.unwrap_or(0.0));
-                    (end, grid.key_of(end))
                 };
-                if let RayStart::Walk(w) = grid.ray_start_keyed(origin_key, end_key, origin, end) {
+                match (ray.hit, ray.end_key) {
+                    (true, Some(k)) => hits.insert(k),
+                    (true, None) => skipped += 1,
+                    (false, _) => beyond += 1,
+                }
+                let start = grid.ray_start_keyed(origin_key, ray.end_key, origin, ray.end);
+                if let RayStart::Walk(w) = start {
                     return Some(w);
                 }
             }
@@ -656,18 +649,13 @@ macro_rules! compiled_for {
                 #[doc = concat!("[`ScanCaster::cast_lanes`] compiled for ", $features, ".")]
                 #[cfg(target_arch = "x86_64")]
                 #[target_feature(enable = $features)]
-                #[allow(clippy::too_many_arguments)]
                 fn $name(
                     &self,
-                    pts: &[[f32; 3]],
-                    part: (usize, usize),
-                    origin: [f32; 3],
-                    max_range_m: Option<f64>,
+                    share: LaneShare<'_>,
                     free: &mut BoxBits,
                     hits: &mut BoxBits,
-                    stop: &AtomicBool,
                 ) -> Option<(usize, usize)> {
-                    self.cast_lanes_body(pts, part, origin, max_range_m, free, hits, stop)
+                    self.cast_lanes_body(share, free, hits)
                 }
             )*
         }
@@ -675,6 +663,42 @@ macro_rules! compiled_for {
 }
 
 compiled_for!(cast_lanes_avx2: "avx2", cast_lanes_avx512: "avx512f,avx512vl,avx512bw,avx512dq");
+
+/// One thread's share of a plain scan's rays, cast with the lanes
+/// ([`ScanCaster::cast_lanes`]): runs of [`SHARE_POINTS`] points dealt to the shares in turn,
+/// so that each share spans the whole image.
+#[derive(Clone, Copy)]
+struct LaneShare<'a> {
+    /// The scan's points in the map frame.
+    pts: &'a [[f32; 3]],
+    /// This share's number and the number of shares.
+    part: (usize, usize),
+    /// The sensor, where every ray starts.
+    origin: [f32; 3],
+    /// Maximum range, m (`None` or negative: none).
+    max_range_m: Option<f64>,
+    /// Set to stop casting.
+    stop: &'a AtomicBool,
+}
+
+/// Whether the processor has the parts of AVX-512 the ray walk is compiled for.
+#[cfg(target_arch = "x86_64")]
+fn has_avx512() -> bool {
+    std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512vl")
+        && std::arch::is_x86_feature_detected!("avx512bw")
+        && std::arch::is_x86_feature_detected!("avx512dq")
+}
+
+/// Where a point's ray ends ([`ScanCaster::ray_end`]).
+struct RayEnd {
+    /// The end: the point, or where the maximum range cuts the ray.
+    end: [f32; 3],
+    /// The end's key (`None`: outside the key range).
+    end_key: Option<Key>,
+    /// Whether the ray ends at the point (a hit) rather than at the maximum range.
+    hit: bool,
+}
 
 /// How [`ScanCaster::prepare_lanes`] went.
 enum Lanes {
@@ -785,31 +809,34 @@ mod tests {
         let (pts, origin) = world_points(&scans[1]);
         let (low, high) = key_box(&c.grid, origin, &pts);
         let (low, high) = (low.map(|k| k - 4), high.map(|k| k + 4));
-        type Compiled = fn(&ScanCaster, &[[f32; 3]], [f32; 3], &mut BoxBits, &mut BoxBits);
-        let mut compiled: Vec<(&str, Compiled)> = vec![("plain", |c, pts, o, f, h| {
-            c.cast_lanes_body(pts, (0, 1), o, Some(2.5), f, h, &AtomicBool::new(false));
+        let share = LaneShare {
+            pts: &pts,
+            part: (0, 1),
+            origin,
+            max_range_m: Some(2.5),
+            stop: &stop,
+        };
+        type Compiled = fn(&ScanCaster, LaneShare<'_>, &mut BoxBits, &mut BoxBits);
+        let mut compiled: Vec<(&str, Compiled)> = vec![("plain", |c, share, f, h| {
+            c.cast_lanes_body(share, f, h);
         })];
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
-            compiled.push(("avx2", |c, pts, o, f, h| {
+            compiled.push(("avx2", |c, share, f, h| {
                 // SAFETY: the processor has AVX2 (checked above).
                 #[allow(unsafe_code)]
                 unsafe {
-                    c.cast_lanes_avx2(pts, (0, 1), o, Some(2.5), f, h, &AtomicBool::new(false));
+                    c.cast_lanes_avx2(share, f, h);
                 }
             }));
         }
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx512f")
-            && std::arch::is_x86_feature_detected!("avx512vl")
-            && std::arch::is_x86_feature_detected!("avx512bw")
-            && std::arch::is_x86_feature_detected!("avx512dq")
-        {
-            compiled.push(("avx512", |c, pts, o, f, h| {
-                // SAFETY: the processor has the four AVX-512 parts (checked above).
+        if has_avx512() {
+            compiled.push(("avx512", |c, share, f, h| {
+                // SAFETY: the processor has the parts of AVX-512 (checked above).
                 #[allow(unsafe_code)]
                 unsafe {
-                    c.cast_lanes_avx512(pts, (0, 1), o, Some(2.5), f, h, &AtomicBool::new(false));
+                    c.cast_lanes_avx512(share, f, h);
                 }
             }));
         }
@@ -817,9 +844,9 @@ mod tests {
         for (name, cast) in compiled {
             let mut free = BoxBits::new(low, high).expect("small box");
             let mut hits = BoxBits::new(low, high).expect("small box");
-            cast(&c, &pts, origin, &mut free, &mut hits);
+            cast(&c, share, &mut free, &mut hits);
             let mut cells = Vec::new();
-            free.merged_codes(&hits, &mut cells);
+            free.merged_codes(&hits, |c, hit| cells.push((c, hit)));
             assert!(cells.len() > 1000);
             match &first {
                 None => first = Some(cells),

@@ -145,27 +145,15 @@ impl BoxBits {
         order
     }
 
-    /// Every cell's Morton code, ascending, appended to `out`.
-    #[cfg(test)]
-    pub(crate) fn sorted_codes(&self, out: &mut Vec<u64>) {
-        for (base, i) in self.words_in_order(None) {
-            let mut word = self.words[i];
-            while word != 0 {
-                out.push(base | word.trailing_zeros() as u64);
-                word &= word - 1;
-            }
-        }
-    }
-
     /// The cells of `self` (free) and of `hits` (a set over the same box), merged in Morton
-    /// order: `(code, hit)`, a cell in both once, as hit.
-    pub(crate) fn merged_codes(&self, hits: &BoxBits, out: &mut Vec<(u64, bool)>) {
+    /// order into `out(code, hit)`, a cell in both once, as hit.
+    pub(crate) fn merged_codes(&self, hits: &BoxBits, mut out: impl FnMut(u64, bool)) {
         for (base, i) in self.words_in_order(Some(hits)) {
             let hit = hits.words.get(i).copied().unwrap_or(0);
             let mut word = self.words[i] | hit;
             while word != 0 {
                 let bit = word.trailing_zeros();
-                out.push((base | bit as u64, hit >> bit & 1 == 1));
+                out(base | bit as u64, hit >> bit & 1 == 1);
                 word &= word - 1;
             }
         }
@@ -359,30 +347,26 @@ mod tests {
                     _ => None,
                 })
                 .collect();
-            let mut want = Vec::new();
-            for w in &walks {
-                let mut w = *w;
-                want.push(w.key);
-                while let Some(k) = w.step() {
-                    want.push(k);
+            let one_by_one = |walks: &[RayWalk]| {
+                let mut cells: Vec<Key> = Vec::new();
+                for &w in walks {
+                    let mut w = w;
+                    cells.push(w.key);
+                    while let Some(k) = w.step() {
+                        cells.push(k);
+                    }
                 }
-            }
+                cells
+            };
             for n in [0, 1, LANES - 1, LANES, LANES + 1, walks.len()] {
                 let mut got = Vec::new();
                 walk_lanes(&mut walks[..n].iter().copied(), &mut |k| got.push(k));
-                let mut one: Vec<Key> = Vec::new();
-                for w in &walks[..n] {
-                    let mut w = *w;
-                    one.push(w.key);
-                    while let Some(k) = w.step() {
-                        one.push(k);
-                    }
-                }
+                let mut one = one_by_one(&walks[..n]);
                 got.sort_unstable();
                 one.sort_unstable();
                 assert_eq!(got, one, "{n} rays from {origin:?}");
             }
-            assert!(want.len() > 10 * walks.len());
+            assert!(one_by_one(&walks).len() > 10 * walks.len());
         }
     }
 
@@ -412,11 +396,19 @@ mod tests {
         want_free.dedup();
         want_hits.sort_unstable();
         want_hits.dedup();
-        let mut got = Vec::new();
-        free.sorted_codes(&mut got);
-        assert_eq!(got, want_free);
+        // A set's own cells: merged with an empty set, none is a hit.
+        let none = BoxBits::new(low, high).expect("small box");
+        let codes = |set: &BoxBits| {
+            let mut v = Vec::new();
+            set.merged_codes(&none, |c, hit| {
+                assert!(!hit);
+                v.push(c);
+            });
+            v
+        };
+        assert_eq!(codes(&free), want_free);
         let mut merged = Vec::new();
-        free.merged_codes(&hits, &mut merged);
+        free.merged_codes(&hits, |c, hit| merged.push((c, hit)));
         let mut want: Vec<(u64, bool)> = want_free
             .iter()
             .filter(|c| want_hits.binary_search(c).is_err())
@@ -427,18 +419,14 @@ mod tests {
         assert_eq!(merged, want);
         let mut both = free.clone();
         both.union_with(&hits);
-        got.clear();
-        both.sorted_codes(&mut got);
         let mut all: Vec<u64> = want_free.iter().chain(&want_hits).copied().collect();
         all.sort_unstable();
         all.dedup();
-        assert_eq!(got, all);
+        assert_eq!(codes(&both), all);
         assert!(!free.missed());
         free.insert([low[0] - 8, low[1], low[2]]);
         assert!(free.missed());
-        got.clear();
-        free.sorted_codes(&mut got);
-        assert_eq!(got, want_free);
+        assert_eq!(codes(&free), want_free);
         assert!(BoxBits::new([0; 3], [u16::MAX; 3]).is_none());
     }
 }

@@ -209,23 +209,14 @@ impl Grid {
     /// The free cells of the ray from `origin` to `end` (OctoMap's `computeRayKeys`): from the
     /// origin's cell up to, not including, the end's cell. `false` when either end is outside
     /// the key range.
+    #[cfg(test)]
     pub(crate) fn ray_keys(&self, origin: [f32; 3], end: [f32; 3], out: &mut impl RaySink) -> bool {
-        match self.ray_start(origin, end) {
-            RayStart::Outside => false,
-            RayStart::Empty => true,
-            RayStart::Walk(mut w) => {
-                out.add(w.key);
-                while let Some(k) = w.step() {
-                    out.add(k);
-                }
-                true
-            }
-        }
+        self.ray_start(origin, end).walk_into(out)
     }
 
     /// The start of the walk of the ray from `origin` to `end`: OctoMap's set-up of
     /// `computeRayKeys`, up to its first cell.
-    #[inline]
+    #[cfg(test)]
     pub(crate) fn ray_start(&self, origin: [f32; 3], end: [f32; 3]) -> RayStart {
         self.ray_start_keyed(self.key_of(origin), self.key_of(end), origin, end)
     }
@@ -296,8 +287,8 @@ pub(crate) const fn local_morton(i: usize, bits: usize) -> u16 {
     m as u16
 }
 
-/// `v.floor()`, inlined: without SSE4.1 the standard one is a call into the C library, and
-/// keys are computed twice a ray.
+/// `v.floor()`, inlined: without SSE4.1 the standard one is a call into the C library, and a
+/// key is computed for every ray's end.
 #[inline(always)]
 fn floor(v: f64) -> f64 {
     // Below 2^52 in magnitude the conversion truncates exactly; larger values, infinities and
@@ -319,6 +310,25 @@ pub(crate) enum RayStart {
     Empty,
     /// The walk, at its first cell.
     Walk(RayWalk),
+}
+
+impl RayStart {
+    /// Walks the ray, putting its free cells into `out`; false if an end is outside the key
+    /// range (no cells).
+    #[inline(always)]
+    pub(crate) fn walk_into(self, out: &mut impl RaySink) -> bool {
+        match self {
+            RayStart::Outside => false,
+            RayStart::Empty => true,
+            RayStart::Walk(mut w) => {
+                out.add(w.key);
+                while let Some(k) = w.step() {
+                    out.add(k);
+                }
+                true
+            }
+        }
+    }
 }
 
 /// A ray's 3D DDA walk in progress: OctoMap's `computeRayKeys` loop, one cell at a time.

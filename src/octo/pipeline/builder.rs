@@ -352,10 +352,10 @@ impl CastThreads {
     fn recv(&mut self) -> Option<PreparedScan> {
         let want = self.received;
         self.received += 1;
+        if let Some(p) = self.early.remove(&want) {
+            return p;
+        }
         loop {
-            if let Some(p) = self.early.remove(&want) {
-                return p;
-            }
             match self.cast.recv() {
                 Ok((i, p)) if i == want => return p,
                 Ok((i, p)) => {
@@ -441,20 +441,33 @@ fn drain(
         return Ok(true);
     };
     while c.in_flight() > 0 {
-        if hooks.stop.load(Ordering::Relaxed) {
-            report.interrupted = true;
-            return Ok(false);
-        }
-        let t0 = Instant::now();
-        let prepared = c.recv();
-        if !out.emit(tree, prepared, t0, report, hooks, known)? {
+        if !apply_next(out, c, tree, report, hooks, known)? {
             return Ok(false);
         }
     }
     Ok(true)
 }
 
-/// [`build`]'s loop over the inputs and their scans; a casting thread, if any, in `scope`.
+/// The next scan cast into the map, its message written; false if the build stopped (the
+/// stop flag was set, before or while it was cast).
+fn apply_next(
+    out: &mut Emitter<'_>,
+    c: &mut CastThreads,
+    tree: &mut OcTree,
+    report: &mut BuildReport,
+    hooks: &mut Hooks<'_>,
+    known: u64,
+) -> Result<bool, PipelineError> {
+    if hooks.stop.load(Ordering::Relaxed) {
+        report.interrupted = true;
+        return Ok(false);
+    }
+    let t0 = Instant::now();
+    let prepared = c.recv();
+    out.emit(tree, prepared, t0, report, hooks, known)
+}
+
+/// [`build`]'s loop over the inputs and their scans; the casting threads, if any, in `scope`.
 #[allow(clippy::too_many_arguments)]
 fn build_in<'scope, 'h: 'scope>(
     cfg: &BuildConfig,
@@ -543,8 +556,8 @@ fn build_in<'scope, 'h: 'scope>(
             posed += 1;
             let scan = with_origin(scan, origin);
             let tree = tree_slot.get_or_insert_with(|| {
+                // Its own caster casts only on one thread: more threads cast scans apart.
                 let mut t = OcTree::new(cfg.resolution_m);
-                t.set_threads(threads);
                 if scan.colors.is_some() && !cfg.no_color {
                     t.enable_color();
                 }
@@ -573,16 +586,8 @@ fn build_in<'scope, 'h: 'scope>(
                 break 'inputs;
             }
             // A scan being cast on each thread while the one before goes into the map.
-            if c.in_flight() > c.threads {
-                if stop.load(Ordering::Relaxed) {
-                    report.interrupted = true;
-                    break 'inputs;
-                }
-                let t0 = Instant::now();
-                let prepared = c.recv();
-                if !out.emit(tree, prepared, t0, report, hooks, known)? {
-                    break 'inputs;
-                }
+            if c.in_flight() > c.threads && !apply_next(out, c, tree, report, hooks, known)? {
+                break 'inputs;
             }
         }
         // An input's scans are all in the map before the next input is opened.
