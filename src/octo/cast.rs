@@ -543,7 +543,7 @@ impl ScanCaster {
             }
             None
         });
-        walk_lanes(&mut walks, &mut |k| free.insert(k));
+        walk_lanes(&mut walks, free);
         (!stopped).then_some((skipped, beyond))
     }
 

@@ -20,7 +20,7 @@
 use super::math::{Key, RayWalk, local_morton, morton};
 
 /// Rays walked side by side.
-pub(crate) const LANES: usize = 8;
+pub(crate) const LANES: usize = 16;
 
 /// Cells a walk may go past its end's key on an axis (its step bound allows 3 extra steps).
 pub(crate) const OVERSHOOT_CELLS: u16 = 4;
@@ -160,6 +160,72 @@ impl BoxBits {
     }
 }
 
+/// Where [`walk_lanes`] puts the cells it walks.
+pub(crate) trait LaneSink {
+    /// Adds one cell.
+    fn insert(&mut self, k: Key);
+
+    /// Adds the cell of every lane whose bit is set in `keep`, lane `l`'s cell being
+    /// `[kx[l], ky[l], kz[l]]`.
+    #[inline(always)]
+    fn insert_lanes(&mut self, kx: &[u16; LANES], ky: &[u16; LANES], kz: &[u16; LANES], keep: u32) {
+        for l in 0..LANES {
+            if keep >> l & 1 == 1 {
+                self.insert([kx[l], ky[l], kz[l]]);
+            }
+        }
+    }
+}
+
+impl LaneSink for BoxBits {
+    #[inline(always)]
+    fn insert(&mut self, k: Key) {
+        BoxBits::insert(self, k);
+    }
+
+    /// The lanes' words and bits computed side by side (no branch, no table: the compiler
+    /// turns the first loop into a few vector operations), then or-ed into the words one lane
+    /// after the other, so that two lanes in the same word both land. A lane not kept, or
+    /// outside the box, ors nothing (bit mask 0) into word 0; one outside the box sets
+    /// [`BoxBits::missed`].
+    #[inline(always)]
+    fn insert_lanes(&mut self, kx: &[u16; LANES], ky: &[u16; LANES], kz: &[u16; LANES], keep: u32) {
+        let [sx, sy, sz] = self.shift;
+        let [lx, ly, lz] = self.low;
+        let mut word = [0u32; LANES];
+        let mut bits = [0u64; LANES];
+        let mut outside = 0u32;
+        for l in 0..LANES {
+            let x = kx[l].wrapping_sub(lx) as u32;
+            let y = ky[l].wrapping_sub(ly) as u32;
+            let z = kz[l].wrapping_sub(lz) as u32;
+            let kept = keep >> l & 1;
+            let out = ((x >> (sx + 2)) | (y >> (sy + 2)) | (z >> (sz + 2)) != 0) as u32;
+            let take = kept & !out;
+            let local =
+                (x & 1) | (y & 1) << 1 | (z & 1) << 2 | (x & 2) << 2 | (y & 2) << 3 | (z & 2) << 4;
+            word[l] = ((x >> 2) | (y >> 2) << sx | (z >> 2) << (sx + sy)) & take.wrapping_neg();
+            bits[l] = (take as u64) << local;
+            outside |= kept & out;
+        }
+        // Every word index is inside the table (the box test above), unless the table is
+        // empty (a box too large, which the caller does not walk into).
+        self.missed |= outside != 0 || self.words.is_empty();
+        for l in 0..LANES {
+            if let Some(w) = self.words.get_mut(word[l] as usize) {
+                *w |= bits[l];
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+impl LaneSink for Vec<Key> {
+    fn insert(&mut self, k: Key) {
+        self.push(k);
+    }
+}
+
 /// [`LANES`] walks side by side, one array per quantity.
 struct Lanes {
     tx: [f64; LANES],
@@ -276,30 +342,26 @@ fn mask64(b: bool) -> u64 {
 /// [`LANES`] at a time, putting each cell a ray crosses into `out`: the same cells as walking
 /// each with [`RayWalk::step`], interleaved.
 #[inline(always)]
-pub(crate) fn walk_lanes(walks: &mut impl Iterator<Item = RayWalk>, out: &mut impl FnMut(Key)) {
+pub(crate) fn walk_lanes(walks: &mut impl Iterator<Item = RayWalk>, out: &mut impl LaneSink) {
     let mut lanes = Lanes::new();
     let mut live = 0u32;
     for l in 0..LANES {
         let Some(w) = walks.next() else { break };
-        out(w.key);
+        out.insert(w.key);
         lanes.load(l, &w);
         live |= 1 << l;
     }
     let all = (1u32 << LANES) - 1;
     while live == all {
         let ended = lanes.step();
-        for l in 0..LANES {
-            if ended & (1 << l) == 0 {
-                out([lanes.kx[l], lanes.ky[l], lanes.kz[l]]);
-            }
-        }
+        out.insert_lanes(&lanes.kx, &lanes.ky, &lanes.kz, !ended & all);
         let mut e = ended;
         while e != 0 {
             let l = e.trailing_zeros() as usize;
             e &= e - 1;
             match walks.next() {
                 Some(w) => {
-                    out(w.key);
+                    out.insert(w.key);
                     lanes.load(l, &w);
                 }
                 None => live &= !(1 << l),
@@ -311,7 +373,7 @@ pub(crate) fn walk_lanes(walks: &mut impl Iterator<Item = RayWalk>, out: &mut im
         if live & (1 << l) != 0 {
             let mut w = lanes.walk(l);
             while let Some(k) = w.step() {
-                out(k);
+                out.insert(k);
             }
         }
     }
@@ -360,7 +422,7 @@ mod tests {
             };
             for n in [0, 1, LANES - 1, LANES, LANES + 1, walks.len()] {
                 let mut got = Vec::new();
-                walk_lanes(&mut walks[..n].iter().copied(), &mut |k| got.push(k));
+                walk_lanes(&mut walks[..n].iter().copied(), &mut got);
                 let mut one = one_by_one(&walks[..n]);
                 got.sort_unstable();
                 one.sort_unstable();

@@ -273,6 +273,9 @@ impl Emitter<'_> {
     }
 }
 
+/// Scans queued or being cast per casting thread, at most (see [`CastThreads::window`]).
+const SCANS_AHEAD_PER_THREAD: usize = 4;
+
 /// The threads that cast the next scans while the caller applies the last one: scans in, each
 /// taken by the first thread free, cast scans out in the order they went in.
 struct CastThreads {
@@ -282,8 +285,10 @@ struct CastThreads {
     cast: mpsc::Receiver<(usize, Option<PreparedScan>)>,
     /// Scans cast before an earlier one, by number.
     early: BTreeMap<usize, Option<PreparedScan>>,
-    /// Casting threads.
-    threads: usize,
+    /// Scans in flight (sent, not yet applied) beyond which the oldest is applied before the
+    /// next is sent: a few per thread, so that a thread done with a quick scan finds another
+    /// queued while the main thread waits for a slow one.
+    window: usize,
     /// Scans sent so far.
     sent: usize,
     /// Cast scans received so far.
@@ -329,7 +334,7 @@ impl CastThreads {
             scans,
             cast,
             early: BTreeMap::new(),
-            threads: n.max(1),
+            window: n.max(1) * SCANS_AHEAD_PER_THREAD,
             sent: 0,
             received: 0,
         }
@@ -585,8 +590,9 @@ fn build_in<'scope, 'h: 'scope>(
                 report.interrupted = true;
                 break 'inputs;
             }
-            // A scan being cast on each thread while the one before goes into the map.
-            if c.in_flight() > c.threads && !apply_next(out, c, tree, report, hooks, known)? {
+            // Scans being cast on every thread, and a few queued, while the oldest goes into
+            // the map.
+            if c.in_flight() > c.window && !apply_next(out, c, tree, report, hooks, known)? {
                 break 'inputs;
             }
         }
