@@ -20,8 +20,8 @@ use super::cellset::CellSet;
 use super::hashorder::KeySet;
 use super::lanes::{BoxBits, OVERSHOOT_CELLS, walk_lanes};
 use super::math::{
-    ColorSlot, Grid, Key, NO_COLOR, RaySink, RayStart, color_slot, end_at_range, morton, norm_f32,
-    slot_order, world_points,
+    ColorSlot, FAN_BATCH, Fan, Grid, Key, NO_COLOR, RaySink, RayStart, RayWalk, color_slot,
+    end_at_range, morton, norm_f32, slot_order, world_points,
 };
 
 /// How many points a scan's rays are cast between two looks at the stop flag.
@@ -512,39 +512,29 @@ impl ScanCaster {
             max_range_m,
             stop,
         } = share;
-        let (mut skipped, mut beyond, mut stopped) = (0, 0, false);
         let (share, shares) = part;
-        let mut next = share * SHARE_POINTS;
-        let grid = &self.grid;
-        let origin_key = grid.key_of(origin);
-        let mut walks = std::iter::from_fn(|| {
-            while let Some(&p) = pts.get(next) {
-                if next.is_multiple_of(SHARE_POINTS) && stop.load(Ordering::Relaxed) {
-                    stopped = true;
-                    return None;
-                }
-                next += 1;
-                if next.is_multiple_of(SHARE_POINTS) {
-                    next += (shares - 1) * SHARE_POINTS;
-                }
-                let Some(ray) = self.ray_end(p, origin, max_range_m) else {
-                    skipped += 1;
-                    continue;
-                };
-                match (ray.hit, ray.end_key) {
-                    (true, Some(k)) => hits.insert(k),
-                    (true, None) => skipped += 1,
-                    (false, _) => beyond += 1,
-                }
-                let start = grid.ray_start_keyed(origin_key, ray.end_key, origin, ray.end);
-                if let RayStart::Walk(w) = start {
-                    return Some(w);
-                }
-            }
-            None
-        });
-        walk_lanes(&mut walks, free);
-        (!stopped).then_some((skipped, beyond))
+        let mut rays = ShareRays {
+            caster: self,
+            fan: Fan::new(&self.grid, origin, max_range_m),
+            origin_key: self.grid.key_of(origin),
+            pts,
+            origin,
+            max_range_m,
+            stop,
+            next: share * SHARE_POINTS,
+            shares,
+            hits,
+            batch: [RayWalk::default(); FAN_BATCH],
+            plain: 0,
+            base: 0,
+            pos: 0,
+            len: 0,
+            skipped: 0,
+            beyond: 0,
+            stopped: false,
+        };
+        walk_lanes(&mut rays, free);
+        (!rays.stopped).then_some((rays.skipped, rays.beyond))
     }
 
     /// A coloured scan, cell by cell in the order OctoMap's `insertPointCloud` updates them:
@@ -679,6 +669,108 @@ struct LaneShare<'a> {
     max_range_m: Option<f64>,
     /// Set to stop casting.
     stop: &'a AtomicBool,
+}
+
+/// The walks of one share of a scan's rays ([`LaneShare`]), in order, set up [`FAN_BATCH`] at
+/// a time by [`Fan::starts`]; a ray that is not plain goes the one-ray way
+/// ([`ScanCaster::ray_end`], [`Grid::ray_start_keyed`]). Each hit's cell goes into `hits` as its
+/// ray is set up.
+struct ShareRays<'a> {
+    caster: &'a ScanCaster,
+    /// The rays' shared set-up (`None`: the origin is outside the key range).
+    fan: Option<Fan>,
+    /// The origin's cell.
+    origin_key: Option<Key>,
+    pts: &'a [[f32; 3]],
+    origin: [f32; 3],
+    max_range_m: Option<f64>,
+    stop: &'a AtomicBool,
+    /// The next point to set up.
+    next: usize,
+    /// Shares the scan is cut into.
+    shares: usize,
+    hits: &'a mut BoxBits,
+    /// The batch's walks, and which are plain (bit per walk).
+    batch: [RayWalk; FAN_BATCH],
+    plain: u64,
+    /// The batch's first point, the next of its rays to hand out, and its length.
+    base: usize,
+    pos: usize,
+    len: usize,
+    /// Points with no ray, and rays cut at the maximum range.
+    skipped: usize,
+    beyond: usize,
+    /// Whether the stop flag ended the share.
+    stopped: bool,
+}
+
+impl ShareRays<'_> {
+    /// Sets up the next batch of the share's points; false when there is none (or the stop
+    /// flag is set, checked at the start of every [`SHARE_POINTS`]).
+    #[inline(always)]
+    fn refill(&mut self) -> bool {
+        if self.next >= self.pts.len() || self.stopped {
+            return false;
+        }
+        if self.next.is_multiple_of(SHARE_POINTS) && self.stop.load(Ordering::Relaxed) {
+            self.stopped = true;
+            return false;
+        }
+        let chunk_end = (self.next / SHARE_POINTS + 1) * SHARE_POINTS;
+        let end = (self.next + FAN_BATCH).min(chunk_end).min(self.pts.len());
+        let pts = &self.pts[self.next..end];
+        self.plain = match &self.fan {
+            Some(fan) => fan.starts(pts, &mut self.batch),
+            None => 0,
+        };
+        self.base = self.next;
+        self.pos = 0;
+        self.len = pts.len();
+        self.next = end;
+        if end == chunk_end {
+            self.next += (self.shares - 1) * SHARE_POINTS;
+        }
+        true
+    }
+}
+
+impl Iterator for ShareRays<'_> {
+    type Item = RayWalk;
+
+    #[inline(always)]
+    fn next(&mut self) -> Option<RayWalk> {
+        loop {
+            if self.pos == self.len && !self.refill() {
+                return None;
+            }
+            let i = self.pos;
+            self.pos += 1;
+            if self.plain >> i & 1 == 1 {
+                let w = self.batch[i];
+                self.hits.insert(w.end);
+                return Some(w);
+            }
+            let p = self.pts[self.base + i];
+            let Some(ray) = self.caster.ray_end(p, self.origin, self.max_range_m) else {
+                self.skipped += 1;
+                continue;
+            };
+            match (ray.hit, ray.end_key) {
+                (true, Some(k)) => self.hits.insert(k),
+                (true, None) => self.skipped += 1,
+                (false, _) => self.beyond += 1,
+            }
+            let start = self.caster.grid.ray_start_keyed(
+                self.origin_key,
+                ray.end_key,
+                self.origin,
+                ray.end,
+            );
+            if let RayStart::Walk(w) = start {
+                return Some(w);
+            }
+        }
+    }
 }
 
 /// Whether the processor has the parts of AVX-512 the ray walk is compiled for.

@@ -188,33 +188,44 @@ fn put_varint(out: &mut Vec<u8>, mut v: u64) {
     }
 }
 
-/// Codes a sorted, duplicate-free list of Morton codes at `depth` as the tree of their paths.
+/// Codes a sorted, duplicate-free list of Morton codes at `depth` as the tree of their paths:
+/// depth first, each node a byte of the child digits it has (the digits of a code at `depth`
+/// are its `depth` groups of 3 bits, highest first), its children's subtrees after it.
+///
+/// One pass over the codes: a code shares its nodes with the one before down to the first
+/// digit where they differ, where that node gets a child (its byte, already written, is
+/// patched), and opens a new node at every level below, written at the end of the output.
+/// Since the codes are sorted, every subtree is whole before the next one starts, so this is
+/// the depth-first order.
 pub fn encode_codes(codes: &[u64], depth: u32, out: &mut Vec<u8>) {
     put_varint(out, codes.len() as u64);
-    if !codes.is_empty() && depth > 0 {
-        encode_level(codes, 0, depth, out);
-    }
-}
-
-fn encode_level(codes: &[u64], level: u32, depth: u32, out: &mut Vec<u8>) {
-    let shift = 3 * (depth - 1 - level);
-    let mut mask = 0u8;
-    for &c in codes {
-        mask |= 1 << ((c >> shift) & 7);
-    }
-    out.push(mask);
-    if level + 1 == depth {
+    let depth = depth.min(21) as usize;
+    if codes.is_empty() || depth == 0 {
         return;
     }
-    let mut start = 0;
-    while start < codes.len() {
-        let digit = (codes[start] >> shift) & 7;
-        let mut end = start + 1;
-        while end < codes.len() && (codes[end] >> shift) & 7 == digit {
-            end += 1;
+    let bits = 3 * depth as u32;
+    let digit = |c: u64, level: usize| 1u8 << ((c >> (3 * (depth - 1 - level))) & 7);
+    // The output position of the open node at each level.
+    let mut open = [0usize; 21];
+    let mut prev: Option<u64> = None;
+    for &c in codes {
+        let first_new = match prev {
+            None => 0,
+            Some(p) => {
+                let differ = (p ^ c) & (u64::MAX >> (64 - bits));
+                if differ == 0 {
+                    continue;
+                }
+                let shared = depth - 1 - (63 - differ.leading_zeros() as usize) / 3;
+                out[open[shared]] |= digit(c, shared);
+                shared + 1
+            }
+        };
+        for (level, slot) in open.iter_mut().enumerate().take(depth).skip(first_new) {
+            *slot = out.len();
+            out.push(digit(c, level));
         }
-        encode_level(&codes[start..end], level + 1, depth, out);
-        start = end;
+        prev = Some(c);
     }
 }
 
@@ -993,6 +1004,58 @@ impl Receiver {
 mod tests {
     use super::*;
     use crate::octo::tree::morton;
+
+    /// The tree of `codes` written level by level, recursively: what [`encode_codes`] must
+    /// write in one pass.
+    fn encode_level_by_level(codes: &[u64], level: u32, depth: u32, out: &mut Vec<u8>) {
+        let shift = 3 * (depth - 1 - level);
+        let mut mask = 0u8;
+        for &c in codes {
+            mask |= 1 << ((c >> shift) & 7);
+        }
+        out.push(mask);
+        if level + 1 == depth {
+            return;
+        }
+        let mut start = 0;
+        while start < codes.len() {
+            let digit = (codes[start] >> shift) & 7;
+            let mut end = start + 1;
+            while end < codes.len() && (codes[end] >> shift) & 7 == digit {
+                end += 1;
+            }
+            encode_level_by_level(&codes[start..end], level + 1, depth, out);
+            start = end;
+        }
+    }
+
+    proptest::proptest! {
+        /// Sorted code lists, sparse and dense, at every depth: the one-pass coder writes the
+        /// bytes the level-by-level one writes.
+        #[test]
+        fn one_pass_tree_coding_is_the_level_by_level_coding(
+            depth in 1u32..=16,
+            raw in proptest::collection::vec(proptest::prelude::any::<u64>(), 0..300),
+            dense in 0u32..3,
+        ) {
+            let bits = 3 * depth;
+            let mask = u64::MAX >> (64 - bits);
+            // Dense lists: codes close together, as a scan's cells are.
+            let spread = [mask, (1 << 12) - 1, 63][dense as usize] & mask;
+            let base = raw.first().copied().unwrap_or(0) & mask & !spread;
+            let mut codes: Vec<u64> = raw.iter().map(|r| base | (r & spread)).collect();
+            codes.sort_unstable();
+            codes.dedup();
+            let mut want = Vec::new();
+            put_varint(&mut want, codes.len() as u64);
+            if !codes.is_empty() {
+                encode_level_by_level(&codes, 0, depth, &mut want);
+            }
+            let mut got = Vec::new();
+            encode_codes(&codes, depth, &mut got);
+            proptest::prop_assert_eq!(got, want);
+        }
+    }
     use crate::octo::{Pose, Scan};
 
     #[test]

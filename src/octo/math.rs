@@ -270,6 +270,159 @@ impl Grid {
     }
 }
 
+/// Points whose ray starts [`Fan::starts`] computes at once.
+pub(crate) const FAN_BATCH: usize = 64;
+
+/// The rays of one scan, all from one origin: what their walks' starts share, so that
+/// [`Fan::starts`] can set up many at once, side by side, in the arithmetic of
+/// [`Grid::ray_start_keyed`] (the same `f32` and `f64` operations in the same order, hence the
+/// same walks).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Fan {
+    /// The sensor.
+    origin: [f32; 3],
+    /// The sensor's cell.
+    origin_key: Key,
+    /// `border - origin` on each axis, for a ray going up (`[0]`) and down (`[1]`) that axis:
+    /// the numerator of the first border's ray parameter.
+    to_border_m: [[f64; 2]; 3],
+    /// Voxel edge, m.
+    resolution_m: f64,
+    /// `1 / resolution_m`.
+    resolution_factor: f64,
+    /// The maximum range, when it cuts rays (a negative one does not).
+    max_range_m: Option<f64>,
+}
+
+impl Fan {
+    /// The rays from `origin`, cut at `max_range_m` if given and not negative; `None` when
+    /// the origin is outside the key range (no ray has cells).
+    pub(crate) fn new(grid: &Grid, origin: [f32; 3], max_range_m: Option<f64>) -> Option<Fan> {
+        let origin_key = grid.key_of(origin)?;
+        let to_border_m = [0, 1, 2].map(|i| {
+            [1.0f64, -1.0].map(|step| {
+                let mut border = grid.key_to_coord(origin_key[i]);
+                border += (step * grid.resolution_m * 0.5) as f32 as f64;
+                border - origin[i] as f64
+            })
+        });
+        Some(Fan {
+            origin,
+            origin_key,
+            to_border_m,
+            resolution_m: grid.resolution_m,
+            resolution_factor: grid.resolution_factor,
+            max_range_m: max_range_m.filter(|r| *r >= 0.0),
+        })
+    }
+
+    /// The walks of the rays to the first [`FAN_BATCH`] points of `pts`, into `walks`: bit
+    /// `i` of the result is set when point `i`'s ray is *plain*, and `walks[i]` is then what
+    /// [`Grid::ray_start_keyed`] starts (its end is the point's key, its end a hit). A plain
+    /// ray's point is finite, inside the key range, within the maximum range, outside the
+    /// origin's cell, and far enough for `f32` to give its direction; any other point goes
+    /// the general way ([`Grid::ray_start_keyed`] and the maximum range's rule).
+    ///
+    /// Written as loops over arrays with selects instead of branches, which the compiler turns
+    /// into vector operations: `f32` and `f64` divisions and square roots are exact to the
+    /// last bit whatever the width, so each ray's numbers are those of the one-ray code.
+    #[inline(always)]
+    pub(crate) fn starts(&self, pts: &[[f32; 3]], walks: &mut [RayWalk; FAN_BATCH]) -> u64 {
+        const B: usize = FAN_BATCH;
+        let n = pts.len().min(B);
+        let mut p = [[0f32; B]; 3];
+        for (i, q) in pts[..n].iter().enumerate() {
+            for a in 0..3 {
+                p[a][i] = q[a];
+            }
+        }
+        let mut ok = [true; B];
+        for (i, k) in ok.iter_mut().enumerate() {
+            *k = i < n;
+        }
+        let mut diff = [[0f32; B]; 3];
+        let mut end = [[0u16; B]; 3];
+        let mut key_steps = [3u32; B];
+        for a in 0..3 {
+            let ko = self.origin_key[a];
+            for i in 0..B {
+                let c = p[a][i];
+                diff[a][i] = c - self.origin[a];
+                // coord_to_key: floor(c / res) + KEY_CENTER inside 0..2^16. Inside that range
+                // the scaled value truncates exactly in an i32, and floor is the truncation
+                // less one when that rounded up.
+                let scaled = self.resolution_factor * c as f64;
+                let inside = (scaled >= -(KEY_CENTER as f64)) & (scaled < KEY_CENTER as f64);
+                let s = if inside { scaled } else { 0.0 };
+                let t = s as i32;
+                let floor = t - ((t as f64) > s) as i32;
+                let k = (floor + KEY_CENTER as i32) as u16;
+                end[a][i] = k;
+                key_steps[i] += ko.abs_diff(k) as u32;
+                ok[i] &= c.abs() < f32::INFINITY && inside;
+            }
+        }
+        let mut length = [0f32; B];
+        let mut length_sq = [0f32; B];
+        for i in 0..B {
+            let (x, y, z) = (diff[0][i], diff[1][i], diff[2][i]);
+            let sq = x * x + y * y + z * z;
+            length_sq[i] = sq;
+            let l = (sq as f64).sqrt() as f32;
+            length[i] = l;
+            let same_cell = (end[0][i] == self.origin_key[0])
+                & (end[1][i] == self.origin_key[1])
+                & (end[2][i] == self.origin_key[2]);
+            ok[i] &= (l > 0.0) & (l < f32::INFINITY) & !same_cell;
+        }
+        if let Some(r) = self.max_range_m {
+            for i in 0..B {
+                ok[i] &= (length_sq[i] as f64).sqrt() <= r;
+            }
+        }
+        let mut t_max = [[0f64; B]; 3];
+        let mut t_delta = [[0f64; B]; 3];
+        let mut step = [[0u16; B]; 3];
+        for a in 0..3 {
+            let [up, down] = self.to_border_m[a];
+            for i in 0..B {
+                let d = diff[a][i] / length[i];
+                ok[i] &= d.abs() < f32::INFINITY;
+                let d = d as f64;
+                let moving = d != 0.0;
+                let num = if d > 0.0 { up } else { down };
+                t_max[a][i] = if moving { num / d } else { f64::MAX };
+                t_delta[a][i] = if moving {
+                    self.resolution_m / d.abs()
+                } else {
+                    f64::MAX
+                };
+                step[a][i] = if d > 0.0 {
+                    1
+                } else if d < 0.0 {
+                    u16::MAX
+                } else {
+                    0
+                };
+            }
+        }
+        let mut plain = 0u64;
+        for i in 0..n {
+            walks[i] = RayWalk {
+                t_max: [t_max[0][i], t_max[1][i], t_max[2][i]],
+                t_delta: [t_delta[0][i], t_delta[1][i], t_delta[2][i]],
+                step: [step[0][i], step[1][i], step[2][i]],
+                key: self.origin_key,
+                end: [end[0][i], end[1][i], end[2][i]],
+                length: length[i] as f64,
+                steps_left: key_steps[i],
+            };
+            plain |= (ok[i] as u64) << i;
+        }
+        plain
+    }
+}
+
 /// The Morton code of cell `i` of a cube of `2^bits` cells a side, where
 /// `i = x | y << bits | z << 2 bits` (a table entry of a block whose cells are kept in Morton
 /// order).
@@ -332,7 +485,7 @@ impl RayStart {
 }
 
 /// A ray's 3D DDA walk in progress: OctoMap's `computeRayKeys` loop, one cell at a time.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub(crate) struct RayWalk {
     /// Ray parameter (m along the ray) of the next cell border on each axis.
     pub(crate) t_max: [f64; 3],
@@ -512,6 +665,79 @@ pub(crate) fn end_at_range(origin: [f32; 3], diff: [f32; 3], range_m: f64) -> [f
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Points around a few origins (ordinary ones, and NaN, infinities, huge values, the
+    /// origin itself, its cell, axis-aligned rays, points past the key range): every ray
+    /// [`Fan::starts`] calls plain starts exactly as [`Grid::ray_start_keyed`] starts it, ends
+    /// in a hit within the maximum range, and every ordinary ray is plain.
+    #[test]
+    fn fan_starts_plain_rays_as_one_ray_set_up_does() {
+        let mut rng = crate::link::Rng::new(23, 0);
+        let mut u = move || rng.next_u32() as f32 / u32::MAX as f32;
+        for (res, origin, range) in [
+            (0.1, [0.05f32, -0.3, 2.0], None),
+            (0.1, [0.1, 0.2, 0.3], Some(4.0)),
+            (0.05, [-7.33, 4.0, -1.25], Some(-1.0)),
+            (0.2, [3276.0, -3276.5, 0.0], None),
+        ] {
+            let grid = Grid::new(res);
+            let fan = Fan::new(&grid, origin, range).expect("origin inside the key range");
+            let mut pts: Vec<[f32; 3]> = (0..1000)
+                .map(|_| {
+                    let r = 0.02 + 8.0 * u();
+                    [0, 1, 2].map(|i| origin[i] + r * (2.0 * u() - 1.0))
+                })
+                .collect();
+            let ordinary = pts.len();
+            for odd in [
+                [f32::NAN, 0.0, 0.0],
+                [0.0, f32::INFINITY, 0.0],
+                [0.0, 0.0, f32::NEG_INFINITY],
+                [1e30, 0.0, 0.0],
+                [0.0, -1e30, 0.0],
+                [f32::MAX, f32::MAX, f32::MAX],
+                origin,
+                [origin[0] + 1e-7, origin[1], origin[2]],
+                [origin[0] + 3.0, origin[1], origin[2]],
+                [origin[0], origin[1] - 0.35, origin[2]],
+                [origin[0], origin[1], origin[2] + 9.0],
+                [origin[0] + 1e-30, origin[1] + 1e-30, origin[2] + 2.0],
+            ] {
+                pts.push(odd);
+            }
+            let (mut plain_count, mut ordinary_plain) = (0, 0);
+            for (c, chunk) in pts.chunks(FAN_BATCH - 3).enumerate() {
+                let mut walks = [RayWalk::default(); FAN_BATCH];
+                let plain = fan.starts(chunk, &mut walks);
+                assert_eq!(plain >> chunk.len(), 0, "no bit past the points");
+                for (i, &p) in chunk.iter().enumerate() {
+                    let start =
+                        grid.ray_start_keyed(grid.key_of(origin), grid.key_of(p), origin, p);
+                    let diff = [0, 1, 2].map(|a| p[a] - origin[a]);
+                    let within = range.is_none_or(|r| r < 0.0 || norm_f32(diff) <= r);
+                    if plain >> i & 1 == 1 {
+                        plain_count += 1;
+                        assert_eq!(start, RayStart::Walk(walks[i]), "point {p:?}");
+                        assert!(within, "point {p:?} beyond {range:?}");
+                        ordinary_plain += (c * (FAN_BATCH - 3) + i < ordinary) as usize;
+                    } else if c * (FAN_BATCH - 3) + i < ordinary {
+                        assert!(
+                            !within || !matches!(start, RayStart::Walk(_)),
+                            "ordinary point {p:?} not plain"
+                        );
+                    }
+                }
+            }
+            assert!(
+                ordinary_plain > ordinary / 3,
+                "{ordinary_plain} plain of {ordinary}"
+            );
+            assert!(
+                plain_count >= ordinary_plain + 3,
+                "axis-aligned rays are plain"
+            );
+        }
+    }
 
     #[test]
     fn default_params_are_octomaps_floats() {

@@ -499,10 +499,10 @@ impl OcTree {
         let mut start = 0;
         while start < ups.len() {
             let digit = ((ups[start].code >> shift) & 7) as usize;
-            let mut end = start + 1;
-            while end < ups.len() && ((ups[end].code >> shift) & 7) as usize == digit {
-                end += 1;
-            }
+            // The updates are in Morton order, so this node's digits are ascending: the run of
+            // `digit` is found by bisection (near the root it is the whole scan).
+            let end =
+                start + ups[start..].partition_point(|u| ((u.code >> shift) & 7) as usize == digit);
             let created = self.create_child(child_blk, digit);
             self.apply(child_blk, digit, depth + 1, &ups[start..end], created, log);
             start = end;
