@@ -381,7 +381,13 @@ impl<R: std::io::Read> Source for StreamSource<R> {
         &mut self,
         what: impl FnOnce() -> String,
     ) -> Result<[u8; N], ParseError> {
-        use std::io::Read;
+        use std::io::{BufRead, Read};
+        // Most records are whole in the buffer: copied from it without a read call.
+        if let Some(&chunk) = self.reader.buffer().first_chunk::<N>() {
+            self.reader.consume(N);
+            self.pos += N;
+            return Ok(chunk);
+        }
         let mut b = [0u8; N];
         let mut got = 0;
         while got < N {
