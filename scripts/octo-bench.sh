@@ -49,12 +49,17 @@ if [ -z "$graph" ]; then
     "$bin" synth ${scans:+--scans "$scans"} -o "$colored"
 fi
 measure() { # label, then the command; appends "label wall_s peak_kb insert_s" to $work/rows
+    # Wall time from the clock in nanoseconds around the run (/usr/bin/time's own is in 10 ms
+    # steps, too coarse for a 70 ms build); peak memory from /usr/bin/time.
     local label=$1; shift
-    /usr/bin/time -f "%e %M" -o "$work/time" "$@" >"$work/out" 2>"$work/err" || { cat "$work/err" >&2; exit 1; }
+    local t0 t1
+    t0=$(date +%s%N)
+    /usr/bin/time -f "%M" -o "$work/time" "$@" >"$work/out" 2>"$work/err" || { cat "$work/err" >&2; exit 1; }
+    t1=$(date +%s%N)
     local insert
     insert=$(grep -ho "time to insert scans: [0-9.e-]*" "$work/out" "$work/err" | awk '{print $5}' || true)
     [ -n "$insert" ] || insert=$(grep -ho "([0-9.]* s inserting)" "$work/err" | tr -d '(' | awk '{print $1}' || true)
-    echo "$label $(cat "$work/time") ${insert:-nan}" >> "$work/rows"
+    echo "$label $(awk -v a="$t0" -v b="$t1" 'BEGIN{printf "%.4f", (b - a) / 1e9}') $(cat "$work/time") ${insert:-nan}" >> "$work/rows"
 }
 : > "$work/rows"
 for res in ${resolutions//,/ }; do

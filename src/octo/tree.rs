@@ -54,6 +54,9 @@ pub use super::math::{
     probability, unmorton, world_points,
 };
 
+/// Updates below which a child's run is found by scanning rather than by bisection.
+const SHORT_RUN_SCAN: usize = 32;
+
 const NONE: u32 = u32::MAX;
 
 #[derive(Clone)]
@@ -499,10 +502,19 @@ impl OcTree {
         let mut start = 0;
         while start < ups.len() {
             let digit = ((ups[start].code >> shift) & 7) as usize;
-            // The updates are in Morton order, so this node's digits are ascending: the run of
-            // `digit` is found by bisection (near the root it is the whole scan).
-            let end =
-                start + ups[start..].partition_point(|u| ((u.code >> shift) & 7) as usize == digit);
+            // The updates are in Morton order, so this node's digits are ascending. Near the
+            // root the run of `digit` is the whole rest (one test); else it is found by a scan
+            // of a short rest, or by bisection of a long one.
+            let rest = &ups[start..];
+            let in_run = |u: &Upd| ((u.code >> shift) & 7) as usize == digit;
+            let run = if rest.last().is_some_and(in_run) {
+                rest.len()
+            } else if rest.len() <= SHORT_RUN_SCAN {
+                rest.iter().position(|u| !in_run(u)).unwrap_or(rest.len())
+            } else {
+                rest.partition_point(in_run)
+            };
+            let end = start + run;
             let created = self.create_child(child_blk, digit);
             self.apply(child_blk, digit, depth + 1, &ups[start..end], created, log);
             start = end;

@@ -76,22 +76,19 @@ fn build(a: &BuildArgs) -> Result<u8> {
         let built = pipeline::build(&cfg, &a.inputs, &mut out, &stream.name(), &mut hooks)?;
         bar.finish_and_clear();
         // Every output holds what was done, also when a signal stopped the build. The two
-        // map files are serialised side by side.
-        let (bt_bytes, ot_bytes) = std::thread::scope(|s| {
-            let ot_bytes = ot
+        // map files are serialised and committed (written, synced, renamed) side by side; the
+        // stream is committed once both are in place, so a failed map leaves no stream.
+        std::thread::scope(|s| -> Result<()> {
+            let tree = &built.tree;
+            let ot_job = ot
                 .as_ref()
-                .map(|_| s.spawn(|| files::write_ot(&built.tree)));
-            let bt_bytes = bt.as_ref().map(|_| files::write_bt(&built.tree));
-            let ot_bytes =
-                ot_bytes.map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
-            (bt_bytes, ot_bytes)
-        });
-        bt.zip(bt_bytes)
-            .map(|(d, b)| d.write_whole(&b))
-            .transpose()?;
-        ot.zip(ot_bytes)
-            .map(|(d, b)| d.write_whole(&b))
-            .transpose()?;
+                .map(|d| s.spawn(move || d.write_whole(&files::write_ot(tree))));
+            let bt_done = bt.as_ref().map(|d| d.write_whole(&files::write_bt(tree)));
+            let ot_done = ot_job.map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
+            bt_done.transpose()?;
+            ot_done.transpose()?;
+            Ok(())
+        })?;
         out.finish()?;
         Ok(built)
     })();
