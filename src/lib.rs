@@ -27,8 +27,9 @@
 //! - [`cli`]: the command-line layer the binaries share, and the only module that uses clap:
 //!   range-checked flag values, output claiming, row writers, the stop flag, progress, the
 //!   link-model and port flag groups.
-// One `unsafe` in the library, allowed where it stands: calling the AVX2 compilation of the
-// octree's ray walk after checking that the processor has AVX2 (`octo::cast`).
+// The only `unsafe` in the library, allowed where it stands: calling the AVX2 and AVX-512
+// compilations of the octree's ray walk after checking that the processor has those features
+// (`octo::cast`).
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 

@@ -242,13 +242,9 @@ impl ScanCaster {
                 .ray_start_keyed(origin_key, ray.end_key, origin, ray.end)
                 .walk_into(free);
             free.end_ray();
-            match (ray.hit, ray.end_key) {
-                (true, Some(k)) => {
-                    let color = color_slot(colors.and_then(|c| c.get(first + j)).copied());
-                    occ.push((morton(k), color));
-                }
-                (true, None) => skipped += 1,
-                (false, _) => beyond += 1,
+            if let Some(k) = ray.hit_cell(&mut skipped, &mut beyond) {
+                let color = color_slot(colors.and_then(|c| c.get(first + j)).copied());
+                occ.push((morton(k), color));
             }
         }
         Some((skipped, beyond))
@@ -516,7 +512,6 @@ impl ScanCaster {
         let mut rays = ShareRays {
             caster: self,
             fan: Fan::new(&self.grid, origin, max_range_m),
-            origin_key: self.grid.key_of(origin),
             pts,
             origin,
             max_range_m,
@@ -679,8 +674,6 @@ struct ShareRays<'a> {
     caster: &'a ScanCaster,
     /// The rays' shared set-up (`None`: the origin is outside the key range).
     fan: Option<Fan>,
-    /// The origin's cell.
-    origin_key: Option<Key>,
     pts: &'a [[f32; 3]],
     origin: [f32; 3],
     max_range_m: Option<f64>,
@@ -755,13 +748,11 @@ impl Iterator for ShareRays<'_> {
                 self.skipped += 1;
                 continue;
             };
-            match (ray.hit, ray.end_key) {
-                (true, Some(k)) => self.hits.insert(k),
-                (true, None) => self.skipped += 1,
-                (false, _) => self.beyond += 1,
+            if let Some(k) = ray.hit_cell(&mut self.skipped, &mut self.beyond) {
+                self.hits.insert(k);
             }
             let start = self.caster.grid.ray_start_keyed(
-                self.origin_key,
+                self.fan.map(|f| f.origin_key()),
                 ray.end_key,
                 self.origin,
                 ray.end,
@@ -790,6 +781,26 @@ struct RayEnd {
     end_key: Option<Key>,
     /// Whether the ray ends at the point (a hit) rather than at the maximum range.
     hit: bool,
+}
+
+impl RayEnd {
+    /// The cell of the ray's point when it is a hit inside the key range; otherwise the point
+    /// is counted in `skipped` (a hit outside the key range) or `beyond` (a ray cut at the
+    /// maximum range).
+    #[inline(always)]
+    fn hit_cell(&self, skipped: &mut usize, beyond: &mut usize) -> Option<Key> {
+        match (self.hit, self.end_key) {
+            (true, Some(k)) => Some(k),
+            (true, None) => {
+                *skipped += 1;
+                None
+            }
+            (false, _) => {
+                *beyond += 1;
+                None
+            }
+        }
+    }
 }
 
 /// How [`ScanCaster::prepare_lanes`] went.

@@ -206,6 +206,16 @@ impl Grid {
         ((k as i64 - KEY_CENTER) as f64 + 0.5) * self.resolution_m
     }
 
+    /// The first cell border a ray starting in cell `k` crosses on one axis, going up (`step`
+    /// 1.0) or down (-1.0): OctoMap's `keyToCoord(k) + (float) (step * resolution * 0.5)`, the
+    /// half cell rounded to `f32` as OctoMap rounds it.
+    #[inline(always)]
+    fn first_border_m(&self, k: u16, step: f64) -> f64 {
+        let mut border = self.key_to_coord(k);
+        border += (step * self.resolution_m * 0.5) as f32 as f64;
+        border
+    }
+
     /// The free cells of the ray from `origin` to `end` (OctoMap's `computeRayKeys`): from the
     /// origin's cell up to, not including, the end's cell. `false` when either end is outside
     /// the key range.
@@ -248,8 +258,7 @@ impl Grid {
                 step[i] = -1;
             }
             if step[i] != 0 {
-                let mut border = self.key_to_coord(ko[i]);
-                border += (step[i] as f64 * self.resolution_m * 0.5) as f32 as f64;
+                let border = self.first_border_m(ko[i], step[i] as f64);
                 t_max[i] = (border - origin[i] as f64) / dir[i];
                 t_delta[i] = self.resolution_m / dir[i].abs();
             }
@@ -300,11 +309,7 @@ impl Fan {
     pub(crate) fn new(grid: &Grid, origin: [f32; 3], max_range_m: Option<f64>) -> Option<Fan> {
         let origin_key = grid.key_of(origin)?;
         let to_border_m = [0, 1, 2].map(|i| {
-            [1.0f64, -1.0].map(|step| {
-                let mut border = grid.key_to_coord(origin_key[i]);
-                border += (step * grid.resolution_m * 0.5) as f32 as f64;
-                border - origin[i] as f64
-            })
+            [1.0, -1.0].map(|step| grid.first_border_m(origin_key[i], step) - origin[i] as f64)
         });
         Some(Fan {
             origin,
@@ -314,6 +319,11 @@ impl Fan {
             resolution_factor: grid.resolution_factor,
             max_range_m: max_range_m.filter(|r| *r >= 0.0),
         })
+    }
+
+    /// The sensor's cell, where every ray starts.
+    pub(crate) fn origin_key(&self) -> Key {
+        self.origin_key
     }
 
     /// The walks of the rays to the first [`FAN_BATCH`] points of `pts`, into `walks`: bit
