@@ -1,11 +1,9 @@
 //! Process-level tests of debt-encode and debt-decode: the built binaries through files and pipes.
 
-mod common;
+use crate::common::{run, testdata};
 
-use common::{run, testdata};
-
-const ENCODE: &str = env!("CARGO_BIN_EXE_debt-encode");
-const DECODE: &str = env!("CARGO_BIN_EXE_debt-decode");
+const ENCODE: &str = env!("TOOL_EXE_debt-encode");
+const DECODE: &str = env!("TOOL_EXE_debt-decode");
 
 fn load(bytes: &[u8]) -> image::DynamicImage {
     image::load_from_memory(bytes).expect("decoder output is an image")

@@ -2,20 +2,18 @@
 //! errors) and the real-time modes over pseudo-terminals (its own pair, and existing ports that
 //! vanish).
 
-mod common;
-
 use std::io::{BufRead, BufReader, Read, Write};
 use std::os::fd::AsFd;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::hostile::signal_once;
-use common::{open_pty, run};
+use crate::common::hostile::signal_once;
+use crate::common::{open_pty, run};
 use nix::sys::signal::Signal;
 use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
-use rovlink::wire::frame;
+use rovlink_wire::frame;
 
-const LINK_SIM: &str = env!("CARGO_BIN_EXE_link-sim");
+const LINK_SIM: &str = env!("TOOL_EXE_link-sim");
 
 /// `count` frames of `len` bytes each (5 bytes of header and CRC included), all different.
 fn frames(count: usize, len: usize) -> Vec<u8> {
@@ -27,7 +25,7 @@ fn frames(count: usize, len: usize) -> Vec<u8> {
     stream
 }
 
-fn pipe(args: &[&str], input: &[u8]) -> (common::Outcome, String) {
+fn pipe(args: &[&str], input: &[u8]) -> (crate::common::Outcome, String) {
     let dir = tempfile::tempdir().unwrap();
     let trace = dir.path().join("trace.csv");
     let mut all = args.to_vec();
@@ -337,7 +335,7 @@ fn read_exactly(file: &mut std::fs::File, n: usize, limit: Duration) -> Vec<u8> 
 /// said on stderr.
 fn terminate(child: &mut std::process::Child) -> String {
     signal_once(child, Signal::SIGTERM, &|| true, EXIT_LIMIT);
-    let status = common::wait_for_exit(child, EXIT_LIMIT);
+    let status = crate::common::wait_for_exit(child, EXIT_LIMIT);
     let mut stderr = String::new();
     child
         .stderr
@@ -350,8 +348,8 @@ fn terminate(child: &mut std::process::Child) -> String {
 }
 
 /// Starts link-sim in --pty mode with `args` and opens both sides raw: (child, A, B).
-fn start_pty(args: &[&str]) -> (common::Reaped, std::fs::File, std::fs::File) {
-    let (child, a_path, b_path) = common::link_sim_pty(args);
+fn start_pty(args: &[&str]) -> (crate::common::Reaped, std::fs::File, std::fs::File) {
+    let (child, a_path, b_path) = crate::common::link_sim_pty(args);
     (child, open_rw(&a_path), open_rw(&b_path))
 }
 
@@ -423,7 +421,7 @@ fn serial_ports_that_vanish_end_the_run_naming_the_side() {
     assert_eq!(read_exactly(&mut b, frame_a.len(), READ_LIMIT), frame_a);
 
     drop(master_a); // the modem on side A is unplugged
-    let status = common::wait_for_exit(&mut child, EXIT_LIMIT);
+    let status = crate::common::wait_for_exit(&mut child, EXIT_LIMIT);
     let mut rest = String::new();
     stderr.read_to_string(&mut rest).unwrap();
     assert_eq!(status.code(), Some(1), "{rest}");
@@ -486,7 +484,7 @@ fn udp_mode_carries_datagrams_as_frames() {
 
     signal_once(&mut child, Signal::SIGINT, &|| true, EXIT_LIMIT);
     assert_eq!(
-        common::wait_for_exit(&mut child, EXIT_LIMIT).code(),
+        crate::common::wait_for_exit(&mut child, EXIT_LIMIT).code(),
         Some(0)
     );
 }
@@ -528,7 +526,7 @@ fn sides_given_as_devices_mix_a_pty_and_udp() {
 
     signal_once(&mut child, Signal::SIGINT, &|| true, EXIT_LIMIT);
     assert_eq!(
-        common::wait_for_exit(&mut child, EXIT_LIMIT).code(),
+        crate::common::wait_for_exit(&mut child, EXIT_LIMIT).code(),
         Some(0)
     );
 }
@@ -559,7 +557,7 @@ fn raw_mode_cuts_packets_at_silence() {
     assert_eq!(read_exactly(&mut b, 6, READ_LIMIT), b"world!");
     signal_once(&mut child, Signal::SIGTERM, &|| true, EXIT_LIMIT);
     assert_eq!(
-        common::wait_for_exit(&mut child, EXIT_LIMIT).code(),
+        crate::common::wait_for_exit(&mut child, EXIT_LIMIT).code(),
         Some(0)
     );
     let trace = std::fs::read_to_string(&trace).unwrap();

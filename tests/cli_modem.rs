@@ -2,18 +2,16 @@
 //! through link-sim's pseudo-terminals (transparent and EvoLogics dialects), an echoing far end,
 //! and a port that vanishes mid-run.
 
-mod common;
-
 use std::io::{BufRead, BufReader, Read, Write};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::hostile::{lines_in, signal_once};
-use common::{open_pty, run};
+use crate::common::hostile::{lines_in, signal_once};
+use crate::common::{open_pty, run};
 use nix::sys::signal::Signal;
 
-const MODEM_BENCH: &str = env!("CARGO_BIN_EXE_modem-bench");
-const LINK_SIM: &str = env!("CARGO_BIN_EXE_link-sim");
+const MODEM_BENCH: &str = env!("TOOL_EXE_modem-bench");
+const LINK_SIM: &str = env!("TOOL_EXE_link-sim");
 
 fn rows(csv: &str) -> Vec<Vec<String>> {
     let mut lines = csv.lines();
@@ -151,12 +149,12 @@ const EXIT_LIMIT: Duration = Duration::from_secs(30);
 /// Ends a link-sim with SIGTERM, once it catches it.
 fn stop(child: &mut Child) {
     signal_once(child, Signal::SIGTERM, &|| true, EXIT_LIMIT);
-    common::wait_for_exit(child, EXIT_LIMIT);
+    crate::common::wait_for_exit(child, EXIT_LIMIT);
 }
 
 #[test]
 fn real_time_through_link_sim_measures_its_model() {
-    let (mut sim, a, b) = common::link_sim_pty(&["--model", "s100", "--jitter-ms", "0"]);
+    let (mut sim, a, b) = crate::common::link_sim_pty(&["--model", "s100", "--jitter-ms", "0"]);
     let out = run(
         MODEM_BENCH,
         &[
@@ -194,7 +192,7 @@ fn real_time_through_link_sim_measures_its_model() {
 
 #[test]
 fn the_evologics_dialect_works_end_to_end() {
-    let (mut sim, a, b) = common::link_sim_pty(&[
+    let (mut sim, a, b) = crate::common::link_sim_pty(&[
         "--model",
         "s2cr-burst",
         "--jitter-ms",
@@ -322,7 +320,7 @@ fn a_port_that_vanishes_keeps_the_rows_and_exits_1() {
         std::thread::sleep(Duration::from_millis(5));
     }
     drop(rx_master);
-    let status = common::wait_for_exit(&mut child, EXIT_LIMIT);
+    let status = crate::common::wait_for_exit(&mut child, EXIT_LIMIT);
     let mut stderr = String::new();
     child
         .stderr
@@ -392,7 +390,7 @@ fn udp_endpoints_through_link_sim() {
 fn ctrl_c_keeps_the_rows_and_writes_the_summary() {
     let dir = tempfile::tempdir().unwrap();
     let (csv, summary) = (dir.path().join("p.csv"), dir.path().join("s.json"));
-    let (mut sim, a, b) = common::link_sim_pty(&["--model", "s100", "--jitter-ms", "0"]);
+    let (mut sim, a, b) = crate::common::link_sim_pty(&["--model", "s100", "--jitter-ms", "0"]);
     let mut child = Command::new(MODEM_BENCH)
         .args(["--tx", &a, "--rx", &b, "--size", "20", "--count", "1000"])
         .args(["--interval", "100", "-o"])
@@ -411,7 +409,7 @@ fn ctrl_c_keeps_the_rows_and_writes_the_summary() {
         &rows_in,
         Duration::from_secs(60),
     );
-    let status = common::wait_for_exit(&mut child, EXIT_LIMIT);
+    let status = crate::common::wait_for_exit(&mut child, EXIT_LIMIT);
     stop(&mut sim);
     let mut stderr = String::new();
     child

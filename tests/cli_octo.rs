@@ -2,13 +2,11 @@
 //! compare_octrees, convert_octree, bt2vrml from Debian's octomap-tools, which `.ci/run`
 //! installs), the delta stream rebuilding the map's view, stats, the link, bad input.
 
-mod common;
-
 use std::path::Path;
 
-use common::{assert_kld_zero, octomap_tool, run};
+use crate::common::{assert_kld_zero, octomap_tool, run};
 
-const OCTO: &str = env!("CARGO_BIN_EXE_octo-delta");
+const OCTO: &str = env!("TOOL_EXE_octo-delta");
 const GEB079: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/testdata/maps/geb079.bt");
 const APPLE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/testdata/maps/apple.pcd");
 

@@ -1,11 +1,9 @@
 //! Process-level tests of rcp-pack and rcp-dump: the built binaries through pipes and files.
 
-mod common;
+use crate::common::{golden, run, testdata, vector_frames};
 
-use common::{golden, run, testdata, vector_frames};
-
-const PACK: &str = env!("CARGO_BIN_EXE_rcp-pack");
-const DUMP: &str = env!("CARGO_BIN_EXE_rcp-dump");
+const PACK: &str = env!("TOOL_EXE_rcp-pack");
+const DUMP: &str = env!("TOOL_EXE_rcp-dump");
 
 fn vectors_jsonl() -> Vec<u8> {
     std::fs::read(testdata("wire-vectors.jsonl")).unwrap()
@@ -36,7 +34,7 @@ fn dump_ndjson_packs_back_byte_for_byte() {
     assert_eq!(packed.code, 0, "{}", packed.stderr);
     // Every good frame of the noisy stream, in order, including the invalid message kept as raw.
     let frames = vector_frames();
-    let raw = rovlink::wire::frame::build(0, 1, &[0xaa, 0xbb, 0xcc]).unwrap();
+    let raw = rovlink_wire::frame::build(0, 1, &[0xaa, 0xbb, 0xcc]).unwrap();
     let expected = [
         &frames[0], &frames[1], &frames[2], &frames[3], &raw, &frames[4],
     ]
@@ -253,7 +251,7 @@ fn image_is_cut_into_trunks() {
         .iter()
         .map(|m| m["trunk"].as_str().unwrap().to_string())
         .collect();
-    assert_eq!(rovlink::wire::json::decode_hex(&joined).unwrap(), data);
+    assert_eq!(rovlink_wire::json::decode_hex(&joined).unwrap(), data);
     assert!(msgs.iter().all(|m| m["src"] == 2 && m["dst"] == 0));
     // The paper's PDU: 39-byte trunks give 57-byte frames.
     assert_eq!(out.stdout.len(), 57 * 2 + (5 + 13 + 22));

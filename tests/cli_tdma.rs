@@ -1,15 +1,13 @@
 //! tdma-run as a process: the built-in session, metrics and events files, waypoints from a file,
 //! bad input.
 
-mod common;
-
 use std::io::{BufRead, Read};
 use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
-use common::run;
+use crate::common::run;
 
-const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
+const TDMA_RUN: &str = env!("TOOL_EXE_tdma-run");
 
 /// How long a process may take to show a sign (a line, a byte) or to end when it should:
 /// only a hang takes this long, however loaded the machine.
@@ -256,7 +254,7 @@ fn the_two_ends_run_in_real_time_through_link_sim() {
     use std::process::{Command, Stdio};
     let dir = tempfile::tempdir().unwrap();
     let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
-    let (mut link, a, b) = common::link_sim_pty(&common::TEST_S100);
+    let (mut link, a, b) = crate::common::link_sim_pty(&crate::common::TEST_S100);
     let waypoints = path("wp.csv");
     std::fs::write(
         &waypoints,
@@ -313,7 +311,7 @@ fn the_two_ends_run_in_real_time_through_link_sim() {
         b"",
     );
     assert_eq!(op.code, 0, "{}", op.stderr);
-    let status = common::wait_for_exit(&mut rov, LIMIT);
+    let status = crate::common::wait_for_exit(&mut rov, LIMIT);
     let _ = link.kill();
     let _ = link.wait();
     assert!(status.success(), "ROV end: {status:?}: {}", rov_said.rest());
@@ -439,7 +437,7 @@ fn a_simulated_session_logs_to_mcap_and_track() {
 fn a_port_that_closes_ends_the_run_with_exit_1_and_keeps_the_outputs() {
     let dir = tempfile::tempdir().unwrap();
     let metrics = dir.path().join("m.json");
-    let (mut link, a, b) = common::link_sim_pty(&["--model", "s100"]);
+    let (mut link, a, b) = crate::common::link_sim_pty(&["--model", "s100"]);
     let mut op = std::process::Command::new(TDMA_RUN)
         .args(["--role", "operator", "--port", &a, "--duration", "60"])
         .args(["--metrics", metrics.to_str().unwrap()])
@@ -467,7 +465,7 @@ fn a_port_that_closes_ends_the_run_with_exit_1_and_keeps_the_outputs() {
     );
     let _ = link.kill();
     let _ = link.wait();
-    let status = common::wait_for_exit(&mut op, LIMIT);
+    let status = crate::common::wait_for_exit(&mut op, LIMIT);
     drop(far_end);
     assert_eq!(status.code(), Some(1), "{}", said.rest());
     let m = json(&metrics);

@@ -5,20 +5,18 @@
 //! garbage, cut connections and a stuck client break nothing; bad and busy addresses are
 //! errors; stopping is prompt.
 
-mod common;
-
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use base64::Engine;
-use rovlink::link::SimTime;
-use rovlink::rcp::foxglove::{self, LiveOrders, LiveView};
-use rovlink::rcp::orders::{Live, OrderSource};
-use rovlink::rcp::report::Observer;
-use rovlink::rcp::{Event, ImageSettings, PoseSample, Role};
-use rovlink::wire::Nav;
-use rovlink::wire::operator::Order;
+use rovlink_field::foxglove::{self, LiveOrders, LiveView};
+use rovlink_link::SimTime;
+use rovlink_rcp::orders::{Live, OrderSource};
+use rovlink_rcp::report::Observer;
+use rovlink_rcp::{Event, ImageSettings, PoseSample, Role};
+use rovlink_wire::Nav;
+use rovlink_wire::operator::Order;
 use serde_json::Value;
 
 const CLIENT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/foxglove/client.py");
@@ -108,8 +106,8 @@ fn pose(t_s: f64, position_m: [f64; 3], heading_deg: f64) -> PoseSample {
 
 /// A built-in picture's DEBT stream, as the ROV sends it, and the trunks it is cut in.
 fn image_stream() -> (Vec<u8>, Vec<Vec<u8>>) {
-    let picture = rovlink::rcp::test_image(160, 120, 3);
-    let trunks = rovlink::rcp::trunks_of(&picture, &ImageSettings::default());
+    let picture = rovlink_rcp::test_image(160, 120, 3);
+    let trunks = rovlink_rcp::trunks_of(&picture, &ImageSettings::default());
     (trunks.concat(), trunks)
 }
 
@@ -150,7 +148,7 @@ fn a_client_receives_poses_and_images_as_they_are_published() {
     );
     wait_for_clients(&view, 1);
     let (stream, trunks) = image_stream();
-    let before_ns = rovlink::rcp::mcap_log::wall_clock_ns();
+    let before_ns = rovlink_field::mcap_log::wall_clock_ns();
     let mut slowest_pose = Duration::ZERO;
     // Forty poses 50 ms apart, an image every tenth: counted, not timed, so that a slow
     // machine publishes them all.
@@ -199,7 +197,7 @@ fn a_client_receives_poses_and_images_as_they_are_published() {
         },
     );
     let seen = finish(child, &out, Duration::from_secs(15));
-    let after_ns = rovlink::rcp::mcap_log::wall_clock_ns();
+    let after_ns = rovlink_field::mcap_log::wall_clock_ns();
     eprintln!(
         "received {seen:.200}; 40 poses published and the last {repeats} times, slowest \
          Observer::pose {slowest_pose:?}"
@@ -297,7 +295,7 @@ fn a_teleop_twist_and_json_orders_come_out_as_live_orders() {
     let seen = finish(child, &out, Duration::from_secs(10));
     assert!(seen["published"].as_u64().unwrap() >= 3, "{seen}");
     let stick = Live::Joystick {
-        joystick: rovlink::rcp::operator::Joystick {
+        joystick: rovlink_rcp::operator::Joystick {
             vx: 50.0,
             vy: 0.0,
             vz: 0.0,
@@ -325,7 +323,7 @@ fn a_teleop_twist_and_json_orders_come_out_as_live_orders() {
     // The Teleop panel stops publishing when the button is released: the Twist holds for
     // TWIST_HOLD, then the joystick goes neutral.
     let released = Instant::now();
-    let neutral = Live::scripted_joystick(rovlink::rcp::operator::Joystick::default());
+    let neutral = Live::scripted_joystick(rovlink_rcp::operator::Joystick::default());
     let got = drain(&mut orders, Duration::from_secs(10), |got| {
         got.contains(&neutral)
     });
@@ -572,10 +570,10 @@ fn stopping_is_prompt_and_tells_the_clients() {
 
 #[test]
 fn an_operator_driven_from_foxglove_over_link_sim() {
-    const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
+    const TDMA_RUN: &str = env!("TOOL_EXE_tdma-run");
     let dir = tempfile::tempdir().unwrap();
     let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
-    let (mut link, a, b) = common::link_sim_pty(&common::TEST_S100);
+    let (mut link, a, b) = crate::common::link_sim_pty(&crate::common::TEST_S100);
     let mut rov = Command::new(TDMA_RUN)
         .args(["--role", "rov", "--port", &b, "--duration", "14"])
         .args(["--image-size", "400", "--metrics", &path("rov.json")])
@@ -584,12 +582,12 @@ fn an_operator_driven_from_foxglove_over_link_sim() {
         .spawn()
         .unwrap();
     // The operator starts once the ROV listens on its port (it says so), not after a guess.
-    let rov_said = common::said_until(
+    let rov_said = crate::common::said_until(
         &mut rov,
         "ROV: answering every slot",
         Duration::from_secs(30),
     );
-    let port = common::free_port().to_string();
+    let port = crate::common::free_port().to_string();
     let address = format!("127.0.0.1:{port}");
     let mut operator = Command::new(TDMA_RUN)
         .args(["--role", "operator", "--port", &a, "--ipg", "150"])
@@ -610,8 +608,8 @@ fn an_operator_driven_from_foxglove_over_link_sim() {
         .spawn()
         .unwrap();
     let seen = finish(seen_by, &out, Duration::from_secs(20));
-    let operator_status = common::wait_for_exit(&mut operator, Duration::from_secs(20));
-    let rov_status = common::wait_for_exit(&mut rov, Duration::from_secs(20));
+    let operator_status = crate::common::wait_for_exit(&mut operator, Duration::from_secs(20));
+    let rov_status = crate::common::wait_for_exit(&mut rov, Duration::from_secs(20));
     let _ = link.kill();
     let _ = link.wait();
     let mut stderr = String::new();

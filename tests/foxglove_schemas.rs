@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
 
-const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
+const TDMA_RUN: &str = env!("TOOL_EXE_tdma-run");
 const CHECK: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/tests/foxglove/check_schemas.py"

@@ -7,14 +7,12 @@
 //! subscriber gets the latest at once), messages on every channel the session feeds, and
 //! publish a GoTo that the ROV acknowledges.
 
-mod common;
-
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use serde_json::Value;
 
-const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
+const TDMA_RUN: &str = env!("TOOL_EXE_tdma-run");
 #[test]
 fn stock_and_sdk_clients_see_a_still_vehicle_at_once_and_drive_it() {
     let dir = tempfile::tempdir().unwrap();
@@ -24,14 +22,14 @@ fn stock_and_sdk_clients_see_a_still_vehicle_at_once_and_drive_it() {
         "t_s,vx,vy,vz,vyaw\n0,0,0,0,0\n",
     )
     .unwrap();
-    let (mut link, a, b) = common::link_sim_pty(&common::TEST_S100);
+    let (mut link, a, b) = crate::common::link_sim_pty(&crate::common::TEST_S100);
     let mut rov = Command::new(TDMA_RUN)
         .args(["--role", "rov", "--port", &b, "--duration", "30"])
         .args(["--image-size", "400", "--metrics", &path("rov.json")])
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let address = format!("127.0.0.1:{}", common::free_port());
+    let address = format!("127.0.0.1:{}", crate::common::free_port());
     let mut operator = Command::new(TDMA_RUN)
         .args(["--role", "operator", "--port", &a, "--ipg", "150"])
         .args(["--duration", "18", "--image-size", "400", "--script"])
@@ -62,11 +60,11 @@ fn stock_and_sdk_clients_see_a_still_vehicle_at_once_and_drive_it() {
             "--seconds",
             "6",
         ];
-        let seen = common::stock_client(&[&args[..], &["--publish-order", &order]].concat());
+        let seen = crate::common::stock_client(&[&args[..], &["--publish-order", &order]].concat());
         (subprotocol, seen)
     });
-    let operator_status = common::wait_for_exit(&mut operator, Duration::from_secs(30));
-    let rov_status = common::wait_for_exit(&mut rov, Duration::from_secs(30));
+    let operator_status = crate::common::wait_for_exit(&mut operator, Duration::from_secs(30));
+    let rov_status = crate::common::wait_for_exit(&mut rov, Duration::from_secs(30));
     let _ = link.kill();
     let _ = link.wait();
     let mut rest = String::new();

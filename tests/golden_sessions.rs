@@ -8,15 +8,13 @@
 //! `sha256sum`. A change that is meant must be recorded (`UPDATE_GOLDEN=1 cargo test --test
 //! golden_sessions`) and said in the commit that makes it.
 
-mod common;
-
 use std::fmt::Write as _;
 use std::path::Path;
 use std::process::Command;
 
 use sha2::{Digest, Sha256};
 
-const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
+const TDMA_RUN: &str = env!("TOOL_EXE_tdma-run");
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
 
 /// The paper's recovery scenario (scripts/recovery.sh): a GoTo out of the S100's range.
@@ -132,7 +130,7 @@ fn simulated_sessions_give_their_recorded_bytes() {
         let dir = tempfile::tempdir().unwrap();
         report.push_str(&record(name, &args, dir.path()));
     }
-    common::golden("sessions.txt", &report);
+    crate::common::golden("sessions.txt", &report);
 }
 
 /// A one-vehicle network read from a scenario file: the single session of the same settings.

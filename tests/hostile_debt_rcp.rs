@@ -3,23 +3,21 @@
 //! closed pipe, and the issue-14 defects of these tools. Every run must end by itself with
 //! 0, 1 or 2 (130/143 when interrupted), never a panic or a signal, and leave no temporary file.
 
-mod common;
-
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use common::hostile::{
+use crate::common::hostile::{
     BAD_NUMBERS, Run, SignalWhen, Stdin, assert_contract, assert_whole_csv, garbage, head_one,
     run_in, signal_when, signalled_on_a_silent_pipe, temp_files,
 };
-use common::testdata;
+use crate::common::testdata;
 use nix::sys::signal::Signal;
 
-const ENCODE: &str = env!("CARGO_BIN_EXE_debt-encode");
-const DECODE: &str = env!("CARGO_BIN_EXE_debt-decode");
-const PACK: &str = env!("CARGO_BIN_EXE_rcp-pack");
-const DUMP: &str = env!("CARGO_BIN_EXE_rcp-dump");
+const ENCODE: &str = env!("TOOL_EXE_debt-encode");
+const DECODE: &str = env!("TOOL_EXE_debt-decode");
+const PACK: &str = env!("TOOL_EXE_rcp-pack");
+const DUMP: &str = env!("TOOL_EXE_rcp-dump");
 const LIMIT: Duration = Duration::from_secs(30);
 /// How long a reader of a silent pipe is left blocked before it is signalled.
 const WAIT: Duration = Duration::from_millis(700);
@@ -377,7 +375,7 @@ fn sigterm_stops_a_sweep_with_whole_rows() {
 #[test]
 fn a_live_capture_ends_0_on_sigterm_and_1_when_the_port_closes() {
     let s = Scratch::new();
-    let (master, path) = common::open_pty();
+    let (master, path) = crate::common::open_pty();
     // A silent port: signalled once the capture has begun (it says so).
     let run = signal_when(
         s.dir.path(),
@@ -411,8 +409,10 @@ fn a_live_capture_ends_0_on_sigterm_and_1_when_the_port_closes() {
     );
     drop(master);
     // A pseudo-terminal whose other side has gone: the port closes at once, exit 1.
-    let (mut master, path) = common::open_pty();
-    master.write_all(&common::vector_frames()[1]).unwrap();
+    let (mut master, path) = crate::common::open_pty();
+    master
+        .write_all(&crate::common::vector_frames()[1])
+        .unwrap();
     let mut child = std::process::Command::new(DUMP)
         .args(["--port", &path, "-q", "-f", "ndjson"])
         .stdout(std::process::Stdio::piped())
@@ -428,7 +428,7 @@ fn a_live_capture_ends_0_on_sigterm_and_1_when_the_port_closes() {
     .unwrap();
     assert!(line.starts_with('{'), "{line}");
     drop(master);
-    let status = common::wait_for_exit(&mut child, LIMIT);
+    let status = crate::common::wait_for_exit(&mut child, LIMIT);
     assert_eq!(status.code(), Some(1));
     for bad in ["tcp:127.0.0.1:1", "udp:nonsense", "udp:127.0.0.1:0=x"] {
         s.check(DUMP, &["--port", bad], b"", &[2]);
@@ -533,7 +533,7 @@ fn issue_14_defects_stay_fixed() {
 fn rcp_dump_reads_tcp_and_udp_ports() {
     use std::io::Read;
     use std::process::{Command, Stdio};
-    let frames = common::vector_frames();
+    let frames = crate::common::vector_frames();
     // TCP: the console closes after the frames: everything printed, exit 1 (port closed).
     let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let device = format!("tcp:{}", listener.local_addr().unwrap());
@@ -548,7 +548,7 @@ fn rcp_dump_reads_tcp_and_udp_ports() {
         console.write_all(f).unwrap();
     }
     drop(console);
-    let status = common::wait_for_exit(&mut child, LIMIT);
+    let status = crate::common::wait_for_exit(&mut child, LIMIT);
     let mut out = String::new();
     child
         .stdout
@@ -597,7 +597,7 @@ fn rcp_dump_reads_tcp_and_udp_ports() {
         Signal::SIGINT,
     )
     .unwrap();
-    let status = common::wait_for_exit(&mut child, LIMIT);
+    let status = crate::common::wait_for_exit(&mut child, LIMIT);
     stdout.read_to_string(&mut out).unwrap();
     let mut err = String::new();
     stderr.read_to_string(&mut err).unwrap();

@@ -3,15 +3,13 @@
 //! 2^64 (whatever the flag allows, the run ends by itself with 0, 1 or 2 and never panics).
 //! A flag added later is swept without touching this file.
 
-mod common;
-
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-use common::hostile::{Run, assert_contract, run_in};
-use common::testdata;
+use crate::common::hostile::{Run, assert_contract, run_in};
+use crate::common::testdata;
 
 /// Value names that are not numbers (paths, names, choices).
 const NOT_NUMERIC: [&str; 16] = [
@@ -116,84 +114,84 @@ fn cases(fixtures: &Path) -> Vec<Case> {
     let xyz = p(fixtures.join("x.xyz"));
     vec![
         Case {
-            bin: env!("CARGO_BIN_EXE_rcp-pack"),
+            bin: env!("TOOL_EXE_rcp-pack"),
             sub: None,
             base: s(&["-o", "out.bin"]),
             stdin: jsonl,
             outputs: vec!["out.bin"],
         },
         Case {
-            bin: env!("CARGO_BIN_EXE_rcp-dump"),
+            bin: env!("TOOL_EXE_rcp-dump"),
             sub: None,
             base: s(&["-o", "out.txt"]),
             stdin: frames.clone(),
             outputs: vec!["out.txt"],
         },
         Case {
-            bin: env!("CARGO_BIN_EXE_debt-encode"),
+            bin: env!("TOOL_EXE_debt-encode"),
             sub: None,
             base: s(&[&png, "-b", "300", "--roi", "0,0,32,24", "-o", "out.debt"]),
             stdin: Vec::new(),
             outputs: vec!["out.debt"],
         },
         Case {
-            bin: env!("CARGO_BIN_EXE_debt-decode"),
+            bin: env!("TOOL_EXE_debt-decode"),
             sub: None,
             base: s(&[&debt, "-o", "out.png"]),
             stdin: Vec::new(),
             outputs: vec!["out.png"],
         },
         Case {
-            bin: env!("CARGO_BIN_EXE_link-sim"),
+            bin: env!("TOOL_EXE_link-sim"),
             sub: None,
             base: s(&["--trace", "trace.csv"]),
             stdin: frames,
             outputs: vec!["trace.csv"],
         },
         Case {
-            bin: env!("CARGO_BIN_EXE_modem-bench"),
+            bin: env!("TOOL_EXE_modem-bench"),
             sub: None,
             base: s(&["--sim", "s100", "--count", "20", "-o", "p.csv"]),
             stdin: Vec::new(),
             outputs: vec!["p.csv"],
         },
         Case {
-            bin: env!("CARGO_BIN_EXE_tdma-run"),
+            bin: env!("TOOL_EXE_tdma-run"),
             sub: None,
             base: s(&["--duration", "5", "--metrics", "m.json"]),
             stdin: Vec::new(),
             outputs: vec!["m.json"],
         },
         Case {
-            bin: env!("CARGO_BIN_EXE_octo-delta"),
+            bin: env!("TOOL_EXE_octo-delta"),
             sub: Some("build"),
             base: s(&[&xyz, "--origin", "0,0,0", "-o", "out.odl"]),
             stdin: Vec::new(),
             outputs: vec!["out.odl"],
         },
         Case {
-            bin: env!("CARGO_BIN_EXE_octo-delta"),
+            bin: env!("TOOL_EXE_octo-delta"),
             sub: Some("apply"),
             base: s(&[&odl, "-o", "view.ot"]),
             stdin: Vec::new(),
             outputs: vec!["view.ot"],
         },
         Case {
-            bin: env!("CARGO_BIN_EXE_octo-delta"),
+            bin: env!("TOOL_EXE_octo-delta"),
             sub: Some("full"),
             base: s(&[&ot, "-o", "full.odl"]),
             stdin: Vec::new(),
             outputs: vec!["full.odl"],
         },
         Case {
-            bin: env!("CARGO_BIN_EXE_octo-delta"),
+            bin: env!("TOOL_EXE_octo-delta"),
             sub: Some("dump"),
             base: s(&[&odl]),
             stdin: Vec::new(),
             outputs: vec![],
         },
         Case {
-            bin: env!("CARGO_BIN_EXE_octo-delta"),
+            bin: env!("TOOL_EXE_octo-delta"),
             sub: Some("synth"),
             base: s(&["--scans", "1", "-o", "s.graph"]),
             stdin: Vec::new(),
@@ -213,7 +211,7 @@ fn make_fixtures(dir: &Path) {
     };
     let png = testdata("kodim23-64x48.png");
     ok(
-        Command::new(env!("CARGO_BIN_EXE_debt-encode"))
+        Command::new(env!("TOOL_EXE_debt-encode"))
             .arg(&png)
             .args(["-b", "300", "-o"])
             .arg(dir.join("x.debt"))
@@ -223,7 +221,7 @@ fn make_fixtures(dir: &Path) {
     );
     std::fs::write(dir.join("x.xyz"), "1 0 0\n0 1 0\n0.5 0.5 0.2\n").unwrap();
     ok(
-        Command::new(env!("CARGO_BIN_EXE_octo-delta"))
+        Command::new(env!("TOOL_EXE_octo-delta"))
             .arg("build")
             .arg(dir.join("x.xyz"))
             .args(["--origin", "0,0,0", "-o"])

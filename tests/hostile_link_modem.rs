@@ -6,23 +6,21 @@
 //! one-line error on exit 2 with no output file left; interrupted runs leave whole CSV rows,
 //! valid JSON marked as interrupted, and no temporary file.
 
-mod common;
-
 use std::io::Write;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::hostile::{
+use crate::common::hostile::{
     BAD_NUMBERS, Run, SignalWhen, Stdin, assert_contract, assert_whole_csv, garbage, head_one, run,
     run_in, signal_once, signal_when, temp_files,
 };
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
-use rovlink::wire::frame;
+use rovlink_wire::frame;
 
-const LINK_SIM: &str = env!("CARGO_BIN_EXE_link-sim");
-const MODEM_BENCH: &str = env!("CARGO_BIN_EXE_modem-bench");
+const LINK_SIM: &str = env!("TOOL_EXE_link-sim");
+const MODEM_BENCH: &str = env!("TOOL_EXE_modem-bench");
 const LIMIT: Duration = Duration::from_secs(20);
 
 /// `count` wire.md frames of 20 bytes, all different.
@@ -367,7 +365,7 @@ fn link_sim_pipe_stops_at_a_signal_while_its_input_is_silent() {
     signal_once(
         &mut child,
         Signal::SIGTERM,
-        &|| common::hostile::lines_in(&trace) == 4,
+        &|| crate::common::hostile::lines_in(&trace) == 4,
         LIMIT,
     );
     let started = Instant::now();

@@ -6,22 +6,20 @@
 //! or a signal death, never a hang; exit 2 is one line naming the file or the flag and leaves
 //! no output file; an interrupted build leaves whole, valid outputs and no temporary file.
 
-mod common;
-
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus, Stdio};
 use std::time::Duration;
 
-use common::hostile::{
+use crate::common::hostile::{
     Run, assert_contract, assert_whole_csv, garbage, head_one, lines_in, run, run_in, signal_once,
     temp_files,
 };
 use nix::sys::signal::Signal;
-use rovlink::octo::cloud::{PcdData, write_pcd, write_ply, write_xyz};
-use rovlink::octo::{Pose, Scan};
+use rovlink_octo::cloud::{PcdData, write_pcd, write_ply, write_xyz};
+use rovlink_octo::{Pose, Scan};
 
-const OCTO: &str = env!("CARGO_BIN_EXE_octo-delta");
+const OCTO: &str = env!("TOOL_EXE_octo-delta");
 const LIMIT: Duration = Duration::from_secs(60);
 
 fn s(p: &Path) -> &str {
@@ -256,7 +254,7 @@ fn outputs_that_are_inputs_are_refused_and_the_input_is_untouched() {
     fixtures(dir.path());
     let d = dir.path();
     std::os::unix::fs::symlink(d.join("c.xyz"), d.join("link.xyz")).unwrap();
-    let model = rovlink::link::Model::preset("satellite-up").unwrap();
+    let model = rovlink_link::Model::preset("satellite-up").unwrap();
     std::fs::write(d.join("model.json"), model.to_json()).unwrap();
     let cases: Vec<(Vec<&str>, &str)> = vec![
         (vec!["build", "c.xyz", "-o", "c.xyz"], "c.xyz"),
@@ -410,7 +408,7 @@ fn interrupted_build(dir: &Path, signal: Signal) -> (Option<i32>, String) {
     let said = std::thread::spawn(move || std::io::read_to_string(stderr).unwrap_or_default());
     let stats = dir.join("i.csv");
     signal_once(&mut child, signal, &|| lines_in(&stats) >= 3, LIMIT);
-    let status = common::wait_for_exit(&mut child, LIMIT);
+    let status = crate::common::wait_for_exit(&mut child, LIMIT);
     (status.code(), said.join().unwrap())
 }
 
@@ -465,7 +463,7 @@ fn signalled_while_reading_a_silent_pipe(
     let pid = child.id();
     let waiting = || writing.is_finished() && blocked_reading_a_pipe(pid);
     signal_once(&mut child, Signal::SIGTERM, &waiting, LIMIT);
-    let status = common::wait_for_exit(&mut child, LIMIT);
+    let status = crate::common::wait_for_exit(&mut child, LIMIT);
     drop(writing.join().unwrap());
     (status, said.join().unwrap())
 }

@@ -4,27 +4,25 @@
 //! a long simulation; `| head -1`. Exit codes 0, 1, 2 (130/143 when interrupted), never a panic
 //! or a signal death, never a hang; no output file left on exit 2, no temporary file ever.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use common::hostile::{
+use crate::common::hostile::{
     BAD_NUMBERS, SignalWhen, Stdin, assert_contract, assert_whole_csv, garbage, head_one, lines_in,
     run, run_in, signal_once, signal_when, temp_files,
 };
 use nix::sys::signal::Signal;
 
-const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
+const TDMA_RUN: &str = env!("TOOL_EXE_tdma-run");
 const LIMIT: Duration = Duration::from_secs(60);
 
-fn tdma(args: &[&str]) -> common::hostile::Run {
+fn tdma(args: &[&str]) -> crate::common::hostile::Run {
     run(TDMA_RUN, args, b"", LIMIT)
 }
 
 /// A PNG of `width` x `height` grey-blue pixels.
 fn png(width: usize, height: usize) -> Vec<u8> {
-    rovlink::debt::picture::to_png(&rovlink::debt::Image {
+    rovlink_debt::picture::to_png(&rovlink_debt::Image {
         width,
         height,
         channels: 3,
@@ -166,7 +164,7 @@ fn a_picture_wider_than_debt_holds_is_scaled_down_and_a_huge_one_refused() {
 #[test]
 fn empty_random_and_truncated_inputs() {
     let dir = tempfile::tempdir().unwrap();
-    let kodim = std::fs::read(common::testdata("kodim23-64x48.png")).unwrap();
+    let kodim = std::fs::read(crate::common::testdata("kodim23-64x48.png")).unwrap();
     let inputs = [
         ("empty", Vec::new()),
         ("random", garbage(4096, 14)),
@@ -362,7 +360,7 @@ fn interrupted(signal: Signal, code: i32) {
     if let Ok(entries) = std::fs::read_dir(dir.path().join("received")) {
         for entry in entries {
             let bytes = std::fs::read(entry.unwrap().path()).unwrap();
-            rovlink::debt::picture::from_bytes("received", &bytes).unwrap();
+            rovlink_debt::picture::from_bytes("received", &bytes).unwrap();
         }
     }
 }
@@ -439,14 +437,14 @@ fn memory_stays_flat_at_the_shortest_ipg() {
     wait_for(5000);
     let late = rss_kb(child.id());
     signal_once(&mut child, Signal::SIGTERM, &|| true, LIMIT);
-    let status = common::wait_for_exit(&mut child, LIMIT);
+    let status = crate::common::wait_for_exit(&mut child, LIMIT);
     assert_eq!(status.code(), Some(143));
     assert!(late < early + 2048, "{early} kB, 3 s later {late} kB");
 }
 
 #[test]
 fn ctrl_c_ends_a_real_time_run_with_exit_0_and_its_summary() {
-    let (_master, slave) = common::open_pty();
+    let (_master, slave) = crate::common::open_pty();
     let dir = tempfile::tempdir().unwrap();
     // Real time on a silent port: signalled once the handler is in place.
     let out = signal_when(

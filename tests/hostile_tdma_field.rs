@@ -2,16 +2,14 @@
 //! promptly, and a signal is obeyed even while the run waits on an order FIFO or a camera
 //! command.
 
-mod common;
-
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::hostile::signal_once;
+use crate::common::hostile::signal_once;
 use nix::sys::signal::Signal;
-use rovlink::rcp::camera::COMMAND_TIMEOUT_S;
+use rovlink_rcp::camera::COMMAND_TIMEOUT_S;
 
-const BIN: &str = env!("CARGO_BIN_EXE_tdma-run");
+const BIN: &str = env!("TOOL_EXE_tdma-run");
 
 /// How long a run may take to show the sign a test waits for, or to end when it has nothing
 /// left to wait for: only a hang takes this long, however loaded the machine.

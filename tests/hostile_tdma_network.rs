@@ -6,18 +6,16 @@
 //! flags; SIGTERM and SIGINT mid-run. Exit 0, 1 or 2 (143/130 on signals), never a panic or a
 //! hang; an error is one line naming the file and the field.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use common::hostile::{
+use crate::common::hostile::{
     Run, SignalWhen, Stdin, assert_contract, garbage, head_one, run, signal_when, temp_files,
 };
 use nix::sys::signal::Signal;
 use serde_json::{Value, json};
 
-const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
+const TDMA_RUN: &str = env!("TOOL_EXE_tdma-run");
 const LIMIT: Duration = Duration::from_secs(30);
 
 /// The three-node scenario, 60 s long.

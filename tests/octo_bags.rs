@@ -8,15 +8,13 @@
 //! `.ci/run` installs the Python packages (pip) and OctoMap's tools (apt); without them these
 //! tests fail saying what to install.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
-use common::{assert_kld_zero, octomap_tool, run};
+use crate::common::{assert_kld_zero, octomap_tool, run};
 
-const OCTO: &str = env!("CARGO_BIN_EXE_octo-delta");
+const OCTO: &str = env!("TOOL_EXE_octo-delta");
 const WRITER: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/bags/survey_bag.py");
 const RES: &str = "0.2";
 
@@ -82,7 +80,7 @@ fn write_bag(dir: &Path, kind: &str, extra: &[&str]) -> PathBuf {
 }
 
 /// Builds `input`'s map (no colour, .bt) with `flags`; returns the outcome and the .bt path.
-fn build(dir: &Path, input: &Path, flags: &[&str]) -> (common::Outcome, PathBuf) {
+fn build(dir: &Path, input: &Path, flags: &[&str]) -> (crate::common::Outcome, PathBuf) {
     let bt = dir.join("ours.bt");
     let _ = std::fs::remove_file(&bt);
     let mut args = vec!["build", s(input), "--res", RES, "-q", "-o"];
@@ -95,7 +93,7 @@ fn build(dir: &Path, input: &Path, flags: &[&str]) -> (common::Outcome, PathBuf)
 }
 
 /// The map of `input` is graph2tree's: same .bt bytes, KLD 0.
-fn assert_same_map(dir: &Path, input: &Path, flags: &[&str], what: &str) -> common::Outcome {
+fn assert_same_map(dir: &Path, input: &Path, flags: &[&str], what: &str) -> crate::common::Outcome {
     let (out, bt) = build(dir, input, flags);
     assert_eq!(out.code, 0, "{what}: {}", out.stderr);
     let ours = std::fs::read(&bt).unwrap();

@@ -4,20 +4,18 @@
 //! operator got it, and the scene at the end is the applied `.ot` view, voxel for voxel, fine
 //! and coarse apart. Bad arrivals files and bad outputs: exit 2, one line, no file.
 
-mod common;
-
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-use common::hostile::{self, assert_contract};
-use common::run;
-use rovlink::octo::delta::{self, ViewSpec};
-use rovlink::octo::files;
-use rovlink::octo::tree::{Key, TREE_DEPTH, morton, unmorton};
+use crate::common::hostile::{self, assert_contract};
+use crate::common::run;
+use rovlink_octo::delta::{self, ViewSpec};
+use rovlink_octo::files;
+use rovlink_octo::tree::{Key, TREE_DEPTH, morton, unmorton};
 
-const OCTO: &str = env!("CARGO_BIN_EXE_octo-delta");
+const OCTO: &str = env!("TOOL_EXE_octo-delta");
 const CHECK: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/octo_view/check_view.py");
 const ROI: &str = "0,-12,-5,14,12,5";
 

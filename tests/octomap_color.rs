@@ -5,15 +5,13 @@
 //! The structure must also be the `OcTree`'s of the same scans (graph2tree's, `compare_octrees`
 //! KLD 0), and a `ColorOcTree` `.bt` (what `convert_octree` writes) must be readable.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::{assert_kld_zero, octomap_tool, run};
-use rovlink::octo::synth::{SurveyParams, survey};
+use crate::common::{assert_kld_zero, octomap_tool, run};
+use rovlink_octo::synth::{SurveyParams, survey};
 
-const OCTO: &str = env!("CARGO_BIN_EXE_octo-delta");
+const OCTO: &str = env!("TOOL_EXE_octo-delta");
 
 fn s(p: &Path) -> &str {
     p.to_str().expect("UTF-8 path")

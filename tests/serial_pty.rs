@@ -4,15 +4,13 @@
 //! on its own when the port closes, with exit code 1 (the README's "a port it was using
 //! closed"); Ctrl-C is the normal end of a capture, exit 0.
 
-mod common;
-
 use std::io::{BufRead, BufReader, Read, Write};
 use std::process::{Child, ChildStderr, Command, Stdio};
 use std::time::Duration;
 
-use common::open_pty;
+use crate::common::open_pty;
 
-const DUMP: &str = env!("CARGO_BIN_EXE_rcp-dump");
+const DUMP: &str = env!("TOOL_EXE_rcp-dump");
 
 /// Starts `rcp-dump --port PATH --format FORMAT` and waits until it says it is reading.
 fn start_dump(path: &str, format: &str) -> (Child, BufReader<ChildStderr>) {
@@ -37,7 +35,7 @@ fn dump_reads_frames_from_a_pseudo_terminal() {
     let (mut master, path) = open_pty();
     let (mut child, mut stderr) = start_dump(&path, "ndjson");
 
-    let frames = common::vector_frames();
+    let frames = crate::common::vector_frames();
     let mut stream = vec![0x00, 0x13, 0x02, 0xff];
     for f in &frames {
         stream.extend(f);
@@ -86,7 +84,7 @@ fn false_preamble_is_given_up_when_the_line_goes_idle() {
     let (mut master, path) = open_pty();
     let (mut child, mut stderr) = start_dump(&path, "ndjson");
     // 0x55 0x02 0xff announces a 255-byte payload; the real frame behind it is only 16 bytes.
-    let frame = &common::vector_frames()[1];
+    let frame = &crate::common::vector_frames()[1];
     // Timed from before the bytes are written: rcp-dump cannot have read them (and started
     // its idle time) earlier, however late this thread runs after the writes.
     let started = std::time::Instant::now();
@@ -113,12 +111,14 @@ fn false_preamble_is_given_up_when_the_line_goes_idle() {
 
 #[test]
 fn dump_stops_cleanly_on_ctrl_c_with_its_summary() {
-    use common::hostile::signal_once;
+    use crate::common::hostile::signal_once;
     use nix::sys::signal::Signal;
 
     let (mut master, path) = open_pty();
     let (mut child, mut stderr) = start_dump(&path, "csv");
-    master.write_all(&common::vector_frames()[1]).unwrap();
+    master
+        .write_all(&crate::common::vector_frames()[1])
+        .unwrap();
     let mut stdout = BufReader::new(child.stdout.take().unwrap());
     let mut out = String::new();
     stdout.read_line(&mut out).unwrap();
@@ -151,8 +151,8 @@ fn pack_refuses_binary_to_a_terminal() {
         .write(true)
         .open(&path)
         .expect("open the terminal side");
-    let out = Command::new(env!("CARGO_BIN_EXE_rcp-pack"))
-        .arg(common::testdata("wire-vectors.jsonl"))
+    let out = Command::new(env!("TOOL_EXE_rcp-pack"))
+        .arg(crate::common::testdata("wire-vectors.jsonl"))
         .stdout(tty)
         .stderr(Stdio::piped())
         .output()
@@ -165,10 +165,12 @@ fn pack_refuses_binary_to_a_terminal() {
     );
     // Hex is text: allowed on a terminal.
     let tty = std::fs::OpenOptions::new().write(true).open(&path).unwrap();
-    let status = Command::new(env!("CARGO_BIN_EXE_rcp-pack"))
+    let status = Command::new(env!("TOOL_EXE_rcp-pack"))
         .args([
             "--hex",
-            common::testdata("wire-vectors.jsonl").to_str().unwrap(),
+            crate::common::testdata("wire-vectors.jsonl")
+                .to_str()
+                .unwrap(),
         ])
         .stdout(tty)
         .status()

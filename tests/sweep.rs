@@ -4,25 +4,23 @@
 //! characters in paths. Needs python3 and GNU parallel (installed by .ci/run), and matplotlib
 //! for the plots.
 
-mod common;
-
 use std::collections::BTreeSet;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::hostile::{Run, assert_contract, run_in};
+use crate::common::hostile::{Run, assert_contract, run_in};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use serde_json::Value;
 
-const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
-const LINK_SIM: &str = env!("CARGO_BIN_EXE_link-sim");
-const MODEM_BENCH: &str = env!("CARGO_BIN_EXE_modem-bench");
-const RCP_DUMP: &str = env!("CARGO_BIN_EXE_rcp-dump");
-const DEBT_ENCODE: &str = env!("CARGO_BIN_EXE_debt-encode");
-const OCTO_DELTA: &str = env!("CARGO_BIN_EXE_octo-delta");
+const TDMA_RUN: &str = env!("TOOL_EXE_tdma-run");
+const LINK_SIM: &str = env!("TOOL_EXE_link-sim");
+const MODEM_BENCH: &str = env!("TOOL_EXE_modem-bench");
+const RCP_DUMP: &str = env!("TOOL_EXE_rcp-dump");
+const DEBT_ENCODE: &str = env!("TOOL_EXE_debt-encode");
+const OCTO_DELTA: &str = env!("TOOL_EXE_octo-delta");
 const LIMIT: Duration = Duration::from_secs(120);
 
 /// The grid: 2 BERs x 2 IPGs x 5 seeds of a 120 s simulated session.
@@ -820,7 +818,7 @@ fn every_tool_with_figures_writes_one_line_with_its_parameters_and_seed() {
     );
     assert!(doc["seed"].is_u64(), "{doc}");
 
-    std::fs::write(d.join("noise.bin"), common::hostile::garbage(300, 5)).unwrap();
+    std::fs::write(d.join("noise.bin"), crate::common::hostile::garbage(300, 5)).unwrap();
     let out = run(RCP_DUMP, &["noise.bin", "-o", "d.txt", "--metrics", "-"]);
     let doc = metrics_line(&out.stdout, "rcp-dump");
     assert_eq!(
@@ -828,7 +826,7 @@ fn every_tool_with_figures_writes_one_line_with_its_parameters_and_seed() {
         (&Value::Null, &Value::from(300))
     );
 
-    let picture = common::testdata("kodim23-64x48.png");
+    let picture = crate::common::testdata("kodim23-64x48.png");
     let picture = picture.to_str().unwrap();
     let out = run(
         DEBT_ENCODE,
@@ -860,7 +858,7 @@ fn every_tool_with_figures_writes_one_line_with_its_parameters_and_seed() {
         "{doc}"
     );
 
-    let graph = common::testdata("maps/spherical_scan.graph");
+    let graph = crate::common::testdata("maps/spherical_scan.graph");
     let out = run(
         OCTO_DELTA,
         &[

@@ -2,18 +2,16 @@
 //! input, a FIFO written while the session runs), `--telemetry`, `--preview`, and the field
 //! cameras `--camera DIR` and `--camera-cmd CMD`.
 
-mod common;
-
 use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
-use common::run;
+use crate::common::run;
 use serde_json::Value;
 
-const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
+const TDMA_RUN: &str = env!("TOOL_EXE_tdma-run");
 
 /// Telemetry lines, each a JSON object with its type, time and end.
 fn telemetry(text: &str) -> Vec<Value> {
@@ -52,7 +50,7 @@ fn png(width: usize, height: usize) -> Vec<u8> {
     let data = (0..width * height * 3)
         .map(|k| (k * 7 % 256) as u8)
         .collect();
-    rovlink::debt::picture::to_png(&rovlink::debt::Image {
+    rovlink_debt::picture::to_png(&rovlink_debt::Image {
         width,
         height,
         channels: 3,
@@ -321,7 +319,7 @@ fn preview_leaves_partial_then_whole_pictures() {
     if last["state"] == "progress" {
         assert_eq!(files, complete.len() + 1);
         let partial =
-            rovlink::debt::picture::open(Path::new(last["file"].as_str().unwrap())).unwrap();
+            rovlink_debt::picture::open(Path::new(last["file"].as_str().unwrap())).unwrap();
         assert_eq!((partial.width, partial.height), (96, 64));
     } else {
         assert_eq!(files, complete.len());
@@ -367,7 +365,7 @@ fn the_simulated_rov_takes_its_pictures_from_a_directory_or_a_command() {
         assert!(!complete.is_empty(), "{flag}: no image");
         for c in complete {
             let image =
-                rovlink::debt::picture::open(Path::new(c["file"].as_str().unwrap())).unwrap();
+                rovlink_debt::picture::open(Path::new(c["file"].as_str().unwrap())).unwrap();
             assert_eq!((image.width, image.height), size, "{flag}");
         }
         // In simulation the capture waits for the camera: it never fails.
@@ -439,7 +437,7 @@ fn real_time_orders_written_into_a_fifo_while_the_operator_runs_are_acknowledged
     nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).unwrap();
     let shot = dir.path().join("shot.png");
     std::fs::write(&shot, png(48, 36)).unwrap();
-    let (mut link, a, b) = common::link_sim_pty(&common::TEST_S100);
+    let (mut link, a, b) = crate::common::link_sim_pty(&crate::common::TEST_S100);
     let cmd = format!("cat '{}'", shot.display());
     let mut rov = Command::new(TDMA_RUN)
         .args(["--role", "rov", "--port", &b, "--duration", "14"])
@@ -510,12 +508,12 @@ fn real_time_orders_written_into_a_fifo_while_the_operator_runs_are_acknowledged
         r#"{{"type":"hold_heading","heading_deg":45,"enable":true}}"#
     )
     .unwrap();
-    let status = common::wait_for_exit(&mut op, LIMIT);
+    let status = crate::common::wait_for_exit(&mut op, LIMIT);
     drop(w);
     let mut stderr = String::new();
     std::io::Read::read_to_string(&mut op.stderr.take().unwrap(), &mut stderr).unwrap();
     assert!(status.success(), "operator: {stderr}");
-    let rov_status = common::wait_for_exit(&mut rov, LIMIT);
+    let rov_status = crate::common::wait_for_exit(&mut rov, LIMIT);
     let _ = link.kill();
     let _ = link.wait();
     rov_reader.join().unwrap();
@@ -549,7 +547,7 @@ fn real_time_orders_written_into_a_fifo_while_the_operator_runs_are_acknowledged
     let complete = of(&lines, "image", Some("complete"));
     assert!(!complete.is_empty(), "{text}");
     let image =
-        rovlink::debt::picture::open(Path::new(complete[0]["file"].as_str().unwrap())).unwrap();
+        rovlink_debt::picture::open(Path::new(complete[0]["file"].as_str().unwrap())).unwrap();
     assert_eq!((image.width, image.height), (48, 36));
     assert!(
         of(&lines, "image", Some("progress"))

@@ -4,21 +4,19 @@
 //! as the ROV engine steps it, with a demand every 0.1 s of wall time; the process tests run
 //! `tdma-run --vehicle mavlink:...` between `link-sim --pty` and the stand-in.
 
-#[path = "common/ardusub.rs"]
-mod ardusub;
-mod common;
+use crate::common::ardusub;
 
 use std::process::{Child, Command as Process, Stdio};
 use std::time::{Duration, Instant};
 
+use crate::common::hostile::signal_once;
 use ardusub::{ALT_HOLD, Config, GUIDED, MANUAL, StandIn};
-use common::hostile::signal_once;
-use rovlink::link::SimTime;
-use rovlink::rcp::drive::{Demand, Drive, DriveEvent};
-use rovlink::rcp::mavlink::{MavlinkDrive, MavlinkOptions, connect};
-use rovlink::vehicle::Command;
-use rovlink::wire::Nav;
-use rovlink::wire::rov::Why;
+use rovlink_field::mavlink::{MavlinkDrive, MavlinkOptions, connect};
+use rovlink_link::SimTime;
+use rovlink_rcp::drive::{Demand, Drive, DriveEvent};
+use rovlink_rcp::vehicle::Command;
+use rovlink_wire::Nav;
+use rovlink_wire::rov::Why;
 
 fn free_udp_port() -> u16 {
     std::net::UdpSocket::bind("127.0.0.1:0")
@@ -492,7 +490,7 @@ fn the_drive_works_against_the_pymavlink_standin() {
         &|| true,
         LIMIT,
     );
-    let status = common::wait_for_exit(&mut python, LIMIT);
+    let status = crate::common::wait_for_exit(&mut python, LIMIT);
     assert!(status.success(), "{status:?}");
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
@@ -529,7 +527,7 @@ fn the_drive_works_against_the_pymavlink_standin() {
     assert!(error < 0.05, "ours {ours:?} theirs {theirs:?}");
 }
 
-const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
+const TDMA_RUN: &str = env!("TOOL_EXE_tdma-run");
 
 fn last_track_position(track: &std::path::Path) -> [f64; 3] {
     let text = std::fs::read_to_string(track).unwrap();
@@ -552,7 +550,8 @@ fn tdma_run_drives_the_standin_through_link_sim_with_live_orders() {
         nix::sys::stat::Mode::S_IRWXU,
     )
     .unwrap();
-    let (mut link, a, b) = common::link_sim_pty(&["--model", "s100", "--half-duplex", "false"]);
+    let (mut link, a, b) =
+        crate::common::link_sim_pty(&["--model", "s100", "--half-duplex", "false"]);
     let port = free_udp_port();
     let mut rov = Process::new(TDMA_RUN)
         .args(["--role", "rov", "--port", &b, "--duration", "17"])
@@ -564,7 +563,7 @@ fn tdma_run_drives_the_standin_through_link_sim_with_live_orders() {
         .unwrap();
     // The stand-in and the operator start once the ROV listens (on the vehicle's port and the
     // link's: it says so), not after a guess.
-    let rov_said = common::said_until(&mut rov, "ROV: answering every slot", LIMIT);
+    let rov_said = crate::common::said_until(&mut rov, "ROV: answering every slot", LIMIT);
     let standin = StandIn::start(&format!("udpout:127.0.0.1:{port}"), Config::default());
     let mut operator = Process::new(TDMA_RUN)
         .args(["--role", "operator", "--port", &a, "--duration", "15"])
@@ -578,7 +577,7 @@ fn tdma_run_drives_the_standin_through_link_sim_with_live_orders() {
     let op_said = std::thread::spawn(move || std::io::read_to_string(op_stderr).unwrap());
     // Half stick forward until the autopilot has it, then stop and go to a point; the FIFO
     // stays open until the operator ends.
-    let mut fifo = common::fifo_writer(path("orders"), &mut operator, LIMIT);
+    let mut fifo = crate::common::fifo_writer(path("orders"), &mut operator, LIMIT);
     let mut type_order = |line: &str| {
         use std::io::Write;
         writeln!(fifo, "{line}").unwrap();
@@ -605,10 +604,10 @@ fn tdma_run_drives_the_standin_through_link_sim_with_live_orders() {
         r#"{"type":"velocity","vx":0,"vy":0,"vz":0,"vyaw":0,"arm":true,"disarm":false,"nav":"manual"}"#,
     );
     type_order(r#"{"type":"goto","x_cm":150,"y_cm":50,"z_cm":50,"heading_deg":90}"#);
-    let op_status = common::wait_for_exit(&mut operator, LIMIT);
+    let op_status = crate::common::wait_for_exit(&mut operator, LIMIT);
     drop(fifo);
     let op_err = op_said.join().unwrap();
-    let rov_status = common::wait_for_exit(&mut rov, LIMIT);
+    let rov_status = crate::common::wait_for_exit(&mut rov, LIMIT);
     let seen = standin.stop();
     let _ = link.kill();
     let _ = link.wait();

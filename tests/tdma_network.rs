@@ -2,13 +2,11 @@
 //! vehicle and per hop, overrides, and bad scenarios (one line naming the file and the field,
 //! exit 2, no output left).
 
-mod common;
-
 use std::path::{Path, PathBuf};
 
-use common::run;
+use crate::common::run;
 
-const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
+const TDMA_RUN: &str = env!("TOOL_EXE_tdma-run");
 
 fn scenario(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

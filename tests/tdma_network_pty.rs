@@ -2,15 +2,13 @@
 //! file for all, `link-sim` standing in for the modems (docs/tdma-network.md, "Real time: one
 //! process per node").
 
-mod common;
-
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc::Receiver;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
+const TDMA_RUN: &str = env!("TOOL_EXE_tdma-run");
 
 /// The two media of the mixed test: an "acoustic" hop from the operator to vehicle 1 (S100
 /// as a stand-in, as the link-sim below runs it) and RF between the vehicles. Slots are set:
@@ -36,7 +34,7 @@ const THREE: &str = r#"{"duration_s":600,"seed":1,
 /// Starts `link-sim --pty 3` with the three nodes' positions; its three ports.
 fn shared_medium() -> (Child, Vec<String>) {
     use std::io::BufRead;
-    let mut child = Command::new(env!("CARGO_BIN_EXE_link-sim"))
+    let mut child = Command::new(env!("TOOL_EXE_link-sim"))
         .args(["--model", "s100", "--pty", "3"])
         .args(["--position", "0,0,0", "--position", "3,0,1"])
         .args(["--position", "7,0,1"])
@@ -226,7 +224,7 @@ impl NodeRun {
 
     /// Waits for the node to end (well within `limit`) and returns its metrics.
     fn finish(mut self, limit: Duration) -> (serde_json::Value, String) {
-        let status = common::wait_for_exit(&mut self.child, limit);
+        let status = crate::common::wait_for_exit(&mut self.child, limit);
         let stderr = self.said.join().unwrap_or_default();
         assert!(status.success(), "{status:?}: {stderr}");
         let text = std::fs::read_to_string(&self.metrics).expect("metrics written");
@@ -253,8 +251,9 @@ fn a_relay_on_two_media_carries_the_far_vehicle_both_ways() {
     let dir = tempfile::tempdir().unwrap();
     let routes = dir.path().join("mixed.json");
     std::fs::write(&routes, MIXED).unwrap();
-    let (mut acoustic, op_port, relay_down) = common::link_sim_pty(&common::TEST_S100);
-    let (mut rf, relay_up, far_port) = common::link_sim_pty(&common::TEST_S100);
+    let (mut acoustic, op_port, relay_down) =
+        crate::common::link_sim_pty(&crate::common::TEST_S100);
+    let (mut rf, relay_up, far_port) = crate::common::link_sim_pty(&crate::common::TEST_S100);
     let far = node(dir.path(), &routes, "rov", 2, &[&far_port], 14.0, &[]);
     let relay = node(
         dir.path(),
@@ -268,7 +267,7 @@ fn a_relay_on_two_media_carries_the_far_vehicle_both_ways() {
     far.wait_started();
     relay.wait_started();
     // The operator's live view, watched by the stock Foxglove client while the session runs.
-    let live = format!("127.0.0.1:{}", common::free_port());
+    let live = format!("127.0.0.1:{}", crate::common::free_port());
     let operator = node(
         dir.path(),
         &routes,
@@ -279,7 +278,7 @@ fn a_relay_on_two_media_carries_the_far_vehicle_both_ways() {
         &["--foxglove", &live],
     );
     operator.wait_started();
-    let seen = common::stock_client(&["--url", &format!("ws://{live}"), "--seconds", "6"]);
+    let seen = crate::common::stock_client(&["--url", &format!("ws://{live}"), "--seconds", "6"]);
     let (o, o_events) = operator.finish(Duration::from_secs(25));
     let (r, _) = relay.finish(Duration::from_secs(10));
     let (f, f_events) = far.finish(Duration::from_secs(10));

@@ -2,12 +2,10 @@
 //! that it can be watched live, with the same results as unpaced. Only lower bounds on the wall
 //! time are checked (a loaded machine can only make a run slower, never a paced one faster).
 
-mod common;
-
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
+const TDMA_RUN: &str = env!("TOOL_EXE_tdma-run");
 const SCENARIO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios/relay-rf.json");
 
 /// Runs tdma-run with `args` and `--metrics -`: the figures (without the wall time and the
@@ -57,7 +55,7 @@ fn a_paced_scenario_takes_its_time_and_gives_the_same_figures() {
 /// stock Foxglove client (tests/foxglove/stock_client.mjs, as in tests/foxglove_stock.rs).
 #[test]
 fn a_paced_scenario_can_be_watched_live_in_foxglove() {
-    let address = format!("127.0.0.1:{}", common::free_port());
+    let address = format!("127.0.0.1:{}", crate::common::free_port());
     let mut run = Command::new(TDMA_RUN)
         .args(["--scenario", SCENARIO, "--duration", "15", "--pace", "1"])
         .args(["--foxglove", &address])
@@ -70,7 +68,8 @@ fn a_paced_scenario_can_be_watched_live_in_foxglove() {
         line.clear();
         assert!(std::io::BufRead::read_line(&mut stderr, &mut line).unwrap() > 0);
     }
-    let seen = common::stock_client(&["--url", &format!("ws://{address}"), "--seconds", "4"]);
+    let seen =
+        crate::common::stock_client(&["--url", &format!("ws://{address}"), "--seconds", "4"]);
     let status = run.wait().unwrap();
     let mut rest = String::new();
     std::io::Read::read_to_string(&mut stderr, &mut rest).unwrap();

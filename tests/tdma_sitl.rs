@@ -12,17 +12,15 @@
 //! `ROVLINK_SITL_REPORT=FILE` the session writes its figures there as JSON
 //! (`scripts/ardusub-sitl.sh` prints them).
 
-mod common;
-
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use common::Reaped as Guard;
+use crate::common::Reaped as Guard;
 use serde_json::Value;
 
-const TDMA_RUN: &str = env!("CARGO_BIN_EXE_tdma-run");
+const TDMA_RUN: &str = env!("TOOL_EXE_tdma-run");
 
 /// The bound on a wait for a sign that only a hang exceeds (SITL boots in a few seconds and
 /// has its position at about 40 s of its own time).
@@ -183,7 +181,7 @@ impl Session {
                 .spawn()
                 .expect("python3 runs"),
         );
-        let (link, a, b) = common::link_sim_pty(&common::TEST_S100);
+        let (link, a, b) = crate::common::link_sim_pty(&crate::common::TEST_S100);
         let mut rov = Command::new(TDMA_RUN)
             .args(["--role", "rov", "--port", &b, "--duration", "600"])
             .args([
@@ -232,7 +230,7 @@ impl Session {
             .stderr(std::fs::File::create(path("op.err")).unwrap())
             .spawn()
             .unwrap();
-        let fifo = common::fifo_writer(path("orders"), &mut operator, LIMIT);
+        let fifo = crate::common::fifo_writer(path("orders"), &mut operator, LIMIT);
         // The operator's clock: its telemetry's t_s against the wall clock, from the line
         // that appears first (read every 20 ms, so within a few tens of milliseconds).
         let until = Instant::now() + LIMIT;
@@ -321,7 +319,7 @@ impl Session {
         drop(self.fifo.take());
         for child in [&mut self.operator.0, &mut self.rov.0] {
             let _ = kill(Pid::from_raw(child.id() as i32), Signal::SIGTERM);
-            common::wait_for_exit(child, Duration::from_secs(30));
+            crate::common::wait_for_exit(child, Duration::from_secs(30));
         }
         let read = |name: &str| -> Value {
             let text = std::fs::read_to_string(self.path(name))

@@ -8,8 +8,8 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::rcp::console::{self, MAX_WARNINGS};
-use rovlink::rcp::session::MAX_DURATION_S;
+use rovlink_field::console::{self, MAX_WARNINGS};
+use rovlink_rcp::session::MAX_DURATION_S;
 
 fuzz_target!(|data: &[u8]| {
     let (orders, warnings) = console::parse_orders("in", data);

@@ -4,7 +4,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::debt::{Header, decode, decode_with_loss};
+use rovlink_debt::{Header, decode, decode_with_loss};
 
 fuzz_target!(|data: &[u8]| {
     // Keep each run fast: images up to 64 x 64 (the decoder's cost grows with the area).

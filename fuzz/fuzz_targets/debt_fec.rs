@@ -4,7 +4,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::debt::{Header, decode_trunks, fec};
+use rovlink_debt::{Header, decode_trunks, fec};
 
 fuzz_target!(|data: &[u8]| {
     // The first two bytes choose the trunk size (16..=79) and which trunks are lost.

@@ -25,8 +25,8 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::wire::frame::{CRC16, Frame, OVERHEAD_BYTES, PREAMBLE};
-use rovlink::wire::{DeframeEvent, DeframeStats, Deframer};
+use rovlink_wire::frame::{CRC16, Frame, OVERHEAD_BYTES, PREAMBLE};
+use rovlink_wire::{DeframeEvent, DeframeStats, Deframer};
 
 /// An owned copy of a [`DeframeEvent`].
 #[derive(Debug, Clone, PartialEq, Eq)]

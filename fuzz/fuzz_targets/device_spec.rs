@@ -9,8 +9,8 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::device::DeviceSpec;
-use rovlink::rcp::mavlink::parse_endpoint;
+use rovlink_link::device::DeviceSpec;
+use rovlink_field::mavlink::parse_endpoint;
 
 fuzz_target!(|data: &[u8]| {
     let text = String::from_utf8_lossy(data);

@@ -9,7 +9,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::gll::evologics::{
+use rovlink_link::gll::evologics::{
     Command, CommandReader, Notification, NotificationReader, format_command, format_notification,
 };
 

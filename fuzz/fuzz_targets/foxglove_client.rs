@@ -8,10 +8,10 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::rcp::foxglove::ClientTopic;
-use rovlink::rcp::orders::Live;
-use rovlink::wire::Nav;
-use rovlink::wire::operator::Order;
+use rovlink_field::foxglove::ClientTopic;
+use rovlink_rcp::orders::Live;
+use rovlink_wire::Nav;
+use rovlink_wire::operator::Order;
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(live) = ClientTopic::Twist.parse(data) {

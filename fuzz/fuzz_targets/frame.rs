@@ -15,9 +15,9 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::wire::frame::{self, CRC16, Frame, PREAMBLE};
-use rovlink::wire::message::Message;
-use rovlink::wire::{MessageRepr, json};
+use rovlink_wire::frame::{self, CRC16, Frame, PREAMBLE};
+use rovlink_wire::message::Message;
+use rovlink_wire::{MessageRepr, json};
 
 fuzz_target!(|data: &[u8]| {
     let Ok(frame) = Frame::new_checked(data) else {

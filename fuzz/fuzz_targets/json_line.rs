@@ -13,9 +13,9 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::wire::frame::Frame;
-use rovlink::wire::message::Message;
-use rovlink::wire::{MessageRepr, json};
+use rovlink_wire::frame::Frame;
+use rovlink_wire::message::Message;
+use rovlink_wire::{MessageRepr, json};
 
 fuzz_target!(|data: &[u8]| {
     let Ok(line) = std::str::from_utf8(data) else {

@@ -8,7 +8,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::link::{Distance, Link, Model, Side, SimTime};
+use rovlink_link::{Distance, Link, Model, Side, SimTime};
 
 fuzz_target!(|data: &[u8]| {
     let text = String::from_utf8_lossy(data);

@@ -9,8 +9,8 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::octo::Scan;
-use rovlink::octo::cloud::{
+use rovlink_octo::Scan;
+use rovlink_octo::cloud::{
     self, McapOptions, PcdData, PlyFormat, read_mcap, read_pcd, read_ply, read_xyz,
     write_clouds_mcap, write_pcd, write_ply, write_ply_as, write_xyz,
 };

@@ -9,7 +9,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::octo::delta::{self, Message, Receiver, ViewSpec};
+use rovlink_octo::delta::{self, Message, Receiver, ViewSpec};
 
 fuzz_target!(|data: &[u8]| {
     let owned;

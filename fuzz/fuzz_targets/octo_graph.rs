@@ -8,10 +8,10 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::octo::graph::{
+use rovlink_octo::graph::{
     self, EDGE_BYTES, EMPTY_NODE_BYTES, Graph, QUATERNION_RECORD_BYTES, VECTOR_RECORD_BYTES,
 };
-use rovlink::octo::{ParseError, Pose, Scan};
+use rovlink_octo::{ParseError, Pose, Scan};
 
 /// An `f32` as bits, every NaN one value (Rust's casts keep NaNs NaN, not their payloads).
 fn key(v: f32) -> u32 {

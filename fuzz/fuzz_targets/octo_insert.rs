@@ -20,10 +20,10 @@
 use std::time::{Duration, Instant};
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::octo::cloud::McapOptions;
-use rovlink::octo::pipeline::InputFormat;
-use rovlink::octo::tree::{OcTree, TREE_DEPTH};
-use rovlink::octo::{Pose, Scan, files};
+use rovlink_octo::cloud::McapOptions;
+use rovlink_octo::pipeline::InputFormat;
+use rovlink_octo::tree::{OcTree, TREE_DEPTH};
+use rovlink_octo::{Pose, Scan, files};
 
 const MAX_SCANS: usize = 4;
 const MAX_POINTS: usize = 48;

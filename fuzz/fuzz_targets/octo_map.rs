@@ -4,7 +4,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::octo::files::{self, MapFormat};
+use rovlink_octo::files::{self, MapFormat};
 
 fuzz_target!(|data: &[u8]| {
     let Ok(tree) = files::read_map(data) else {

@@ -9,11 +9,11 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::octo::ros::{
+use rovlink_octo::ros::{
     self, ByteOrder, Transform, decode_odometry, decode_point_cloud2, decode_pose_stamped,
     decode_pose_stamped_as_pose, decode_tf_message, decode_transform_stamped,
 };
-use rovlink::octo::tf::{PoseTrack, TfTree};
+use rovlink_octo::tf::{PoseTrack, TfTree};
 
 const OFFSET: usize = 1000;
 
@@ -25,7 +25,7 @@ fn bits(t: &Transform) -> Vec<u64> {
         .collect()
 }
 
-fn within<T>(r: &Result<T, rovlink::octo::ParseError>, len: usize) {
+fn within<T>(r: &Result<T, rovlink_octo::ParseError>, len: usize) {
     if let Err(e) = r {
         assert!(
             (OFFSET as u64..=(OFFSET + len) as u64).contains(&e.offset),
@@ -78,12 +78,12 @@ fuzz_target!(|data: &[u8]| {
         assert_eq!(as_pose.as_ref().ok().map(|p| p.1), t.to_pose());
     }
     if let Ok((h, b, _)) = cloud {
-        let scan = b.finish(rovlink::octo::Pose::IDENTITY);
+        let scan = b.finish(rovlink_octo::Pose::IDENTITY);
         assert!(scan.points.iter().flatten().all(|v| v.is_finite()));
         let again = ros::encode_point_cloud2(&h, &scan, order);
         let (h2, b2, _) = decode_point_cloud2(&again, 0).expect("re-encoded cloud");
         assert_eq!(h2, h);
-        assert_eq!(b2.finish(rovlink::octo::Pose::IDENTITY), scan);
+        assert_eq!(b2.finish(rovlink_octo::Pose::IDENTITY), scan);
     }
     for t in &transforms {
         assert!(t.transform.check().is_ok(), "{t:?}");

@@ -8,8 +8,8 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::octo::delta::{self, Roi, ViewSpec};
-use rovlink::octo::view::{self, SceneBuilder, Timing};
+use rovlink_octo::delta::{self, Roi, ViewSpec};
+use rovlink_octo::view::{self, SceneBuilder, Timing};
 
 fuzz_target!(|data: &[u8]| {
     match data {

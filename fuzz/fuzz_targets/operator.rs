@@ -13,7 +13,7 @@
 mod payload;
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::wire::operator;
+use rovlink_wire::operator;
 
 fuzz_target!(|data: &[u8]| {
     if operator::Packet::new_checked(data).is_err() {

@@ -20,8 +20,8 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::link::SimTime;
-use rovlink::rcp::routing::{BROADCAST, Dropped, MAX_PATH_NODES, Router, Routes, RoutesError};
+use rovlink_link::SimTime;
+use rovlink_rcp::routing::{BROADCAST, Dropped, MAX_PATH_NODES, Router, Routes, RoutesError};
 
 fuzz_target!(|data: &[u8]| {
     let split = data.iter().position(|&b| b == 0).unwrap_or(data.len());

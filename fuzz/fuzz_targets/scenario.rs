@@ -16,9 +16,9 @@
 use std::path::Path;
 
 use libfuzzer_sys::fuzz_target;
-use rovlink::rcp::Role;
-use rovlink::rcp::scenario::Scenario;
-use rovlink::rcp::session::{MAX_IPG_S, MIN_IPG_S};
+use rovlink_rcp::Role;
+use rovlink_rcp::scenario::Scenario;
+use rovlink_rcp::session::{MAX_IPG_S, MIN_IPG_S};
 
 fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else {

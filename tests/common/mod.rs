@@ -2,6 +2,7 @@
 //! everything, compare against golden files.
 #![allow(dead_code)]
 
+pub mod ardusub;
 pub mod hostile;
 
 use std::io::Write;
@@ -31,7 +32,7 @@ pub fn testdata(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// Runs `bin` (a path from `env!("CARGO_BIN_EXE_...")`) with arguments and standard input.
+/// Runs `bin` (a path from `env!("TOOL_EXE_...")`) with arguments and standard input.
 pub fn run(bin: &str, args: &[&str], stdin: &[u8]) -> Outcome {
     let mut child = Command::new(bin)
         .args(args)
@@ -98,7 +99,7 @@ pub fn vector_frames() -> Vec<Vec<u8>> {
     std::fs::read_to_string(testdata("wire-vectors.hex"))
         .expect("vectors")
         .lines()
-        .map(|l| rovlink::wire::json::decode_hex(l.trim()).expect("hex"))
+        .map(|l| rovlink_wire::json::decode_hex(l.trim()).expect("hex"))
         .collect()
 }
 
@@ -150,7 +151,7 @@ pub const TEST_S100: [&str; 10] = [
 /// Starts `link-sim --pty` with `args`; returns it and the paths of its sides A and B.
 pub fn link_sim_pty(args: &[&str]) -> (Reaped, String, String) {
     use std::io::BufRead;
-    let mut child = Command::new(env!("CARGO_BIN_EXE_link-sim"))
+    let mut child = Command::new(env!("TOOL_EXE_link-sim"))
         .arg("--pty")
         .args(args)
         .stdout(Stdio::piped())

@@ -2,8 +2,8 @@
 //! from `src` carries (`Message::parse_payload` is `Packet::new_checked` + `Repr::parse` of the
 //! type the source implies).
 
-use rovlink::wire::message::Message;
-use rovlink::wire::{MessageRepr, json};
+use rovlink_wire::message::Message;
+use rovlink_wire::{MessageRepr, json};
 
 /// For every payload the parser accepts: the value validates, `buffer_len` is the payload
 /// length, `emit` gives back the payload exactly whatever the buffer held before (all-zero and

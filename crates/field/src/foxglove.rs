@@ -1,0 +1,1106 @@
+//! A live Foxglove view of a session, and a console an operator drives from Foxglove: a
+//! WebSocket server (the official `foxglove` SDK, behind [`crate::foxglove_gate`] so that
+//! viewers offering `foxglove.websocket.v1` are served as well as `foxglove.sdk.v1`) bound only
+//! to the address it is given. A new subscriber gets the latest message of each [`KEPT`]
+//! channel at once, and a still vehicle's pose is republished every [`POSE_EVERY`].
+//!
+//! [`start`] returns two halves:
+//! - [`LiveView`], an [`Observer`]: the channels of the MCAP log ([`Topic`]: pose,
+//!   goal, velocities, link frames, link log, completed images, with the same JSON Schemas and
+//!   the same messages, built by [`View`]), plus the live view's own: the image in
+//!   progress on `/camera/preview` and the session's events on `/session/log`. Messages carry
+//!   the wall clock as their log time.
+//! - [`LiveOrders`], an [`OrderSource`] (operator end only; a ROV end does not offer
+//!   publishing): what clients publish, on channels they advertise with the `json` encoding:
+//!   - `/orders`: each message one order object in wire.md's JSON form
+//!     (`{"type":"goto","x_cm":300,"y_cm":0,"z_cm":50,"heading_deg":90}`, `velocity`,
+//!     `image_settings`, `hold_heading`) or `{"type":"cancel"}`, read by [`Live::from_object`];
+//!   - any topic whose schema is `geometry_msgs/Twist` or `geometry_msgs/msg/Twist` (Foxglove's
+//!     Teleop panel: topic of the user's choosing, `/cmd_vel` by convention): the joystick,
+//!     by [`twist_joystick`]. The panel publishes only while a button is held, so a Twist
+//!     holds for [`TWIST_HOLD`]: with none newer by then, the joystick goes neutral (a JSON
+//!     `velocity` on `/orders` is kept until the next, as wire.md's joystick is).
+//!
+//! The contract: nothing a client sends stops the session, panics, or grows memory without
+//! bound. Junk frames, unknown operations and messages on channels never advertised are
+//! refused by the SDK (which tells the client); here, a payload larger than
+//! [`MAX_PAYLOAD_BYTES`] or one that does not parse is refused with a warning; orders wait in a
+//! queue of [`MAX_QUEUED`] (the oldest dropped and counted past that; a joystick replaces a
+//! joystick still waiting), warnings in one of [`MAX_WARNINGS`] (the rest counted), all drained
+//! by [`OrderSource::poll`] and [`OrderSource::take_warnings`]. Publishing never blocks the
+//! session: nothing is built for a channel no client subscribes to, a preview at most every
+//! [`PREVIEW_EVERY`], and the SDK queues at most [`BACKLOG_MESSAGES`] messages per client,
+//! dropping the oldest for a slow one. [`LiveView::stop`] (or dropping it) closes the server, waiting at
+//! most [`STOP_WAIT`] for the clients to be told.
+
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use foxglove::websocket::{Capability, ChannelView, Client, ClientChannel, ServerListener};
+use foxglove::{Context, PartialMetadata, RawChannel, Schema, WebSocketServerHandle};
+
+use crate::foxglove_gate::{Gate, Reports};
+use crate::mcap_log::{Clock, Topic, View, ViewMessage};
+use rovlink_link::SimTime;
+use rovlink_rcp::operator::Joystick;
+use rovlink_rcp::orders::{Live, OrderSource};
+use rovlink_rcp::report::{FrameEvent, Observer};
+use rovlink_rcp::{Event, PoseSample, Role};
+use rovlink_wire::Nav;
+
+/// The largest client message read, bytes (an order is a few hundred).
+pub const MAX_PAYLOAD_BYTES: usize = 64 * 1024;
+/// The most orders waiting for [`OrderSource::poll`].
+pub const MAX_QUEUED: usize = 64;
+/// The most warnings waiting for [`OrderSource::take_warnings`].
+pub const MAX_WARNINGS: usize = 32;
+/// The most messages the SDK queues for one client before it drops the oldest.
+pub const BACKLOG_MESSAGES: usize = 256;
+/// The longest [`LiveView::stop`] waits for the clients to be closed.
+pub const STOP_WAIT: Duration = Duration::from_secs(1);
+/// The shortest wall time between two previews of the image in progress (decoding and
+/// PNG-encoding one costs milliseconds; a simulation makes trunks far faster than that).
+pub const PREVIEW_EVERY: Duration = Duration::from_millis(500);
+/// The longest a still vehicle's pose goes unpublished: it is republished this often.
+pub const POSE_EVERY: Duration = Duration::from_secs(1);
+/// The channels whose latest message a new subscriber gets at once.
+pub const KEPT: [Topic; 8] = [
+    Topic::Pose,
+    Topic::Goal,
+    Topic::Actual,
+    Topic::Commanded,
+    Topic::Image,
+    Topic::Preview,
+    Topic::Tf,
+    Topic::Events,
+];
+/// The topic of the JSON order channel.
+pub const ORDERS_TOPIC: &str = "/orders";
+/// How long a Twist stays in force without a newer one (the Teleop panel's default rate is
+/// 1 Hz).
+pub const TWIST_HOLD: Duration = Duration::from_secs(2);
+/// The schema names of a Twist channel (ROS 1 style, as the Teleop panel names it, and ROS 2).
+pub const TWIST_SCHEMAS: [&str; 2] = ["geometry_msgs/Twist", "geometry_msgs/msg/Twist"];
+
+/// Why the server did not start.
+#[derive(Debug, thiserror::Error)]
+pub enum FoxgloveError {
+    /// The address is not HOST:PORT.
+    #[error("--foxglove: expected HOST:PORT (e.g. 127.0.0.1:8765), found {found:?}: {why}")]
+    Address {
+        /// What was given.
+        found: String,
+        /// What is wrong with it.
+        why: &'static str,
+    },
+    /// The address could not be listened on (in use, not this machine's, unknown host).
+    #[error("--foxglove {addr}: cannot listen: {source}")]
+    Bind {
+        /// The address.
+        addr: String,
+        /// The system's reason.
+        source: std::io::Error,
+    },
+    /// The SDK refused to set up the server or a channel.
+    #[error("--foxglove {addr}: {message}")]
+    Server {
+        /// The address.
+        addr: String,
+        /// The SDK's reason.
+        message: String,
+    },
+}
+
+/// The channel a client publishes on, by what it advertised.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ClientTopic {
+    /// [`ORDERS_TOPIC`]: wire.md order objects and cancel.
+    Orders,
+    /// A `geometry_msgs` Twist (the Teleop panel): the joystick.
+    Twist,
+}
+
+impl ClientTopic {
+    /// What a client channel is for, from its topic, schema name and encoding; `Err` says why
+    /// it is refused.
+    pub fn of(topic: &str, schema_name: &str, encoding: &str) -> Result<ClientTopic, String> {
+        let kind = if topic == ORDERS_TOPIC {
+            ClientTopic::Orders
+        } else if TWIST_SCHEMAS.contains(&schema_name) {
+            ClientTopic::Twist
+        } else {
+            return Err(format!(
+                "expected topic {ORDERS_TOPIC} or schema {}, found topic {:?} with schema {:?}",
+                TWIST_SCHEMAS.join(" or "),
+                shorten(topic),
+                shorten(schema_name)
+            ));
+        };
+        if encoding != "json" {
+            return Err(format!(
+                "expected encoding json, found {:?}",
+                shorten(encoding)
+            ));
+        }
+        Ok(kind)
+    }
+
+    /// One message published on the channel.
+    pub fn parse(self, payload: &[u8]) -> Result<Live, String> {
+        if payload.len() > MAX_PAYLOAD_BYTES {
+            return Err(format!(
+                "expected at most {MAX_PAYLOAD_BYTES} bytes, found {}",
+                payload.len()
+            ));
+        }
+        let value: serde_json::Value = rovlink_base::strict_json::from_slice(payload)
+            .map_err(|e| format!("expected a JSON object: {e}"))?;
+        let Some(map) = value.as_object() else {
+            return Err(format!(
+                "expected a JSON object, found {}",
+                shorten(&rovlink_wire::json::show(&value))
+            ));
+        };
+        match self {
+            ClientTopic::Orders => Live::from_object(map).map_err(|e| e.to_string()),
+            ClientTopic::Twist => twist_joystick(map),
+        }
+    }
+}
+
+/// A Twist (`{"linear":{"x","y","z"},"angular":{"x","y","z"}}`, m/s and rad/s as the Teleop
+/// panel sends them, full stick at 1) as the joystick, armed, in manual. ROS's body frame is
+/// forward-left-up (REP 103), the vehicle's forward-right-down, so: surge = linear.x, sway =
+/// -linear.y, heave = -linear.z, yaw = -angular.z, each times 100 % and clamped to
+/// -100..=100 %. A missing field is 0; one that is not a number (NaN arrives as null) refuses
+/// the message. angular.x and angular.y are ignored.
+pub fn twist_joystick(map: &serde_json::Map<String, serde_json::Value>) -> Result<Live, String> {
+    let axis = |group: &str, axis: &str| -> Result<f64, String> {
+        let value = match map.get(group) {
+            None => return Ok(0.0),
+            Some(serde_json::Value::Object(inner)) => match inner.get(axis) {
+                None => return Ok(0.0),
+                Some(v) => v,
+            },
+            Some(other) => {
+                return Err(format!(
+                    "field {group}: expected an object, found {}",
+                    shorten(&rovlink_wire::json::show(other))
+                ));
+            }
+        };
+        match value.as_f64() {
+            Some(v) if v.is_finite() => Ok((v * 100.0).clamp(-100.0, 100.0)),
+            _ => Err(format!(
+                "field {group}.{axis}: expected a number, found {}",
+                shorten(&rovlink_wire::json::show(value))
+            )),
+        }
+    };
+    Ok(Live::Joystick {
+        joystick: Joystick {
+            vx: axis("linear", "x")?,
+            vy: 0.0 - axis("linear", "y")?,
+            vz: 0.0 - axis("linear", "z")?,
+            vyaw: 0.0 - axis("angular", "z")?,
+        },
+        arm: true,
+        disarm: false,
+        nav: Nav::Manual,
+    })
+}
+
+/// At most 80 characters of `text`, for a warning that must stay one short line.
+fn shorten(text: &str) -> String {
+    const MAX: usize = 80;
+    let line: String = text.chars().filter(|c| !c.is_control()).collect();
+    if line.chars().count() <= MAX {
+        return line;
+    }
+    let mut short: String = line.chars().take(MAX).collect();
+    short.push_str("...");
+    short
+}
+
+/// What clients published, waiting for the session.
+#[derive(Default)]
+struct Inbox {
+    orders: VecDeque<Live>,
+    dropped_orders: u64,
+    warnings: VecDeque<String>,
+    dropped_warnings: u64,
+    /// When the Twist in force arrived, while one is.
+    twist_at: Option<Instant>,
+    /// The client topics already warned about (each is warned about once per session).
+    warned_topics: std::collections::HashSet<String>,
+}
+
+impl Inbox {
+    fn push(&mut self, live: Live) {
+        let joystick = |l: &Live| matches!(l, Live::Joystick { .. });
+        if joystick(&live)
+            && let Some(last) = self.orders.back_mut()
+            && joystick(last)
+        {
+            *last = live;
+            return;
+        }
+        if self.orders.len() >= MAX_QUEUED {
+            self.orders.pop_front();
+            self.dropped_orders += 1;
+        }
+        self.orders.push_back(live);
+    }
+
+    /// A Twist's joystick, arrived at `at`.
+    fn twist(&mut self, live: Live, at: Instant) {
+        self.push(live);
+        self.twist_at = Some(at);
+    }
+
+    /// At `now`: a neutral joystick when the Twist in force is older than [`TWIST_HOLD`].
+    fn expire(&mut self, now: Instant) {
+        if self
+            .twist_at
+            .is_some_and(|at| now.saturating_duration_since(at) > TWIST_HOLD)
+        {
+            self.twist_at = None;
+            self.push(Live::scripted_joystick(Joystick::default()));
+        }
+    }
+
+    /// Warns about client topic `topic` once for the whole session: a viewer advertises its
+    /// panels' topics again at every layout reload.
+    fn warn_topic(&mut self, topic: &str, warning: String) {
+        if self.warned_topics.len() < 4 * MAX_WARNINGS && self.warned_topics.insert(topic.into()) {
+            self.warn(warning);
+        }
+    }
+
+    fn warn(&mut self, warning: String) {
+        if self.warnings.len() >= MAX_WARNINGS {
+            self.dropped_warnings += 1;
+        } else {
+            self.warnings.push_back(warning);
+        }
+    }
+}
+
+/// The inbox, even if a thread panicked holding it (its contents stay consistent: every
+/// change is one push or pop).
+fn lock(inbox: &Mutex<Inbox>) -> MutexGuard<'_, Inbox> {
+    inbox
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// The SDK's callbacks: client channels and their messages, into the inbox.
+struct Listener {
+    inbox: Arc<Mutex<Inbox>>,
+    /// The view's channels and their latest messages, for new subscribers.
+    latest: Arc<Latest>,
+}
+
+/// The view's channels, and the latest message of each [`KEPT`] one.
+struct Latest {
+    channels: Vec<Option<Arc<RawChannel>>>,
+    messages: Mutex<Vec<Option<ViewMessage>>>,
+}
+
+impl Latest {
+    /// Channel `index`, if the view has it.
+    fn channel(&self, index: usize) -> Option<&Arc<RawChannel>> {
+        self.channels.get(index).and_then(Option::as_ref)
+    }
+
+    /// Keeps the message published on channel `index` if its topic is [`KEPT`].
+    fn keep(&self, index: usize, topic: Topic, json: &str, log_time_ns: u64) {
+        if KEPT.contains(&topic) {
+            let mut messages = self.messages.lock().unwrap_or_else(|p| p.into_inner());
+            if let Some(slot) = messages.get_mut(index) {
+                *slot = Some(ViewMessage {
+                    topic,
+                    log_time_ns,
+                    json: json.to_string(),
+                });
+            }
+        }
+    }
+
+    /// Sends the latest message of `channel` (if it has one) to `client` alone.
+    fn send_to(&self, client: &Client, channel: &ChannelView) {
+        let Some(index) =
+            (self.channels.iter()).position(|c| c.as_ref().is_some_and(|c| c.id() == channel.id()))
+        else {
+            return;
+        };
+        let message = self
+            .messages
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .get(index)
+            .cloned()
+            .flatten();
+        if let (Some(message), Some(channel)) = (message, self.channel(index)) {
+            channel.log_with_meta_to_sink(
+                message.json.as_bytes(),
+                PartialMetadata {
+                    log_time: Some(message.log_time_ns),
+                },
+                client.sink_id(),
+            );
+        }
+    }
+}
+
+impl Listener {
+    fn name(client: &Client, channel: &ClientChannel) -> String {
+        format!(
+            "foxglove client {} channel {} ({})",
+            u32::from(client.id()),
+            channel.id,
+            shorten(&channel.topic)
+        )
+    }
+}
+
+impl ServerListener for Listener {
+    fn on_subscribe(&self, client: Client, channel: ChannelView) {
+        self.latest.send_to(&client, &channel);
+    }
+
+    fn on_client_advertise(&self, client: Client, channel: &ClientChannel) {
+        if let Err(why) = ClientTopic::of(&channel.topic, &channel.schema_name, &channel.encoding) {
+            let warning = format!(
+                "{}: refused: {why} (said once per topic)",
+                Listener::name(&client, channel)
+            );
+            lock(&self.inbox).warn_topic(&channel.topic, warning);
+        }
+    }
+
+    fn on_message_data(&self, client: Client, channel: &ClientChannel, payload: &[u8]) {
+        // A refused channel was reported when it was advertised; its messages are ignored.
+        let Ok(kind) = ClientTopic::of(&channel.topic, &channel.schema_name, &channel.encoding)
+        else {
+            return;
+        };
+        let parsed = kind.parse(payload);
+        let mut inbox = lock(&self.inbox);
+        match parsed {
+            Ok(live) if kind == ClientTopic::Twist => inbox.twist(live, Instant::now()),
+            Ok(live) => {
+                // A joystick from /orders is kept until the next: no Twist is in force.
+                if matches!(live, Live::Joystick { .. }) {
+                    inbox.twist_at = None;
+                }
+                inbox.push(live);
+            }
+            Err(why) => inbox.warn(format!(
+                "{}: message skipped: {why}",
+                Listener::name(&client, channel)
+            )),
+        }
+    }
+}
+
+/// The orders Foxglove clients publish (see the module doc), as they come.
+pub struct LiveOrders {
+    inbox: Arc<Mutex<Inbox>>,
+    /// The handshakes the gate refused.
+    reports: Option<Reports>,
+}
+
+impl OrderSource for LiveOrders {
+    fn poll(&mut self, _now: SimTime) -> Vec<Live> {
+        let mut inbox = lock(&self.inbox);
+        inbox.expire(Instant::now());
+        inbox.orders.drain(..).collect()
+    }
+
+    fn take_warnings(&mut self) -> Vec<String> {
+        let mut inbox = lock(&self.inbox);
+        let mut warnings: Vec<String> = inbox.warnings.drain(..).collect();
+        warnings.extend(self.reports.iter().flat_map(Reports::take));
+        if inbox.dropped_orders > 0 {
+            warnings.push(format!(
+                "foxglove: {} orders dropped: more than {MAX_QUEUED} waiting",
+                inbox.dropped_orders
+            ));
+            inbox.dropped_orders = 0;
+        }
+        if inbox.dropped_warnings > 0 {
+            warnings.push(format!(
+                "foxglove: {} more client messages skipped or channels refused",
+                inbox.dropped_warnings
+            ));
+            inbox.dropped_warnings = 0;
+        }
+        warnings
+    }
+}
+
+/// The live view: an [`Observer`] of a single session or of a network (one lane per vehicle
+/// under `/vehicle/N/`) publishing the session on the server's channels.
+pub struct LiveView {
+    /// The handshake layer on the address given (dropped first: no new connections).
+    gate: Option<Gate>,
+    server: Option<WebSocketServerHandle>,
+    /// The channels (they live as long as the context), and the latest message of each kept
+    /// one: lane `k`'s topic `t` at `k * Topic::ALL.len() + t.index()` (none for a network
+    /// vehicle's link frames), then a network's `/network/frames` or a node's `/link/frames`.
+    latest: Arc<Latest>,
+    _context: Arc<Context>,
+    lanes: Vec<Lane>,
+    /// A real-time network node's view of its own frames (its `/link/frames`).
+    node: Option<View>,
+    /// What its frames are: a single session's link, a network's hops, a node's own.
+    extra: Extra,
+    addr: String,
+}
+
+/// One vehicle's part of the view.
+struct Lane {
+    /// Its vehicle's address in a network (none in a single session).
+    vehicle: Option<u8>,
+    view: View,
+    /// When the last preview was built, and the length of the prefix it showed.
+    last_preview: Option<(Instant, usize)>,
+    /// The last pose, and when it was published (a still vehicle's is republished).
+    last_pose: Option<(PoseSample, Instant)>,
+}
+
+/// Splits HOST:PORT (IPv6 in brackets, `[::1]:8765`).
+fn host_port(addr: &str) -> Result<(&str, u16), FoxgloveError> {
+    let bad = |why| FoxgloveError::Address {
+        found: addr.to_string(),
+        why,
+    };
+    let (host, port) = addr.rsplit_once(':').ok_or_else(|| bad("no port"))?;
+    if host.is_empty() {
+        return Err(bad("no host"));
+    }
+    if host.contains(':') && !(host.starts_with('[') && host.ends_with(']')) {
+        return Err(bad("an IPv6 host goes in brackets: [::1]:8765"));
+    }
+    let port = port
+        .parse::<u16>()
+        .map_err(|_| bad("the port is not a number in 0..=65535"))?;
+    Ok((host, port))
+}
+
+/// Starts the server, bound to `addr` only (HOST:PORT; port 0 picks a free one, see
+/// [`LiveView::port`]). A bad address or one that cannot be listened on (a port in use) is an
+/// `Err` naming it. Returns the observer that publishes and the source of client orders; a
+/// `role` of [`Role::Rov`] offers no publishing to clients (its orders come over the link),
+/// and its [`LiveOrders`] stays empty. Must not be called from inside an async runtime.
+pub fn start(addr: &str, role: Role) -> Result<(LiveView, LiveOrders), FoxgloveError> {
+    let name = format!("tdma-run {}", role.name());
+    serve(addr, &name, role == Role::Operator, &[None], Extra::Nothing)
+}
+
+/// Starts the server of a simulated network's view (see [`start`]): each vehicle's channels
+/// under `/vehicle/N/` (as the network's MCAP log has them: all but the single link's
+/// `link/frames`; its body frame `vehicle_N` on `/vehicle/N/tf`), and `/network/frames`, every
+/// hop of every frame. Clients cannot publish: a network's orders come from its scenario.
+pub fn start_network(addr: &str, vehicles: &[u8]) -> Result<LiveView, FoxgloveError> {
+    let lanes: Vec<Option<u8>> = vehicles.iter().map(|&v| Some(v)).collect();
+    serve(
+        addr,
+        "tdma-run network",
+        false,
+        &lanes,
+        Extra::NetworkFrames,
+    )
+    .map(|(view, _)| view)
+}
+
+/// Starts the server of one real-time node of a network (`tdma-run --routes`, see
+/// [`start`]): the channels of `vehicles` (every vehicle for the operator, its own for a ROV)
+/// under `/vehicle/N/` as [`start_network`] has them, and `/link/frames`, the frames this node
+/// sent and received (`rovlink.LinkFrame`, as a single session's link: a received frame's send
+/// time is the far node's, so it has no `t_sent_s` or `delay_ms`), fed by
+/// [`Observer::frame`]. Clients cannot publish: a node's orders come from its flags.
+pub fn start_node(addr: &str, role: Role, vehicles: &[u8]) -> Result<LiveView, FoxgloveError> {
+    let lanes: Vec<Option<u8>> = vehicles.iter().map(|&v| Some(v)).collect();
+    let name = format!("tdma-run {} (network node)", role.name());
+    serve(addr, &name, false, &lanes, Extra::NodeFrames).map(|(view, _)| view)
+}
+
+/// A view's channels beyond its lanes'.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum Extra {
+    /// None (a single session).
+    Nothing,
+    /// A simulated network's `/network/frames`.
+    NetworkFrames,
+    /// A real-time node's own `/link/frames`.
+    NodeFrames,
+}
+
+fn serve(
+    addr: &str,
+    name: &str,
+    publish: bool,
+    lanes: &[Option<u8>],
+    extra: Extra,
+) -> Result<(LiveView, LiveOrders), FoxgloveError> {
+    let (host, port) = host_port(addr)?;
+    let context = Context::new();
+    let sdk = |e: foxglove::FoxgloveError| match e {
+        foxglove::FoxgloveError::Bind(source) => FoxgloveError::Bind {
+            addr: addr.to_string(),
+            source,
+        },
+        other => FoxgloveError::Server {
+            addr: addr.to_string(),
+            message: other.to_string(),
+        },
+    };
+    let channel = |name: &str, schema_name: &str, schema: &'static str| {
+        context
+            .channel_builder(name)
+            .message_encoding("json")
+            .schema(Schema::new(schema_name, "jsonschema", schema.as_bytes()))
+            .build_raw()
+            .map_err(sdk)
+    };
+    let mut channels = Vec::with_capacity(lanes.len() * Topic::ALL.len() + 1);
+    for lane in lanes {
+        for topic in Topic::ALL {
+            let name = match lane {
+                // A vehicle of a network has no link of its own: its frames are the network's.
+                Some(_) if topic == Topic::Frames => {
+                    channels.push(None);
+                    continue;
+                }
+                Some(vehicle) => crate::net_mcap::vehicle_topic(*vehicle, topic),
+                None => topic.name().to_string(),
+            };
+            channels.push(Some(channel(&name, topic.schema_name(), topic.schema())?));
+        }
+    }
+    match extra {
+        Extra::Nothing => {}
+        Extra::NetworkFrames => channels.push(Some(channel(
+            crate::net_mcap::NETWORK_FRAMES_TOPIC,
+            "rovlink.HopFrame",
+            crate::net_mcap::HOP_FRAME,
+        )?)),
+        Extra::NodeFrames => channels.push(Some(channel(
+            Topic::Frames.name(),
+            Topic::Frames.schema_name(),
+            Topic::Frames.schema(),
+        )?)),
+    }
+    let latest = Arc::new(Latest {
+        messages: Mutex::new(vec![None; channels.len()]),
+        channels,
+    });
+    let inbox = Arc::new(Mutex::new(Inbox::default()));
+    // The SDK listens on a loopback port of its own; the gate, on the address given, carries
+    // every viewer's connection to it (see `foxglove_gate`: stock viewers offer the protocol's
+    // older name, which the SDK refuses).
+    let mut server = context
+        .websocket_server()
+        .name(name)
+        .bind("127.0.0.1", 0)
+        .message_backlog_size(BACKLOG_MESSAGES)
+        .listener(Arc::new(Listener {
+            inbox: inbox.clone(),
+            latest: latest.clone(),
+        }));
+    if publish {
+        server = server
+            .capabilities([Capability::ClientPublish])
+            .supported_encodings(["json"]);
+    }
+    let handle = server.start_blocking().map_err(sdk)?;
+    let gate = Gate::start(&format!("{host}:{port}"), handle.port()).map_err(|source| {
+        FoxgloveError::Bind {
+            addr: addr.to_string(),
+            source,
+        }
+    })?;
+    let lanes = lanes
+        .iter()
+        .map(|&vehicle| Lane {
+            vehicle,
+            view: match vehicle {
+                Some(v) => View::new(Clock::Wall).with_body_frame(&format!("vehicle_{v}")),
+                None => View::new(Clock::Wall),
+            },
+            last_preview: None,
+            last_pose: None,
+        })
+        .collect();
+    let view = LiveView {
+        gate: Some(gate),
+        server: Some(handle),
+        latest,
+        _context: context,
+        lanes,
+        node: (extra == Extra::NodeFrames).then(|| View::new(Clock::Wall)),
+        extra,
+        addr: addr.to_string(),
+    };
+    let reports = view.gate.as_ref().map(Gate::reports);
+    Ok((view, LiveOrders { inbox, reports }))
+}
+
+impl LiveView {
+    /// The port the server listens on (the gate's).
+    pub fn port(&self) -> u16 {
+        self.gate.as_ref().map_or(0, Gate::port)
+    }
+
+    /// The address it was started on, as given.
+    pub fn addr(&self) -> &str {
+        &self.addr
+    }
+
+    /// Clients connected now.
+    pub fn clients(&self) -> usize {
+        self.server
+            .as_ref()
+            .map_or(0, WebSocketServerHandle::client_count)
+    }
+
+    /// The handshakes the gate refused, not yet reported (a network's view has no
+    /// [`LiveOrders`] to report them).
+    pub fn take_refusals(&self) -> Vec<String> {
+        self.gate
+            .as_ref()
+            .map(|g| g.reports().take())
+            .unwrap_or_default()
+    }
+
+    /// The lane of `vehicle` (the only one in a single session).
+    fn lane_of(&self, vehicle: u8) -> Option<usize> {
+        match self.extra {
+            Extra::Nothing => (!self.lanes.is_empty()).then_some(0),
+            _ => self.lanes.iter().position(|l| l.vehicle == Some(vehicle)),
+        }
+    }
+
+    /// Lane `lane` builds what some client subscribes to, and the kept channels' messages
+    /// (but the preview's: a decode for nobody), whose latest a new subscriber gets at once.
+    fn follow_subscriptions(&mut self, lane: usize) {
+        let base = lane * Topic::ALL.len();
+        let latest = &self.latest;
+        if let Some(lane) = self.lanes.get_mut(lane) {
+            lane.view.want(|topic| {
+                (KEPT.contains(&topic) && topic != Topic::Preview)
+                    || latest
+                        .channel(base + topic.index())
+                        .is_some_and(|c| c.has_sinks())
+            });
+        }
+    }
+
+    fn publish_at(&self, index: usize, topic: Topic, json: &str, log_time_ns: u64) {
+        self.latest.keep(index, topic, json, log_time_ns);
+        if let Some(channel) = self.latest.channel(index) {
+            channel.log_with_meta(
+                json.as_bytes(),
+                PartialMetadata {
+                    log_time: Some(log_time_ns),
+                },
+            );
+        }
+    }
+
+    fn publish_all(&self, lane: usize, messages: &[ViewMessage]) {
+        for m in messages {
+            let index = lane * Topic::ALL.len() + m.topic.index();
+            self.publish_at(index, m.topic, &m.json, m.log_time_ns);
+        }
+    }
+
+    /// Closes the server: the clients are told, for at most [`STOP_WAIT`].
+    pub fn stop(mut self) {
+        self.shut_down();
+    }
+
+    fn shut_down(&mut self) {
+        self.gate.take();
+        let Some(server) = self.server.take() else {
+            return;
+        };
+        let shutdown = server.stop();
+        let (done_tx, done_rx) = std::sync::mpsc::channel();
+        let waiter = std::thread::Builder::new()
+            .name("foxglove-stop".into())
+            .spawn(move || {
+                shutdown.wait_blocking();
+                let _ = done_tx.send(());
+            });
+        if waiter.is_ok() {
+            let _ = done_rx.recv_timeout(STOP_WAIT);
+        }
+    }
+
+    fn lane_frame(&mut self, lane: usize, e: &FrameEvent<'_>) {
+        self.follow_subscriptions(lane);
+        let Some(l) = self.lanes.get(lane) else {
+            return;
+        };
+        let messages = l.view.frame(e);
+        self.publish_all(lane, &messages);
+        self.republish_still(lane, e.t_received_s.or(e.t_sent_s));
+    }
+
+    /// A still vehicle's status changes nothing, so no pose comes: the last one is published
+    /// again (stamped `t_s`) at least every [`POSE_EVERY`], so that a viewer opened now shows it.
+    fn republish_still(&mut self, lane: usize, t_s: Option<f64>) {
+        let now = Instant::now();
+        if let Some((mut pose, at)) = self.lanes.get(lane).and_then(|l| l.last_pose)
+            && now.saturating_duration_since(at) >= POSE_EVERY
+        {
+            pose.t_s = pose.t_s.max(t_s.unwrap_or(pose.t_s));
+            self.lane_pose(lane, &pose);
+        }
+    }
+
+    fn lane_image(&mut self, lane: usize, t_s: f64, stream: &[u8]) {
+        self.follow_subscriptions(lane);
+        if let Some(message) = self.lanes.get(lane).and_then(|l| l.view.image(t_s, stream)) {
+            self.publish_all(lane, &[message]);
+        }
+    }
+
+    fn lane_pose(&mut self, lane: usize, pose: &PoseSample) {
+        self.follow_subscriptions(lane);
+        let Some(l) = self.lanes.get_mut(lane) else {
+            return;
+        };
+        let messages = l.view.pose(pose);
+        l.last_pose = Some((*pose, Instant::now()));
+        self.publish_all(lane, &messages);
+    }
+
+    fn lane_event(&mut self, lane: usize, end: Role, t_s: f64, event: &Event) {
+        let Some(l) = self.lanes.get_mut(lane) else {
+            return;
+        };
+        if let Event::ImageProgress { prefix, .. } = event {
+            // Only when new trunks changed the picture, and at most every PREVIEW_EVERY.
+            let now = Instant::now();
+            if l.last_preview.is_some_and(|(at, len)| {
+                len == prefix.len() || now.saturating_duration_since(at) < PREVIEW_EVERY
+            }) {
+                return;
+            }
+            l.last_preview = Some((now, prefix.len()));
+        }
+        self.follow_subscriptions(lane);
+        let Some(l) = self.lanes.get(lane) else {
+            return;
+        };
+        let messages = l.view.event(end, t_s, event);
+        self.publish_all(lane, &messages);
+    }
+}
+
+impl Drop for LiveView {
+    fn drop(&mut self) {
+        self.shut_down();
+    }
+}
+
+impl Observer for LiveView {
+    fn frame(&mut self, e: &FrameEvent<'_>) {
+        match self.extra {
+            Extra::Nothing => self.lane_frame(0, e),
+            Extra::NetworkFrames => self.network_frame(e),
+            Extra::NodeFrames => self.node_frame(e),
+        }
+    }
+
+    fn image(&mut self, vehicle: u8, t_s: f64, stream: &[u8]) {
+        if let Some(lane) = self.lane_of(vehicle) {
+            self.lane_image(lane, t_s, stream);
+        }
+    }
+
+    fn pose(&mut self, vehicle: u8, pose: &PoseSample) {
+        if let Some(lane) = self.lane_of(vehicle) {
+            self.lane_pose(lane, pose);
+        }
+    }
+
+    fn event(&mut self, vehicle: u8, end: Role, t_s: f64, event: &Event) {
+        if let Some(lane) = self.lane_of(vehicle) {
+            self.lane_event(lane, end, t_s, event);
+        }
+    }
+}
+
+impl LiveView {
+    /// A simulated network's frame at one receiver, on `/network/frames`.
+    fn network_frame(&mut self, e: &FrameEvent<'_>) {
+        let index = self.lanes.len() * Topic::ALL.len();
+        let Some(channel) = self.latest.channel(index) else {
+            return;
+        };
+        if channel.has_sinks() {
+            let now_ns = crate::mcap_log::wall_clock_ns();
+            let json = crate::net_mcap::hop_json(e, now_ns);
+            channel.log_with_meta(
+                json.as_bytes(),
+                PartialMetadata {
+                    log_time: Some(now_ns),
+                },
+            );
+        }
+        // A still vehicle's pose is republished on the network's ticks too.
+        for lane in 0..self.lanes.len() {
+            self.republish_still(lane, e.t_received_s.or(e.t_sent_s));
+        }
+    }
+
+    /// A frame a real-time node sent or heard, on its `/link/frames`.
+    fn node_frame(&mut self, e: &FrameEvent<'_>) {
+        let index = self.lanes.len() * Topic::ALL.len();
+        if let Some(node) = self.node.as_mut() {
+            let subscribed = self.latest.channel(index).is_some_and(|c| c.has_sinks());
+            node.want(|topic| topic == Topic::Frames && subscribed);
+            let frames: Vec<ViewMessage> = (node.frame(e).into_iter())
+                .filter(|m| m.topic == Topic::Frames)
+                .collect();
+            for m in frames {
+                self.publish_at(index, m.topic, &m.json, m.log_time_ns);
+            }
+        }
+        // A still vehicle's pose is republished on the node's frames too.
+        for lane in 0..self.lanes.len() {
+            self.republish_still(lane, e.t_received_s.or(e.t_sent_s));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rovlink_wire::operator::Order;
+
+    fn object(text: &str) -> serde_json::Map<String, serde_json::Value> {
+        serde_json::from_str(text).unwrap()
+    }
+
+    #[test]
+    fn a_teleop_twist_is_the_joystick_in_the_vehicles_frame() {
+        let live = twist_joystick(&object(
+            r#"{"linear":{"x":0.5,"y":0.25,"z":-1},"angular":{"x":9,"y":9,"z":1}}"#,
+        ))
+        .unwrap();
+        assert_eq!(
+            live,
+            Live::Joystick {
+                joystick: Joystick {
+                    vx: 50.0,
+                    vy: -25.0,
+                    vz: 100.0,
+                    vyaw: -100.0
+                },
+                arm: true,
+                disarm: false,
+                nav: Nav::Manual,
+            }
+        );
+        let Live::Joystick { joystick, .. } =
+            twist_joystick(&object(r#"{"linear":{"x":7},"angular":{"z":-3}}"#)).unwrap()
+        else {
+            panic!("not a joystick");
+        };
+        assert_eq!(
+            (joystick.vx, joystick.vy, joystick.vyaw),
+            (100.0, 0.0, 100.0),
+            "clamped, missing is 0"
+        );
+        let error = twist_joystick(&object(r#"{"linear":{"x":null}}"#)).unwrap_err();
+        assert_eq!(error, "field linear.x: expected a number, found null");
+        let error = twist_joystick(&object(r#"{"angular":[1]}"#)).unwrap_err();
+        assert!(
+            error.starts_with("field angular: expected an object"),
+            "{error}"
+        );
+    }
+
+    #[test]
+    fn client_channels_are_orders_or_twists_in_json() {
+        assert_eq!(
+            ClientTopic::of("/orders", "", "json"),
+            Ok(ClientTopic::Orders)
+        );
+        assert_eq!(
+            ClientTopic::of("/cmd_vel", "geometry_msgs/msg/Twist", "json"),
+            Ok(ClientTopic::Twist)
+        );
+        assert_eq!(
+            ClientTopic::of("/teleop", "geometry_msgs/Twist", "json"),
+            Ok(ClientTopic::Twist)
+        );
+        let error = ClientTopic::of("/cmd_vel", "geometry_msgs/Twist", "cdr").unwrap_err();
+        assert_eq!(error, r#"expected encoding json, found "cdr""#);
+        assert!(ClientTopic::of("/other", "std_msgs/String", "json").is_err());
+    }
+
+    #[test]
+    fn client_messages_parse_or_say_why() {
+        assert_eq!(
+            ClientTopic::Orders
+                .parse(br#"{"type":"goto","x_cm":300,"y_cm":0,"z_cm":50,"heading_deg":90}"#),
+            Ok(Live::Order(Order::GoTo {
+                x_cm: 300,
+                y_cm: 0,
+                z_cm: 50,
+                heading_deg: 90
+            }))
+        );
+        assert_eq!(
+            ClientTopic::Orders.parse(br#"{"type":"cancel"}"#),
+            Ok(Live::Cancel)
+        );
+        let error = ClientTopic::Orders.parse(b"{").unwrap_err();
+        assert!(error.starts_with("expected a JSON object: "), "{error}");
+        let error = ClientTopic::Twist.parse(b"[1,2]").unwrap_err();
+        assert_eq!(error, "expected a JSON object, found [1,2]");
+        let huge = vec![b' '; MAX_PAYLOAD_BYTES + 1];
+        let error = ClientTopic::Orders.parse(&huge).unwrap_err();
+        assert_eq!(
+            error,
+            format!(
+                "expected at most {MAX_PAYLOAD_BYTES} bytes, found {}",
+                MAX_PAYLOAD_BYTES + 1
+            )
+        );
+        let error = ClientTopic::Orders
+            .parse(br#"{"type":"goto"}"#)
+            .unwrap_err();
+        assert!(error.contains("x_cm"), "{error}");
+    }
+
+    #[test]
+    fn the_inbox_is_bounded_and_joysticks_coalesce() {
+        let mut inbox = Inbox::default();
+        let stick = |vx| {
+            Live::scripted_joystick(Joystick {
+                vx,
+                ..Joystick::default()
+            })
+        };
+        inbox.push(stick(1.0));
+        inbox.push(stick(2.0));
+        assert_eq!(inbox.orders, [stick(2.0)]);
+        inbox.push(Live::Cancel);
+        inbox.push(stick(3.0));
+        assert_eq!(inbox.orders.len(), 3);
+        for _ in 0..2 * MAX_QUEUED {
+            inbox.push(Live::Cancel);
+        }
+        assert_eq!(inbox.orders.len(), MAX_QUEUED);
+        assert_eq!(
+            inbox.dropped_orders,
+            (3 + 2 * MAX_QUEUED - MAX_QUEUED) as u64
+        );
+        for k in 0..2 * MAX_WARNINGS {
+            inbox.warn(format!("w{k}"));
+        }
+        assert_eq!(inbox.warnings.len(), MAX_WARNINGS);
+        assert_eq!(inbox.dropped_warnings, MAX_WARNINGS as u64);
+        let mut orders = LiveOrders {
+            inbox: Arc::new(Mutex::new(inbox)),
+            reports: None,
+        };
+        assert_eq!(orders.poll(SimTime::ZERO).len(), MAX_QUEUED);
+        assert!(orders.poll(SimTime::ZERO).is_empty());
+        let warnings = orders.take_warnings();
+        assert_eq!(warnings.len(), MAX_WARNINGS + 2, "{warnings:?}");
+        assert!(warnings.iter().any(|w| w.contains("orders dropped")));
+        assert!(orders.take_warnings().is_empty());
+    }
+
+    #[test]
+    fn a_twist_holds_for_a_while_then_the_joystick_goes_neutral() {
+        let mut inbox = Inbox::default();
+        let t0 = Instant::now();
+        let ahead = Live::scripted_joystick(Joystick {
+            vx: 50.0,
+            ..Joystick::default()
+        });
+        inbox.twist(ahead, t0);
+        inbox.expire(t0 + TWIST_HOLD / 2);
+        assert_eq!(inbox.orders, [ahead]);
+        inbox.orders.clear();
+        inbox.expire(t0 + TWIST_HOLD + Duration::from_millis(1));
+        assert_eq!(inbox.orders, [Live::scripted_joystick(Joystick::default())]);
+        inbox.orders.clear();
+        inbox.expire(t0 + 10 * TWIST_HOLD);
+        assert!(inbox.orders.is_empty(), "neutral once");
+    }
+
+    #[test]
+    fn addresses_are_host_and_port() {
+        assert_eq!(host_port("127.0.0.1:8765").unwrap(), ("127.0.0.1", 8765));
+        assert_eq!(host_port("[::1]:0").unwrap(), ("[::1]", 0));
+        for (bad, why) in [
+            ("8765", "no port"),
+            (":8765", "no host"),
+            ("::1:8765", "brackets"),
+            ("localhost:99999", "0..=65535"),
+            ("localhost:", "0..=65535"),
+        ] {
+            let error = host_port(bad).unwrap_err().to_string();
+            assert!(error.contains(why) && error.contains(bad), "{bad}: {error}");
+        }
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn any_bytes_parse_or_fail_without_panicking(data in proptest::collection::vec(proptest::num::u8::ANY, 0..200)) {
+            let _ = ClientTopic::Orders.parse(&data);
+            let _ = ClientTopic::Twist.parse(&data);
+        }
+
+        #[test]
+        fn any_twist_numbers_give_a_joystick_in_range(
+            v in proptest::collection::vec(-1e300f64..1e300, 4),
+        ) {
+            let text = format!(
+                r#"{{"linear":{{"x":{},"y":{},"z":{}}},"angular":{{"z":{}}}}}"#,
+                v[0], v[1], v[2], v[3]
+            );
+            let Ok(Live::Joystick { joystick, .. }) = ClientTopic::Twist.parse(text.as_bytes()) else {
+                panic!("{text}");
+            };
+            for axis in [joystick.vx, joystick.vy, joystick.vz, joystick.vyaw] {
+                proptest::prop_assert!((-100.0..=100.0).contains(&axis));
+            }
+        }
+    }
+
+    #[test]
+    fn the_docs_orders_are_orders() {
+        let doc = include_str!("../../../docs/tdma-foxglove.md");
+        let block = doc
+            .split("```json\n")
+            .nth(1)
+            .and_then(|rest| rest.split("```").next())
+            .expect("docs/tdma-foxglove.md has a json block");
+        let orders: Vec<Live> = block
+            .lines()
+            .map(|line| ClientTopic::Orders.parse(line.as_bytes()))
+            .collect::<Result<_, _>>()
+            .unwrap();
+        assert_eq!(orders.len(), 5);
+        assert_eq!(orders[4], Live::Cancel);
+    }
+
+    #[test]
+    fn warnings_stay_one_short_line() {
+        assert_eq!(shorten("a\nb"), "ab");
+        assert_eq!(shorten(&"x".repeat(200)).len(), 83);
+    }
+}

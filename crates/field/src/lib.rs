@@ -1,0 +1,16 @@
+//! rovlink-field: what connects a session to the world around it, above the engines of
+//! `rovlink-rcp`:
+//!
+//! - [`foxglove`] and [`foxglove_gate`]: the live Foxglove WebSocket view of a session;
+//! - [`mcap_log`] and [`net_mcap`]: a session's MCAP log, single vehicle and network;
+//! - [`mavlink`]: the ROV end driving an ArduSub autopilot over MAVLink 2;
+//! - [`console`]: the operator's orders as JSON Lines from a console or a FIFO.
+#![deny(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod console;
+pub mod foxglove;
+pub mod foxglove_gate;
+pub mod mavlink;
+pub mod mcap_log;
+pub mod net_mcap;

@@ -1,0 +1,361 @@
+//! octo-delta's command line: subcommands and flags, every number range-checked with its unit.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use rovlink_cli::value::{self, MAX_COUNT};
+use rovlink_octo::cloud::McapOptions;
+use rovlink_octo::delta::Roi;
+use rovlink_octo::pipeline::{
+    BuildConfig, COARSE_FACTOR_MAX, COORDINATE_MAX_M, Coarse, DumpFormat, InputFormat, MAX_RANGE_M,
+    RESOLUTION_MAX_M, RESOLUTION_MIN_M, THREADS_MAX,
+};
+use rovlink_octo::{synth, transfer};
+
+const EXAMPLES: &str = "\
+Examples:
+  octo-delta synth -o survey.graph                     a synthetic seabed survey to try things on
+  octo-delta synth -o survey.mcap                      the same, coloured, as ROS 2 MCAP
+  octo-delta build survey.graph --res 0.1 -o deltas.odl --stats bandwidth.csv --ot map.ot
+  octo-delta build scan*.pcd --roi -2,-2,-5,2,2,0 --coarse-depth 13 -o deltas.odl
+  octo-delta build run.mcap --fixed-frame odom -o deltas.odl   a ROS 2 bag posed by /tf
+  octo-delta build rosbag2_2026_12_01/ --pose-topic /odom --bt map.bt   a rosbag2 directory
+  octo-delta build survey.graph -o deltas.odl --link satellite-up   when each scan reaches shore
+  octo-delta apply deltas.odl -o view.ot               the operator's view
+  octo-delta apply deltas.odl --mcap view.mcap --arrivals arrivals.csv   the view as it grew, for Foxglove
+  octo-delta dump deltas.odl --format csv              one line per message
+  octo-delta full map.ot --roi -1,-1,-1,1,1,1 -o full.odl
+
+Any output may be - (standard output), one per run. SIGINT, SIGTERM or SIGHUP stop a build
+after its current scan: the stream holds every whole message so far, --bt/--ot the map so far.
+
+Exit codes: 0 ok, 2 bad usage or bad input (the message names the file and the offset),
+130/143/129 a build stopped by SIGINT/SIGTERM/SIGHUP.";
+
+/// The progress bar of a build.
+pub const PROGRESS: &str = "scan {pos}/{len} [{bar:30}] {elapsed_precise} (eta {eta})";
+
+/// Occupancy maps (OctoMap-compatible) whose changes stream over a narrow link.
+///
+/// `build` inserts point clouds into an octree exactly as OctoMap does (same maps, same .bt and
+/// .ot files) and writes, after each scan, one message with what changed: newly occupied and
+/// newly free voxels, at full resolution with colour inside the region of interest, at a
+/// coarse depth without colour outside it. `apply` rebuilds the operator's view from the
+/// stream, `dump` lists it, `full` sends a whole map. The stream format is in
+/// docs/octo-delta-format.md.
+#[derive(Parser, Debug)]
+#[command(version, after_help = EXAMPLES)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Build the map from point clouds and write the delta stream.
+    Build(Box<BuildArgs>),
+    /// Apply a delta stream: write the operator's view as a .ot file and/or a Foxglove MCAP.
+    Apply(ApplyArgs),
+    /// List a delta stream's messages.
+    Dump(DumpArgs),
+    /// A whole map (.ot or .bt) as a one-message stream (the operator's "full map" request).
+    Full(FullArgs),
+    /// Write a synthetic seabed survey (scans with poses) as a .graph or MCAP file.
+    Synth(SynthArgs),
+}
+
+fn coordinate() -> value::RealParser {
+    value::real(-COORDINATE_MAX_M, COORDINATE_MAX_M, "m")
+}
+
+fn roi(text: &str) -> Result<Roi, String> {
+    let v = value::tuple::<6>(coordinate()).parse(text)?;
+    let roi = Roi {
+        min_m: [v[0], v[1], v[2]],
+        max_m: [v[3], v[4], v[5]],
+    };
+    rovlink_octo::pipeline::check_roi(&roi).map_err(|e| format!("expected {}", e.expected))?;
+    Ok(roi)
+}
+
+fn input_format(text: &str) -> Result<InputFormat, String> {
+    text.parse()
+}
+
+/// `--format`'s help, naming every input format.
+fn format_help() -> String {
+    let names = InputFormat::names();
+    format!("Input format, when the file name does not tell: {names}")
+}
+
+fn dump_format(text: &str) -> Result<DumpFormat, String> {
+    text.parse()
+}
+
+/// The view the operator gets: coarse depth and region of interest.
+#[derive(Args, Debug, Clone)]
+pub struct ViewArgs {
+    /// Region of interest x0,y0,z0,x1,y1,z1 in metres: voxels there are sent at full resolution
+    /// with colour [default: everywhere, as in the paper's experiment].
+    #[arg(long, value_name = "BOX", value_parser = roi, allow_hyphen_values = true)]
+    pub roi: Option<Roi>,
+
+    /// Depth of the coarse voxels sent outside the ROI (1..=16; 13 = 8x the fine edge).
+    #[arg(long, value_name = "D", default_value_t = 13,
+          value_parser = value::count(1, 16), conflicts_with = "coarse_res", allow_hyphen_values = true)]
+    pub coarse_depth: u64,
+
+    /// Coarse voxel edge in metres instead of a depth (rounded to the nearest power-of-two
+    /// multiple of --res, at most 2^15 x --res).
+    #[arg(long, value_name = "M",
+          value_parser = value::positive(RESOLUTION_MAX_M * COARSE_FACTOR_MAX, "m"), allow_hyphen_values = true)]
+    pub coarse_res: Option<f64>,
+}
+
+impl ViewArgs {
+    /// The coarse voxels asked for.
+    pub fn coarse(&self) -> Coarse {
+        match self.coarse_res {
+            Some(m) => Coarse::Edge(m),
+            None => Coarse::Depth(self.coarse_depth as u32),
+        }
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct BuildArgs {
+    /// Point clouds: OctoMap .graph, PCD, PLY, XYZ, or a ROS 2 bag: MCAP (chunks zstd, lz4 or
+    /// none) or rosbag2 (the directory, its metadata.yaml or a .db3) with PointCloud2 clouds
+    /// posed by /tf + /tf_static or a pose topic; - for standard input.
+    #[arg(required = true, value_name = "INPUT")]
+    pub inputs: Vec<PathBuf>,
+
+    /// Voxel edge in metres.
+    #[arg(long, value_name = "M", default_value_t = 0.1,
+          value_parser = value::real(RESOLUTION_MIN_M, RESOLUTION_MAX_M, "m"), allow_hyphen_values = true)]
+    pub res: f64,
+
+    #[command(flatten)]
+    pub view: ViewArgs,
+
+    /// Rays longer than this (metres) mark free space up to this range only, no hit (OctoMap's
+    /// maxrange) [default: no limit].
+    #[arg(long, value_name = "M", value_parser = value::positive(MAX_RANGE_M, "m"), allow_hyphen_values = true)]
+    pub max_range: Option<f64>,
+
+    /// The delta stream [default: standard output].
+    #[arg(short, long, value_name = "FILE", default_value = "-")]
+    pub output: PathBuf,
+
+    /// One CSV row per scan (one whole line each, flushed): points, message bytes, list sizes,
+    /// and what sending the full map would cost (computing the .bt size takes a copy of the
+    /// map per scan).
+    #[arg(long, value_name = "FILE")]
+    pub stats: Option<PathBuf>,
+
+    /// Write the build's figures (scans, points, times, map and stream sizes; with --link the
+    /// transfer's latencies under `link`) as one line of JSON that also carries every parameter
+    /// of the run and its seed (`-`: standard output, then give -o a file).
+    #[arg(long, value_name = "FILE")]
+    pub metrics: Option<PathBuf>,
+
+    /// Write the final map as OctoMap's maximum-likelihood .bt.
+    #[arg(long, value_name = "FILE")]
+    pub bt: Option<PathBuf>,
+
+    /// Write the final map as OctoMap's .ot (a ColorOcTree when the input has colour).
+    #[arg(long, value_name = "FILE")]
+    pub ot: Option<PathBuf>,
+
+    /// Input format, when the file name does not tell (its help lists `InputFormat::names()`).
+    #[arg(long, value_name = "FORMAT", value_parser = input_format, help = format_help())]
+    pub format: Option<InputFormat>,
+
+    /// Sensor origin x,y,z (metres) for inputs without a pose (PLY, XYZ, PCD without VIEWPOINT,
+    /// a bag without TF or pose topic: without --origin such a bag is refused).
+    #[arg(long, value_name = "XYZ", value_parser = value::tuple::<3>(coordinate()),
+          allow_hyphen_values = true)]
+    pub origin: Option<[f64; 3]>,
+
+    /// Bags: the sensor_msgs/msg/PointCloud2 topic [default: the first one].
+    #[arg(long, value_name = "TOPIC")]
+    pub cloud_topic: Option<String>,
+
+    /// Bags: the sensor's pose from this topic instead of TF: geometry_msgs/msg/PoseStamped,
+    /// geometry_msgs/msg/TransformStamped or nav_msgs/msg/Odometry, interpolated at each cloud's
+    /// stamp [default: /tf + /tf_static when the bag has them, else the first PoseStamped topic].
+    #[arg(long, value_name = "TOPIC")]
+    pub pose_topic: Option<String>,
+
+    /// Bags posed by TF: the frame the map is built in; each cloud's header.frame_id is looked
+    /// up in it at the cloud's stamp [default: the root of the TF tree].
+    #[arg(long, value_name = "FRAME")]
+    pub fixed_frame: Option<String>,
+
+    /// Ignore colours (build an OcTree, not a ColorOcTree).
+    #[arg(long)]
+    pub no_color: bool,
+
+    /// Also resend an occupied voxel when its colour changes (a brighter point, or pruning
+    /// averaging it as OctoMap's ColorOcTree does); by default a voxel's colour is sent once,
+    /// when it becomes occupied, as in the paper.
+    #[arg(long, conflicts_with = "no_color")]
+    pub color_updates: bool,
+
+    /// Send each scan's message over this link model in virtual time (reliable, shaped to 85%
+    /// of the link rate) and report when each scan reached the operator.
+    #[arg(long, value_name = "MODEL")]
+    pub link: Option<String>,
+
+    /// With --link: seconds between scans.
+    #[arg(long, value_name = "S", default_value_t = 1.0, requires = "link",
+          value_parser = value::seconds(0.0, transfer::MAX_PERIOD_S), allow_hyphen_values = true)]
+    pub scan_period: f64,
+
+    /// With --link: one CSV row per scan: bytes, when it was ready, complete and shown.
+    #[arg(long, value_name = "FILE", requires = "link")]
+    pub arrivals: Option<PathBuf>,
+
+    /// With --link: seed of the link's random streams.
+    #[arg(
+        long,
+        default_value_t = 1,
+        requires = "link",
+        allow_hyphen_values = true
+    )]
+    pub seed: u64,
+
+    /// Threads casting scans' rays, a scan each, while the map takes the last one
+    /// [default: the machine's cores, at most 8].
+    #[arg(long, value_name = "N", value_parser = value::CountParser {
+        min: 1, max: THREADS_MAX as u64, unit: "threads" }, allow_hyphen_values = true)]
+    pub threads: Option<u64>,
+
+    /// No progress bar, no summary.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+impl BuildArgs {
+    /// The library's build configuration of these flags.
+    pub fn config(&self) -> BuildConfig {
+        BuildConfig {
+            resolution_m: self.res,
+            coarse: self.view.coarse(),
+            roi: self.view.roi,
+            max_range_m: self.max_range,
+            format: self.format,
+            origin_m: self.origin,
+            mcap: McapOptions {
+                cloud_topic: self.cloud_topic.clone(),
+                pose_topic: self.pose_topic.clone(),
+            },
+            fixed_frame: self.fixed_frame.clone(),
+            no_color: self.no_color,
+            color_updates: self.color_updates,
+            threads: self.threads.map(|t| t as usize),
+        }
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct ApplyArgs {
+    /// The delta stream [default: standard input].
+    #[arg(default_value = "-")]
+    pub input: PathBuf,
+    /// The view, as a .ot file ("-" for standard output); required unless --mcap is given.
+    #[arg(short, long, value_name = "FILE", required_unless_present = "mcap")]
+    pub output: Option<PathBuf>,
+    /// Apply only the first N messages.
+    #[arg(long, value_name = "N", value_parser = value::count(0, MAX_COUNT), allow_hyphen_values = true)]
+    pub messages: Option<u64>,
+    /// Also write the view as it grew, for Foxglove: an MCAP file with one foxglove.SceneUpdate
+    /// (JSON) per message on /octo_delta/view, coloured cubes for fine voxels, translucent grey
+    /// ones for coarse voxels, logged when the operator got the message.
+    #[arg(long, value_name = "FILE")]
+    pub mcap: Option<PathBuf>,
+    /// With --mcap: the CSV of build --link --arrivals; message k is logged at its row's
+    /// t_shown_s (when it and every earlier message had arrived).
+    #[arg(long, value_name = "FILE", requires = "mcap")]
+    pub arrivals: Option<PathBuf>,
+    /// With --mcap and no --arrivals: seconds between messages (message k logged at k x S).
+    #[arg(long, value_name = "S", default_value_t = 1.0, requires = "mcap", conflicts_with = "arrivals",
+          value_parser = value::seconds(0.0, transfer::MAX_PERIOD_S), allow_hyphen_values = true)]
+    pub scan_period: f64,
+}
+
+#[derive(Args, Debug)]
+pub struct DumpArgs {
+    /// The delta stream [default: standard input].
+    #[arg(default_value = "-")]
+    pub input: PathBuf,
+    /// Output form: text, ndjson or csv.
+    #[arg(short, long, value_parser = dump_format, default_value = "text")]
+    pub format: DumpFormat,
+    /// List every voxel (text and ndjson), not only the counts.
+    #[arg(long)]
+    pub voxels: bool,
+    /// Where the listing goes [default: standard output].
+    #[arg(short, long, value_name = "FILE", default_value = "-")]
+    pub output: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct FullArgs {
+    /// The map: .ot (OcTree or ColorOcTree) or .bt.
+    pub input: PathBuf,
+    #[command(flatten)]
+    pub view: ViewArgs,
+    /// The one-message stream [default: standard output].
+    #[arg(short, long, value_name = "FILE", default_value = "-")]
+    pub output: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct SynthArgs {
+    /// The survey file: a .graph (no colour), or with --format mcap (or a .mcap name) an MCAP of
+    /// coloured sensor_msgs/msg/PointCloud2 scans with geometry_msgs/msg/PoseStamped poses
+    /// [default: standard output].
+    #[arg(short, long, value_name = "FILE", default_value = "-")]
+    pub output: PathBuf,
+    /// Output format [default: from the file name, else graph].
+    #[arg(long, value_enum)]
+    pub format: Option<SynthFormat>,
+    /// Number of scans [default: the survey's own, 80].
+    #[arg(long, value_parser = value::CountParser {
+        min: 1, max: synth::MAX_SCANS as u64, unit: "scans" }, allow_hyphen_values = true)]
+    pub scans: Option<u64>,
+    /// Seed of the scene and the path.
+    #[arg(long, default_value_t = 1, allow_hyphen_values = true)]
+    pub seed: u64,
+}
+
+impl SynthArgs {
+    /// The survey these flags ask for.
+    pub fn params(&self) -> synth::SurveyParams {
+        synth::SurveyParams {
+            seed: self.seed,
+            scans: self
+                .scans
+                .map_or(synth::SurveyParams::default().scans, |n| {
+                    usize::try_from(n).unwrap_or(usize::MAX)
+                }),
+            ..synth::SurveyParams::default()
+        }
+    }
+
+    /// Whether to write MCAP: --format mcap, or a .mcap name without --format.
+    pub fn mcap(&self) -> bool {
+        let by_name = self
+            .output
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
+        self.format.map_or(by_name, |f| f == SynthFormat::Mcap)
+    }
+}
+
+#[derive(ValueEnum, Debug, Clone, Copy, PartialEq)]
+pub enum SynthFormat {
+    Graph,
+    Mcap,
+}

@@ -1,0 +1,368 @@
+//! tdma-run's command line.
+
+use std::path::PathBuf;
+
+use clap::{Parser, ValueEnum};
+use rovlink_cli::model::ModelArgs;
+use rovlink_cli::port::PortArgs;
+use rovlink_cli::value::{self, Bound, Range, RealParser, Unit};
+use rovlink_link::Model;
+use rovlink_rcp::ImageSettings;
+use rovlink_rcp::realtime::Role;
+use rovlink_rcp::session::{MAX_DURATION_S, MAX_IPG_S, MIN_IMAGE_BYTES, MIN_IPG_S, auto_ipg_for};
+use rovlink_wire::operator::Roi;
+
+const EXAMPLES: &str = "\
+Examples:
+  tdma-run                                   10 minutes over the S100 model, built-in script and image
+  tdma-run --sim --model s100 --ipg 640 --ber 0 --duration 600 --metrics m.json
+  tdma-run --ber 7e-4 --events events.csv    one row per frame: the data of the paper's Fig. 10
+  tdma-run --waypoints wp.csv --buoy 0,0,0 --start 1,0,1 --duration 200 --track track.csv
+  tdma-run --images photos/ --image-size 1500 --roi 100,80,420,300 --images-out received/
+  tdma-run --mcap session.mcap               open it in Foxglove: pose, velocities, link, images
+  tdma-run --duration 3600 --mcap - | mcap info -   any output may be - (standard output; one)
+
+Real time, one end per process (through link-sim standing in for the modems):
+  link-sim --model s100 --pty > ptys.txt &     prints two pseudo-terminals: A, then B
+  sleep 1; A=$(sed -n 1p ptys.txt); B=$(sed -n 2p ptys.txt)
+  tdma-run --role rov --port $B --duration 130 &
+  tdma-run --role operator --port $A --ipg 640 --duration 120 --images-out received/
+Real modems: --port /dev/ttyUSB0 (transparent, e.g. WFS S100), --dialect evologics with
+--port tcp:192.168.0.209:9200, or --port udp:BIND=PEER. Start the ROV end first.
+
+In the field (docs/tdma-mavlink.md, docs/tdma-console.md, docs/tdma-foxglove.md):
+  tdma-run --role rov --port /dev/ttyUSB0 --vehicle mavlink:udpin:0.0.0.0:14550 --camera cam/
+  mkfifo orders; tdma-run --role operator --port /dev/ttyUSB0 --orders orders --telemetry - &
+  echo '{\"type\":\"goto\",\"x_cm\":300,\"y_cm\":0,\"z_cm\":50,\"heading_deg\":90}' > orders
+  tdma-run --role operator --port /dev/ttyUSB0 --foxglove 127.0.0.1:8765 --images-out rx/ --preview
+
+--script: CSV t_s,vx,vy,vz,vyaw (joystick, percent of full thrust, from t on).
+--waypoints: CSV t_s,x_m,y_m,z_m,heading_deg (a GoTo order queued at t; NED metres, within
+  the GoTo order's +-327.67 m).
+--images: pictures larger than DEBT's 4096x4096 are scaled down to fit (up to 64 megapixels;
+  larger ones are refused).
+--track: CSV t_s,x_m,y_m,z_m,heading_deg,distance_m,goal_x_m,goal_y_m,goal_z_m,
+  goal_distance_m,backtrack_x_m,backtrack_y_m,backtrack_z_m,link_up (one row per 0.1 s vehicle
+  step; distances from the buoy; the data of the paper's Figs. 12-14).
+The summary on stderr has Table 4's rows for both directions; --metrics writes them as one
+line of JSON with the image, order and link-recovery counters, every parameter of the run
+(\"params\") and its seed, so that many runs' files concatenate (scripts/sweep runs grids). In real time each end knows only its half:
+frames it sent, and frames it received with their arrival times (no one-way delay: that needs
+both clocks); the operator adds the round trip from each slot's frame to the ROV's answer.
+
+Exit codes: 0 ok (also when Ctrl-C ends a real-time run), 1 the port failed during a real-time
+run (outputs so far kept), 2 bad usage or input, 130/143/129 a simulation stopped by SIGINT,
+SIGTERM or SIGHUP (at its next event: the summary and every output hold what was done, and
+the metrics say \"interrupted\").";
+
+/// Which end runs in real time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum RoleArg {
+    /// The TDMA master: sends the slots, plays the script and waypoints, receives images.
+    Operator,
+    /// The vehicle: answers each slot, drives the simulated vehicle, sends images.
+    Rov,
+}
+
+impl RoleArg {
+    /// The library's role.
+    pub fn role(self) -> Role {
+        match self {
+            RoleArg::Operator => Role::Operator,
+            RoleArg::Rov => Role::Rov,
+        }
+    }
+}
+
+/// The inter-packet gap.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Ipg {
+    /// Derived from the model.
+    Auto,
+    /// Given, ms.
+    Millis(f64),
+}
+
+fn ipg(text: &str) -> Result<Ipg, String> {
+    if text == "auto" {
+        return Ok(Ipg::Auto);
+    }
+    value::millis(MIN_IPG_S * 1e3, MAX_IPG_S * 1e3)
+        .0
+        .parse(text)
+        .map(Ipg::Millis)
+        .map_err(|e| format!("{e} (or `auto`)"))
+}
+
+fn duration() -> RealParser {
+    RealParser(Range {
+        min: Bound::Excl(0.0),
+        max: MAX_DURATION_S,
+        unit: Unit::Seconds,
+    })
+}
+
+fn roi(text: &str) -> Result<Roi, String> {
+    let [x0, y0, x1, y1] = value::rect(1023).parse(text)?.map(|v| v as u16);
+    Ok(Roi { x0, y0, x1, y1 })
+}
+
+/// Run a teleoperation session: operator (TDMA master) and ROV, over a link model in virtual
+/// time (the default, --sim) or one end per process over a real port (--role).
+///
+/// Both ends speak the remote-control protocol of wire.md: joystick and high-level orders down,
+/// status and DEBT-coded camera images up, one frame per slot, with heartbeats and the ROV's
+/// recovery by backtracking. In simulation the same seed gives the same session.
+#[derive(Parser, Debug)]
+#[command(version, after_help = format!("{EXAMPLES}\n\n{}", rovlink_link::device::HELP))]
+pub struct Args {
+    /// Both ends and the link in one process, in virtual time (the default).
+    #[arg(long, conflicts_with_all = ["role", "port"])]
+    pub sim: bool,
+
+    /// Run one end in real time over --port.
+    #[arg(long, value_enum, requires = "port", help_heading = "Real time")]
+    pub role: Option<RoleArg>,
+
+    /// The modem: a device (see Devices below): a serial port or pseudo-terminal path,
+    /// serial:PATH:BAUD, tcp:HOST:PORT, tcpin:HOST:PORT, udp:BIND=PEER, udpin:HOST:PORT or
+    /// udpout:HOST:PORT.
+    #[arg(long, value_name = "DEV", requires = "role", help_heading = "Real time",
+          value_parser = value::device)]
+    pub port: Option<String>,
+
+    /// A network (docs/tdma-network.md): a scenario file whose nodes, media and routes are
+    /// used (the rest ignored), the same file for every process. --address is then this
+    /// node's own address (a ROV's; default 1), --port its first medium's modem.
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "role",
+        help_heading = "Real time"
+    )]
+    pub routes: Option<PathBuf>,
+
+    /// With --routes: the modem of the node's second medium (a relay between two media), a
+    /// device as --port.
+    #[arg(long, value_name = "DEV", requires = "routes", help_heading = "Real time",
+          value_parser = value::device)]
+    pub port2: Option<String>,
+
+    /// The port's dialect and pacing (with `--role`).
+    #[command(flatten)]
+    pub port_args: PortArgs,
+
+    /// The link model (a built-in, a file, or flags).
+    #[command(flatten)]
+    pub model: ModelArgs,
+
+    /// Inter-packet gap, 1 ms ..= 10 min, or `auto` (air times + 2 x delays + 3 jitter sigmas).
+    #[arg(long, value_name = "MS|auto", default_value = "auto", value_parser = ipg)]
+    pub ipg: Ipg,
+
+    /// Run a simulation (--sim or --scenario) at X times real time (1 = real time), to watch
+    /// it live, e.g. in Foxglove with --foxglove; the results are the same as unpaced.
+    #[arg(long, value_name = "X", conflicts_with = "role",
+          value_parser = value::real(rovlink_rcp::driver::MIN_PACE, rovlink_rcp::driver::MAX_PACE, "x"))]
+    pub pace: Option<f64>,
+
+    /// Session length, s (at most a week) [default: 600, or the scenario's].
+    #[arg(long, value_name = "S", value_parser = duration())]
+    pub duration: Option<f64>,
+
+    /// Seed of the link's random streams [default: 1, or the scenario's].
+    #[arg(long, value_parser = value::count(0, u64::MAX))]
+    pub seed: Option<u64>,
+
+    /// A multi-vehicle session in virtual time: nodes, media, routes and waypoints from this
+    /// JSON file (docs/tdma-network.md); --duration and --seed override the file's.
+    #[arg(long, value_name = "FILE", help_heading = "Network",
+          conflicts_with_all = ["sim", "role", "port", "script", "waypoints", "buoy", "start",
+                                "ipg", "image_size", "trunk", "fec", "roi", "orders", "camera",
+                                "camera_cmd", "preview", "vehicle"])]
+    pub scenario: Option<PathBuf>,
+
+    /// The operator modem's position, NED m (each within 100 km): its distance to the ROV
+    /// drives the range model.
+    #[arg(long, value_name = "X,Y,Z", default_value = "0,0,0", allow_hyphen_values = true,
+          value_parser = value::point3())]
+    pub buoy: [f64; 3],
+
+    /// The ROV's initial position, NED m (each within 100 km).
+    #[arg(long, value_name = "X,Y,Z", default_value = "1,0,0", allow_hyphen_values = true,
+          value_parser = value::point3())]
+    pub start: [f64; 3],
+
+    /// Joystick script, CSV t_s,vx,vy,vz,vyaw [default: a built-in 10-minute script].
+    #[arg(long, value_name = "FILE")]
+    pub script: Option<PathBuf>,
+
+    /// GoTo orders, CSV t_s,x_m,y_m,z_m,heading_deg [default: the built-in script's].
+    #[arg(long, value_name = "FILE")]
+    pub waypoints: Option<PathBuf>,
+
+    /// Encoded image size, 16 ..= 65535 bytes (cut at 64 trunks).
+    #[arg(long, value_name = "BYTES", default_value_t = 2000,
+          value_parser = value::bytes(u64::from(MIN_IMAGE_BYTES), 65_535))]
+    pub image_size: u64,
+
+    /// Trunk size, 1 ..= 242 bytes (39 makes the paper's 57-byte ROV frame).
+    #[arg(long, value_name = "BYTES", default_value_t = 39,
+          value_parser = value::bytes(1, rovlink_wire::rov::MAX_TRUNK_BYTES as u64))]
+    pub trunk: u64,
+
+    /// Spend PERCENT (1 ..= 50) of each image's trunks on Reed-Solomon parity, sent after its
+    /// data trunks (progressive display unchanged): the operator completes an image once any
+    /// data-trunk count of them arrived, and asks (RIT) only for what parity cannot recover.
+    #[arg(long, value_name = "PERCENT",
+          value_parser = value::count(1, u64::from(rovlink_debt::fec::MAX_PERCENT)))]
+    pub fec: Option<u64>,
+
+    /// Region of interest x0,y0,x1,y1 in pixels (each < 1024).
+    #[arg(long, value_name = "X0,Y0,X1,Y1", value_parser = roi)]
+    pub roi: Option<Roi>,
+
+    /// Camera pictures: a directory of images or one image file, cycled [default: built-in].
+    #[arg(long, value_name = "DIR|FILE")]
+    pub images: Option<PathBuf>,
+
+    /// Write the session's figures, every parameter and the seed as one line of JSON here
+    /// (- for standard output).
+    #[arg(long, value_name = "FILE")]
+    pub metrics: Option<PathBuf>,
+
+    /// Write one CSV row per frame here (-: standard output):
+    /// direction,kind,bytes,t_sent_s,t_received_s,fate.
+    #[arg(long, value_name = "FILE")]
+    pub events: Option<PathBuf>,
+
+    /// Write every completed image here as PNG (image-0001.png, ...).
+    #[arg(long, value_name = "DIR")]
+    pub images_out: Option<PathBuf>,
+
+    /// Write the vehicle's track here, one CSV row per vehicle step (see below; - for
+    /// standard output).
+    #[arg(long, value_name = "FILE")]
+    pub track: Option<PathBuf>,
+
+    /// Write an MCAP session log here (Foxglove: pose, goal, velocities, link, images; - for
+    /// standard output, not a terminal).
+    #[arg(long, value_name = "FILE")]
+    pub mcap: Option<PathBuf>,
+
+    /// What moves the vehicle: `sim` (the built-in model) or `mavlink:ENDPOINT`, an ArduSub
+    /// autopilot (real time, --role rov) at a device (see Devices below): udpin:0.0.0.0:14550
+    /// (listen, answer the sender), udpout:HOST:PORT, tcp:HOST:PORT, tcpin:HOST:PORT or
+    /// serial:/dev/ttyACM0:115200. Aliases, as before: udp:HOST:PORT = udpin:HOST:PORT (here
+    /// as for --port, udp: with = is BIND=PEER), tcpout:HOST:PORT = tcp:HOST:PORT.
+    #[arg(long, value_name = "sim|mavlink:ENDPOINT", default_value = "sim",
+          value_parser = vehicle, help_heading = "Field")]
+    pub vehicle: Vehicle,
+
+    /// Camera: the newest image file in DIR at each capture.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["images", "camera_cmd"],
+          help_heading = "Field")]
+    pub camera: Option<PathBuf>,
+
+    /// Camera: run CMD (with sh -c) at each capture and read one image from its standard
+    /// output, e.g. "ffmpeg -f v4l2 -i /dev/video0 -frames:v 1 -f image2pipe -c:v png -".
+    #[arg(
+        long,
+        value_name = "CMD",
+        conflicts_with = "images",
+        help_heading = "Field"
+    )]
+    pub camera_cmd: Option<String>,
+
+    /// Live orders: JSON Lines, each an order in wire.md's JSON form or {"type":"cancel"},
+    /// read as they come (a pipe or FIFO; - for standard input), each sent at the next free
+    /// slot. In simulation a line's "t_s" says when. Without --script/--waypoints the
+    /// built-in script is then not played.
+    #[arg(long, value_name = "FILE|-", help_heading = "Field")]
+    pub orders: Option<PathBuf>,
+
+    /// Write JSON Lines as things happen (- for standard output): each status received,
+    /// orders sent/acknowledged/cancelled, image progress, link lost/recovered.
+    #[arg(long, value_name = "FILE|-", help_heading = "Field")]
+    pub telemetry: Option<PathBuf>,
+
+    /// With --images-out: write the image in progress as its trunks arrive, so it sharpens.
+    #[arg(long, requires = "images_out", help_heading = "Field")]
+    pub preview: bool,
+
+    /// Serve a live Foxglove WebSocket view here (HOST:PORT; binds only there): the --mcap
+    /// channels live, and client channels /orders (JSON orders) and Twist (Teleop panel) on a
+    /// single session's operator end. With --scenario or --routes, every vehicle under
+    /// /vehicle/N/ (view only).
+    #[arg(long, value_name = "HOST:PORT", help_heading = "Field")]
+    pub foxglove: Option<String>,
+}
+
+/// What moves the vehicle.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Vehicle {
+    /// The built-in kinematic model.
+    Sim,
+    /// An autopilot over MAVLink at this endpoint.
+    Mavlink(String),
+}
+
+fn vehicle(text: &str) -> Result<Vehicle, String> {
+    match text.split_once(':') {
+        _ if text == "sim" => Ok(Vehicle::Sim),
+        Some(("mavlink", endpoint)) if !endpoint.is_empty() => {
+            rovlink_field::mavlink::parse_endpoint(endpoint).map_err(|e| e.to_string())?;
+            Ok(Vehicle::Mavlink(endpoint.to_string()))
+        }
+        _ => Err(format!(
+            "expected sim or mavlink:ENDPOINT (e.g. mavlink:udpin:0.0.0.0:14550), found {text:?}"
+        )),
+    }
+}
+
+impl Args {
+    /// The input files, for the outputs' same-file check.
+    pub fn inputs(&self) -> impl Iterator<Item = &std::path::Path> {
+        [
+            &self.script,
+            &self.waypoints,
+            &self.images,
+            &self.orders,
+            &self.model.model_file,
+            &self.scenario,
+            &self.routes,
+        ]
+        .into_iter()
+        .flatten()
+        .map(PathBuf::as_path)
+    }
+
+    /// The session length, s: given, or 600.
+    pub fn duration_s(&self) -> f64 {
+        self.duration.unwrap_or(600.0)
+    }
+
+    /// The seed: given, or 1.
+    pub fn seed(&self) -> u64 {
+        self.seed.unwrap_or(1)
+    }
+
+    /// The image settings the flags give (the parsers bound each to its type).
+    pub fn settings(&self) -> ImageSettings {
+        ImageSettings {
+            roi: self.roi,
+            size_bytes: u16::try_from(self.image_size).unwrap_or(u16::MAX),
+            trunk_bytes: u8::try_from(self.trunk).unwrap_or(u8::MAX),
+            fec_percent: self.fec.map_or(0, |p| p as u8),
+            ..ImageSettings::default()
+        }
+    }
+
+    /// The IPG, s: given, or derived from `model` and `settings`.
+    pub fn ipg_s(&self, model: &Model, settings: &ImageSettings) -> f64 {
+        match self.ipg {
+            Ipg::Millis(ms) => ms / 1e3,
+            Ipg::Auto => auto_ipg_for(model, settings, self.start, self.buoy),
+        }
+    }
+}

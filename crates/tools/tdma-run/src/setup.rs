@@ -1,0 +1,169 @@
+//! What every tdma-run mode shares: the flags that apply to one end only, the ends' parts
+//! (order sources, the vehicle, the camera), how a real-time run's end is said.
+
+use crate::outputs::{Destinations, check_images_out};
+use anyhow::Result;
+use rovlink_base::io::{EXIT_CHECK_FAILED, EXIT_OK};
+use rovlink_base::output::{Dest, Kind, Outputs};
+use rovlink_cli::say;
+use rovlink_cli::stop;
+use rovlink_rcp::camera;
+use rovlink_rcp::realtime::{Ended, Role};
+use rovlink_rcp::report::Observer;
+use rovlink_rcp::session::{Parts, SessionConfig};
+
+use crate::TOOL;
+use crate::flags::{Args, Vehicle};
+
+/// The exit code of a real-time run that ended so after `duration_s`, said on stderr.
+pub(super) fn ended_code(ended: Ended, duration_s: f64) -> u8 {
+    match ended {
+        Ended::Done => EXIT_OK,
+        Ended::Stopped => {
+            say!("stopped after {duration_s:.1} s");
+            EXIT_OK
+        }
+        Ended::Failed(error) => {
+            say!("{error} after {duration_s:.1} s; outputs so far kept");
+            EXIT_CHECK_FAILED
+        }
+    }
+}
+
+/// Warnings of the session (a bad order line) on standard error, as they come.
+pub(super) struct Stderr;
+
+impl Observer for Stderr {
+    fn warning(&mut self, _t_s: f64, text: &str) {
+        say!("{text}");
+    }
+
+    fn wants_poses(&self) -> bool {
+        false
+    }
+}
+
+/// The field flags that apply only to one end.
+pub(super) fn field_usage(args: &Args, role: Option<Role>) -> Result<()> {
+    use rovlink_base::UsageError;
+    let rov_side = role != Some(Role::Operator);
+    let operator_side = role != Some(Role::Rov);
+    if matches!(args.vehicle, Vehicle::Mavlink(_)) && role != Some(Role::Rov) {
+        return Err(UsageError(
+            "--vehicle mavlink:... drives a real autopilot: it needs --role rov (real time)".into(),
+        )
+        .into());
+    }
+    let checks = [
+        (rov_side, "--camera", args.camera.is_some(), "the ROV end"),
+        (
+            rov_side,
+            "--camera-cmd",
+            args.camera_cmd.is_some(),
+            "the ROV end",
+        ),
+        (
+            operator_side,
+            "--orders",
+            args.orders.is_some(),
+            "the operator end",
+        ),
+        (operator_side, "--preview", args.preview, "the operator end"),
+    ];
+    for (applies, flag, given, end) in checks {
+        if given && !applies {
+            return Err(UsageError(format!("{flag} only applies to {end}")).into());
+        }
+    }
+    Ok(())
+}
+
+/// What the ends run beyond the config: order sources, the vehicle, the camera.
+pub(super) fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
+    let mut parts = Parts::from_config(config);
+    if let Vehicle::Mavlink(endpoint) = &args.vehicle {
+        let options = rovlink_field::mavlink::MavlinkOptions::default();
+        let drive = rovlink_field::mavlink::connect(endpoint, &options)
+            .map_err(|e| rovlink_base::UsageError(format!("--vehicle: {e}")))?;
+        say!("vehicle: ArduSub over MAVLink at {}", drive.endpoint());
+        parts.drive = Box::new(drive);
+    }
+    if let Some(dir) = &args.camera {
+        parts.camera = Box::new(camera::newest_in_dir(dir)?);
+    }
+    if let Some(command) = &args.camera_cmd {
+        // In virtual time a capture waits for the command's run (the session's time stands
+        // still meanwhile); in real time it never waits.
+        parts.camera = Box::new(match args.role {
+            Some(_) => camera::command_camera(command)?,
+            None => camera::command_camera_waiting(command)?.stop_on(stop::flag()),
+        });
+    }
+    if let Some(path) = &args.orders {
+        let live = args.role.is_some();
+        parts.orders.push(Box::new(open_orders(path, live)?));
+    }
+    Ok(parts)
+}
+
+/// A signal came while the run was still starting.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub(super) struct Stopped(pub(super) String);
+
+/// Opens `--orders`. In simulation the whole input is read at start, which waits for a
+/// FIFO's writer (or a terminal's end of input): that wait is done aside, so a signal
+/// meanwhile ends the run ([`Stopped`]) instead of being left for later.
+fn open_orders(path: &std::path::Path, live: bool) -> Result<rovlink_field::console::JsonOrders> {
+    use std::sync::mpsc::RecvTimeoutError;
+    if live {
+        return Ok(rovlink_field::console::open_orders(path, true)?);
+    }
+    let (tx, rx) = std::sync::mpsc::channel();
+    let owned = path.to_path_buf();
+    std::thread::Builder::new()
+        .name("orders-open".into())
+        .spawn(move || {
+            let _ = tx.send(rovlink_field::console::open_orders(&owned, false));
+        })?;
+    loop {
+        match rx.recv_timeout(std::time::Duration::from_millis(50)) {
+            Ok(opened) => return Ok(opened?),
+            Err(RecvTimeoutError::Timeout) if !stop::requested() => {}
+            Err(_) => {
+                let what = format!(
+                    "stopped while waiting for the orders of --orders {}",
+                    path.display()
+                );
+                return Err(Stopped(what).into());
+            }
+        }
+    }
+}
+
+/// The host part of HOST:PORT, for the URL said at start.
+pub(super) fn host_of(addr: &str) -> &str {
+    addr.rsplit_once(':').map_or(addr, |(host, _)| host)
+}
+
+/// Every output the flags name, claimed before any work (so bad usage leaves no file): the
+/// metrics' destination and the others', in every kind of session.
+pub(super) fn claim_outputs(args: &Args) -> Result<(Option<Dest>, Destinations)> {
+    let mut outs = Outputs::new();
+    outs.inputs(args.inputs());
+    let metrics = outs.claim_opt("--metrics", args.metrics.as_deref(), Kind::Text)?;
+    let dests = Destinations {
+        events: outs.claim_opt("--events", args.events.as_deref(), Kind::Text)?,
+        track: outs.claim_opt("--track", args.track.as_deref(), Kind::Text)?,
+        mcap: outs.claim_opt("--mcap", args.mcap.as_deref(), Kind::Binary)?,
+        images_out: (args.images_out.as_deref())
+            .map(|dir| outs.claim_dir("--images-out", dir))
+            .transpose()?,
+        telemetry: outs.claim_opt("--telemetry", args.telemetry.as_deref(), Kind::Text)?,
+        preview: args.preview,
+    };
+    if let Some(dir) = &dests.images_out {
+        check_images_out(dir, args.inputs())?;
+    }
+    Ok((metrics, dests))
+}
