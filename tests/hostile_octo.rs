@@ -16,8 +16,8 @@ use crate::common::hostile::{
     temp_files,
 };
 use nix::sys::signal::Signal;
-use rovlink_octo::cloud::{PcdData, write_pcd, write_ply, write_xyz};
 use rovlink_octo::{Pose, Scan};
+use rovlink_scans::cloud::{PcdData, write_pcd, write_ply, write_xyz};
 
 const OCTO: &str = env!("TOOL_EXE_octo-delta");
 const LIMIT: Duration = Duration::from_secs(60);

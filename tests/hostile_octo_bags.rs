@@ -5,7 +5,7 @@
 //! signalled), one line naming the file and what was wrong, never a panic or a hang, no output
 //! file after exit 2, the bag untouched.
 //!
-//! The bags are written here, in Rust (the CDR encoders of `rovlink_octo::ros`, a few MCAP
+//! The bags are written here, in Rust (the CDR encoders of `rovlink_scans::ros`, a few MCAP
 //! records by hand, SQLite for the `.db3`), so these tests need no Python.
 
 use std::path::{Path, PathBuf};
@@ -15,10 +15,10 @@ use crate::common::hostile::{
     Run, SignalWhen, Stdin, assert_contract, run_in, signal_when, temp_files,
 };
 use nix::sys::signal::Signal;
-use rovlink_octo::ros::{
+use rovlink_octo::{Pose, Scan};
+use rovlink_scans::ros::{
     ByteOrder, Header, Transform, TransformStamped, encode_point_cloud2, encode_tf_message,
 };
-use rovlink_octo::{Pose, Scan};
 
 const OCTO: &str = env!("TOOL_EXE_octo-delta");
 const LIMIT: Duration = Duration::from_secs(60);

@@ -9,7 +9,7 @@
 use std::sync::atomic::AtomicBool;
 
 use libfuzzer_sys::fuzz_target;
-use rovlink_octo::bag::Bag;
+use rovlink_scans::bag::Bag;
 
 const MAGIC: &[u8] = b"\x89MCAP0\r\n";
 

@@ -10,7 +10,7 @@
 
 use libfuzzer_sys::fuzz_target;
 use rovlink_octo::Scan;
-use rovlink_octo::cloud::{
+use rovlink_scans::cloud::{
     self, McapOptions, PcdData, PlyFormat, read_mcap, read_pcd, read_ply, read_xyz,
     write_clouds_mcap, write_pcd, write_ply, write_ply_as, write_xyz,
 };

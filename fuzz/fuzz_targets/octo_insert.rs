@@ -20,8 +20,8 @@
 use std::time::{Duration, Instant};
 
 use libfuzzer_sys::fuzz_target;
-use rovlink_octo::cloud::McapOptions;
-use rovlink_octo::pipeline::InputFormat;
+use rovlink_scans::cloud::McapOptions;
+use rovlink_mapper::pipeline::InputFormat;
 use rovlink_octo::tree::{OcTree, TREE_DEPTH};
 use rovlink_octo::{Pose, Scan, files};
 

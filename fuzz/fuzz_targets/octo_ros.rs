@@ -9,11 +9,11 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rovlink_octo::ros::{
+use rovlink_scans::ros::{
     self, ByteOrder, Transform, decode_odometry, decode_point_cloud2, decode_pose_stamped,
     decode_pose_stamped_as_pose, decode_tf_message, decode_transform_stamped,
 };
-use rovlink_octo::tf::{PoseTrack, TfTree};
+use rovlink_scans::tf::{PoseTrack, TfTree};
 
 const OFFSET: usize = 1000;
 

@@ -9,7 +9,7 @@
 
 use libfuzzer_sys::fuzz_target;
 use rovlink_octo::delta::{self, Roi, ViewSpec};
-use rovlink_octo::view::{self, SceneBuilder, Timing};
+use rovlink_mapper::view::{self, SceneBuilder, Timing};
 
 fuzz_target!(|data: &[u8]| {
     match data {

@@ -25,24 +25,18 @@
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
-pub mod bag;
 pub mod cast;
 pub mod cellset;
-pub mod cloud;
+pub mod checks;
 pub mod delta;
 pub mod files;
 pub mod graph;
 pub mod hashorder;
 mod lanes;
 pub mod math;
-pub mod pipeline;
-pub mod recording;
-pub mod ros;
 pub mod synth;
-pub mod tf;
 pub mod transfer;
 pub mod tree;
-pub mod view;
 
 /// A sensor pose as OctoMap holds it: translation and rotation quaternion, in `f32`.
 ///

@@ -137,8 +137,8 @@ impl SurveyParams {
     /// Checks every number against a range no survey needs to leave (finite, the sign, a
     /// maximum); the error names the option (`--scans` for [`scans`](Self::scans)) and the
     /// range with its unit. [`survey`] itself clamps instead, so it never fails.
-    pub fn validate(&self) -> Result<(), super::pipeline::ConfigError> {
-        use super::pipeline::{ConfigError, check_range};
+    pub fn validate(&self) -> Result<(), crate::checks::ConfigError> {
+        use crate::checks::{ConfigError, check_range};
         let count = |option, v: usize, lo: usize, hi: usize, unit: &str| {
             if (lo..=hi).contains(&v) {
                 Ok(())

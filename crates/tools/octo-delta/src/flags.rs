@@ -4,13 +4,13 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use rovlink_cli::value::{self, MAX_COUNT};
-use rovlink_octo::cloud::McapOptions;
-use rovlink_octo::delta::Roi;
-use rovlink_octo::pipeline::{
+use rovlink_mapper::pipeline::{
     BuildConfig, COARSE_FACTOR_MAX, COORDINATE_MAX_M, Coarse, DumpFormat, InputFormat, MAX_RANGE_M,
     RESOLUTION_MAX_M, RESOLUTION_MIN_M, THREADS_MAX,
 };
+use rovlink_octo::delta::Roi;
 use rovlink_octo::{synth, transfer};
+use rovlink_scans::cloud::McapOptions;
 
 const EXAMPLES: &str = "\
 Examples:
@@ -74,7 +74,7 @@ fn roi(text: &str) -> Result<Roi, String> {
         min_m: [v[0], v[1], v[2]],
         max_m: [v[3], v[4], v[5]],
     };
-    rovlink_octo::pipeline::check_roi(&roi).map_err(|e| format!("expected {}", e.expected))?;
+    rovlink_mapper::pipeline::check_roi(&roi).map_err(|e| format!("expected {}", e.expected))?;
     Ok(roi)
 }
 

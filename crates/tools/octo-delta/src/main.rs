@@ -1,6 +1,6 @@
 //! octo-delta: an OctoMap-compatible occupancy map built from point clouds, whose changes stream
 //! over a narrow link (fine and coloured inside a region of interest, coarse outside). The work
-//! is `rovlink_octo::pipeline`'s; this binary parses, claims its outputs and reports.
+//! is `rovlink_mapper::pipeline`'s; this binary parses, claims its outputs and reports.
 #![forbid(unsafe_code)]
 
 mod flags;
@@ -16,8 +16,9 @@ use rovlink_cli::metrics;
 use rovlink_cli::rows::{RowFormat, RowWriter};
 use rovlink_cli::say;
 use rovlink_cli::{UsageError, progress, stop};
-use rovlink_octo::pipeline::{self, Hooks, SinkError, StatsRow};
-use rovlink_octo::{files, transfer, view};
+use rovlink_mapper::pipeline::{self, Hooks, SinkError, StatsRow};
+use rovlink_mapper::view;
+use rovlink_octo::{files, transfer};
 
 const TOOL: &str = "octo-delta";
 

@@ -1,15 +1,15 @@
-//! Property tests of the point-cloud readers (`rovlink_octo::cloud`): random clouds written in
+//! Property tests of the point-cloud readers (`rovlink_scans::cloud`): random clouds written in
 //! every format (by the library's writers and by independent writers here that add fields the
 //! readers must skip) read back to the same points, colours and pose; random bytes, and random
 //! mutations and truncations of valid files, never make a reader panic, and whatever a reader
 //! accepts has finite points and one colour per point.
 
 use proptest::prelude::*;
-use rovlink_octo::cloud::{
+use rovlink_octo::{Pose, Scan};
+use rovlink_scans::cloud::{
     self, CloudFormat, McapOptions, PcdData, PlyFormat, read_mcap, read_pcd, read_ply, read_xyz,
     write_clouds_mcap, write_pcd, write_ply, write_ply_as, write_xyz,
 };
-use rovlink_octo::{Pose, Scan};
 
 // ---- strategies -------------------------------------------------------------------------
 

@@ -1,4 +1,4 @@
-//! `rovlink_octo::bag` reads the bags that the real ROS 2 writers write: the `mcap` and
+//! `rovlink_scans::bag` reads the bags that the real ROS 2 writers write: the `mcap` and
 //! `mcap-ros2-support` Python writers (zstd, lz4 and uncompressed chunks, unchunked) and
 //! `rosbags` (rosbag2 directories with sqlite3 or mcap storage, payloads plain or
 //! zstd-compressed one by one), through `tests/bags/write_bag.py`.
@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::atomic::AtomicBool;
 
-use rovlink_octo::bag::Bag;
+use rovlink_scans::bag::Bag;
 
 const CLOUD: &str = "sensor_msgs/msg/PointCloud2";
 const TF: &str = "tf2_msgs/msg/TFMessage";
@@ -237,9 +237,9 @@ fn mcap_ros2_writer_clouds_read_as_scans() {
         [("/cloud".into(), CLOUD.into(), "cdr".into(), Some(3))]
     );
     assert_eq!(got, written);
-    let scans = rovlink_octo::cloud::read_mcap(
+    let scans = rovlink_scans::cloud::read_mcap(
         &std::fs::read(&path).unwrap(),
-        &rovlink_octo::cloud::McapOptions::default(),
+        &rovlink_scans::cloud::McapOptions::default(),
     )
     .unwrap();
     assert_eq!(scans.scans.len(), 3);

@@ -4,7 +4,7 @@
 use std::fmt::Write as _;
 
 use super::{CloudBuilder, Lines, Scalar, Tokens, capacity, err, shown, shown_names, text};
-use crate::{ParseError, Pose, Scan};
+use rovlink_octo::{ParseError, Pose, Scan};
 
 /// How a PLY file stores its rows (the header's `format` line).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

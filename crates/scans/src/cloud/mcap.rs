@@ -17,7 +17,7 @@ use crate::ros::{
     decode_point_cloud2, decode_pose_stamped_as_pose,
 };
 pub use crate::ros::{POINT_CLOUD2_SCHEMA, POSE_STAMPED_SCHEMA};
-use crate::{ParseError, Pose, Scan};
+use rovlink_octo::{ParseError, Pose, Scan};
 /// Topic of the clouds [`write_clouds_mcap`] writes.
 pub const DEFAULT_CLOUD_TOPIC: &str = "/points";
 /// Topic of the poses [`write_clouds_mcap`] writes.

@@ -36,7 +36,7 @@
 //! fuzzed (`fuzz/fuzz_targets/octo_ros.rs`) and property-tested (`tests/proptest_octo_tf.rs`).
 
 use crate::cloud::{CloudBuilder, Scalar, err, shown_names, unpack_rgb};
-use crate::{ParseError, Pose, Scan};
+use rovlink_octo::{ParseError, Pose, Scan};
 
 /// Schema name of point clouds: ROS 2's `sensor_msgs/msg/PointCloud2`.
 pub const POINT_CLOUD2_SCHEMA: &str = "sensor_msgs/msg/PointCloud2";

@@ -35,9 +35,9 @@ pub use config::{
 };
 pub use inputs::{InputFormat, MAX_INPUT_BYTES, input_files, read_input, read_limited};
 
-use super::ParseError;
-use super::recording::RecordingError;
 use rovlink_base::io::IoError;
+use rovlink_octo::ParseError;
+use rovlink_scans::recording::RecordingError;
 
 /// Why a build (or another pipeline) failed.
 #[derive(Debug, thiserror::Error)]

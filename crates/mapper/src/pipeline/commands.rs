@@ -6,10 +6,11 @@ use std::io::Write;
 
 use super::{Coarse, ConfigError, PipelineError, RESOLUTION_MAX_M, RESOLUTION_MIN_M};
 use super::{check_range, view_spec};
-use crate::delta::{self, Message, Receiver, Roi, ViewSpec};
-use crate::tree::{OcTree, TREE_DEPTH, unmorton};
-use crate::{cloud, files, graph, synth};
 use rovlink_base::io::IoError;
+use rovlink_octo::delta::{self, Message, Receiver, Roi, ViewSpec};
+use rovlink_octo::tree::{OcTree, TREE_DEPTH, unmorton};
+use rovlink_octo::{files, graph, synth};
+use rovlink_scans::cloud;
 
 /// A stream's header and messages, or where `bytes` (named `name`) stop being one.
 pub fn read_stream(

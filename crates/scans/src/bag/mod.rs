@@ -86,7 +86,7 @@ pub struct Message {
 impl Message {
     /// An error about this message's payload: `error.offset` is an offset in [`Message::data`],
     /// turned into a place in the file.
-    pub fn error(&self, error: crate::ParseError) -> BagError {
+    pub fn error(&self, error: rovlink_octo::ParseError) -> BagError {
         BagError::new(self.at.within(error.offset), error.message)
     }
 }

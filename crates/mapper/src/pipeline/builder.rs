@@ -14,13 +14,13 @@ use serde::Serialize;
 
 use super::inputs::{ScanSource, open_scans, with_origin};
 use super::{BuildConfig, PipelineError};
-use crate::Scan;
-use crate::cast::{PreparedScan, ScanCaster};
-use crate::delta::{self, Sender, ViewSpec};
-use crate::recording::{Item, Recording, RecordingError};
-use crate::tree::OcTree;
-use crate::{files, transfer};
 use rovlink_base::io::IoError;
+use rovlink_octo::Scan;
+use rovlink_octo::cast::{PreparedScan, ScanCaster};
+use rovlink_octo::delta::{self, Sender, ViewSpec};
+use rovlink_octo::tree::OcTree;
+use rovlink_octo::{files, transfer};
+use rovlink_scans::recording::{Item, Recording, RecordingError};
 
 /// One row of `--stats`: a scan's message and what sending the whole map would have cost.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -776,7 +776,7 @@ mod tests {
     #[test]
     fn two_threads_build_the_same_bytes_as_one() {
         let dir = tempfile::tempdir().unwrap();
-        let params = crate::synth::SurveyParams {
+        let params = rovlink_octo::synth::SurveyParams {
             scans: 6,
             ..Default::default()
         };

@@ -31,10 +31,10 @@
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
-use super::bag::{self, Bag, BagError, Location};
-use super::ros::{self, Header, Transform};
-use super::tf::{PoseTrack, TfTree, Unavailable};
-use super::{ParseError, Pose, Scan};
+use crate::bag::{self, Bag, BagError, Location};
+use crate::ros::{self, Header, Transform};
+use crate::tf::{PoseTrack, TfTree, Unavailable};
+use rovlink_octo::{ParseError, Pose, Scan};
 
 /// Which topics and frames [`Recording`] reads.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]

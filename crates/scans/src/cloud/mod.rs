@@ -51,7 +51,7 @@
 use std::fmt;
 use std::path::Path;
 
-use super::{ParseError, Pose, Scan};
+use rovlink_octo::{ParseError, Pose, Scan};
 
 mod mcap;
 mod pcd;

@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 use super::{
     CloudBuilder, Lines, Scalar, Tokens, capacity, err, shown, shown_names, text, unpack_rgb,
 };
-use crate::{ParseError, Pose, Scan};
+use rovlink_octo::{ParseError, Pose, Scan};
 
 /// How a PCD file stores its points (the header's `DATA` line).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

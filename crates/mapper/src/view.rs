@@ -56,9 +56,9 @@ use std::io::Write;
 
 use serde::Serialize;
 
-use super::delta::{Framed, Message, Receiver, ViewSpec};
-use super::pipeline::{self, ARRIVAL_COLUMNS, ConfigError, PipelineError};
-use super::tree::{KEY_CENTER, NodeRef, OcTree, TREE_DEPTH, unmorton};
+use crate::pipeline::{self, ARRIVAL_COLUMNS, ConfigError, PipelineError};
+use rovlink_octo::delta::{Framed, Message, Receiver, ViewSpec};
+use rovlink_octo::tree::{KEY_CENTER, NodeRef, OcTree, TREE_DEPTH, unmorton};
 
 /// The topic of the scene updates.
 pub const TOPIC: &str = "/octo_delta/view";
@@ -974,9 +974,9 @@ mod tests {
     use std::collections::HashMap;
 
     use super::*;
-    use crate::delta::{self, Delta, Roi, Sender};
-    use crate::synth::{self, SurveyParams};
-    use crate::tree::{Key, morton};
+    use rovlink_octo::delta::{self, Delta, Roi, Sender};
+    use rovlink_octo::synth::{self, SurveyParams};
+    use rovlink_octo::tree::{Key, morton};
 
     /// The scene a player has after `updates`: entity id -> cubes.
     fn replay(scene: &mut HashMap<String, Vec<Cube>>, u: &SceneUpdate) {

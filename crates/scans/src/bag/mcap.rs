@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use ::mcap::records::op;
 
 use super::{BagError, Location, MAX_CHUNK_BYTES, Message, Topic};
-use crate::ParseError;
+use rovlink_octo::ParseError;
 
 /// MCAP's magic bytes, at the start and at the end of a file.
 const MAGIC: &[u8] = ::mcap::MAGIC;
@@ -1255,7 +1255,7 @@ mod tests {
 
     #[test]
     fn summary_topics_and_counts_and_stop() {
-        let scans = vec![crate::Scan::default(); 4];
+        let scans = vec![rovlink_octo::Scan::default(); 4];
         let bytes = crate::cloud::write_clouds_mcap(&scans);
         let mut bag = Bag::from_mcap_bytes("w.mcap", bytes).unwrap();
         let topics: Vec<_> = bag
@@ -1292,7 +1292,7 @@ mod tests {
                 CRC32.checksum(&plain),
             ),
             file("lz4", &lz4(&plain), plain.len() as u64, 0),
-            crate::cloud::write_clouds_mcap(&[crate::Scan::default()]),
+            crate::cloud::write_clouds_mcap(&[rovlink_octo::Scan::default()]),
         ] {
             for cut in 0..bytes.len() {
                 assert!(read_all(bytes[..cut].to_vec()).is_err());

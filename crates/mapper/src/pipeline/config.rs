@@ -4,10 +4,10 @@
 //! ([`view_spec`]: resolution, coarse depth, region of interest).
 
 use super::InputFormat;
-use crate::cloud::McapOptions;
-use crate::delta::{Roi, ViewSpec};
-use crate::transfer;
-use crate::tree::TREE_DEPTH;
+pub use rovlink_octo::checks::{ConfigError, check_range, check_scan_period, shown};
+use rovlink_octo::delta::{Roi, ViewSpec};
+use rovlink_octo::tree::TREE_DEPTH;
+use rovlink_scans::cloud::McapOptions;
 
 /// Finest voxel edge accepted, m (0.1 mm).
 pub const RESOLUTION_MIN_M: f64 = 1e-4;
@@ -21,64 +21,6 @@ pub const COORDINATE_MAX_M: f64 = 1e7;
 pub const THREADS_MAX: usize = 64;
 /// Largest `--coarse-res` as a multiple of the resolution (coarse depth 1).
 pub const COARSE_FACTOR_MAX: f64 = 32768.0;
-
-/// A wrong number in a configuration: which option, what was expected (with its unit) and what
-/// was found. Displays as `--res: expected 0.0001 m ..= 1000 m, found 0`.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{option}: expected {expected}, found {found}")]
-pub struct ConfigError {
-    /// The option, as the command line names it (`--res`).
-    pub option: &'static str,
-    /// The accepted values, with units.
-    pub expected: String,
-    /// The value given.
-    pub found: String,
-}
-
-impl ConfigError {
-    fn new(option: &'static str, expected: impl Into<String>, found: impl ToString) -> Self {
-        ConfigError {
-            option,
-            expected: expected.into(),
-            found: found.to_string(),
-        }
-    }
-}
-
-/// A number as messages show it: plain, or in exponent form when very large or small
-/// (`1e300`, `1e-9`, not 300 digits).
-pub fn shown(v: f64) -> String {
-    let a = v.abs();
-    if a != 0.0 && a.is_finite() && !(1e-4..1e7).contains(&a) {
-        format!("{v:e}")
-    } else {
-        v.to_string()
-    }
-}
-
-/// Checks that `v` is finite and within `lo ..= hi` (`unit` for the message).
-pub fn check_range(
-    option: &'static str,
-    v: f64,
-    lo: f64,
-    hi: f64,
-    unit: &str,
-) -> Result<f64, ConfigError> {
-    if v.is_finite() && (lo..=hi).contains(&v) {
-        Ok(v)
-    } else {
-        let u = if unit.is_empty() {
-            String::new()
-        } else {
-            format!(" {unit}")
-        };
-        Err(ConfigError::new(
-            option,
-            format!("{}{u} ..= {}{u}", shown(lo), shown(hi)),
-            shown(v),
-        ))
-    }
-}
 
 /// How coarse the voxels sent outside the ROI are.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -235,11 +177,6 @@ impl BuildConfig {
         }
         Ok(spec)
     }
-}
-
-/// Checks a transfer's time between scans (0 ..= [`transfer::MAX_PERIOD_S`]).
-pub fn check_scan_period(period_s: f64) -> Result<f64, ConfigError> {
-    check_range("--scan-period", period_s, 0.0, transfer::MAX_PERIOD_S, "s")
 }
 
 #[cfg(test)]

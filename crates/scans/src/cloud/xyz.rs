@@ -3,7 +3,7 @@
 use std::fmt::Write as _;
 
 use super::{CloudBuilder, Lines, err, shown};
-use crate::{ParseError, Pose, Scan};
+use rovlink_octo::{ParseError, Pose, Scan};
 
 /// A colour value as read, for deciding the file's colour scale once all are known.
 struct Channel {

@@ -8,11 +8,11 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
 use super::{BuildConfig, PipelineError};
-use crate::bag::Bag;
-use crate::cloud::{self, CloudFormat, McapOptions};
-use crate::recording::{Recording, RecordingOptions};
-use crate::{ParseError, Pose, Scan, graph};
 use rovlink_base::io::{Input, IoError, StopReader};
+use rovlink_octo::{ParseError, Pose, Scan, graph};
+use rovlink_scans::bag::Bag;
+use rovlink_scans::cloud::{self, CloudFormat, McapOptions};
+use rovlink_scans::recording::{Recording, RecordingOptions};
 
 /// An input's format: OctoMap's `.graph`, one of the point-cloud formats of [`cloud`], or a
 /// rosbag2 bag.
@@ -26,7 +26,7 @@ pub enum InputFormat {
     /// OctoMap scan graph (`.graph`): scans with poses, streamed from disk.
     Graph,
     /// A point-cloud file of [`cloud`]; an MCAP file is a robot log, its clouds posed by TF or
-    /// a pose topic ([`recording`](crate::recording)).
+    /// a pose topic ([`recording`](rovlink_scans::recording)).
     Cloud(CloudFormat),
     /// A rosbag2 bag: its directory, its `metadata.yaml` or one `.db3` (sqlite3 or mcap storage).
     Rosbag2,
@@ -76,7 +76,7 @@ impl InputFormat {
         if ext("graph") {
             return Some(InputFormat::Graph);
         }
-        if crate::bag::is_rosbag2_file_name(path) {
+        if rovlink_scans::bag::is_rosbag2_file_name(path) {
             return Some(InputFormat::Rosbag2);
         }
         CloudFormat::from_path(path).map(InputFormat::Cloud)

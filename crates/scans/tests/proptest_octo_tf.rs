@@ -7,11 +7,11 @@
 //! their samples.
 
 use proptest::prelude::*;
-use rovlink_octo::ros::{
+use rovlink_scans::ros::{
     self, ByteOrder, Header, Transform, TransformStamped, decode_odometry, decode_point_cloud2,
     decode_pose_stamped, decode_pose_stamped_as_pose, decode_tf_message, decode_transform_stamped,
 };
-use rovlink_octo::tf::{PoseTrack, TfTree, Unavailable};
+use rovlink_scans::tf::{PoseTrack, TfTree, Unavailable};
 
 // ---- strategies -------------------------------------------------------------------------
 
