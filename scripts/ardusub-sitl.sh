@@ -14,7 +14,8 @@ profile=()
 report="$(mktemp -t ardusub-sitl.XXXXXX.json)"
 trap 'rm -f "$report"' EXIT
 started=$(date +%s)
-ROVLINK_SITL_REPORT="$report" cargo test "${profile[@]}" --quiet --test tdma_sitl -- --test-threads 2
+cargo build "${profile[@]}" --quiet --workspace
+ROVLINK_SITL_REPORT="$report" cargo test "${profile[@]}" --quiet -p rovlink --test tools -- tdma_sitl --test-threads 2
 python3 - "$report" "$(( $(date +%s) - started ))" <<'PY'
 import json, sys
 f = json.load(open(sys.argv[1]))

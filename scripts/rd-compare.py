@@ -64,7 +64,7 @@ _K /= _K.sum()
 
 
 def blur(v):
-    """Separable 11-tap Gaussian, borders clamped (as src/debt/metrics.rs)."""
+    """Separable 11-tap Gaussian, borders clamped (as crates/debt/src/metrics.rs)."""
     p = np.pad(v, ((0, 0), (5, 5)), mode="edge")
     rows = sum(_K[k] * p[:, k:k + v.shape[1]] for k in range(11))
     p = np.pad(rows, ((5, 5), (0, 0)), mode="edge")

@@ -9,6 +9,7 @@ mod cli_octo;
 mod cli_rcp;
 mod cli_tdma;
 mod common;
+mod crate_graph;
 mod foxglove_live;
 mod foxglove_schemas;
 mod foxglove_stock;
@@ -32,3 +33,26 @@ mod tdma_network;
 mod tdma_network_pty;
 mod tdma_pace;
 mod tdma_sitl;
+
+/// The tools these tests run are packages of their own, built by `cargo build --workspace`
+/// (`scripts/test` does it first), not by `cargo test`: each must be there. (Whether each is as
+/// new as its sources is cargo's to know; run the tests through `scripts/test`, or build first.)
+#[test]
+fn the_tools_are_built() {
+    let tools = [
+        env!("TOOL_EXE_debt-encode"),
+        env!("TOOL_EXE_debt-decode"),
+        env!("TOOL_EXE_rcp-pack"),
+        env!("TOOL_EXE_rcp-dump"),
+        env!("TOOL_EXE_link-sim"),
+        env!("TOOL_EXE_modem-bench"),
+        env!("TOOL_EXE_tdma-run"),
+        env!("TOOL_EXE_octo-delta"),
+    ];
+    for tool in tools {
+        assert!(
+            std::path::Path::new(tool).is_file(),
+            "{tool} is missing: build the tools first (cargo build --workspace, as scripts/test does)"
+        );
+    }
+}

@@ -13,8 +13,8 @@
 //! (the cost is convex in it). Contexts seen in fewer than `--min-streams` sequences keep one
 //! half and count 0.
 //!
-//! `cargo run --release --example train_priors -- [--budgets 300,...] [--window 256]
-//! [--min-streams 8] [--out src/debt/priors.rs] [--source TEXT] IMAGES...`
+//! `cargo run --release -p rovlink-debt --example train_priors -- [--budgets 300,...] [--window 256]
+//! [--min-streams 8] [--out crates/debt/src/priors.rs] [--source TEXT] IMAGES...`
 //!
 //! `--source` is a line of text put in the table's doc (where the pictures came from).
 
@@ -135,7 +135,7 @@ fn main() {
     let mut budgets = vec![300, 500, 1000, 2000, 4000, 8000, 16000];
     let mut window = 256;
     let mut min_streams = 8;
-    let mut out = PathBuf::from("src/debt/priors.rs");
+    let mut out = PathBuf::from("crates/debt/src/priors.rs");
     let mut source = String::from("(not given)");
     let mut images = Vec::new();
     let mut args = std::env::args().skip(1);
@@ -223,7 +223,7 @@ fn main() {
         "{streams} streams; weighted bits over the window {before:.0} -> {after:.0} ({saving:.2} % fewer)"
     );
     let command = format!(
-        "cargo run --release --example train_priors -- --budgets {} --window {window} \
+        "cargo run --release -p rovlink-debt --example train_priors -- --budgets {} --window {window} \
          --min-streams {min_streams} --out {} --source '{source}' {}",
         budgets
             .iter()
@@ -266,12 +266,12 @@ fn main() {
         text.push_str("//!\n");
     }
     text.push_str(&format!("//! ```text\n//! {command}\n//! ```\n\n"));
-    text.push_str("use super::coder::{CONTEXTS, Prior};\n\n");
+    text.push_str("use super::coder::Prior;\n\n");
     text.push_str(
         "/// Initial state of each context, indexed as the coder's contexts: probability of a 0 in\n\
          /// 1/32768 and the count of symbols it stands for.\n\
          #[rustfmt::skip]\n\
-         pub const PRIORS: [Prior; CONTEXTS] = [\n",
+         pub const PRIORS: &[Prior] = &[\n",
     );
     for row in priors.chunks(8) {
         let cells: Vec<String> = row.iter().map(|(p, c)| format!("({p}, {c})")).collect();

@@ -64,15 +64,18 @@ pub const CONTEXTS: usize = ctx::COUNT;
 /// [`Context::with_prior`].
 pub type Prior = (u16, u8);
 
-/// The contexts at the start of a stream: all at one half, or from a priors table.
-fn initial_contexts(priors: Option<&[Prior; CONTEXTS]>) -> Vec<Context> {
-    match priors {
-        None => vec![Context::default(); CONTEXTS],
-        Some(table) => table
-            .iter()
-            .map(|&(p0, count)| Context::with_prior(p0, count))
-            .collect(),
-    }
+/// The contexts at the start of a stream: all at one half, or from a priors table. A table
+/// may be shorter than [`CONTEXTS`]: the contexts past its end (added to `ctx` after the table
+/// was trained) start at one half, so a new context is one edit here and the trained table
+/// stays valid; entries past [`CONTEXTS`] are ignored.
+fn initial_contexts(priors: Option<&[Prior]>) -> Vec<Context> {
+    let table = priors.unwrap_or(&[]);
+    (0..CONTEXTS)
+        .map(|i| match table.get(i) {
+            Some(&(p0, count)) => Context::with_prior(p0, count),
+            None => Context::default(),
+        })
+        .collect()
 }
 
 /// One context-coded decision, as [`Encoder::decisions`] records it.
@@ -109,11 +112,11 @@ impl Encoder {
 
     /// An encoder whose contexts start from `priors` instead of one half; its stream decodes
     /// only with [`Decoder::with_priors`] and the same table.
-    pub fn with_priors(budget_bytes: usize, priors: &[Prior; CONTEXTS]) -> Encoder {
+    pub fn with_priors(budget_bytes: usize, priors: &[Prior]) -> Encoder {
         Encoder::start(budget_bytes, Some(priors))
     }
 
-    fn start(budget_bytes: usize, priors: Option<&[Prior; CONTEXTS]>) -> Encoder {
+    fn start(budget_bytes: usize, priors: Option<&[Prior]>) -> Encoder {
         Encoder {
             rc: RangeEncoder::new(),
             contexts: initial_contexts(priors),
@@ -180,11 +183,11 @@ impl<'a> Decoder<'a> {
     }
 
     /// Decodes `data` written by [`Encoder::with_priors`] with the same table.
-    pub fn with_priors(data: &'a [u8], priors: &[Prior; CONTEXTS]) -> Decoder<'a> {
+    pub fn with_priors(data: &'a [u8], priors: &[Prior]) -> Decoder<'a> {
         Decoder::start(data, Some(priors))
     }
 
-    fn start(data: &'a [u8], priors: Option<&[Prior; CONTEXTS]>) -> Decoder<'a> {
+    fn start(data: &'a [u8], priors: Option<&[Prior]>) -> Decoder<'a> {
         Decoder {
             rc: RangeDecoder::new(data),
             contexts: initial_contexts(priors),
@@ -724,11 +727,11 @@ mod tests {
             .collect()
     }
 
-    fn encoder(budget: usize, priors: Option<&[Prior; CONTEXTS]>) -> Encoder {
+    fn encoder(budget: usize, priors: Option<&[Prior]>) -> Encoder {
         priors.map_or_else(|| Encoder::new(budget), |p| Encoder::with_priors(budget, p))
     }
 
-    fn decoder<'a>(data: &'a [u8], priors: Option<&[Prior; CONTEXTS]>) -> Decoder<'a> {
+    fn decoder<'a>(data: &'a [u8], priors: Option<&[Prior]>) -> Decoder<'a> {
         priors.map_or_else(|| Decoder::new(data), |p| Decoder::with_priors(data, p))
     }
 
@@ -750,11 +753,12 @@ mod tests {
             };
         }
         round_trip_and_budget(Some(&table));
-        round_trip_and_budget(Some(&crate::priors::PRIORS));
+        round_trip_and_budget(Some(&table[..CONTEXTS / 2]));
+        round_trip_and_budget(Some(crate::priors::PRIORS));
         assert_eq!(crate::priors::PRIORS.len(), CONTEXTS);
     }
 
-    fn round_trip_and_budget(priors: Option<&[Prior; CONTEXTS]>) {
+    fn round_trip_and_budget(priors: Option<&[Prior]>) {
         let data = random_bands(5);
         let planes = 10;
         let mut enc_bands = make(&data, true);

@@ -298,7 +298,7 @@ fn decode_part(
     let (w, _) = header.coded_size();
     let (mut bands, layout) = build_bands(header, None, part, parts);
     let mut dec = if priors {
-        Decoder::with_priors(payload, &super::priors::PRIORS)
+        Decoder::with_priors(payload, super::priors::PRIORS)
     } else {
         Decoder::new(payload)
     };

@@ -484,7 +484,7 @@ pub(super) fn encode_bands(
     let max = bands.iter().map(Band::max_magnitude).max().unwrap_or(0);
     let plane_count = 32 - max.leading_zeros();
     let mut enc = if priors {
-        Encoder::with_priors(budget, &super::priors::PRIORS)
+        Encoder::with_priors(budget, super::priors::PRIORS)
     } else {
         Encoder::new(budget)
     };

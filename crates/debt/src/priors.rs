@@ -19,15 +19,15 @@
 //! Regenerate (from the repository's root, the pictures in that order) with
 //!
 //! ```text
-//! cargo run --release --example train_priors -- --budgets 300,500,1000,2000,4000,8000,16000 --window 256 --min-streams 8 --out src/debt/priors.rs --source 'the scikit-image 0.26.0 wheel from PyPI (pip download scikit-image==0.26.0 --no-deps -d target/corpus, unzipped there: skimage/data), each picture CC0 or public domain as the skimage.data docstrings state' target/corpus/skimage/data/astronaut.png target/corpus/skimage/data/camera.png target/corpus/skimage/data/chelsea.png target/corpus/skimage/data/coffee.png target/corpus/skimage/data/rocket.jpg target/corpus/skimage/data/coins.png target/corpus/skimage/data/brick.png target/corpus/skimage/data/grass.png target/corpus/skimage/data/gravel.png target/corpus/skimage/data/ihc.png target/corpus/skimage/data/retina.jpg
+//! cargo run --release -p rovlink-debt --example train_priors -- --budgets 300,500,1000,2000,4000,8000,16000 --window 256 --min-streams 8 --out crates/debt/src/priors.rs --source 'the scikit-image 0.26.0 wheel from PyPI (pip download scikit-image==0.26.0 --no-deps -d target/corpus, unzipped there: skimage/data), each picture CC0 or public domain as the skimage.data docstrings state' target/corpus/skimage/data/astronaut.png target/corpus/skimage/data/camera.png target/corpus/skimage/data/chelsea.png target/corpus/skimage/data/coffee.png target/corpus/skimage/data/rocket.jpg target/corpus/skimage/data/coins.png target/corpus/skimage/data/brick.png target/corpus/skimage/data/grass.png target/corpus/skimage/data/gravel.png target/corpus/skimage/data/ihc.png target/corpus/skimage/data/retina.jpg
 //! ```
 
-use super::coder::{CONTEXTS, Prior};
+use super::coder::Prior;
 
 /// Initial state of each context, indexed as the coder's contexts: probability of a 0 in
 /// 1/32768 and the count of symbols it stands for.
 #[rustfmt::skip]
-pub const PRIORS: [Prior; CONTEXTS] = [
+pub const PRIORS: &[Prior] = &[
     (19031, 0), (12616, 2), (16384, 0), (16384, 0), (7931, 5), (9944, 5), (16384, 0), (16384, 0),
     (13878, 5), (16384, 0), (16384, 0), (16384, 0), (26382, 3), (18248, 2), (17209, 5), (12815, 5),
     (24852, 5), (18280, 2), (17130, 1), (8346, 2), (28605, 5), (17622, 2), (17560, 5), (7417, 5),

@@ -527,7 +527,7 @@ mod tests {
     fn spherical_scan_reads_as_octomap_wrote_it() {
         let bytes = std::fs::read(concat!(
             env!("CARGO_MANIFEST_DIR"),
-            "/testdata/maps/spherical_scan.graph"
+            "/../../testdata/maps/spherical_scan.graph"
         ))
         .expect("testdata/maps/spherical_scan.graph");
         let graph = read(&bytes).expect("OctoMap's own file reads");

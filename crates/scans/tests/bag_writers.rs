@@ -32,7 +32,7 @@ fn unhex(s: &str) -> Vec<u8> {
 /// Writes `messages` as a bag of `kind` at `out` with the real writers; what was written (the
 /// script reads MCAP files back with the official reader).
 fn write(kind: &str, out: &Path, messages: &[Written]) -> Vec<(String, u64, Vec<u8>)> {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/bags/write_bag.py");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/bags/write_bag.py");
     let mut child = Command::new("python3")
         .arg(&script)
         .args(["--kind", kind, "--out"])

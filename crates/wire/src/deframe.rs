@@ -16,7 +16,7 @@
 //! never panic, on any bytes in any chunking.
 //!
 //! ```
-//! use crate::{Deframer, DeframeEvent, frame};
+//! use rovlink_wire::{Deframer, DeframeEvent, frame};
 //! let mut stream = vec![0x00, 0x55, 0x99]; // garbage, including a false preamble
 //! stream.extend(frame::build(1, 0, b"hello").unwrap());
 //! let mut deframer = Deframer::new();

@@ -953,7 +953,7 @@ pub fn write_pcd(scan: &Scan, data: PcdData) -> Vec<u8> {
 mod tests {
     use super::*;
 
-    const APPLE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/testdata/maps/apple.pcd");
+    const APPLE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../testdata/maps/apple.pcd");
 
     fn scan(points: &[[f32; 3]], colors: Option<&[[u8; 3]]>, pose: Pose) -> Scan {
         Scan {
