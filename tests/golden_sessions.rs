@@ -5,7 +5,7 @@
 //! where it completes images); testdata/golden/sessions.txt holds, per session, its metrics
 //! (JSON, the tool's version blanked: it is not the driver's) and the length and SHA-256 of every
 //! other output file, so any changed byte shows and the shell can check a file with
-//! `sha256sum`. A change that is meant must be recorded (`UPDATE_GOLDEN=1 cargo test --test
+//! `sha256sum`. A change that is meant must be recorded (`UPDATE_GOLDEN=1 scripts/test --
 //! golden_sessions`) and said in the commit that makes it.
 
 use std::fmt::Write as _;

@@ -1,6 +1,6 @@
 //! The link model's bars: statistics against the S100 model, and virtual-time speed.
 //!
-//! Run: `cargo bench --bench link` (add `-- --quick` for fewer frames and repetitions).
+//! Run: `cargo bench -p rovlink-link --bench link` (add `-- --quick` for fewer frames and repetitions).
 //!
 //! 1. Statistics (issue 4's bars): 57-byte frames back to back through the S100 preset; mean
 //!    delay against 85 + 240 = 325.0 ms (within 1 %), jitter (standard deviation of the delay)

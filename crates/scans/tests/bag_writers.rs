@@ -247,7 +247,7 @@ fn mcap_ros2_writer_clouds_read_as_scans() {
     assert_eq!(scans.log_times_ns, [1_000, 2_000, 3_000]);
 }
 
-/// Reading speed and memory: `BAG_BENCH_FILE=big.mcap cargo test --release --test bag_writers
+/// Reading speed and memory: `BAG_BENCH_FILE=big.mcap cargo test --release -p rovlink-scans --test bag_writers
 /// -- --ignored read_speed --nocapture` under `/usr/bin/time -v` (peak RSS).
 #[test]
 #[ignore = "a measurement on a file given by BAG_BENCH_FILE"]

@@ -1,6 +1,6 @@
 //! Deframe + parse throughput of link-frame streams, on one core.
 //!
-//! Run: `cargo bench --bench deframe` (add `-- --quick` for fewer repetitions). Prints one row
+//! Run: `cargo bench -p rovlink-wire --bench deframe` (add `-- --quick` for fewer repetitions). Prints one row
 //! per case: the median throughput over the repetitions, the spread, and the ratio to the anchor
 //! measured in the same run: a bare CRC-16 over every frame at known boundaries, the least work
 //! any deframer must do. The bar is 100 MB/s of 57-byte frames.
