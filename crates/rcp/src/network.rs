@@ -126,7 +126,7 @@ mod tests {
     }
 
     fn images() -> Vec<debt::Image> {
-        vec![crate::test_image(160, 120, 1)]
+        vec![crate::camera::builtin_picture(160, 120, 1)]
     }
 
     fn run_quiet(s: &Scenario) -> NetworkMetrics {

@@ -182,7 +182,7 @@ impl Scenario {
     pub fn from_file(path: &Path) -> Result<Scenario, ScenarioError> {
         let name = path.display();
         regular_file(path).map_err(|what| field(name.to_string(), what))?;
-        let bytes = crate::read_at_most(path, MAX_SCENARIO_FILE_BYTES)
+        let bytes = rovlink_base::io::read_file_bounded(path, MAX_SCENARIO_FILE_BYTES)
             .map_err(|e| field(name.to_string(), format!("cannot read: {e}")))?
             .ok_or_else(|| {
                 field(

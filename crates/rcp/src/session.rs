@@ -177,7 +177,7 @@ mod tests {
             script: Vec::new(),
             waypoints: Vec::new(),
             settings: ImageSettings::default(),
-            images: vec![crate::test_image(160, 120, 1)],
+            images: vec![crate::camera::builtin_picture(160, 120, 1)],
         }
     }
 
@@ -385,7 +385,7 @@ mod tests {
                 "joystick change 1: expected a time",
             ),
             (
-                Box::new(|c| c.images = vec![crate::test_image(4097, 2, 0)]),
+                Box::new(|c| c.images = vec![crate::camera::builtin_picture(4097, 2, 0)]),
                 "camera picture 1: expected 1x1 ..= 4096x4096 pixels",
             ),
         ];
