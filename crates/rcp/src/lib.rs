@@ -6,10 +6,10 @@
 //! bitmap and RIT resends, EISN/ISN toggles, CI/IC cancellation, heartbeats and the recovery
 //! algorithm. [`harness`] holds the two ends around the engines (order sources, the vehicle, the
 //! counters), which [`session`] runs with a link in virtual time and [`realtime`] one at a time
-//! over a port; [`drive`] is what moves the vehicle, [`camera`] what takes its pictures,
-//! [`orders`] and [`script`] what the operator plays. What a session writes and shows (CSV
-//! rows, images, the MCAP log, the live Foxglove view) lives above this crate, in tdma-run's
-//! `outputs` and in `rovlink-field`.
+//! over a port; [`autopilot`] is what moves the vehicle (its autopilot, or the built-in model),
+//! [`camera`] what takes its pictures, [`orders`] and [`script`] what the operator plays. What
+//! a session writes and shows (CSV rows, images, the MCAP log, the live Foxglove view) lives
+//! above this crate, in tdma-run's `outputs` and in `rovlink-field`.
 //!
 //! This file holds, besides the module list, only the protocol's shared vocabulary: what an
 //! engine did ([`Event`]), which end is which ([`Role`]), the vehicle at one instant
@@ -22,9 +22,9 @@
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod autopilot;
 pub mod camera;
 pub mod config;
-pub mod drive;
 pub mod driver;
 pub mod harness;
 pub mod network;
@@ -98,7 +98,7 @@ pub enum Event {
     /// Operator: ROV frames arrive again.
     AnswersBack,
     /// ROV: the vehicle (autopilot) reported something.
-    Vehicle(drive::DriveEvent),
+    Vehicle(autopilot::DriveEvent),
     /// ROV: the camera gave no picture; why.
     CameraFailed(String),
 }

@@ -23,8 +23,8 @@
 use std::collections::BTreeMap;
 use std::sync::atomic::AtomicBool;
 
+use crate::autopilot::SimDrive;
 use crate::camera::Cycle;
-use crate::drive::SimDrive;
 use crate::driver::{self, Setup, SimAir, VehicleEnds};
 use crate::orders::Script;
 use crate::report::Observer;

@@ -27,9 +27,9 @@
 
 use std::collections::VecDeque;
 
+use crate::autopilot::DriveEvent;
+use crate::autopilot::{Demand, Drive, DriveState, SimDrive};
 use crate::camera::{Camera, Cycle};
-use crate::drive::DriveEvent;
-use crate::drive::{Demand, Drive, DriveState, SimDrive};
 use crate::trunk_cache::TrunkCache;
 use crate::vehicle::Command;
 use crate::{Event, ImageSettings, PoseSample, emit};

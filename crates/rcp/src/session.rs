@@ -39,7 +39,7 @@ pub struct Parts {
     /// built by [`Parts::from_config`]).
     pub orders: Vec<Box<dyn crate::orders::OrderSource>>,
     /// What moves the vehicle.
-    pub drive: Box<dyn crate::drive::Drive>,
+    pub drive: Box<dyn crate::autopilot::Drive>,
     /// The camera.
     pub camera: Box<dyn crate::camera::Camera>,
 }
@@ -53,7 +53,7 @@ impl Parts {
                 &config.script,
                 &config.waypoints,
             ))],
-            drive: Box::new(crate::drive::SimDrive::new(config.start_m)),
+            drive: Box::new(crate::autopilot::SimDrive::new(config.start_m)),
             camera: Box::new(crate::camera::Cycle::new(config.images.clone())),
         }
     }

@@ -1,8 +1,8 @@
 //! The ends a node holds and how a scenario builds them: the operator's end for a vehicle,
 //! the vehicle's end, and a node's router.
 
+use crate::autopilot::Drive;
 use crate::camera::Camera;
-use crate::drive::Drive;
 use crate::harness::{OperatorEnd, RovEnd};
 use crate::orders::OrderSource;
 use crate::routing::Router;

@@ -453,8 +453,8 @@ impl Observer for Recorder {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rovlink_rcp::autopilot::DriveEvent;
     use rovlink_rcp::camera::builtin_picture;
-    use rovlink_rcp::drive::DriveEvent;
     use rovlink_rcp::{ImageSettings, trunks_of};
     use rovlink_wire::operator::Order;
     use serde_json::Value;
