@@ -29,7 +29,7 @@ use serde_json::{Map, Value};
 use crate::ImageSettings;
 use crate::Role;
 use crate::config::{
-    MAX_DURATION_S, MAX_IPG_S, MAX_POSITION_M, MIN_IMAGE_BYTES, MIN_IPG_S, Waypoint,
+    MAX_DURATION_S, MAX_IPG_S, MAX_POSITION_M, MIN_IMAGE_BYTES, MIN_IPG_S, Waypoint, bound_ipg,
 };
 use crate::routing::{MAX_VEHICLE, Routes, RoutesError};
 use crate::rules;
@@ -259,7 +259,7 @@ impl Scenario {
             &hops(vehicle, 0),
             self.settings.trunk_bytes,
         );
-        slot_s.clamp(MIN_IPG_S, MAX_IPG_S)
+        bound_ipg(slot_s).ipg_s
     }
 
     /// The model of the hop from `a` to `b`: their shared medium's, else `a`'s first.

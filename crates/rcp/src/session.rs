@@ -17,8 +17,8 @@ use crate::scenario::{MediumSpec, Node, Scenario};
 use rovlink_link::ModelError;
 
 pub use crate::config::{
-    ConfigError, JoystickChange, MAX_DURATION_S, MAX_IPG_S, MAX_POSITION_M, MAX_WAYPOINT_M,
-    MIN_IMAGE_BYTES, MIN_IPG_S, SessionConfig, Waypoint, auto_ipg_for,
+    BoundedIpg, ConfigError, JoystickChange, MAX_DURATION_S, MAX_IPG_S, MAX_POSITION_M,
+    MAX_WAYPOINT_M, MIN_IMAGE_BYTES, MIN_IPG_S, SessionConfig, Waypoint, auto_ipg_for, bound_ipg,
 };
 
 /// Why a session could not run.

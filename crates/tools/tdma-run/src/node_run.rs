@@ -14,7 +14,7 @@ use rovlink_rcp::realnet::{self, Network};
 use rovlink_rcp::realtime::Role;
 use rovlink_rcp::report::Tee;
 use rovlink_rcp::scenario::Scenario;
-use rovlink_rcp::session::{MAX_IPG_S, MIN_IPG_S, SessionConfig};
+use rovlink_rcp::session::{SessionConfig, bound_ipg};
 use rovlink_rcp::{camera, script};
 
 use crate::TOOL;
@@ -174,7 +174,8 @@ fn session_config(args: &Args, network: &Network, role: Role) -> Result<SessionC
     let config = SessionConfig {
         model,
         seed: scenario.seed,
-        ipg_s: network.cycle_s().clamp(MIN_IPG_S, MAX_IPG_S),
+        // The cycle held to an IPG's bounds: only validation looks at it (see bound_ipg).
+        ipg_s: bound_ipg(network.cycle_s()).ipg_s,
         duration_s: args.duration_s(),
         buoy_m: position(0),
         start_m: match role {
