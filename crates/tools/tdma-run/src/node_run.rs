@@ -21,10 +21,6 @@ use crate::TOOL;
 use crate::flags::{Args, Ipg, RoleArg};
 use crate::scenario_run::{Both, mark_interrupted, network_summary};
 
-/// The EvoLogics destination of every packet a network node sends: broadcast (the routers
-/// decide who takes a frame).
-const EVOLOGICS_BROADCAST: u32 = 255;
-
 /// Runs this process's node of the network in `path`.
 pub fn run(args: &Args, path: &Path) -> Result<u8> {
     let (metrics_dest, dests) = crate::setup::claim_outputs(args)?;
@@ -55,8 +51,12 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
         }
         other => other?,
     };
+    // Every packet to the dialect's broadcast address, if its packets carry one: the routers
+    // decide who takes a frame.
     let mut options = args.port_args.options();
-    options.address = EVOLOGICS_BROADCAST;
+    if let Some(broadcast) = options.dialect.broadcast_address() {
+        options.address = broadcast;
+    }
     let mut endpoints: Vec<Box<dyn Endpoint>> = Vec::new();
     for device in &ports {
         endpoints.push(options.open(device)?);
