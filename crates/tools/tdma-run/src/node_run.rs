@@ -32,7 +32,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
         Scenario::from_file(path).map_err(|e| UsageError(format!("--routes {e}")))?;
     // The frames sent are the flags' (the trunk size sets the ROV frame and so the slots).
     scenario.settings = args.settings();
-    let address = match (role, address_given()) {
+    let address = match (role, args.address_given) {
         (_, true) => u8::try_from(args.port_args.address).unwrap_or(u8::MAX),
         (Role::Operator, false) => 0,
         (Role::Rov, false) => 1,
@@ -138,18 +138,6 @@ fn usage(args: &Args) -> Result<(), UsageError> {
         ))),
         None => Ok(()),
     }
-}
-
-/// True when `--address` is on the command line (its default, 2, is the EvoLogics
-/// destination's, not a node's).
-fn address_given() -> bool {
-    use clap::CommandFactory;
-    Args::command()
-        .allow_negative_numbers(true)
-        .try_get_matches_from(std::env::args_os())
-        .ok()
-        .and_then(|m| m.value_source("address"))
-        == Some(clap::parser::ValueSource::CommandLine)
 }
 
 /// The session this node runs: the flags' duration, images and orders; the network's
