@@ -106,7 +106,7 @@ fn pose(t_s: f64, position_m: [f64; 3], heading_deg: f64) -> PoseSample {
 
 /// A built-in picture's DEBT stream, as the ROV sends it, and the trunks it is cut in.
 fn image_stream() -> (Vec<u8>, Vec<Vec<u8>>) {
-    let picture = rovlink_rcp::test_image(160, 120, 3);
+    let picture = rovlink_rcp::camera::builtin_picture(160, 120, 3);
     let trunks = rovlink_rcp::trunks_of(&picture, &ImageSettings::default());
     (trunks.concat(), trunks)
 }

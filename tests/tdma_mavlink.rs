@@ -13,7 +13,7 @@ use crate::common::hostile::signal_once;
 use ardusub::{ALT_HOLD, Config, GUIDED, MANUAL, StandIn};
 use rovlink_field::mavlink::{MavlinkDrive, MavlinkOptions, connect};
 use rovlink_link::SimTime;
-use rovlink_rcp::drive::{Demand, Drive, DriveEvent};
+use rovlink_rcp::autopilot::{Demand, Drive, DriveEvent};
 use rovlink_rcp::vehicle::Command;
 use rovlink_wire::Nav;
 use rovlink_wire::rov::Why;

@@ -130,7 +130,7 @@ pub fn warn(tool: &str, message: &str) {
 /// `/dev/zero`) is an error of kind `InvalidData` saying so, after reading `max_bytes + 1`
 /// bytes at most, so no file can make a tool run out of memory.
 pub fn read_at_most(path: &Path, max_bytes: u64) -> io::Result<Vec<u8>> {
-    read_bounded(File::open(path)?, max_bytes)?.ok_or_else(|| {
+    read_file_bounded(path, max_bytes)?.ok_or_else(|| {
         io::Error::new(
             io::ErrorKind::InvalidData,
             format!("more than {max_bytes} bytes: not a file this tool reads"),
@@ -177,6 +177,13 @@ pub fn open_regular(path: &Path) -> io::Result<File> {
     }
     fcntl(&file, FcntlArg::F_SETFL(OFlag::empty())).map_err(io::Error::from)?;
     Ok(file)
+}
+
+/// The bytes of the file at `path` through [`read_bounded`]: `None` when it holds more than
+/// `max_bytes`, so that the caller says so in its own words ([`read_at_most`] is this with
+/// the error every tool shares).
+pub fn read_file_bounded(path: &Path, max_bytes: u64) -> io::Result<Option<Vec<u8>>> {
+    read_bounded(File::open(path)?, max_bytes)
 }
 
 /// Reads what is left of `reader` if it holds at most `max_bytes` (`None` if it holds more),

@@ -52,9 +52,42 @@ pub fn parse<A: clap::Parser>(tool: &str) -> A {
     }
 }
 
+/// [`parse`], also handing back clap's matches of the command line, for what the parsed
+/// arguments cannot say: whether a flag with a default was given
+/// ([`clap::ArgMatches::value_source`]).
+pub fn parse_with_matches<A: clap::Parser>(tool: &str) -> (A, clap::ArgMatches) {
+    match try_parse_with_matches_from::<A, _, _>(std::env::args_os()) {
+        Ok(parsed) => parsed,
+        Err(err) => exit_with(tool, err),
+    }
+}
+
 /// [`parse`] without exiting, from any argument list (tests use it). The first successful parse
 /// of a process records its parameters for [`metrics`].
 pub fn try_parse_from<A, I, T>(args: I) -> Result<A, clap::Error>
+where
+    A: clap::Parser,
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let mut matches = matches_from::<A, _, _>(args)?;
+    A::from_arg_matches_mut(&mut matches)
+}
+
+/// [`try_parse_from`], also handing back the matches ([`parse_with_matches`]).
+fn try_parse_with_matches_from<A, I, T>(args: I) -> Result<(A, clap::ArgMatches), clap::Error>
+where
+    A: clap::Parser,
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let matches = matches_from::<A, _, _>(args)?;
+    A::from_arg_matches(&matches).map(|parsed| (parsed, matches))
+}
+
+/// Clap's matches of `args` for `A`, negative numbers taken as values (see [`parse`]); the
+/// parameters recorded for [`metrics`].
+fn matches_from<A, I, T>(args: I) -> Result<clap::ArgMatches, clap::Error>
 where
     A: clap::Parser,
     I: IntoIterator<Item = T>,
@@ -72,9 +105,9 @@ where
         cmd
     }
     let cmd = negatives(A::command());
-    let mut matches = cmd.clone().try_get_matches_from(args)?;
+    let matches = cmd.clone().try_get_matches_from(args)?;
     metrics::record(&cmd, &matches);
-    A::from_arg_matches_mut(&mut matches)
+    Ok(matches)
 }
 
 /// Prints a clap error as [`parse`] does and exits.

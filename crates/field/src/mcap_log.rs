@@ -543,11 +543,11 @@ impl View {
             }
             Event::ImageCancelled => events(INFO, "the image in flight was cancelled"),
             Event::Vehicle(drive) => match drive {
-                rovlink_rcp::drive::DriveEvent::Silent { silent_s } => {
+                rovlink_rcp::autopilot::DriveEvent::Silent { silent_s } => {
                     events(WARNING, &format!("autopilot silent for {silent_s:.1} s"))
                 }
-                rovlink_rcp::drive::DriveEvent::Heard => events(INFO, "autopilot heard again"),
-                rovlink_rcp::drive::DriveEvent::CommandAck {
+                rovlink_rcp::autopilot::DriveEvent::Heard => events(INFO, "autopilot heard again"),
+                rovlink_rcp::autopilot::DriveEvent::CommandAck {
                     command,
                     result,
                     accepted,
@@ -555,10 +555,10 @@ impl View {
                     if *accepted { INFO } else { WARNING },
                     &format!("autopilot answered {command}: {result}"),
                 ),
-                rovlink_rcp::drive::DriveEvent::Refused { why, reason } => {
+                rovlink_rcp::autopilot::DriveEvent::Refused { why, reason } => {
                     events(WARNING, &format!("vehicle refused ({why}): {reason}"))
                 }
-                rovlink_rcp::drive::DriveEvent::Note(note) => {
+                rovlink_rcp::autopilot::DriveEvent::Note(note) => {
                     events(INFO, &format!("vehicle: {note}"))
                 }
             },

@@ -1,7 +1,7 @@
 //! The ROV camera's pictures, through the one picture loader ([`debt::picture`]) with its
 //! header checked before anything is decoded:
 //! - [`Cycle`]: pictures loaded before the session ([`load`]: one image file or a directory of
-//!   them; `--images`), or the built-in ones, cycled;
+//!   them; `--images`), or the built-in ones ([`builtin_picture`]), cycled;
 //! - [`NewestInDir`] (`--camera DIR`): the newest picture file of a directory at capture time,
 //!   for a camera program that keeps writing frames there;
 //! - [`CommandCamera`] (`--camera-cmd CMD`): one picture from the standard output of `sh -c CMD`,
@@ -110,14 +110,48 @@ impl Pictures {
 }
 
 /// The camera's pictures: the files at `path` ([`load`]), or with no path the four built-in
-/// 320x240 ones ([`crate::test_image`]).
+/// 320x240 ones ([`builtin_picture`] of seeds 0 to 3).
 pub fn load_or_builtin(path: Option<&Path>) -> Result<Pictures, CameraError> {
     match path {
         Some(path) => load(path),
         None => Ok(Pictures {
-            images: (0..4).map(|k| crate::test_image(320, 240, k)).collect(),
+            images: (0..4).map(|k| builtin_picture(320, 240, k)).collect(),
             scaled: Vec::new(),
         }),
+    }
+}
+
+/// A picture of the built-in camera (no `--images`, [`load_or_builtin`]): `width` x `height`
+/// RGB, a seabed-like texture with a pipe and a rock, different for each `seed`. Tests use it
+/// too, as a picture like the ones sessions send.
+pub fn builtin_picture(width: usize, height: usize, seed: u64) -> debt::Image {
+    let mut data = Vec::with_capacity(width * height * 3);
+    let s = seed as f64;
+    for y in 0..height {
+        for x in 0..width {
+            let (fx, fy) = (x as f64 / width as f64, y as f64 / height as f64);
+            let sand = 0.5
+                + 0.15 * ((fx * 23.0 + s).sin() * (fy * 17.0 - s).cos())
+                + 0.1 * ((fx * 71.0 + fy * 43.0 + s * 3.0).sin());
+            let rock = ((fx - 0.3 - 0.05 * s.sin()).powi(2) + (fy - 0.6).powi(2)).sqrt() < 0.15;
+            let pipe = (fy - 0.35 - 0.1 * fx).abs() < 0.03;
+            let (r, g, b) = if rock {
+                (0.25, 0.3, 0.3)
+            } else if pipe {
+                (0.8, 0.6, 0.1)
+            } else {
+                (0.3 * sand, 0.6 * sand, 0.7 * sand + 0.1)
+            };
+            for c in [r, g, b] {
+                data.push((c * 255.0).clamp(0.0, 255.0) as u8);
+            }
+        }
+    }
+    debt::Image {
+        width,
+        height,
+        channels: 3,
+        data,
     }
 }
 
@@ -275,7 +309,7 @@ fn camera_picture(name: &str, bytes: &[u8]) -> Result<debt::Image, String> {
 /// A picture file through [`camera_picture`].
 fn camera_file(path: &Path) -> Result<debt::Image, String> {
     let name = path.display().to_string();
-    match crate::read_at_most(path, debt::picture::MAX_INPUT_BYTES) {
+    match rovlink_base::io::read_file_bounded(path, debt::picture::MAX_INPUT_BYTES) {
         Ok(Some(bytes)) => camera_picture(&name, &bytes),
         Ok(None) => Err(PictureError::TooManyBytes { name }.to_string()),
         Err(source) => Err(PictureError::Read { name, source }.to_string()),

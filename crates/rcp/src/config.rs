@@ -68,6 +68,39 @@ pub const MAX_WAYPOINT_M: f64 = 327.67;
 /// The smallest encoded image, bytes.
 pub const MIN_IMAGE_BYTES: u16 = 16;
 
+/// An IPG held to [`MIN_IPG_S`] ..= [`MAX_IPG_S`] by [`bound_ipg`], and whether it had to be.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BoundedIpg {
+    /// The IPG within the bounds, s: the one given when it was within them, else the nearer
+    /// bound (`f64::clamp`'s value: not a number stays not a number).
+    pub ipg_s: f64,
+    /// True when the IPG given was not within the bounds (or not finite), so `ipg_s` is not it.
+    pub clamped: bool,
+}
+
+/// The one rule for the bounds of an IPG (a TDMA slot: an exchange and its guard),
+/// [`MIN_IPG_S`] ..= [`MAX_IPG_S`]. It says where `ipg_s` falls; each caller decides what a
+/// value outside means, as its source calls for:
+///
+/// - [`SessionConfig::validate`] refuses it (`IPG: expected 1 ms ..= 10 min, found ...`): a
+///   session's IPG is a setting (`--ipg`, or a library caller's), and a setting is never
+///   changed behind its owner's back.
+/// - `Scenario::auto_slot_s` takes the clamped value: an `auto` slot is derived from the
+///   models (the exchange's air times, delays and guards), and a derived slot beyond a bound
+///   (a model of a very slow or very fast link) is still a slot to run, at the bound.
+/// - tdma-run's network node (`--routes`) takes the clamped value for its session's IPG:
+///   that IPG is the network's cycle, which only its validation looks at (the node's ends run
+///   at the scenario's slots), and a cycle of many slots may be longer than one IPG may be.
+///
+/// The values a user gives are refused before any of these, in their own words, against the
+/// same bounds: `--ipg` by tdma-run's parser, a scenario's `slot_s` by the scenario reader.
+pub fn bound_ipg(ipg_s: f64) -> BoundedIpg {
+    BoundedIpg {
+        ipg_s: ipg_s.clamp(MIN_IPG_S, MAX_IPG_S),
+        clamped: !(ipg_s.is_finite() && (MIN_IPG_S..=MAX_IPG_S).contains(&ipg_s)),
+    }
+}
+
 /// A session setting out of its range: `what`, what it must be, what it is.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{what}: expected {expected}, found {found}")]
@@ -186,7 +219,7 @@ impl SessionConfig {
         }
         check_position("buoy position", self.buoy_m, MAX_POSITION_M)?;
         check_position("start position", self.start_m, MAX_POSITION_M)?;
-        if !(self.ipg_s.is_finite() && (MIN_IPG_S..=MAX_IPG_S).contains(&self.ipg_s)) {
+        if bound_ipg(self.ipg_s).clamped {
             return Err(out_of_range(
                 "IPG",
                 "1 ms ..= 10 min",
@@ -256,4 +289,25 @@ pub fn auto_ipg_for(
         distance_m: rovlink_base::geometry::distance_m(start_m, buoy_m),
     };
     rules::slot_s(&[hop], &[hop], settings.trunk_bytes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_ipg_is_held_to_its_bounds_and_says_when_it_was() {
+        let held = |ipg_s: f64| {
+            let b = bound_ipg(ipg_s);
+            (b.ipg_s, b.clamped)
+        };
+        assert_eq!(held(0.64), (0.64, false));
+        assert_eq!(held(MIN_IPG_S), (MIN_IPG_S, false));
+        assert_eq!(held(MAX_IPG_S), (MAX_IPG_S, false));
+        assert_eq!(held(1e-12), (MIN_IPG_S, true));
+        assert_eq!(held(8400.0), (MAX_IPG_S, true));
+        assert_eq!(held(f64::INFINITY), (MAX_IPG_S, true));
+        let nan = bound_ipg(f64::NAN);
+        assert!(nan.ipg_s.is_nan() && nan.clamped);
+    }
 }

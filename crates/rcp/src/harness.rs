@@ -8,7 +8,7 @@
 //! - [`OperatorEnd`]: drains its [`OrderSource`]s (a script, a JSON Lines console, a Foxglove
 //!   client) into the operator engine, sends each slot's frame, notices when the ROV's answers
 //!   stop (the operator's side of a lost link) and shows each status as a pose;
-//! - [`RovEnd`]: steps the vehicle (through its [`crate::drive::Drive`]), answers each frame,
+//! - [`RovEnd`]: steps the vehicle (through its [`crate::autopilot::Drive`]), answers each frame,
 //!   and numbers the orders it executes so that an order executed twice is counted;
 //! - [`Tally`]: the one place events become the session's counters ([`Tally::record`]);
 //! - [`Out`]: a tally and an [`Observer`], which every event, pose and image goes through.
@@ -72,7 +72,7 @@ impl Tally {
             (Role::Rov, Event::ImageStarted { .. }) => m.images_started += 1,
             (Role::Rov, Event::LinkLost) => m.link_losses += 1,
             (Role::Rov, Event::LinkRecovered) => m.link_recoveries += 1,
-            (Role::Rov, Event::Vehicle(crate::drive::DriveEvent::Refused { .. })) => {
+            (Role::Rov, Event::Vehicle(crate::autopilot::DriveEvent::Refused { .. })) => {
                 m.refusals += 1;
             }
             (Role::Operator, Event::Status(repr)) => {

@@ -6,16 +6,25 @@
 //! bitmap and RIT resends, EISN/ISN toggles, CI/IC cancellation, heartbeats and the recovery
 //! algorithm. [`harness`] holds the two ends around the engines (order sources, the vehicle, the
 //! counters), which [`session`] runs with a link in virtual time and [`realtime`] one at a time
-//! over a port; [`drive`] is what moves the vehicle, [`camera`] what takes its pictures,
-//! [`orders`] and [`script`] what the operator plays; [`outputs`] writes a session's CSV rows,
-//! images and [`mcap_log`] (Foxglove) as it goes; [`foxglove`] serves the same view live and
-//! takes orders from Foxglove.
+//! over a port; [`autopilot`] is what moves the vehicle (its autopilot, or the built-in model),
+//! [`camera`] what takes its pictures, [`orders`] and [`script`] what the operator plays. What
+//! a session writes and shows (CSV rows, images, the MCAP log, the live Foxglove view) lives
+//! above this crate, in tdma-run's `outputs` and in `rovlink-field`.
+//!
+//! This file holds, besides the module list, only the protocol's shared vocabulary: what an
+//! engine did ([`Event`]), which end is which ([`Role`]), the vehicle at one instant
+//! ([`PoseSample`]), how images are encoded and cut ([`ImageSettings`]), a frame out of a
+//! message ([`emit`]) and an image into its trunks ([`trunks_of`]). Nearly every module and
+//! every caller of the crate names them; at the crate root they read as what they are, the
+//! words of the protocol (`rovlink_rcp::Event`), where a `vocabulary` module would only add a
+//! path segment and a re-export for each. Everything with a subject of its own has its module
+//! ([`trunk_cache`], the built-in pictures in [`camera`]).
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod autopilot;
 pub mod camera;
 pub mod config;
-pub mod drive;
 pub mod driver;
 pub mod harness;
 pub mod network;
@@ -30,21 +39,13 @@ pub mod rules;
 pub mod scenario;
 pub mod script;
 pub mod session;
+pub mod trunk_cache;
 pub mod vehicle;
 
 use rovlink_debt as debt;
 use rovlink_wire::operator::{Order, Roi};
 use rovlink_wire::rov::{MAX_TRUNKS, cut_trunks};
 use rovlink_wire::{Message, MessageRepr};
-
-/// A file's bytes through [`rovlink_base::io::read_bounded`]: `None` when it holds more than
-/// `max_bytes`.
-pub(crate) fn read_at_most(
-    path: &std::path::Path,
-    max_bytes: u64,
-) -> std::io::Result<Option<Vec<u8>>> {
-    rovlink_base::io::read_bounded(std::fs::File::open(path)?, max_bytes)
-}
 
 /// Something an engine did that a report or a test wants to know.
 #[derive(Debug, Clone, PartialEq)]
@@ -97,7 +98,7 @@ pub enum Event {
     /// Operator: ROV frames arrive again.
     AnswersBack,
     /// ROV: the vehicle (autopilot) reported something.
-    Vehicle(drive::DriveEvent),
+    Vehicle(autopilot::DriveEvent),
     /// ROV: the camera gave no picture; why.
     CameraFailed(String),
 }
@@ -245,149 +246,4 @@ pub fn trunks_of(image: &debt::Image, settings: &ImageSettings) -> Vec<Vec<u8>> 
     cut_trunks(&stream, trunk)
         .map(|trunks| trunks.into_iter().map(<[u8]>::to_vec).collect())
         .unwrap_or_default()
-}
-
-/// The most picture bytes a [`TrunkCache`] keeps (the four built-in 320x240 pictures take
-/// 0.9 MB); a larger picture is encoded every time.
-pub const TRUNK_CACHE_BYTES: usize = 8 << 20;
-
-/// The trunks of the pictures last encoded, by picture and settings: a camera that cycles
-/// through a few pictures (`--images`, the built-in ones) has each encoded once per setting
-/// instead of at every capture. The encoder is a function of the picture and the settings, so
-/// a hit is the same trunks [`trunks_of`] would return. Holds at most [`TRUNK_CACHE_BYTES`]
-/// of pictures (by default), the least recently used dropped first.
-#[derive(Debug)]
-pub struct TrunkCache {
-    /// Least recently used first.
-    entries: std::collections::VecDeque<(ImageSettings, debt::Image, Vec<Vec<u8>>)>,
-    picture_bytes: usize,
-    budget_bytes: usize,
-}
-
-impl Default for TrunkCache {
-    fn default() -> Self {
-        TrunkCache::with_budget(TRUNK_CACHE_BYTES)
-    }
-}
-
-impl TrunkCache {
-    /// An empty cache holding at most `budget_bytes` of pictures.
-    pub fn with_budget(budget_bytes: usize) -> TrunkCache {
-        TrunkCache {
-            entries: std::collections::VecDeque::new(),
-            picture_bytes: 0,
-            budget_bytes,
-        }
-    }
-
-    /// [`trunks_of`] `image` with `settings`, encoded only when not already held.
-    pub fn trunks(&mut self, image: &debt::Image, settings: &ImageSettings) -> Vec<Vec<u8>> {
-        let held = self
-            .entries
-            .iter()
-            .position(|(s, i, _)| s == settings && i == image);
-        if let Some(entry) = held.and_then(|k| self.entries.remove(k)) {
-            let trunks = entry.2.clone();
-            self.entries.push_back(entry);
-            return trunks;
-        }
-        let trunks = trunks_of(image, settings);
-        let bytes = image.data.len();
-        if bytes <= self.budget_bytes {
-            while self.picture_bytes + bytes > self.budget_bytes {
-                let Some((_, dropped, _)) = self.entries.pop_front() else {
-                    break;
-                };
-                self.picture_bytes -= dropped.data.len();
-            }
-            self.picture_bytes += bytes;
-            self.entries
-                .push_back((*settings, image.clone(), trunks.clone()));
-        }
-        trunks
-    }
-
-    /// The number of (picture, settings) pairs held.
-    pub fn len(&self) -> usize {
-        self.entries.len()
-    }
-
-    /// True when nothing is held.
-    pub fn is_empty(&self) -> bool {
-        self.entries.is_empty()
-    }
-}
-
-/// A built-in camera picture: `width` x `height` RGB, a seabed-like texture with a few
-/// objects, different for each `seed`.
-pub fn test_image(width: usize, height: usize, seed: u64) -> debt::Image {
-    let mut data = Vec::with_capacity(width * height * 3);
-    let s = seed as f64;
-    for y in 0..height {
-        for x in 0..width {
-            let (fx, fy) = (x as f64 / width as f64, y as f64 / height as f64);
-            let sand = 0.5
-                + 0.15 * ((fx * 23.0 + s).sin() * (fy * 17.0 - s).cos())
-                + 0.1 * ((fx * 71.0 + fy * 43.0 + s * 3.0).sin());
-            let rock = ((fx - 0.3 - 0.05 * s.sin()).powi(2) + (fy - 0.6).powi(2)).sqrt() < 0.15;
-            let pipe = (fy - 0.35 - 0.1 * fx).abs() < 0.03;
-            let (r, g, b) = if rock {
-                (0.25, 0.3, 0.3)
-            } else if pipe {
-                (0.8, 0.6, 0.1)
-            } else {
-                (0.3 * sand, 0.6 * sand, 0.7 * sand + 0.1)
-            };
-            for c in [r, g, b] {
-                data.push((c * 255.0).clamp(0.0, 255.0) as u8);
-            }
-        }
-    }
-    debt::Image {
-        width,
-        height,
-        channels: 3,
-        data,
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_trunk_cache_gives_what_trunks_of_gives_and_stays_bounded() {
-        let picture_bytes = 64 * 48 * 3;
-        let mut cache = TrunkCache::with_budget(4 * picture_bytes);
-        let pictures: Vec<debt::Image> = (0..3).map(|k| test_image(64, 48, k)).collect();
-        let small = ImageSettings {
-            size_bytes: 400,
-            ..ImageSettings::default()
-        };
-        for _ in 0..2 {
-            for picture in &pictures[..2] {
-                for settings in [ImageSettings::default(), small] {
-                    assert_eq!(
-                        cache.trunks(picture, &settings),
-                        trunks_of(picture, &settings)
-                    );
-                }
-            }
-        }
-        assert_eq!(cache.len(), 4);
-        // A picture above the budget is encoded, not held.
-        let large = test_image(64, 48 * 5, 0);
-        assert_eq!(cache.trunks(&large, &small), trunks_of(&large, &small));
-        assert_eq!(cache.len(), 4);
-        // One more pushes out the least recently used: the first picture at the default
-        // settings.
-        assert_eq!(
-            cache.trunks(&pictures[2], &small),
-            trunks_of(&pictures[2], &small)
-        );
-        assert_eq!(cache.len(), 4);
-        assert!(cache.picture_bytes <= 4 * picture_bytes);
-        let first = (ImageSettings::default(), &pictures[0]);
-        assert!(!cache.entries.iter().any(|(s, i, _)| (*s, i) == first));
-    }
 }

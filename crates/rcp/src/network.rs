@@ -23,8 +23,8 @@
 use std::collections::BTreeMap;
 use std::sync::atomic::AtomicBool;
 
+use crate::autopilot::SimDrive;
 use crate::camera::Cycle;
-use crate::drive::SimDrive;
 use crate::driver::{self, Setup, SimAir, VehicleEnds};
 use crate::orders::Script;
 use crate::report::Observer;
@@ -126,7 +126,7 @@ mod tests {
     }
 
     fn images() -> Vec<debt::Image> {
-        vec![crate::test_image(160, 120, 1)]
+        vec![crate::camera::builtin_picture(160, 120, 1)]
     }
 
     fn run_quiet(s: &Scenario) -> NetworkMetrics {

@@ -320,7 +320,11 @@ mod tests {
             };
             Pair {
                 operator: Operator::new(1, 640_000_000),
-                rov: Rov::new(cfg, [1.0, 0.0, 0.0], vec![crate::test_image(64, 48, 1)]),
+                rov: Rov::new(
+                    cfg,
+                    [1.0, 0.0, 0.0],
+                    vec![crate::camera::builtin_picture(64, 48, 1)],
+                ),
                 t: SimTime::ZERO,
                 events: Vec::new(),
             }

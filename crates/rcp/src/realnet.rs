@@ -366,7 +366,7 @@ mod tests {
                         script: Vec::new(),
                         waypoints: Vec::<Waypoint>::new(),
                         settings: network.scenario.settings,
-                        images: vec![crate::test_image(64, 48, 1)],
+                        images: vec![crate::camera::builtin_picture(64, 48, 1)],
                     };
                     let mut parts = Parts::from_config(&config);
                     // A console line naming vehicle 1: a HoldHeading order for it alone.

@@ -27,11 +27,12 @@
 
 use std::collections::VecDeque;
 
+use crate::autopilot::DriveEvent;
+use crate::autopilot::{Demand, Drive, DriveState, SimDrive};
 use crate::camera::{Camera, Cycle};
-use crate::drive::DriveEvent;
-use crate::drive::{Demand, Drive, DriveState, SimDrive};
+use crate::trunk_cache::TrunkCache;
 use crate::vehicle::Command;
-use crate::{Event, ImageSettings, PoseSample, TrunkCache, emit};
+use crate::{Event, ImageSettings, PoseSample, emit};
 use rovlink_debt as debt;
 use rovlink_link::SimTime;
 use rovlink_wire::frame::{ADDR_OPERATOR, Frame};
@@ -679,7 +680,7 @@ mod tests {
     fn a_picture_the_codec_refuses_sends_status_without_panicking() {
         // Wider than DEBT holds: trunks_of yields nothing (src/rcp/rov.rs used to index trunk
         // n - 1 of none).
-        let picture = crate::test_image(4097, 2, 0);
+        let picture = crate::camera::builtin_picture(4097, 2, 0);
         let mut rov = Rov::new(RovConfig::default(), [1.0, 0.0, 0.0], vec![picture]);
         let mut operator = Operator::new(1, 640_000_000);
         for slot in 0..3u64 {

@@ -29,7 +29,7 @@ use serde_json::{Map, Value};
 use crate::ImageSettings;
 use crate::Role;
 use crate::config::{
-    MAX_DURATION_S, MAX_IPG_S, MAX_POSITION_M, MIN_IMAGE_BYTES, MIN_IPG_S, Waypoint,
+    MAX_DURATION_S, MAX_IPG_S, MAX_POSITION_M, MIN_IMAGE_BYTES, MIN_IPG_S, Waypoint, bound_ipg,
 };
 use crate::routing::{MAX_VEHICLE, Routes, RoutesError};
 use crate::rules;
@@ -182,7 +182,7 @@ impl Scenario {
     pub fn from_file(path: &Path) -> Result<Scenario, ScenarioError> {
         let name = path.display();
         regular_file(path).map_err(|what| field(name.to_string(), what))?;
-        let bytes = crate::read_at_most(path, MAX_SCENARIO_FILE_BYTES)
+        let bytes = rovlink_base::io::read_file_bounded(path, MAX_SCENARIO_FILE_BYTES)
             .map_err(|e| field(name.to_string(), format!("cannot read: {e}")))?
             .ok_or_else(|| {
                 field(
@@ -259,7 +259,7 @@ impl Scenario {
             &hops(vehicle, 0),
             self.settings.trunk_bytes,
         );
-        slot_s.clamp(MIN_IPG_S, MAX_IPG_S)
+        bound_ipg(slot_s).ipg_s
     }
 
     /// The model of the hop from `a` to `b`: their shared medium's, else `a`'s first.

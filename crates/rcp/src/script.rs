@@ -50,7 +50,7 @@ fn table(path: &Path, columns: &[&str]) -> Result<Vec<(u64, Vec<f64>)>, ScriptEr
     };
     let read = match path.as_os_str() == "-" {
         true => read_stdin_at_most(MAX_FILE_BYTES),
-        false => crate::read_at_most(path, MAX_FILE_BYTES),
+        false => rovlink_base::io::read_file_bounded(path, MAX_FILE_BYTES),
     };
     let Some(text) = read.map_err(read_error)? else {
         return Err(ScriptError::TooBig {

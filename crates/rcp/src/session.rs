@@ -17,8 +17,8 @@ use crate::scenario::{MediumSpec, Node, Scenario};
 use rovlink_link::ModelError;
 
 pub use crate::config::{
-    ConfigError, JoystickChange, MAX_DURATION_S, MAX_IPG_S, MAX_POSITION_M, MAX_WAYPOINT_M,
-    MIN_IMAGE_BYTES, MIN_IPG_S, SessionConfig, Waypoint, auto_ipg_for,
+    BoundedIpg, ConfigError, JoystickChange, MAX_DURATION_S, MAX_IPG_S, MAX_POSITION_M,
+    MAX_WAYPOINT_M, MIN_IMAGE_BYTES, MIN_IPG_S, SessionConfig, Waypoint, auto_ipg_for, bound_ipg,
 };
 
 /// Why a session could not run.
@@ -39,7 +39,7 @@ pub struct Parts {
     /// built by [`Parts::from_config`]).
     pub orders: Vec<Box<dyn crate::orders::OrderSource>>,
     /// What moves the vehicle.
-    pub drive: Box<dyn crate::drive::Drive>,
+    pub drive: Box<dyn crate::autopilot::Drive>,
     /// The camera.
     pub camera: Box<dyn crate::camera::Camera>,
 }
@@ -53,7 +53,7 @@ impl Parts {
                 &config.script,
                 &config.waypoints,
             ))],
-            drive: Box::new(crate::drive::SimDrive::new(config.start_m)),
+            drive: Box::new(crate::autopilot::SimDrive::new(config.start_m)),
             camera: Box::new(crate::camera::Cycle::new(config.images.clone())),
         }
     }
@@ -177,7 +177,7 @@ mod tests {
             script: Vec::new(),
             waypoints: Vec::new(),
             settings: ImageSettings::default(),
-            images: vec![crate::test_image(160, 120, 1)],
+            images: vec![crate::camera::builtin_picture(160, 120, 1)],
         }
     }
 
@@ -385,7 +385,7 @@ mod tests {
                 "joystick change 1: expected a time",
             ),
             (
-                Box::new(|c| c.images = vec![crate::test_image(4097, 2, 0)]),
+                Box::new(|c| c.images = vec![crate::camera::builtin_picture(4097, 2, 0)]),
                 "camera picture 1: expected 1x1 ..= 4096x4096 pixels",
             ),
         ];

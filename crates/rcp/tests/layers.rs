@@ -14,11 +14,11 @@ const ROOT: &str = env!("CARGO_MANIFEST_DIR");
 
 /// The layers of `rcp`, bottom first.
 const LAYERS: [(&str, &[&str]); 4] = [
-    ("vocabulary", &["rules", "report", "vehicle"]),
+    ("vocabulary", &["rules", "report", "vehicle", "trunk_cache"]),
     (
         "engines",
         &[
-            "operator", "rov", "drive", "orders", "script", "routing", "scenario", "harness",
+            "operator", "rov", "autopilot", "orders", "script", "routing", "scenario", "harness",
             "camera", "config",
         ],
     ),

@@ -8,10 +8,10 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
 use proptest::prelude::*;
+use rovlink_rcp::camera::builtin_picture;
 use rovlink_rcp::network;
 use rovlink_rcp::report::Quiet;
 use rovlink_rcp::scenario::Scenario;
-use rovlink_rcp::test_image;
 
 const THREE: &str = r#"{"duration_s":150,
   "nodes":[{"address":0,"role":"operator","position":[0,0,0]},
@@ -63,7 +63,7 @@ proptest! {
         ber in prop_oneof![Just(0.0), 1e-4..5e-4f64],
     ) {
         let s = scenario(seed, &near, &far, duplicate_percent, ber);
-        let images = [test_image(96, 64, seed)];
+        let images = [builtin_picture(96, 64, seed)];
         let m = network::run(&s, &images, &mut Quiet, &AtomicBool::new(false), None).unwrap();
         for (address, v) in &m.vehicles {
             prop_assert_eq!(v.orders_executed_twice, 0, "vehicle {}: {:?}", address, v);

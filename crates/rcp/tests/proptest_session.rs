@@ -8,10 +8,11 @@ use std::sync::atomic::AtomicBool;
 
 use proptest::prelude::*;
 use rovlink_link::Model;
+use rovlink_rcp::ImageSettings;
+use rovlink_rcp::camera::builtin_picture;
 use rovlink_rcp::operator::Joystick;
 use rovlink_rcp::report::Quiet;
 use rovlink_rcp::session::{self, JoystickChange, SessionConfig, Waypoint};
-use rovlink_rcp::{ImageSettings, test_image};
 
 prop_compose! {
     fn waypoint()(t_s in 0.0..150.0f64, x in -3.0..3.0f64, y in -3.0..3.0f64, z in 0.0..2.0f64,
@@ -55,7 +56,7 @@ prop_compose! {
             script,
             waypoints,
             settings: ImageSettings { size_bytes, ..ImageSettings::default() },
-            images: vec![test_image(96, 64, seed % 7)],
+            images: vec![builtin_picture(96, 64, seed % 7)],
         }
     }
 }

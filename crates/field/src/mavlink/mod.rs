@@ -71,7 +71,7 @@ use mavlink::dialects::ardupilotmega::{
 use codec::{Autopilot, Inbox};
 use rovlink_link::SimTime;
 use rovlink_link::device::DeviceSpec;
-use rovlink_rcp::drive::{Demand, Drive, DriveEvent, DriveState};
+use rovlink_rcp::autopilot::{Demand, Drive, DriveEvent, DriveState};
 use rovlink_rcp::vehicle::{Command, Vehicle, angle_diff_deg};
 use rovlink_wire::Nav;
 use rovlink_wire::rov::Why;

@@ -30,8 +30,9 @@ pub struct Notifications {
 /// implementation of this trait), this module (`src/link/dialect/mod.rs`: its `mod` line and
 /// its arm in [`emulator`]), and the enum where dialects are named ([`Dialect`] in
 /// `src/gll/device.rs`: the variant, its name and its help; `--dialect`'s value list is made
-/// from it, and its arm in `PortOptions::open` says how the real-modem tools speak it, or that
-/// they do not).
+/// from it; what the tools ask of a dialect, its broadcast address and whether it is emulated
+/// between two sides only; and its arm in `PortOptions::open` says how the real-modem tools
+/// speak it, or that they do not).
 pub trait Emulator {
     /// Bytes `side`'s host wrote: every packet its commands carry goes on the air through
     /// `offer`, which returns the link's sequence number for it (reports carry it back); the
@@ -64,6 +65,8 @@ mod tests {
         for dialect in Dialect::ALL {
             let has = emulator(dialect).is_some();
             assert_eq!(has, dialect != Dialect::Transparent, "{}", dialect.name());
+            // An emulator works on a link's two sides (`Side`): a shared medium has none.
+            assert_eq!(has, dialect.two_sides_only(), "{}", dialect.name());
         }
     }
 }

@@ -38,6 +38,26 @@ impl Dialect {
             Dialect::Evologics => "EvoLogics AT commands (AT*SEND / AT*SENDIM, RECV)",
         }
     }
+
+    /// The destination address every modem in range takes, for a dialect whose packets carry
+    /// a destination; none for bare packets. A node of a routed network sends every packet
+    /// there (tdma-run `--routes`): its neighbours' routers decide who takes a frame.
+    pub fn broadcast_address(self) -> Option<u32> {
+        match self {
+            Dialect::Transparent => None,
+            Dialect::Evologics => Some(super::evologics::BROADCAST_ADDRESS),
+        }
+    }
+
+    /// True when link-sim emulates the dialect only between the two sides of a link (an
+    /// emulated modem has its side's address, 1 or 2), not on a shared medium of more ports
+    /// (`link-sim --pty N`, N > 2). Bare packets go anywhere.
+    pub fn two_sides_only(self) -> bool {
+        match self {
+            Dialect::Transparent => false,
+            Dialect::Evologics => true,
+        }
+    }
 }
 
 /// How a device is opened and spoken to (the command line's `cli::port::PortArgs`).

@@ -27,6 +27,8 @@ pub const MAX_BURST_BYTES: usize = 1024;
 pub const MAX_IM_BYTES: usize = 64;
 /// Integrity below which a received packet is reported as damaged (the modem's own scale).
 pub const INTEGRITY_THRESHOLD: u32 = 90;
+/// The destination address every modem in range takes: the broadcast address.
+pub const BROADCAST_ADDRESS: u32 = 255;
 
 /// A command from the host.
 #[derive(Debug, Clone, PartialEq, Eq)]

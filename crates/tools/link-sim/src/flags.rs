@@ -17,7 +17,6 @@ use rovlink_cli::value::{self, CountParser};
 use rovlink_link::SimTime;
 use rovlink_link::device::DeviceSpec;
 use rovlink_link::emulate::Emulation;
-use rovlink_link::gll::Dialect;
 use rovlink_link::model::MAX_RANGE_M;
 use rovlink_link::pipe::Pace;
 use rovlink_link::realtime::{Framing, MAX_PORTS, SideOptions, priority_allowed};
@@ -361,13 +360,14 @@ impl Args {
         if ports == 2 {
             return Ok(());
         }
+        let dialect = format!("--dialect {}", self.dialect.0.name());
         let two_only = [
             ("--trace", self.trace.is_some()),
             ("--reverse-model", self.reverse_model.is_some()),
             ("--reverse-model-file", self.reverse_model_file.is_some()),
             ("--distance", self.distance.is_some()),
             ("--distance-file", self.distance_file.is_some()),
-            ("--dialect evologics", self.dialect.0 == Dialect::Evologics),
+            (dialect.as_str(), self.dialect.0.two_sides_only()),
         ];
         match two_only.iter().find(|(_, given)| *given) {
             Some((flag, _)) => Err(UsageError(format!(

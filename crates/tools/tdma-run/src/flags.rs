@@ -296,6 +296,12 @@ pub struct Args {
     /// /vehicle/N/ (view only).
     #[arg(long, value_name = "HOST:PORT", help_heading = "Field")]
     pub foxglove: Option<String>,
+
+    /// True when `--address` is on the command line, not its default ([`Args::from_command_line`]
+    /// reads it): with `--routes` the flag is the node's own address, and its default, 2, is
+    /// the EvoLogics destination's, not a node's.
+    #[arg(skip)]
+    pub address_given: bool,
 }
 
 /// What moves the vehicle.
@@ -321,6 +327,15 @@ fn vehicle(text: &str) -> Result<Vehicle, String> {
 }
 
 impl Args {
+    /// The process's command line, parsed as every tool's is (`rovlink_cli::parse`: a bad one
+    /// is said and exits), with [`Args::address_given`].
+    pub fn from_command_line() -> Args {
+        let (mut args, matches) = rovlink_cli::parse_with_matches::<Args>(crate::TOOL);
+        args.address_given =
+            matches.value_source("address") == Some(clap::parser::ValueSource::CommandLine);
+        args
+    }
+
     /// The input files, for the outputs' same-file check.
     pub fn inputs(&self) -> impl Iterator<Item = &std::path::Path> {
         [

@@ -29,7 +29,7 @@ use flags::Args;
 pub const TOOL: &str = "tdma-run";
 
 fn main() -> ExitCode {
-    let args: Args = rovlink_cli::parse(TOOL);
+    let args = Args::from_command_line();
     rovlink_cli::finish(TOOL, run(&args))
 }
 

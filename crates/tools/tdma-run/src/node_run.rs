@@ -14,16 +14,12 @@ use rovlink_rcp::realnet::{self, Network};
 use rovlink_rcp::realtime::Role;
 use rovlink_rcp::report::Tee;
 use rovlink_rcp::scenario::Scenario;
-use rovlink_rcp::session::{MAX_IPG_S, MIN_IPG_S, SessionConfig};
+use rovlink_rcp::session::{SessionConfig, bound_ipg};
 use rovlink_rcp::{camera, script};
 
 use crate::TOOL;
 use crate::flags::{Args, Ipg, RoleArg};
 use crate::scenario_run::{Both, mark_interrupted, network_summary};
-
-/// The EvoLogics destination of every packet a network node sends: broadcast (the routers
-/// decide who takes a frame).
-const EVOLOGICS_BROADCAST: u32 = 255;
 
 /// Runs this process's node of the network in `path`.
 pub fn run(args: &Args, path: &Path) -> Result<u8> {
@@ -36,7 +32,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
         Scenario::from_file(path).map_err(|e| UsageError(format!("--routes {e}")))?;
     // The frames sent are the flags' (the trunk size sets the ROV frame and so the slots).
     scenario.settings = args.settings();
-    let address = match (role, address_given()) {
+    let address = match (role, args.address_given) {
         (_, true) => u8::try_from(args.port_args.address).unwrap_or(u8::MAX),
         (Role::Operator, false) => 0,
         (Role::Rov, false) => 1,
@@ -55,8 +51,12 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
         }
         other => other?,
     };
+    // Every packet to the dialect's broadcast address, if its packets carry one: the routers
+    // decide who takes a frame.
     let mut options = args.port_args.options();
-    options.address = EVOLOGICS_BROADCAST;
+    if let Some(broadcast) = options.dialect.broadcast_address() {
+        options.address = broadcast;
+    }
     let mut endpoints: Vec<Box<dyn Endpoint>> = Vec::new();
     for device in &ports {
         endpoints.push(options.open(device)?);
@@ -140,18 +140,6 @@ fn usage(args: &Args) -> Result<(), UsageError> {
     }
 }
 
-/// True when `--address` is on the command line (its default, 2, is the EvoLogics
-/// destination's, not a node's).
-fn address_given() -> bool {
-    use clap::CommandFactory;
-    Args::command()
-        .allow_negative_numbers(true)
-        .try_get_matches_from(std::env::args_os())
-        .ok()
-        .and_then(|m| m.value_source("address"))
-        == Some(clap::parser::ValueSource::CommandLine)
-}
-
 /// The session this node runs: the flags' duration, images and orders; the network's
 /// cycle; the node's own position.
 fn session_config(args: &Args, network: &Network, role: Role) -> Result<SessionConfig> {
@@ -174,7 +162,8 @@ fn session_config(args: &Args, network: &Network, role: Role) -> Result<SessionC
     let config = SessionConfig {
         model,
         seed: scenario.seed,
-        ipg_s: network.cycle_s().clamp(MIN_IPG_S, MAX_IPG_S),
+        // The cycle held to an IPG's bounds: only validation looks at it (see bound_ipg).
+        ipg_s: bound_ipg(network.cycle_s()).ipg_s,
         duration_s: args.duration_s(),
         buoy_m: position(0),
         start_m: match role {

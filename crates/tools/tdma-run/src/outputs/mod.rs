@@ -453,8 +453,9 @@ impl Observer for Recorder {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rovlink_rcp::drive::DriveEvent;
-    use rovlink_rcp::{ImageSettings, test_image, trunks_of};
+    use rovlink_rcp::autopilot::DriveEvent;
+    use rovlink_rcp::camera::builtin_picture;
+    use rovlink_rcp::{ImageSettings, trunks_of};
     use rovlink_wire::operator::Order;
     use serde_json::Value;
 
@@ -485,7 +486,7 @@ mod tests {
 
     /// An image's DEBT stream, as the ROV cuts it into trunks.
     fn trunks() -> Vec<Vec<u8>> {
-        trunks_of(&test_image(64, 48, 1), &ImageSettings::default())
+        trunks_of(&builtin_picture(64, 48, 1), &ImageSettings::default())
     }
 
     #[test]
@@ -664,7 +665,7 @@ mod tests {
             ..Destinations::default()
         });
         // A picture large enough that its preview takes a while to decode and compress.
-        let trunks = trunks_of(&test_image(320, 240, 1), &ImageSettings::default());
+        let trunks = trunks_of(&builtin_picture(320, 240, 1), &ImageSettings::default());
         let stream = trunks.concat();
         for n in 1..=5u32 {
             // The last trunks arrive and the image completes at once, while its preview may

@@ -8,7 +8,7 @@ use serde_json::{Map, Value};
 
 use rovlink_base::output::Dest;
 use rovlink_cli::rows::{RowFormat, RowWriter};
-use rovlink_rcp::drive::DriveEvent;
+use rovlink_rcp::autopilot::DriveEvent;
 use rovlink_rcp::{Event, Role};
 use rovlink_wire::operator::Order;
 use rovlink_wire::{Message, MessageRepr};

@@ -1,15 +1,17 @@
-//! What moves the vehicle: the ROV engine's demand at each vehicle step, and what the vehicle
-//! reports back.
+//! The vehicle's autopilot as the ROV engine sees it (the [`Drive`] trait): what moves the
+//! vehicle, the engine's demand at each vehicle step, and what the vehicle reports back. (Not
+//! the session driver, `driver`, the layer above that runs the engines.)
 //!
 //! The ROV engine decides, every [`crate::rov::RovConfig::step_s`], what the vehicle should do
 //! (the joystick's thrust, a GoTo target, the backtracking target while the link is lost, the
 //! arm state and navigation mode the operator asked for, heading hold) and hands it to a
 //! [`Drive`] as a [`Demand`]. The drive is the built-in kinematic [`Vehicle`] in simulation, or a
-//! real autopilot (`rcp::mavlink`, in the application layer); either way the engine reads the vehicle's state back
-//! from [`Drive::state`] for the status it sends, for GoTo arrival and for the position stack
-//! of the recovery algorithm. Nothing here reads a clock: the time comes with each step.
-//! The built-in model comes to rest ([`Vehicle::advance`]), and says when a step would not
-//! move it ([`Drive::still_under`]), so that a simulation need not wake for such steps.
+//! real autopilot (`rovlink_field::mavlink`, above this crate); either way the engine reads the
+//! vehicle's state back from [`Drive::state`] for the status it sends, for GoTo arrival and for
+//! the position stack of the recovery algorithm. Nothing here reads a clock: the time comes with
+//! each step. The built-in model comes to rest ([`Vehicle::advance`]), and says when a step
+//! would not move it ([`Drive::still_under`]), so that a simulation need not wake for such
+//! steps.
 
 use crate::vehicle::{ARRIVAL_DEG, ARRIVAL_M, Command, Vehicle, angle_diff_deg};
 use rovlink_link::SimTime;
