@@ -1,51 +1,63 @@
 #!/usr/bin/env bash
 # What an edit costs to rebuild, before and after a change of layout, measured one right after
-# the other on this machine: for each tree given (a checkout of this repository, either the one
-# crate of before the workspace or the workspace), with its own empty target directory,
-#   1. a cold `cargo build --release` (the registry's sources already fetched);
+# the other on this machine. Each tree given (a checkout of this repository: the one crate of
+# before the workspace, or the workspace) builds in its own empty target directory
+# (TREE/target-cost); every step runs in each tree in turn before the next step starts, so a
+# change in the machine's load hits both alike:
+#   1. a cold `cargo build --release` (the registry's sources already fetched), then a cold
+#      `cargo test --no-run` (every test binary, debug);
 #   2. for one file in each of wire, debt, octo and rcp: touch it, then time
-#      `cargo build --release` (every tool), `cargo build --release --bin debt-encode` for debt,
-#      and `cargo test --no-run` (every test binary, debug);
-#   3. the size of target/debug after the test build.
-# Prints one CSV row per measurement: tree,what,seconds (or bytes). Wall-clock seconds; the
-# machine is shared, so run it when it is quiet and read the ratios, not the absolutes.
+#      `cargo build --release --bin debt-encode` (debt only), `cargo build --release` (every
+#      tool) and `cargo test --no-run`;
+#   3. the size of target/debug after the test builds.
+# Prints one CSV row per measurement: tree,what,value (seconds of wall clock, or bytes). The
+# machine is shared: run it when it is quiet, and read the ratios rather than the absolutes.
 #
-#   scripts/build-cost.sh /work/before /work/after > build-cost.csv
+#   scripts/build-cost.sh /path/to/before /path/to/after > build-cost.csv
 set -euo pipefail
 [ $# -ge 1 ] || { echo "usage: scripts/build-cost.sh TREE..." >&2; exit 2; }
+trees=()
+for t in "$@"; do trees+=("$(cd "$t" && pwd)"); done
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
 
 now() { date +%s.%N; }
-timed() { # label, command...
-  local label=$1; shift
-  local t0; t0=$(now)
-  "$@" >/dev/null 2>"$log" || { echo "build-cost: $label failed, see $log" >&2; exit 1; }
-  printf '%s,%s,%.1f\n' "$name" "$label" "$(echo "$(now) - $t0" | bc)"
+# In every tree, `prepare` (a function of the tree, may be :) then the timed command.
+step() { # label, prepare, command...
+  local label=$1 prepare=$2; shift 2
+  local tree t0
+  for tree in "${trees[@]}"; do
+    export CARGO_TARGET_DIR="$tree/target-cost"
+    (cd "$tree" && $prepare "$tree")
+    t0=$(now)
+    (cd "$tree" && "$@") >/dev/null 2>"$log" || { echo "build-cost: $label failed in $tree:" >&2; tail -5 "$log" >&2; exit 1; }
+    printf '%s,%s,%.1f\n' "$(basename "$tree")" "$label" "$(echo "$(now) - $t0" | bc)"
+  done
 }
 # The file of each layer in either layout.
 file_of() { # tree, layer
+  local f
   case $2 in
     wire) f=wire/frame.rs ;; debt) f=debt/encode.rs ;; octo) f=octo/tree.rs ;; rcp) f=rcp/rov.rs ;;
   esac
   if [ -d "$1/crates" ]; then echo "$1/crates/${f%%/*}/src/${f#*/}"; else echo "$1/src/$f"; fi
 }
+clean() { rm -rf "$1/target-cost"; }
+layer=""
+touch_layer() { touch "$(file_of "$1" "$layer")"; }
 
 echo "tree,what,value"
-for tree in "$@"; do
-  name=$(basename "$tree")
-  export CARGO_TARGET_DIR="$tree/target-cost"
-  log=$(mktemp)
-  rm -rf "$CARGO_TARGET_DIR"
-  cd "$tree"
-  timed "cold release build" cargo build --release --locked
-  timed "cold test build (--no-run)" cargo test --locked --no-run
-  for layer in wire debt octo rcp; do
-    file=$(file_of "$tree" "$layer")
-    touch "$file"
-    if [ "$layer" = debt ]; then
-      timed "touch $layer: release debt-encode" cargo build --release --locked --bin debt-encode
-    fi
-    timed "touch $layer: release all tools" cargo build --release --locked
-    timed "touch $layer: test --no-run" cargo test --locked --no-run
-  done
-  printf '%s,target/debug bytes,%s\n' "$name" "$(du -sb "$CARGO_TARGET_DIR/debug" | cut -f1)"
+step "cold release build" clean cargo build --release --locked
+step "cold test build (--no-run)" : cargo test --locked --no-run
+for layer in wire debt octo rcp; do
+  if [ "$layer" = debt ]; then
+    step "touch $layer: release debt-encode" touch_layer cargo build --release --locked --bin debt-encode
+    step "touch $layer: release all tools" : cargo build --release --locked
+  else
+    step "touch $layer: release all tools" touch_layer cargo build --release --locked
+  fi
+  step "touch $layer: test --no-run" : cargo test --locked --no-run
+done
+for tree in "${trees[@]}"; do
+  printf '%s,target/debug bytes,%s\n' "$(basename "$tree")" "$(du -sb "$tree/target-cost/debug" | cut -f1)"
 done

@@ -18,8 +18,16 @@ const LAYERS: [(&str, &[&str]); 4] = [
     (
         "engines",
         &[
-            "operator", "rov", "autopilot", "orders", "script", "routing", "scenario", "harness",
-            "camera", "config",
+            "operator",
+            "rov",
+            "autopilot",
+            "orders",
+            "script",
+            "routing",
+            "scenario",
+            "harness",
+            "camera",
+            "config",
         ],
     ),
     ("driver", &["driver"]),
