@@ -4,8 +4,10 @@
 # before the workspace, or the workspace) builds in its own empty target directory
 # (TREE/target-cost); every step runs in each tree in turn before the next step starts, so a
 # change in the machine's load hits both alike:
-#   1. a cold `cargo build --release` (the registry's sources already fetched), then a cold
-#      `cargo test --no-run` (every test binary, debug);
+#   1. a cold `cargo build --release` (the registry's sources already fetched), then the whole
+#      suite from a cold debug build: the tree's own test command without installs or lints
+#      (`cargo test` in the one crate; `cargo build --workspace` and `cargo test --workspace`
+#      in the workspace), its outcome printed as a row of its own;
 #   2. for one file in each of wire, debt, octo and rcp: touch it, then time
 #      `cargo build --release --bin debt-encode` (debt only), `cargo build --release` (every
 #      tool) and `cargo test --no-run`;
@@ -19,7 +21,7 @@ set -euo pipefail
 trees=()
 for t in "$@"; do trees+=("$(cd "$t" && pwd)"); done
 log=$(mktemp)
-trap 'rm -f "$log"' EXIT
+trap 'rm -f "$log" "$log.suite" "$log.outcomes"' EXIT
 
 now() { date +%s.%N; }
 # In every tree, `prepare` (a function of the tree, may be :) then the timed command.
@@ -43,12 +45,24 @@ file_of() { # tree, layer
   if [ -d "$1/crates" ]; then echo "$1/crates/${f%%/*}/src/${f#*/}"; else echo "$1/src/$f"; fi
 }
 clean() { rm -rf "$1/target-cost"; }
+# The suite, built cold and run; its outcome (passed / failed) goes to a row of its own.
+suite() {
+  local ok=passed
+  if [ -d crates ]; then
+    { cargo build --workspace --locked && cargo test --workspace --locked --no-fail-fast; } >"$log.suite" 2>&1 || ok=failed
+  else
+    cargo test --locked --no-fail-fast >"$log.suite" 2>&1 || ok=failed
+  fi
+  echo "$(basename "$PWD"),suite outcome,$ok" >>"$log.outcomes"
+}
 layer=""
 touch_layer() { touch "$(file_of "$1" "$layer")"; }
 
 echo "tree,what,value"
 step "cold release build" clean cargo build --release --locked
-step "cold test build (--no-run)" : cargo test --locked --no-run
+: >"$log.outcomes"
+step "suite: cold debug build and run" : suite
+cat "$log.outcomes"
 for layer in wire debt octo rcp; do
   if [ "$layer" = debt ]; then
     step "touch $layer: release debt-encode" touch_layer cargo build --release --locked --bin debt-encode
