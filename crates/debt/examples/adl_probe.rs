@@ -11,7 +11,7 @@
 //! the level, the margin a direction must beat direction 0 by, and `chroma` to lift the chroma
 //! planes along the luma's directions too).
 //!
-//! `cargo run --release --example adl_probe -- [--bytes 300,...] [--variant 2:32:0.1 ...] DIR...`
+//! `cargo run --release -p rovlink-debt --example adl_probe -- [--bytes 300,...] [--variant 2:32:0.1 ...] DIR...`
 
 use rovlink_debt::adl::Params;
 use rovlink_debt::metrics::psnr;

@@ -1,7 +1,7 @@
 //! Measures the resilient-layout prototype ([`rovlink_debt::resilient`]) against the plain
 //! stream: PSNR with nothing lost and with 5 % of the trunks lost (8 seeded patterns).
 //!
-//! `cargo run --release --example resilient_probe -- [--bytes 500,2000,8000] [--trunk 39] IMAGES`
+//! `cargo run --release -p rovlink-debt --example resilient_probe -- [--bytes 500,2000,8000] [--trunk 39] IMAGES`
 
 use rovlink_base::rng::Rng;
 use rovlink_debt::metrics::psnr;

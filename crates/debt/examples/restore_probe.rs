@@ -8,7 +8,7 @@
 //! `--ycc`, a third: the filter works in YCbCr (BT.601), luma with its 12 taps, each chroma with
 //! its own 12 and the luma's 12 (60 B).
 //!
-//! `cargo run --release --example restore_probe -- [--bytes 300,...] [--row-step 1] [--cross] [--ycc] DIR...`
+//! `cargo run --release -p rovlink-debt --example restore_probe -- [--bytes 300,...] [--row-step 1] [--cross] [--ycc] DIR...`
 
 use rovlink_debt::metrics::psnr;
 use rovlink_debt::restore::{Filter, OFFSETS, TAP_SCALE, apply, fit, ridge_solve};
