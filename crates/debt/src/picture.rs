@@ -362,9 +362,7 @@ pub fn open(path: &Path) -> Result<Image, PictureError> {
 /// Reads a picture file, dealing with a large one as `oversize` says.
 pub fn open_fit(path: &Path, oversize: Oversize) -> Result<Loaded, PictureError> {
     let name = path.display().to_string();
-    let read =
-        std::fs::File::open(path).and_then(|f| rovlink_base::io::read_bounded(f, MAX_INPUT_BYTES));
-    let bytes = match read {
+    let bytes = match rovlink_base::io::read_file_bounded(path, MAX_INPUT_BYTES) {
         Ok(Some(bytes)) => bytes,
         Ok(None) => return Err(PictureError::TooManyBytes { name }),
         Err(source) => return Err(PictureError::Read { name, source }),
