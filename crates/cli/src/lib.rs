@@ -46,10 +46,7 @@ macro_rules! say {
 /// Negative numbers are values, never flags (`--x -5` reaches `--x`'s range check and says
 /// what it expected), in every subcommand too.
 pub fn parse<A: clap::Parser>(tool: &str) -> A {
-    match try_parse_from::<A, _, _>(std::env::args_os()) {
-        Ok(args) => args,
-        Err(err) => exit_with(tool, err),
-    }
+    parse_with_matches(tool).0
 }
 
 /// [`parse`], also handing back clap's matches of the command line, for what the parsed
@@ -70,24 +67,12 @@ where
     I: IntoIterator<Item = T>,
     T: Into<std::ffi::OsString> + Clone,
 {
-    let mut matches = matches_from::<A, _, _>(args)?;
-    A::from_arg_matches_mut(&mut matches)
+    try_parse_with_matches_from(args).map(|(parsed, _)| parsed)
 }
 
-/// [`try_parse_from`], also handing back the matches ([`parse_with_matches`]).
+/// [`try_parse_from`], also handing back clap's matches of `args` (negative numbers taken as
+/// values, see [`parse`]), whose parameters it records for [`metrics`].
 fn try_parse_with_matches_from<A, I, T>(args: I) -> Result<(A, clap::ArgMatches), clap::Error>
-where
-    A: clap::Parser,
-    I: IntoIterator<Item = T>,
-    T: Into<std::ffi::OsString> + Clone,
-{
-    let matches = matches_from::<A, _, _>(args)?;
-    A::from_arg_matches(&matches).map(|parsed| (parsed, matches))
-}
-
-/// Clap's matches of `args` for `A`, negative numbers taken as values (see [`parse`]); the
-/// parameters recorded for [`metrics`].
-fn matches_from<A, I, T>(args: I) -> Result<clap::ArgMatches, clap::Error>
 where
     A: clap::Parser,
     I: IntoIterator<Item = T>,
@@ -107,7 +92,7 @@ where
     let cmd = negatives(A::command());
     let matches = cmd.clone().try_get_matches_from(args)?;
     metrics::record(&cmd, &matches);
-    Ok(matches)
+    A::from_arg_matches(&matches).map(|parsed| (parsed, matches))
 }
 
 /// Prints a clap error as [`parse`] does and exits.
