@@ -19,7 +19,10 @@
 set -euo pipefail
 [ $# -ge 1 ] || { echo "usage: scripts/build-cost.sh TREE..." >&2; exit 2; }
 trees=()
-for t in "$@"; do trees+=("$(cd "$t" && pwd)"); done
+for t in "$@"; do
+  [ -f "$t/Cargo.toml" ] || { echo "build-cost: $t: not a checkout of this repository (no Cargo.toml)" >&2; exit 2; }
+  trees+=("$(cd "$t" && pwd)")
+done
 log=$(mktemp)
 trap 'rm -f "$log" "$log.suite" "$log.outcomes"' EXIT
 
