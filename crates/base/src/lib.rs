@@ -3,6 +3,7 @@
 //! - [`io`]: files and streams as every tool uses them (`-` for stdin/stdout, atomic output
 //!   files, errors that name the file, bounded reads, the exit-code table);
 //! - [`output`]: a run's outputs, claimed before any work is done ([`output::Outputs`]);
+//! - [`secret`]: key files and order sources checked as ssh checks a private key;
 //! - [`rng`]: seeded random streams, one per simulated quantity;
 //! - [`stats`]: running statistics (mean, deviation, jitter estimators);
 //! - [`geometry`]: the one distance between two points;
@@ -14,6 +15,7 @@ pub mod geometry;
 pub mod io;
 pub mod output;
 pub mod rng;
+pub mod secret;
 pub mod stats;
 pub mod strict_json;
 
