@@ -277,18 +277,20 @@ impl SessionConfig {
 
 /// The IPG wire.md derives from a model for a session, the one-hop case of a network's slot
 /// ([`rules::slot_s`] of one hop out and one back): the operator's frame, the ROV's frame with a
-/// trunk of `settings.trunk_bytes`, at the distance between `start_m` and `buoy_m`.
+/// trunk of `settings.trunk_bytes`, at the distance between `start_m` and `buoy_m`, each frame
+/// `overhead_bytes` longer when secured.
 pub fn auto_ipg_for(
     model: &Model,
     settings: &ImageSettings,
     start_m: [f64; 3],
     buoy_m: [f64; 3],
+    overhead_bytes: usize,
 ) -> f64 {
     let hop = rules::Hop {
         model,
         distance_m: rovlink_base::geometry::distance_m(start_m, buoy_m),
     };
-    rules::slot_s(&[hop], &[hop], settings.trunk_bytes)
+    rules::slot_s(&[hop], &[hop], settings.trunk_bytes, overhead_bytes)
 }
 
 #[cfg(test)]

@@ -38,6 +38,7 @@ pub mod rov;
 pub mod rules;
 pub mod scenario;
 pub mod script;
+pub mod secure;
 pub mod session;
 pub mod trunk_cache;
 pub mod vehicle;

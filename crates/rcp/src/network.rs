@@ -51,10 +51,13 @@ pub enum NetworkError {
 /// Runs `scenario` in virtual time; the vehicles' cameras cycle through `images` (each vehicle
 /// starting at its own picture). `stop` is checked at every event: once set, the run ends
 /// there with the figures so far and `interrupted` set to [`crate::report::STOPPED`]. With a
-/// `pace`, virtual time is held to `pace` times real time ([`driver::Pace`]).
+/// `pace`, virtual time is held to `pace` times real time ([`driver::Pace`]). With
+/// `security`, every node seals and checks its frames ([`crate::secure`]); the caller counts
+/// the overhead in `scenario.frame_overhead_bytes`.
 pub fn run(
     scenario: &Scenario,
     images: &[debt::Image],
+    security: Option<&crate::secure::Security>,
     observer: &mut dyn Observer,
     stop: &AtomicBool,
     pace: Option<f64>,
@@ -85,13 +88,15 @@ pub fn run(
         };
         vehicles.insert(address, ends);
     }
-    simulate(scenario, vehicles, observer, stop, pace)
+    let guards = security.map_or_else(BTreeMap::new, |s| s.simulation_guards(scenario));
+    simulate(scenario, vehicles, guards, observer, stop, pace)
 }
 
 /// Runs `scenario` in virtual time with the vehicles' `ends`, every node in this process.
 pub fn simulate(
     scenario: &Scenario,
     ends: BTreeMap<u8, VehicleEnds>,
+    guards: BTreeMap<u8, rovlink_security::Guard>,
     observer: &mut dyn Observer,
     stop: &AtomicBool,
     pace: Option<f64>,
@@ -108,6 +113,7 @@ pub fn simulate(
         measured_by: "simulation",
         duration_s: scenario.duration_s,
         duplicate_window_s: rules::duplicate_window_s(scenario.cycle_s()),
+        guards,
     };
     let (metrics, _) = driver::run(setup, &mut air, stop, observer);
     Ok(metrics)
@@ -130,7 +136,15 @@ mod tests {
     }
 
     fn run_quiet(s: &Scenario) -> NetworkMetrics {
-        run(s, &images(), &mut Quiet, &AtomicBool::new(false), None).unwrap()
+        run(
+            s,
+            &images(),
+            None,
+            &mut Quiet,
+            &AtomicBool::new(false),
+            None,
+        )
+        .unwrap()
     }
 
     #[test]
@@ -163,6 +177,41 @@ mod tests {
         // The operator never hears the far vehicle itself: 7 m is out of the S100's 5 m.
         assert_eq!(m.nodes["0"].frames_forwarded, 0);
         assert!(m.media["rf"].receptions_out_of_range > 0);
+    }
+
+    #[test]
+    fn secured_frames_cross_the_relay_unchanged_and_cost_their_bytes() {
+        use rovlink_security::KeyRing;
+        let plain_scenario = scenario(THREE);
+        let mut secured = plain_scenario.clone();
+        secured.frame_overhead_bytes = crate::secure::OVERHEAD_BYTES;
+        let ring = KeyRing::parse(
+            "1 000102030405060708090a0b0c0d0e0f\n2 0f0e0d0c0b0a09080706050403020100\n",
+        )
+        .unwrap();
+        for encrypt in [false, true] {
+            let security = crate::secure::Security {
+                ring: ring.clone(),
+                encrypt,
+                key_file: "keys".into(),
+            };
+            let m = run(
+                &secured,
+                &images(),
+                Some(&security),
+                &mut Quiet,
+                &AtomicBool::new(false),
+                None,
+            )
+            .unwrap();
+            let far = &m.vehicles["2"];
+            assert_eq!(far.orders_executed, 1, "{m:#?}");
+            assert!(far.images_completed >= 3, "{m:#?}");
+            assert!(far.frames_refused.is_empty(), "{m:#?}");
+            assert!(m.nodes.values().all(|n| n.refused.is_empty()), "{m:#?}");
+            assert!(m.nodes["1"].frames_forwarded > 700, "{m:#?}");
+            assert!(m.cycle_s > plain_scenario.cycle_s(), "{m:#?}");
+        }
     }
 
     #[test]
@@ -238,7 +287,7 @@ mod tests {
     #[test]
     fn a_stop_ends_the_run_with_the_figures_so_far() {
         let stop = AtomicBool::new(true);
-        let m = run(&scenario(THREE), &images(), &mut Quiet, &stop, None).unwrap();
+        let m = run(&scenario(THREE), &images(), None, &mut Quiet, &stop, None).unwrap();
         assert_eq!(m.interrupted.as_deref(), Some(STOPPED));
         assert!(m.duration_s < 1.0);
     }

@@ -174,13 +174,17 @@ pub fn run(
     role: Role,
     config: &SessionConfig,
     network: &Network,
-    parts: Parts,
+    mut parts: Parts,
     endpoints: &mut [Box<dyn Endpoint>],
     stop: &AtomicBool,
     observer: &mut dyn Observer,
 ) -> (NetworkMetrics, Ended) {
     let mut scenario = network.scenario.clone();
     scenario.settings = config.settings;
+    let guards = std::mem::take(&mut parts.guards);
+    if !guards.is_empty() {
+        scenario.frame_overhead_bytes = crate::secure::OVERHEAD_BYTES;
+    }
     let address = network.address;
     let vehicles = match role {
         Role::Operator => operator_ends(&scenario, parts),
@@ -209,6 +213,7 @@ pub fn run(
         measured_by: role.name(),
         duration_s: config.duration_s,
         duplicate_window_s: rules::duplicate_window_s(scenario.cycle_s()),
+        guards,
     };
     driver::run(setup, &mut air, stop, observer)
 }

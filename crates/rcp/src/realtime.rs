@@ -34,13 +34,14 @@ pub use crate::driver::Ended;
 pub fn run(
     role: Role,
     config: &SessionConfig,
-    parts: Parts,
+    mut parts: Parts,
     endpoint: &mut dyn Endpoint,
     stop: &AtomicBool,
     observer: &mut dyn Observer,
 ) -> (Metrics, Ended) {
     let scenario = session::scenario(config);
     let vehicle = session::rov_address();
+    let guards = std::mem::take(&mut parts.guards);
     let mut ends = parts.ends(&scenario, vehicle, Some(role));
     if let Some(operator) = ends.operator.as_mut() {
         operator.status_poses = true;
@@ -58,6 +59,7 @@ pub fn run(
         duration_s: config.duration_s,
         // A single session has no relays, and the ROV does not know the operator's IPG.
         duplicate_window_s: 0.0,
+        guards,
     };
     let (metrics, ended) = driver::run(setup, &mut air, stop, observer);
     (session::single(metrics), ended)

@@ -70,6 +70,10 @@ pub struct Metrics {
     /// Operator: statuses that said the vehicle has no position estimate (absent when none).
     #[serde(skip_serializing_if = "is_zero")]
     pub statuses_without_position: u64,
+    /// Frames a secured end refused (absent when none), by the source address they claimed,
+    /// then by reason (`unsecured`, `malformed`, `no_key`, `bad_tag`, `replay`).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub frames_refused: BTreeMap<String, BTreeMap<&'static str, u64>>,
     /// Real time, operator: mean time from a slot's frame to the ROV's answer, ms.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub round_trip_ms: Option<f64>,
@@ -100,6 +104,10 @@ pub struct NodeMetrics {
     pub own_dropped: u64,
     /// Forwards towards the node the frame was heard from (must be 0).
     pub forwarded_back: u64,
+    /// Frames for this node its guard refused (absent when none), by the source address they
+    /// claimed, then by reason (see [`Metrics::frames_refused`]).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub refused: BTreeMap<String, BTreeMap<&'static str, u64>>,
 }
 
 /// What crossed one medium.

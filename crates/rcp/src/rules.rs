@@ -62,15 +62,20 @@ pub struct Hop<'a> {
 
 /// The TDMA slot rule, the one place it is written: a vehicle's slot, s, is the operator's
 /// frame ([`OPERATOR_FRAME_BYTES`]) over each hop of `out`, each followed by its [`guard_s`],
-/// then the answer (a status with a trunk of `trunk_bytes`) over each hop of `back`. A single
-/// session's automatic IPG is the one-hop case.
-pub fn slot_s(out: &[Hop<'_>], back: &[Hop<'_>], trunk_bytes: u8) -> f64 {
+/// then the answer (a status with a trunk of `trunk_bytes`) over each hop of `back`; every
+/// frame is `overhead_bytes` longer when frames are secured (6, docs/wire-extensions.md; 0
+/// for the paper's plain frames). A single session's automatic IPG is the one-hop case.
+pub fn slot_s(out: &[Hop<'_>], back: &[Hop<'_>], trunk_bytes: u8, overhead_bytes: usize) -> f64 {
     let mut slot_s = 0.0;
     for hop in out {
-        slot_s += hop_s(hop.model, OPERATOR_FRAME_BYTES, hop.distance_m);
+        slot_s += hop_s(
+            hop.model,
+            OPERATOR_FRAME_BYTES + overhead_bytes,
+            hop.distance_m,
+        );
         slot_s += guard_s(hop.model);
     }
-    let answer_bytes = rov_frame_bytes(trunk_bytes);
+    let answer_bytes = rov_frame_bytes(trunk_bytes) + overhead_bytes;
     for hop in back {
         slot_s += hop_s(hop.model, answer_bytes, hop.distance_m);
     }

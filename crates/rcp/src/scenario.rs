@@ -117,6 +117,9 @@ pub struct Scenario {
     pub routes: Routes,
     /// How every vehicle encodes and cuts its images.
     pub settings: ImageSettings,
+    /// Bytes every frame carries beyond the plain one: 0, or the secured frame's overhead when
+    /// the session runs with keys (set by the caller, not the file); the slot rule counts them.
+    pub frame_overhead_bytes: usize,
 }
 
 impl Scenario {
@@ -171,6 +174,7 @@ impl Scenario {
             media,
             routes,
             settings,
+            frame_overhead_bytes: 0,
         };
         scenario
             .routes
@@ -258,6 +262,7 @@ impl Scenario {
             &hops(0, vehicle),
             &hops(vehicle, 0),
             self.settings.trunk_bytes,
+            self.frame_overhead_bytes,
         );
         bound_ipg(slot_s).ipg_s
     }
@@ -779,7 +784,7 @@ pub(crate) mod tests {
         assert_eq!(cycle.len(), 2);
         // One hop: the single-vehicle session's automatic IPG.
         let model = Model::preset("s100").unwrap();
-        let single = crate::config::auto_ipg_for(&model, &s.settings, [3.0, 0.0, 1.0], [0.0; 3]);
+        let single = crate::config::auto_ipg_for(&model, &s.settings, [3.0, 0.0, 1.0], [0.0; 3], 0);
         assert!(
             (cycle[0].length_s - single).abs() < 1e-9,
             "{cycle:?} vs {single}"

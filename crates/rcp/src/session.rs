@@ -42,6 +42,9 @@ pub struct Parts {
     pub drive: Box<dyn crate::autopilot::Drive>,
     /// The camera.
     pub camera: Box<dyn crate::camera::Camera>,
+    /// The guards of the nodes this process runs, by address ([`crate::secure`]); empty for
+    /// the paper's plain frames.
+    pub guards: BTreeMap<u8, rovlink_security::Guard>,
 }
 
 impl Parts {
@@ -55,6 +58,7 @@ impl Parts {
             ))],
             drive: Box::new(crate::autopilot::SimDrive::new(config.start_m)),
             camera: Box::new(crate::camera::Cycle::new(config.images.clone())),
+            guards: BTreeMap::new(),
         }
     }
 
@@ -107,6 +111,7 @@ pub fn scenario(config: &SessionConfig) -> Scenario {
         }],
         routes: Routes::default(),
         settings: config.settings,
+        frame_overhead_bytes: 0,
     }
 }
 
@@ -140,7 +145,7 @@ pub fn run(
 /// time ([`crate::driver::Pace`]).
 pub fn run_with(
     config: &SessionConfig,
-    parts: Parts,
+    mut parts: Parts,
     observer: &mut dyn Observer,
     stop: &AtomicBool,
     pace: Option<f64>,
@@ -148,8 +153,9 @@ pub fn run_with(
     config.validate()?;
     let scenario = scenario(config);
     let vehicle = rov_address();
+    let guards = std::mem::take(&mut parts.guards);
     let ends = BTreeMap::from([(vehicle, parts.ends(&scenario, vehicle, None))]);
-    match network::simulate(&scenario, ends, observer, stop, pace) {
+    match network::simulate(&scenario, ends, guards, observer, stop, pace) {
         Ok(metrics) => Ok(single(metrics)),
         Err(NetworkError::Model { error, .. }) => Err(SessionError::Model(error)),
     }

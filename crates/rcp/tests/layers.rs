@@ -28,6 +28,7 @@ const LAYERS: [(&str, &[&str]); 4] = [
             "harness",
             "camera",
             "config",
+            "secure",
         ],
     ),
     ("driver", &["driver"]),

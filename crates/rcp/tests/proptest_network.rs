@@ -64,7 +64,7 @@ proptest! {
     ) {
         let s = scenario(seed, &near, &far, duplicate_percent, ber);
         let images = [builtin_picture(96, 64, seed)];
-        let m = network::run(&s, &images, &mut Quiet, &AtomicBool::new(false), None).unwrap();
+        let m = network::run(&s, &images, None, &mut Quiet, &AtomicBool::new(false), None).unwrap();
         for (address, v) in &m.vehicles {
             prop_assert_eq!(v.orders_executed_twice, 0, "vehicle {}: {:?}", address, v);
             prop_assert_eq!(v.orders_acknowledged_unexecuted, 0, "vehicle {}: {:?}", address, v);

@@ -48,7 +48,7 @@ mod port_air;
 mod round_trips;
 mod sim_air;
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::harness::{OperatorEnd, Out, RovEnd, Tally};
@@ -60,6 +60,7 @@ use crate::routing::{Dropped, Router};
 use crate::scenario::Scenario;
 use rovlink_link::SimTime;
 use rovlink_link::gll::GllError;
+use rovlink_security::{Guard, Refusal};
 use rovlink_wire::frame::Frame;
 
 pub use crate::report::SINGLE_MEDIUM;
@@ -136,6 +137,10 @@ pub struct Setup<'a> {
     /// The routers' duplicate window, s ([`crate::rules::duplicate_window_s`] of the cycle; 0 for
     /// none, where a node does not know the far end's cycle).
     pub duplicate_window_s: f64,
+    /// Each secured node's guard, by address ([`crate::secure`]): it seals what the node
+    /// originates and opens what the node's engines take; a frame it refuses reaches no
+    /// engine. Empty: the paper's plain frames.
+    pub guards: BTreeMap<u8, Guard>,
 }
 
 /// The nodes this process runs, their ends and counters.
@@ -148,6 +153,9 @@ struct Net<'a> {
     nodes: BTreeMap<u8, NodeMetrics>,
     cycle_s: f64,
     last_prune: SimTime,
+    guards: BTreeMap<u8, Guard>,
+    /// What has been said once (refusals per node and source, sealing failures).
+    told: BTreeSet<String>,
 }
 
 /// Runs `setup` over `air` until its duration has passed, `stop` is set, the observer has
@@ -198,6 +206,8 @@ pub fn run<A: Air>(
             .collect(),
         cycle_s,
         last_prune: SimTime::ZERO,
+        guards: setup.guards,
+        told: BTreeSet::new(),
     };
     let end = SimTime::from_secs_f64(setup.duration_s);
     let mut drain = false;
@@ -257,6 +267,26 @@ pub fn run<A: Air>(
         }
         m.interrupted = interrupted.clone();
         metrics.vehicles.insert(address.to_string(), m);
+    }
+    for (address, guard) in &mut net.guards {
+        if let Err(error) = guard.sync() {
+            observer.warning(duration_s, &format!("node {address}: {error}"));
+        }
+    }
+    for (&address, node) in &net.nodes {
+        for (src, reasons) in &node.refused {
+            let vehicle = if address == 0 {
+                src.clone()
+            } else {
+                address.to_string()
+            };
+            if let Some(m) = metrics.vehicles.get_mut(&vehicle) {
+                let into = m.frames_refused.entry(src.clone()).or_default();
+                for (reason, n) in reasons {
+                    *into.entry(reason).or_default() += n;
+                }
+            }
+        }
     }
     metrics.nodes = net
         .nodes
@@ -349,6 +379,15 @@ impl Net<'_> {
         order: Option<u64>,
         observer: &mut dyn Observer,
     ) -> Result<(), GllError> {
+        let bytes = match self.guards.get_mut(&address).map(|g| g.seal(&bytes)) {
+            None => bytes,
+            Some(Ok(sealed)) => sealed,
+            Some(Err(error)) => {
+                let text = format!("node {address}: a frame not sent: {error}");
+                self.tell(observer, t, text.clone(), text);
+                return Ok(());
+            }
+        };
         let Some(router) = self.routers.get_mut(&address) else {
             return Ok(());
         };
@@ -364,6 +403,13 @@ impl Net<'_> {
         self.origins
             .insert((vehicle, frame_key(&bytes)), Origin { t_sent: t, order });
         air.transmit(t, address, interface, bytes, true, observer)
+    }
+
+    /// Shows `text` once per `topic` (a warning on stderr and in the live log).
+    fn tell(&mut self, observer: &mut dyn Observer, t: SimTime, topic: String, text: String) {
+        if self.told.insert(topic) {
+            observer.warning(t.as_secs_f64(), &text);
+        }
     }
 
     /// Forgets origins older than four cycles (frames that never arrived).
@@ -399,11 +445,34 @@ impl Net<'_> {
         {
             decision = Some((t, router.decide(t, &heard.bytes, heard.interface)));
         }
+        let mut refused = None;
+        let mut opened = None;
+        let mut store_error = None;
+        if let Some((_, decision)) = &decision
+            && decision.deliver
+            && let Some(guard) = self.guards.get_mut(&heard.rx)
+        {
+            match guard.open(&heard.bytes) {
+                Ok((o, stored)) => {
+                    opened = Some(o.frame);
+                    store_error = stored;
+                }
+                Err(reason) => refused = Some(reason),
+            }
+        }
         let mut action = "";
         if let Some((_, decision)) = &decision {
             let node = self.nodes.entry(heard.rx).or_default();
             node.frames_heard += 1;
-            node.frames_delivered += u64::from(decision.deliver);
+            node.frames_delivered += u64::from(decision.deliver && refused.is_none());
+            if let (Some(reason), Some((src, _))) = (refused, decision.addresses) {
+                *node
+                    .refused
+                    .entry(src.to_string())
+                    .or_default()
+                    .entry(reason.as_str())
+                    .or_default() += 1;
+            }
             node.frames_forwarded += decision.forward_on.len() as u64;
             match decision.dropped {
                 Some(Dropped::Duplicate) => node.duplicates_dropped += 1,
@@ -423,6 +492,9 @@ impl Net<'_> {
                     .count() as u64;
             }
             action = match (decision.deliver, decision.forward_on.is_empty()) {
+                _ if let Some(reason) = refused => {
+                    crate::secure::refused_action(reason, !decision.forward_on.is_empty())
+                }
                 (true, true) => "delivered",
                 (true, false) => "delivered+forwarded",
                 (false, false) => "forwarded",
@@ -448,16 +520,47 @@ impl Net<'_> {
         let Some((t, decision)) = decision else {
             return Ok(());
         };
+        if let Some(error) = store_error {
+            let text = format!("node {}: {error}", heard.rx);
+            self.tell(observer, t, format!("store {}", heard.rx), text);
+        }
+        if let (Some(reason), Some((src, _))) = (refused, decision.addresses) {
+            self.told_refusal(observer, t, heard.rx, src, reason);
+        }
         for &k in &decision.forward_on {
             air.transmit(t, heard.rx, k, heard.bytes.clone(), false, observer)?;
         }
-        match (decision.deliver, decision.addresses) {
-            (true, Some((src, _))) => self.deliver(air, heard.rx, src, t, heard.bytes, observer),
+        match (decision.deliver && refused.is_none(), decision.addresses) {
+            (true, Some((src, _))) => {
+                let key = frame_key(&heard.bytes);
+                let bytes = opened.unwrap_or(heard.bytes);
+                self.deliver(air, heard.rx, src, t, bytes, key, observer)
+            }
             _ => Ok(()),
         }
     }
 
-    /// Node `rx`'s engine takes a frame from `src` at `t`.
+    /// Says once per receiving node and claimed source that its frames are refused.
+    fn told_refusal(
+        &mut self,
+        observer: &mut dyn Observer,
+        t: SimTime,
+        rx: u8,
+        src: u8,
+        reason: Refusal,
+    ) {
+        let text = format!(
+            "node {rx}: refused a frame claiming to come from {src} ({}): it moves nothing and \
+             is no heartbeat; refusals are counted per source and reason in --metrics (said \
+             once per source)",
+            reason.as_str()
+        );
+        self.tell(observer, t, format!("refused {rx} {src}"), text);
+    }
+
+    /// Node `rx`'s engine takes a frame from `src` at `t` (`key`: the frame's identity as it
+    /// was on the air, [`frame_key`]; `bytes`: the plain frame).
+    #[allow(clippy::too_many_arguments)]
     fn deliver<A: Air>(
         &mut self,
         air: &mut A,
@@ -465,10 +568,11 @@ impl Net<'_> {
         src: u8,
         t: SimTime,
         bytes: Vec<u8>,
+        key: u64,
         observer: &mut dyn Observer,
     ) -> Result<(), GllError> {
         let vehicle_address = if rx == 0 { src } else { rx };
-        let origin = self.origins.remove(&(vehicle_address, frame_key(&bytes)));
+        let origin = self.origins.remove(&(vehicle_address, key));
         let Some(vehicle) = self.vehicles.get_mut(&vehicle_address) else {
             return Ok(());
         };

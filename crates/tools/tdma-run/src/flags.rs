@@ -35,6 +35,9 @@ In the field (docs/tdma-mavlink.md, docs/tdma-console.md, docs/tdma-foxglove.md)
   mkfifo orders; tdma-run --role operator --port /dev/ttyUSB0 --orders orders --telemetry - &
   echo '{\"type\":\"goto\",\"x_cm\":300,\"y_cm\":0,\"z_cm\":50,\"heading_deg\":90}' > orders
   tdma-run --role operator --port /dev/ttyUSB0 --foxglove 127.0.0.1:8765 --images-out rx/ --preview
+With keys (docs/threat-model.md): rcp-pack --new-key keys (copy it to the vehicle), then
+  tdma-run --role rov --port $B --key-file keys --encrypt &
+  tdma-run --role operator --port $A --key-file keys --encrypt
 
 --script: CSV t_s,vx,vy,vz,vyaw (joystick, percent of full thrust, from t on).
 --waypoints: CSV t_s,x_m,y_m,z_m,heading_deg (a GoTo order queued at t; NED metres, within
@@ -297,6 +300,31 @@ pub struct Args {
     #[arg(long, value_name = "HOST:PORT", help_heading = "Field")]
     pub foxglove: Option<String>,
 
+    /// Authenticate every frame, both ways, with the keys in FILE (docs/threat-model.md):
+    /// frames with a bad tag, replayed or plain are refused (they move nothing and are no
+    /// heartbeat) and counted in --metrics. Lines `ADDRESS KEY` (32 or 64 hex digits; `*` is
+    /// every vehicle, `broadcast` address 15); the file must be yours and private (chmod 600).
+    /// Every end needs it; make one with `rcp-pack --new-key FILE`. Each frame is 6 bytes
+    /// longer, and the automatic IPG counts them.
+    #[arg(long, value_name = "FILE", help_heading = "Security")]
+    pub key_file: Option<PathBuf>,
+
+    /// With --key-file: also encrypt every message (AES-CTR, no extra bytes), so images and
+    /// positions cannot be read on the medium.
+    #[arg(long, requires = "key_file", help_heading = "Security")]
+    pub encrypt: bool,
+
+    /// With --key-file in real time: this node's frame counters (what it sent, the highest it
+    /// accepted: a frame at or below is a replay, in this session or a later one), default
+    /// FILE.nodeN.counters beside the key file. Keep it with the key; one per node.
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "key_file",
+        help_heading = "Security"
+    )]
+    pub key_state: Option<PathBuf>,
+
     /// True when `--address` is on the command line, not its default ([`Args::from_command_line`]
     /// reads it): with `--routes` the flag is the node's own address, and its default, 2, is
     /// the EvoLogics destination's, not a node's.
@@ -377,7 +405,17 @@ impl Args {
     pub fn ipg_s(&self, model: &Model, settings: &ImageSettings) -> f64 {
         match self.ipg {
             Ipg::Millis(ms) => ms / 1e3,
-            Ipg::Auto => auto_ipg_for(model, settings, self.start, self.buoy),
+            Ipg::Auto => auto_ipg_for(
+                model,
+                settings,
+                self.start,
+                self.buoy,
+                if self.key_file.is_some() {
+                    rovlink_rcp::secure::OVERHEAD_BYTES
+                } else {
+                    0
+                },
+            ),
         }
     }
 }

@@ -44,13 +44,14 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     let network = Network::new(scenario, &file, role, address, ports.len())
         .map_err(|e| UsageError(e.to_string()))?;
     let config = session_config(args, &network, role)?;
-    let parts = match crate::setup::parts(args, &config) {
+    let mut parts = match crate::setup::parts(args, &config) {
         Err(e) if e.is::<crate::setup::Stopped>() => {
             say!("{e}: nothing was run");
             return Ok(stop::code_or(EXIT_OK));
         }
         other => other?,
     };
+    parts.guards = crate::setup::guards(args, &network.scenario, Some(network.address))?;
     // Every packet to the dialect's broadcast address, if its packets carry one: the routers
     // decide who takes a frame.
     let mut options = args.port_args.options();

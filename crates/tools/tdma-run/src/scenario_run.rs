@@ -48,6 +48,11 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     }
     let mut metrics_out = metrics_dest.map(|dest| dest.open()).transpose()?;
     let template = "{spinner} {pos}/{len} s [{bar:30}] {msg}";
+    let security = crate::setup::security(args)?;
+    if security.is_some() {
+        scenario.frame_overhead_bytes = rovlink_rcp::secure::OVERHEAD_BYTES;
+        say!("frames authenticated (AES-CMAC, 6 bytes a frame); others are refused");
+    }
     let bar = progress::bar(true, scenario.duration_s.ceil() as u64, template);
     let mut recorder = Recorder::new(
         dests,
@@ -92,6 +97,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
         network::run(
             &scenario,
             &pictures.images,
+            security.as_ref(),
             &mut observers,
             stop::flag(),
             args.pace,

@@ -72,7 +72,7 @@ pub(super) fn field_usage(args: &Args, role: Option<Role>) -> Result<()> {
     ];
     for (applies, flag, given, end) in checks {
         if given && !applies {
-            return Err(UsageError(format!("{flag} only applies to {end}")).into());
+            return Err(rovlink_base::UsageError(format!("{flag} only applies to {end}")).into());
         }
     }
     Ok(())
@@ -104,6 +104,58 @@ pub(super) fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
         parts.orders.push(Box::new(open_orders(path, live)?));
     }
     Ok(parts)
+}
+
+/// The guards of the nodes this run holds ([`rovlink_rcp::secure`]): none without
+/// `--key-file`; in a simulation one per node of `scenario`; in real time the one node at
+/// `node`, its counters in `--key-state` or beside the key file. Without keys, a real-time end
+/// warns once that the link is open.
+pub(super) fn guards(
+    args: &Args,
+    scenario: &rovlink_rcp::scenario::Scenario,
+    node: Option<u8>,
+) -> Result<std::collections::BTreeMap<u8, rovlink_security::Guard>> {
+    let Some(security) = security(args)? else {
+        if node.is_some() {
+            say!("warning: {}", rovlink_rcp::secure::OPEN_LINK_WARNING);
+        }
+        return Ok(Default::default());
+    };
+    let guards = match node {
+        None => security.simulation_guards(scenario),
+        Some(address) => {
+            let guard = security
+                .node_guard(address, args.key_state.as_deref())
+                .map_err(|e| rovlink_base::UsageError(format!("--key-state: {e}")))?;
+            std::collections::BTreeMap::from([(address, guard)])
+        }
+    };
+    let encrypted = if security.encrypt { ", encrypted" } else { "" };
+    say!("frames authenticated (AES-CMAC, 6 bytes a frame{encrypted}); others are refused");
+    Ok(guards)
+}
+
+/// `--key-file` and `--encrypt`, read and checked (the trunk must leave room for the tag).
+pub(super) fn security(args: &Args) -> Result<Option<rovlink_rcp::secure::Security>> {
+    let Some(path) = &args.key_file else {
+        return Ok(None);
+    };
+    let ring = rovlink_security::KeyRing::load(path)
+        .map_err(|e| rovlink_base::UsageError(format!("--key-file: {e}")))?;
+    let max = rovlink_wire::rov::MAX_EXTENDED_TRUNK_BYTES - rovlink_rcp::secure::OVERHEAD_BYTES;
+    if args.trunk > max as u64 {
+        return Err(rovlink_base::UsageError(format!(
+            "--trunk {}: with --key-file a trunk is at most {max} bytes (the frame carries a \
+             6-byte tag and counter)",
+            args.trunk
+        ))
+        .into());
+    }
+    Ok(Some(rovlink_rcp::secure::Security {
+        ring,
+        encrypt: args.encrypt,
+        key_file: path.clone(),
+    }))
 }
 
 /// A signal came while the run was still starting.

@@ -61,6 +61,11 @@ pub fn run(args: &Args) -> Result<u8> {
         }
         other => other?,
     };
+    let node = role.map(|r| match r {
+        Role::Operator => 0,
+        Role::Rov => session::rov_address(),
+    });
+    parts.guards = crate::setup::guards(args, &session::scenario(&config), node)?;
     let mut live = match &args.foxglove {
         Some(addr) => {
             let end = role.unwrap_or(Role::Operator);
