@@ -32,6 +32,7 @@ mod tdma_mavlink;
 mod tdma_network;
 mod tdma_network_pty;
 mod tdma_pace;
+mod tdma_secure;
 mod tdma_sitl;
 
 /// The tools these tests run are packages of their own, built by `cargo build --workspace`

@@ -1,0 +1,472 @@
+//! Issue 45's attacks on the medium, each tried against two real-time ends with `--key-file`
+//! over `link-sim --pty 3` (one shared medium: the operator, the ROV, and a third node that
+//! hears every frame and may transmit any), with the legitimate path shown to work in the
+//! same run: injected and forged frames, spoofed statuses, a recorded frame replayed in the
+//! same session and in a later one, neutral frames sent after the operator stopped. And the
+//! simulation with keys: the same session, each frame 6 bytes longer.
+//!
+//! Every wait is for a sign (a line the process says, a frame heard), never a delay.
+
+use std::io::{BufRead, Read, Write};
+use std::os::unix::fs::PermissionsExt;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
+use std::time::{Duration, Instant};
+
+use crate::common::Reaped;
+
+const TDMA_RUN: &str = env!("TOOL_EXE_tdma-run");
+const KEY: &str = "2b7e151628aed2a6abf7158809cf4f3c";
+const LIMIT: Duration = Duration::from_secs(30);
+
+/// A private key file holding `KEY` for every vehicle.
+fn key_file(dir: &Path) -> PathBuf {
+    let path = dir.join("keys");
+    std::fs::write(&path, format!("* {KEY}\n")).unwrap();
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
+    path
+}
+
+/// `link-sim --pty 3`: the test link (9600 bit/s, full duplex) with three nodes in range of
+/// each other; its ports: operator, ROV, intruder.
+fn medium() -> (Reaped, Vec<String>) {
+    let mut child = Command::new(env!("TOOL_EXE_link-sim"))
+        .args(crate::common::TEST_S100)
+        .args(["--pty", "3"])
+        .args([
+            "--position",
+            "0,0,0",
+            "--position",
+            "1,0,0",
+            "--position",
+            "2,0,0",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("link-sim starts");
+    let mut stdout = std::io::BufReader::new(child.stdout.take().expect("stdout"));
+    let ports = (0..3)
+        .map(|_| {
+            let mut line = String::new();
+            stdout.read_line(&mut line).expect("a port's path");
+            line.trim().to_string()
+        })
+        .collect();
+    (Reaped(child), ports)
+}
+
+/// One `tdma-run` end: the lines it writes (stdout and stderr) as they come.
+struct End {
+    child: Reaped,
+    lines: Receiver<String>,
+    said: String,
+    metrics: PathBuf,
+}
+
+fn start(role: &str, port: &str, dir: &Path, name: &str, args: &[&str]) -> End {
+    let metrics = dir.join(format!("{name}.json"));
+    let mut child = Command::new(TDMA_RUN)
+        .args(["--role", role, "--port", port, "--metrics"])
+        .arg(&metrics)
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("tdma-run starts");
+    let (tx, lines) = std::sync::mpsc::channel();
+    let stdout = std::io::BufReader::new(child.stdout.take().unwrap());
+    let stderr = std::io::BufReader::new(child.stderr.take().unwrap());
+    for reader in [
+        Box::new(stdout) as Box<dyn BufRead + Send>,
+        Box::new(stderr),
+    ] {
+        let tx = tx.clone();
+        std::thread::spawn(move || {
+            for line in reader.lines().map_while(Result::ok) {
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+    }
+    End {
+        child: Reaped(child),
+        lines,
+        said: String::new(),
+        metrics,
+    }
+}
+
+impl End {
+    /// True once the end has said a line holding `text` (reading what it said so far, waiting
+    /// at most `wait`).
+    fn has_said(&mut self, text: &str, wait: Duration) -> bool {
+        if self.said.contains(text) {
+            return true;
+        }
+        let until = Instant::now() + wait;
+        loop {
+            let left = until.saturating_duration_since(Instant::now());
+            match self.lines.recv_timeout(left) {
+                Ok(line) => {
+                    self.said.push_str(&line);
+                    self.said.push('\n');
+                    if line.contains(text) {
+                        return true;
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => return false,
+                Err(RecvTimeoutError::Disconnected) => return false,
+            }
+        }
+    }
+
+    /// Waits for `text`, failing the test after [`LIMIT`].
+    fn wait_for(&mut self, text: &str) {
+        assert!(
+            self.has_said(text, LIMIT),
+            "nothing said {text:?}: {}",
+            self.said
+        );
+    }
+
+    /// Waits for the end to exit on its own; its metrics and everything it said.
+    fn finish(mut self) -> (serde_json::Value, String) {
+        let status = crate::common::wait_for_exit(&mut self.child.0, LIMIT);
+        while let Ok(line) = self.lines.recv_timeout(Duration::from_secs(5)) {
+            self.said.push_str(&line);
+            self.said.push('\n');
+        }
+        assert!(status.success(), "{status:?}: {}", self.said);
+        let text = std::fs::read_to_string(&self.metrics).expect("metrics written");
+        (
+            serde_json::from_str(&text).expect("metrics JSON"),
+            self.said,
+        )
+    }
+}
+
+/// The third node on the medium: every frame it hears, and a way to transmit.
+struct Intruder {
+    port: std::fs::File,
+    heard: Receiver<Vec<u8>>,
+}
+
+fn intruder(path: &str) -> Intruder {
+    use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
+    let port = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(path)
+        .expect("the intruder's port");
+    let mut raw = tcgetattr(&port).expect("tcgetattr");
+    cfmakeraw(&mut raw);
+    tcsetattr(&port, SetArg::TCSANOW, &raw).expect("raw mode");
+    let mut reader = port.try_clone().unwrap();
+    let (tx, heard) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut deframer = rovlink_wire::Deframer::new();
+        let mut buf = [0u8; 512];
+        while let Ok(n) = reader.read(&mut buf) {
+            if n == 0 {
+                break;
+            }
+            deframer.push(&buf[..n]);
+            while let Some(event) = deframer.next_event() {
+                if let rovlink_wire::DeframeEvent::Frame { frame, .. } = event
+                    && tx.send(frame.into_inner().to_vec()).is_err()
+                {
+                    return;
+                }
+            }
+        }
+    });
+    Intruder { port, heard }
+}
+
+impl Intruder {
+    fn send(&mut self, frame: &[u8]) {
+        self.port.write_all(frame).expect("the intruder transmits");
+    }
+
+    /// The next frame heard that `wanted` picks, failing after [`LIMIT`].
+    fn record(&self, wanted: impl Fn(&[u8]) -> bool) -> Vec<u8> {
+        let until = Instant::now() + LIMIT;
+        loop {
+            let left = until.saturating_duration_since(Instant::now());
+            let frame = self.heard.recv_timeout(left).expect("a frame heard");
+            if wanted(&frame) {
+                return frame;
+            }
+        }
+    }
+}
+
+/// A plain frame of wire.md from its JSON line.
+fn pack(line: &str) -> Vec<u8> {
+    let repr = rovlink_wire::json::parse_line(line).expect("a message");
+    rovlink_wire::pack::frame(&repr, false).expect("a frame")
+}
+
+/// The same frame sealed under another key (a forger without ours).
+fn forged(plain: &[u8], counter: u64) -> Vec<u8> {
+    let key = rovlink_security::Key::from_bytes(&[0x5a; 16]).unwrap();
+    let suite = rovlink_security::suite::Suite::new(&key);
+    rovlink_security::sealed::seal(&suite, plain, counter, false).unwrap()
+}
+
+const GOTO_TO_1: [&str; 2] = [
+    r#"{"type":"operator","src":0,"dst":1,"oid":0,"clo":false,"eisn":0,"ic":false,"rit":0,"order":{"type":"goto","x_cm":790,"y_cm":-490,"z_cm":300,"heading_deg":90}}"#,
+    r#"{"type":"operator","src":0,"dst":1,"oid":1,"clo":false,"eisn":0,"ic":false,"rit":0,"order":{"type":"goto","x_cm":790,"y_cm":-490,"z_cm":300,"heading_deg":90}}"#,
+];
+
+const FAKE_STATUS: &str = r#"{"type":"rov","src":1,"dst":0,"ft":false,"lt":false,"st":0,"isn":0,"ci":false,"itsn":0,"rd":true,"eoid":0,"loc":false,"hh":false,"arm":true,"nav":"guided","x_cm":7777,"y_cm":7777,"z_cm":0,"roll_deg":0,"pitch_deg":0,"yaw_deg":0,"trunk":""}"#;
+
+/// Sends `frames` in turn until `end` says `sign` (each refusal is said once per source).
+fn inject_until(intruder: &mut Intruder, frames: &[Vec<u8>], end: &mut End, sign: &str) {
+    let until = Instant::now() + LIMIT;
+    for frame in frames.iter().cycle() {
+        intruder.send(frame);
+        if end.has_said(sign, Duration::from_millis(100)) {
+            return;
+        }
+        assert!(Instant::now() < until, "{sign:?} never said: {}", end.said);
+    }
+}
+
+fn refused(m: &serde_json::Value, src: &str, reason: &str) -> u64 {
+    m["frames_refused"][src][reason].as_u64().unwrap_or(0)
+}
+
+#[test]
+fn injected_forged_and_spoofed_frames_move_nothing_and_fool_no_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let keys = key_file(dir.path());
+    let keys = keys.to_str().unwrap();
+    let waypoints = dir.path().join("wp.csv");
+    std::fs::write(&waypoints, "t_s,x_m,y_m,z_m,heading_deg\n1,2,0,1,90\n").unwrap();
+    let telemetry = dir.path().join("op.jsonl");
+    let (_link, ports) = medium();
+    let mut rov = start(
+        "rov",
+        &ports[1],
+        dir.path(),
+        "rov",
+        &["--key-file", keys, "--duration", "14"],
+    );
+    rov.wait_for("ROV: answering");
+    let mut op = start(
+        "operator",
+        &ports[0],
+        dir.path(),
+        "op",
+        &[
+            "--key-file",
+            keys,
+            "--duration",
+            "12",
+            "--waypoints",
+            waypoints.to_str().unwrap(),
+            "--telemetry",
+            telemetry.to_str().unwrap(),
+        ],
+    );
+    op.wait_for("operator: IPG");
+    let mut intruder = intruder(&ports[2]);
+    let gotos: Vec<Vec<u8>> = GOTO_TO_1.iter().map(|l| pack(l)).collect();
+    let mut attack = gotos.clone();
+    attack.extend(gotos.iter().map(|g| forged(g, 1)));
+    inject_until(&mut intruder, &attack, &mut rov, "claiming to come from 0");
+    let fake = pack(FAKE_STATUS);
+    inject_until(
+        &mut intruder,
+        &[fake.clone(), forged(&fake, 1)],
+        &mut op,
+        "claiming to come from 1",
+    );
+    let (o, o_said) = op.finish();
+    let (r, _) = rov.finish();
+    let rov_refused = refused(&r, "0", "unsecured") + refused(&r, "0", "bad_tag");
+    assert!(rov_refused >= 1, "{r:#}");
+    let op_refused = refused(&o, "1", "unsecured") + refused(&o, "1", "bad_tag");
+    assert!(op_refused >= 1, "{o:#}");
+    // The operator's GoTo ran, once; none of the intruder's did.
+    assert_eq!(r["orders_executed"], 1, "{r:#}");
+    assert_eq!(o["orders_acknowledged"], 1, "{o:#}");
+    // The operator showed none of the fake positions.
+    let shown = std::fs::read_to_string(&telemetry).unwrap();
+    assert!(shown.contains(r#""type":"rov""#), "{shown}");
+    assert!(!shown.contains(r#""x_cm":7777"#), "{shown}");
+    assert!(o_said.contains("frames authenticated"), "{o_said}");
+    assert!(
+        r["operator_to_rov"]["frames_delivered"].as_u64().unwrap() >= 5,
+        "the operator's own frames still arrive: {r:#}"
+    );
+}
+
+/// An operator frame to vehicle 1 carrying order type `ot`, sealed but not encrypted (the
+/// intruder can see the type: the test keys do not encrypt).
+fn is_order(frame: &[u8], ot: u8) -> bool {
+    frame.len() > 6 && frame[1] == 0x01 && frame[3] & 0x20 != 0 && (frame[5] >> 2) & 0x0f == ot
+}
+
+#[test]
+fn a_recorded_frame_replayed_is_refused_in_the_same_session_and_the_next() {
+    let dir = tempfile::tempdir().unwrap();
+    let keys = key_file(dir.path());
+    let keys = keys.to_str().unwrap();
+    let waypoints = dir.path().join("wp.csv");
+    std::fs::write(&waypoints, "t_s,x_m,y_m,z_m,heading_deg\n1,2,0,1,90\n").unwrap();
+    let wp = waypoints.to_str().unwrap();
+    let (_link, ports) = medium();
+    let mut intruder = intruder(&ports[2]);
+    let mut rov = start(
+        "rov",
+        &ports[1],
+        dir.path(),
+        "rov1",
+        &["--key-file", keys, "--duration", "12"],
+    );
+    rov.wait_for("ROV: answering");
+    let mut op = start(
+        "operator",
+        &ports[0],
+        dir.path(),
+        "op1",
+        &["--key-file", keys, "--duration", "8", "--waypoints", wp],
+    );
+    op.wait_for("operator: IPG");
+    let goto = intruder.record(|f| is_order(f, 1));
+    inject_until(
+        &mut intruder,
+        &[goto.clone()],
+        &mut rov,
+        "claiming to come from 0 (replay)",
+    );
+    let (o, _) = op.finish();
+    let (r, _) = rov.finish();
+    assert_eq!(r["orders_executed"], 1, "{r:#}");
+    assert_eq!(o["orders_acknowledged"], 1, "{o:#}");
+    assert!(refused(&r, "0", "replay") >= 1, "{r:#}");
+
+    // A later session with the same keys and counter files: the old GoTo is still a replay,
+    // and the operator's new frames (counters above everything it sent before) are taken.
+    let mut rov = start(
+        "rov",
+        &ports[1],
+        dir.path(),
+        "rov2",
+        &["--key-file", keys, "--duration", "8"],
+    );
+    rov.wait_for("ROV: answering");
+    inject_until(
+        &mut intruder,
+        &[goto],
+        &mut rov,
+        "claiming to come from 0 (replay)",
+    );
+    let op = start(
+        "operator",
+        &ports[0],
+        dir.path(),
+        "op2",
+        &["--key-file", keys, "--duration", "4"],
+    );
+    let (o, _) = op.finish();
+    let (r, _) = rov.finish();
+    assert_eq!(r["orders_executed"], 0, "{r:#}");
+    assert!(refused(&r, "0", "replay") >= 1, "{r:#}");
+    assert!(
+        r["operator_to_rov"]["frames_delivered"].as_u64().unwrap() >= 3,
+        "the operator's new frames are taken: {r:#}"
+    );
+    assert!(
+        o["rov_to_operator"]["frames_delivered"].as_u64().unwrap() >= 3,
+        "{o:#}"
+    );
+}
+
+#[test]
+fn frames_sent_after_the_operator_stopped_do_not_hold_the_link_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let keys = key_file(dir.path());
+    let keys = keys.to_str().unwrap();
+    let (_link, ports) = medium();
+    let mut intruder = intruder(&ports[2]);
+    let mut rov = start(
+        "rov",
+        &ports[1],
+        dir.path(),
+        "rov",
+        &["--key-file", keys, "--duration", "25", "--telemetry", "-"],
+    );
+    rov.wait_for("ROV: answering");
+    let op = start(
+        "operator",
+        &ports[0],
+        dir.path(),
+        "op",
+        &["--key-file", keys, "--duration", "3"],
+    );
+    let neutral = intruder.record(|f| is_order(f, 0));
+    let (o, _) = op.finish();
+    assert!(
+        o["operator_to_rov"]["frames_sent"].as_u64().unwrap() >= 3,
+        "{o:#}"
+    );
+    // The operator is gone: a recorded heartbeat and plain neutral sticks, sent again and
+    // again, must not keep the vehicle from counting the link as lost.
+    let plain = pack(
+        r#"{"type":"operator","src":0,"dst":1,"oid":0,"clo":false,"eisn":0,"ic":false,"rit":0,"order":{"type":"velocity","vx":0,"vy":0,"vz":0,"vyaw":0,"arm":false,"disarm":false,"nav":"manual"}}"#,
+    );
+    inject_until(
+        &mut intruder,
+        &[neutral, plain],
+        &mut rov,
+        r#""state":"lost""#,
+    );
+    let (r, _) = rov.finish();
+    assert!(r["link_losses"].as_u64().unwrap() >= 1, "{r:#}");
+    let refusals = refused(&r, "0", "replay") + refused(&r, "0", "unsecured");
+    assert!(refusals >= 1, "{r:#}");
+}
+
+#[test]
+fn a_secured_simulation_runs_the_same_session_with_longer_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let keys = key_file(dir.path());
+    let run = |extra: &[&str]| {
+        let metrics = dir.path().join("m.json");
+        let events = dir.path().join("e.csv");
+        let mut args = vec!["--sim", "--duration", "120", "--metrics"];
+        args.push(metrics.to_str().unwrap());
+        args.extend(["--events", events.to_str().unwrap()]);
+        args.extend(extra);
+        let out = crate::common::run(TDMA_RUN, &args, b"");
+        assert_eq!(out.code, 0, "{}", out.stderr);
+        let m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&metrics).unwrap()).unwrap();
+        (m, std::fs::read_to_string(&events).unwrap(), out.stderr)
+    };
+    let (plain, plain_events, _) = run(&[]);
+    for extra in [
+        &["--key-file", keys.to_str().unwrap()][..],
+        &["--key-file", keys.to_str().unwrap(), "--encrypt"],
+    ] {
+        let (m, events, said) = run(extra);
+        assert!(said.contains("frames authenticated"), "{said}");
+        assert_eq!(m["orders_executed"], plain["orders_executed"], "{m:#}");
+        assert!(m.get("frames_refused").is_none(), "{m:#}");
+        assert!(m["images_completed"].as_u64().unwrap() >= 2, "{m:#}");
+        // Every operator frame is 16 + 6 bytes; the plain session's are 16.
+        assert!(events.contains(",22,"), "{events}");
+        assert!(!events.contains("operator_to_rov,velocity,16,"));
+        assert!(plain_events.contains("operator_to_rov,velocity,16,"));
+        // The IPG counts the 12 bytes of a slot: fewer slots in the same time.
+        let sent = |m: &serde_json::Value| m["operator_to_rov"]["frames_sent"].as_u64().unwrap();
+        assert!(sent(&m) < sent(&plain), "{m:#} {plain:#}");
+    }
+}
