@@ -342,7 +342,7 @@ fn a_recorded_frame_replayed_is_refused_in_the_same_session_and_the_next() {
     let goto = intruder.record(|f| is_order(f, 1));
     inject_until(
         &mut intruder,
-        &[goto.clone()],
+        std::slice::from_ref(&goto),
         &mut rov,
         "claiming to come from 0 (replay)",
     );
