@@ -355,11 +355,22 @@ pub(crate) fn image_period_s(image_times_s: &[f64]) -> Option<f64> {
     (n > 1).then(|| (image_times_s[n - 1] - image_times_s[0]) / (n - 1) as f64)
 }
 
-/// What a frame is, for the events table.
+/// What a frame is, for the events table: a secured frame's message when it is not
+/// encrypted, `encrypted` when it is.
 pub(crate) fn kind_of(bytes: &[u8]) -> &'static str {
-    let parsed = Frame::new_checked(bytes)
-        .ok()
-        .and_then(|f| MessageRepr::parse(&f).ok());
+    use rovlink_security::sealed::{Sealed, is_sealed};
+    let Ok(frame) = Frame::new_checked(bytes) else {
+        return "raw";
+    };
+    if is_sealed(frame.payload()) {
+        return match Sealed::new_checked(frame.payload()) {
+            Ok(p) if p.encrypted() => "encrypted",
+            Ok(p) => rovlink_wire::frame::build(frame.src(), frame.dst(), p.message())
+                .map_or("raw", |plain| kind_of(&plain)),
+            Err(_) => "raw",
+        };
+    }
+    let parsed = MessageRepr::parse(&frame).ok();
     match parsed.map(|r| r.message) {
         Some(Message::Operator(op)) => op.order.name(),
         Some(Message::Rov(rov)) if !rov.trunk.is_empty() => "image_trunk",
