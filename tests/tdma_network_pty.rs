@@ -55,14 +55,30 @@ fn shared_medium() -> (Child, Vec<String>) {
 
 /// Runs the three nodes of `text` over one shared medium: the operator for `duration_s`;
 /// each node's metrics and events.
-fn three_nodes(text: &str, duration_s: f64) -> Vec<(serde_json::Value, String)> {
+fn three_nodes(text: &str, duration_s: f64, extra: &[&str]) -> Vec<(serde_json::Value, String)> {
     let dir = tempfile::tempdir().unwrap();
     let routes = dir.path().join("three.json");
     std::fs::write(&routes, text).unwrap();
     let (mut link, ports) = shared_medium();
     let vehicles_s = duration_s + 2.0;
-    let far = node(dir.path(), &routes, "rov", 2, &[&ports[2]], vehicles_s, &[]);
-    let relay = node(dir.path(), &routes, "rov", 1, &[&ports[1]], vehicles_s, &[]);
+    let far = node(
+        dir.path(),
+        &routes,
+        "rov",
+        2,
+        &[&ports[2]],
+        vehicles_s,
+        extra,
+    );
+    let relay = node(
+        dir.path(),
+        &routes,
+        "rov",
+        1,
+        &[&ports[1]],
+        vehicles_s,
+        extra,
+    );
     far.wait_started();
     relay.wait_started();
     let operator = node(
@@ -72,7 +88,7 @@ fn three_nodes(text: &str, duration_s: f64) -> Vec<(serde_json::Value, String)> 
         0,
         &[&ports[0]],
         duration_s,
-        &[],
+        extra,
     );
     let limit = Duration::from_secs_f64(duration_s + 10.0);
     let runs = vec![
@@ -87,7 +103,7 @@ fn three_nodes(text: &str, duration_s: f64) -> Vec<(serde_json::Value, String)> 
 #[test]
 fn three_nodes_on_one_medium_reach_the_far_vehicle_only_through_the_relay() {
     let direct = THREE.replace(r#""routes":{"0":{"2":1},"2":{"0":1}}"#, r#""routes":{}"#);
-    let m = three_nodes(&direct, 4.0);
+    let m = three_nodes(&direct, 4.0, &[]);
     let (o, r, f) = (&m[0].0, &m[1].0, &m[2].0);
     assert_eq!(
         count(&f["vehicles"]["2"]["operator_to_rov"]["frames_delivered"]),
@@ -106,7 +122,7 @@ fn three_nodes_on_one_medium_reach_the_far_vehicle_only_through_the_relay() {
         "{o:#}"
     );
 
-    let m = three_nodes(THREE, 16.0);
+    let m = three_nodes(THREE, 16.0, &[]);
     let ((o, o_events), (r, _), (f, f_events)) = (&m[0], &m[1], &m[2]);
     for v in ["1", "2"] {
         let heard = count(&o["vehicles"][v]["rov_to_operator"]["frames_delivered"]);
@@ -244,6 +260,43 @@ fn count(v: &serde_json::Value) -> u64 {
 fn end(link: &mut Child) {
     let _ = link.kill();
     let _ = link.wait();
+}
+
+#[test]
+fn with_keys_the_relay_forwards_the_far_vehicles_secured_frames_unchanged() {
+    // Every node reads the same file of per-vehicle keys; the relay forwards the far
+    // vehicle's frames without opening them (a simulation gives it only its own key:
+    // rcp::network's tests).
+    let dir = tempfile::tempdir().unwrap();
+    let keys = dir.path().join("keys");
+    std::fs::write(
+        &keys,
+        "1 000102030405060708090a0b0c0d0e0f\n2 f0e0d0c0b0a090807060504030201000\n",
+    )
+    .unwrap();
+    std::fs::set_permissions(&keys, std::os::unix::fs::PermissionsExt::from_mode(0o600)).unwrap();
+    let m = three_nodes(THREE, 16.0, &["--key-file", keys.to_str().unwrap()]);
+    let ((o, _), (r, _), (f, f_events)) = (&m[0], &m[1], &m[2]);
+    assert_eq!(f["vehicles"]["2"]["orders_executed"], 1, "{f:#}");
+    assert_eq!(o["vehicles"]["2"]["orders_acknowledged"], 1, "{o:#}");
+    assert!(count(&r["nodes"]["1"]["frames_forwarded"]) >= 5, "{r:#}");
+    for n in [o, r, f] {
+        assert!(
+            n["nodes"]
+                .as_object()
+                .unwrap()
+                .values()
+                .all(|m| m.get("refused").is_none()),
+            "{n:#}"
+        );
+    }
+    // The far vehicle's frames are 6 bytes longer than the plain ones: 22-byte polls.
+    assert!(
+        f_events
+            .lines()
+            .any(|l| l.contains(",22,") && l.ends_with(",2,delivered")),
+        "{f_events}"
+    );
 }
 
 #[test]

@@ -470,3 +470,57 @@ fn a_secured_simulation_runs_the_same_session_with_longer_frames() {
         assert!(sent(&m) < sent(&plain), "{m:#} {plain:#}");
     }
 }
+
+#[test]
+fn hostile_key_files_are_refused_with_one_line_and_nothing_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let private = |name: &str, text: &str| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
+        path
+    };
+    let empty = private("empty", "");
+    let short = private("short", &format!("* {}\n", &KEY[..30]));
+    let comments = private("comments", "# no key\n");
+    let open = private("open", &format!("* {KEY}\n"));
+    std::fs::set_permissions(&open, std::fs::Permissions::from_mode(0o644)).unwrap();
+    let foreign = private("foreign", &format!("* {KEY}\n"));
+    let am_root = nix::unistd::geteuid().is_root();
+    if am_root {
+        nix::unistd::chown(&foreign, Some(nix::unistd::Uid::from_raw(65534)), None).unwrap();
+    }
+    let mut cases = vec![
+        (empty, "0 bytes"),
+        (short, "found 30 characters"),
+        (comments, "no key in the file"),
+        (open, "permissions 0644 are too open"),
+        (dir.path().to_path_buf(), "found a directory"),
+        (PathBuf::from("/dev/zero"), "found a device"),
+        (dir.path().join("missing"), "cannot read"),
+    ];
+    if am_root {
+        cases.push((foreign, "owned by uid 65534"));
+    } else {
+        eprintln!("not root: the file owned by another user is not tried");
+    }
+    let metrics = dir.path().join("m.json");
+    for (path, expected) in cases {
+        let out = crate::common::run(
+            TDMA_RUN,
+            &[
+                "--sim",
+                "--key-file",
+                path.to_str().unwrap(),
+                "--metrics",
+                metrics.to_str().unwrap(),
+            ],
+            b"",
+        );
+        assert_eq!(out.code, 2, "{path:?}: {}", out.stderr);
+        assert_eq!(out.stderr.lines().count(), 1, "{}", out.stderr);
+        assert!(out.stderr.contains(expected), "{path:?}: {}", out.stderr);
+        assert!(!out.stderr.contains(&KEY[..16]), "the key is never shown");
+        assert!(!metrics.exists(), "nothing written");
+    }
+}
