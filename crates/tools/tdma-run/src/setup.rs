@@ -126,7 +126,13 @@ pub(super) fn guards(
         Some(address) => {
             let guard = security
                 .node_guard(address, args.key_state.as_deref())
-                .map_err(|e| rovlink_base::UsageError(format!("--key-state: {e}")))?;
+                .map_err(|e| {
+                    let flag = match args.key_state {
+                        Some(_) => "--key-state",
+                        None => "--key-file (its counters)",
+                    };
+                    rovlink_base::UsageError(format!("{flag}: {e}"))
+                })?;
             std::collections::BTreeMap::from([(address, guard)])
         }
     };
