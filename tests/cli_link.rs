@@ -564,14 +564,7 @@ fn a_udp_side_drops_frames_from_anyone_but_its_peer() {
         .read_line(&mut path_a)
         .unwrap();
     let mut a = open_rw(path_a.trim_end());
-    let (tx, lines) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        for line in stderr.lines().map_while(Result::ok) {
-            if tx.send(line).is_err() {
-                return;
-            }
-        }
-    });
+    let lines = crate::common::lines_of(stderr);
 
     // Someone else on the host sends well-formed frames to B's port, twice.
     let foreign = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();

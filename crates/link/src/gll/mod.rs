@@ -275,3 +275,30 @@ impl Endpoint for Udp {
         self.socket.foreign_drops().count()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_udp_endpoint_receives_its_peers_packets_and_counts_the_others() {
+        let peer = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let spec = format!("udp:127.0.0.1:0={}", peer.local_addr().unwrap());
+        let opened = crate::device::open(&spec.parse().unwrap(), &Default::default()).unwrap();
+        let crate::device::Io::Udp(socket) = opened.io else {
+            panic!("{spec}: not UDP");
+        };
+        let at = socket.local_addr().unwrap();
+        let mut endpoint = Udp::new(socket);
+        let foreign = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        foreign.send_to(b"forged", at).unwrap();
+        peer.send_to(b"frame", at).unwrap();
+        let deadline = Instant::now() + Duration::from_secs(10);
+        let received = endpoint
+            .receive(deadline)
+            .unwrap()
+            .expect("the peer's packet");
+        assert_eq!(received.bytes, b"frame");
+        assert_eq!(endpoint.foreign_datagrams_dropped(), 1);
+    }
+}
