@@ -601,14 +601,16 @@ fn someone_elses_orders_fifo_is_refused_and_its_goto_never_read() {
         std::fs::set_permissions(&fifo, std::fs::Permissions::from_mode(mode)).unwrap();
         std::os::unix::fs::chown(&fifo, owner, owner).unwrap();
         for session in [&sim[..], &real_time[..]] {
-            let mut child = Command::new(TDMA_RUN)
-                .args(session)
-                .args(["--orders", fifo_path, "--metrics", metrics_path])
-                .stdin(Stdio::null())
-                .stdout(Stdio::null())
-                .stderr(Stdio::piped())
-                .spawn()
-                .unwrap();
+            let mut child = crate::common::Reaped(
+                Command::new(TDMA_RUN)
+                    .args(session)
+                    .args(["--orders", fifo_path, "--metrics", metrics_path])
+                    .stdin(Stdio::null())
+                    .stdout(Stdio::null())
+                    .stderr(Stdio::piped())
+                    .spawn()
+                    .unwrap(),
+            );
             let status = crate::common::wait_for_exit(&mut child, LIMIT);
             let stderr = std::io::read_to_string(child.stderr.take().unwrap()).unwrap();
             assert_eq!(status.code(), Some(2), "{session:?}: {stderr}");
