@@ -57,7 +57,7 @@ rov=$!
 pids+=($rov)
 sleep 0.5
 
-mkfifo "$work/orders"
+mkfifo -m 600 "$work/orders"
 "$BIN/tdma-run" --role operator --port "$side_a" --duration "$seconds" \
   --orders "$work/orders" --telemetry "$work/telemetry.jsonl" \
   --foxglove "127.0.0.1:$fox_port" --images-out "$work/images" \

@@ -531,6 +531,93 @@ fn sides_given_as_devices_mix_a_pty_and_udp() {
     );
 }
 
+/// `udp:BIND=PEER` takes only PEER's datagrams: valid frames from another socket on the same
+/// host are dropped (their source named once on stderr, counted in `--stats`), PEER's are
+/// still carried.
+#[test]
+fn a_udp_side_drops_frames_from_anyone_but_its_peer() {
+    let dir = tempfile::tempdir().unwrap();
+    let stats = dir.path().join("stats.json");
+    let client_b = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let side_b = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap();
+    let peer = client_b.local_addr().unwrap();
+    let b = format!("udp:{side_b}={peer}");
+    let stats_path = stats.to_str().unwrap();
+    let args = [
+        "--jitter-ms",
+        "0",
+        "--a",
+        "pty",
+        "--b",
+        &b,
+        "--stats",
+        stats_path,
+    ];
+    let (child, stderr, first) = start(&args);
+    let mut child = crate::common::Reaped(child);
+    assert!(first.contains("forwarding A"), "{first}");
+    let mut path_a = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut path_a)
+        .unwrap();
+    let mut a = open_rw(path_a.trim_end());
+    let lines = crate::common::lines_of(stderr);
+
+    // Someone else on the host sends well-formed frames to B's port, twice.
+    let foreign = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let forged = frame::build(2, 1, &[0x66; 12]).unwrap();
+    foreign.send_to(&forged, side_b).unwrap();
+    foreign.send_to(&forged, side_b).unwrap();
+    let said = format!(
+        "dropped datagrams from {}, not the peer {peer}",
+        foreign.local_addr().unwrap()
+    );
+    let mut seen = Vec::new();
+    while !seen
+        .last()
+        .is_some_and(|l: &String| l.contains("dropped datagrams"))
+    {
+        match lines.recv_timeout(READ_LIMIT) {
+            Ok(line) => seen.push(line),
+            Err(e) => panic!("no line naming the foreign source ({e}): {seen:#?}"),
+        }
+    }
+    let line = seen.last().unwrap();
+    assert!(
+        line.contains(&format!("udp:{side_b}={peer}: {said}")),
+        "{line}"
+    );
+
+    // The peer's frame, sent after both forged ones, is the first A hears.
+    let frame_b = frame::build(2, 1, &[0x99; 12]).unwrap();
+    client_b.send_to(&frame_b, side_b).unwrap();
+    assert_eq!(read_exactly(&mut a, frame_b.len(), READ_LIMIT), frame_b);
+
+    signal_once(&mut child, Signal::SIGINT, &|| true, EXIT_LIMIT);
+    let status = crate::common::wait_for_exit(&mut child, EXIT_LIMIT);
+    let rest: Vec<String> = lines.iter().collect();
+    assert_eq!(status.code(), Some(0), "{rest:#?}");
+    assert!(
+        !rest.iter().any(|l| l.contains(&said)),
+        "a source is named once: {rest:#?}"
+    );
+    assert!(
+        rest.iter()
+            .any(|l| l.contains("B->A: 1 frames offered, 1 delivered")),
+        "{rest:#?}"
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    let dropped = &json["real_time"]["foreign_datagrams_dropped"];
+    assert_eq!(
+        (dropped["a"].as_u64(), dropped["b"].as_u64()),
+        (Some(0), Some(2))
+    );
+}
+
 #[test]
 fn raw_mode_cuts_packets_at_silence() {
     let dir = tempfile::tempdir().unwrap();

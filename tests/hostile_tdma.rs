@@ -635,3 +635,50 @@ fn field_flags_on_the_wrong_end_or_malformed_are_one_line_and_exit_2() {
         assert_eq!(out.stderr.trim().lines().count(), 1, "{}", out.stderr);
     }
 }
+
+/// A real-time end on `udp:BIND=PEER` takes frames only from PEER: datagrams from another
+/// socket on the host are dropped, their source named once on stderr and counted in
+/// `--metrics` (`foreign_datagrams_dropped`); the peer's are tested through link-sim
+/// (`cli_link`), the endpoint's receiving loop in `rovlink-link`'s unit tests.
+#[test]
+fn a_real_time_end_on_udp_drops_datagrams_from_anyone_but_its_peer() {
+    let dir = tempfile::tempdir().unwrap();
+    let metrics = dir.path().join("m.json");
+    let peer = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let at = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap();
+    let port = format!("udp:{at}={}", peer.local_addr().unwrap());
+    let mut child = crate::common::Reaped(
+        std::process::Command::new(TDMA_RUN)
+            .args(["--role", "rov", "--port", &port, "--duration", "60"])
+            .args(["--metrics", metrics.to_str().unwrap()])
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let lines = crate::common::lines_of(child.stderr.take().unwrap());
+    let mut said = Vec::new();
+    let mut wait_for = |sign: &str| {
+        while !said.last().is_some_and(|l: &String| l.contains(sign)) {
+            match lines.recv_timeout(LIMIT) {
+                Ok(line) => said.push(line),
+                Err(e) => panic!("no {sign:?} ({e}): {said:#?}"),
+            }
+        }
+    };
+    wait_for("ROV: answering every slot");
+    let foreign = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let forged = rovlink_wire::frame::build(0, 1, &[0x66; 11]).unwrap();
+    foreign.send_to(&forged, at).unwrap();
+    wait_for(&format!(
+        "{port}: dropped datagrams from {}, not the peer",
+        foreign.local_addr().unwrap()
+    ));
+    signal_once(&mut child, Signal::SIGINT, &|| true, LIMIT);
+    let status = crate::common::wait_for_exit(&mut child, LIMIT);
+    assert_eq!(status.code(), Some(0), "{said:#?}");
+    let m: serde_json::Value = serde_json::from_slice(&std::fs::read(&metrics).unwrap()).unwrap();
+    assert_eq!(m["foreign_datagrams_dropped"], 1, "{m}");
+}

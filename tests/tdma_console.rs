@@ -434,7 +434,9 @@ fn real_time_orders_written_into_a_fifo_while_the_operator_runs_are_acknowledged
     let dir = tempfile::tempdir().unwrap();
     let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
     let fifo = dir.path().join("orders");
-    nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).unwrap();
+    // As the docs make it: mkfifo -m 600 (the user's own; nobody else may write orders).
+    let private = nix::sys::stat::Mode::S_IRUSR | nix::sys::stat::Mode::S_IWUSR;
+    nix::unistd::mkfifo(&fifo, private).unwrap();
     let shot = dir.path().join("shot.png");
     std::fs::write(&shot, png(48, 36)).unwrap();
     let (mut link, a, b) = crate::common::link_sim_pty(&crate::common::TEST_S100);
@@ -560,4 +562,68 @@ fn real_time_orders_written_into_a_fifo_while_the_operator_runs_are_acknowledged
     let rov_lines = read_telemetry(&dir.path().join("rov.jsonl"));
     assert_eq!(of(&rov_lines, "order", Some("executed")).len(), 2);
     assert!(rov_lines.iter().all(|l| l["end"] == "rov"));
+}
+
+/// Someone else's orders FIFO (issue 45): one that any user may write (0666), or one owned by
+/// another user, with a GoTo already written into it by that user. `tdma-run` refuses it with
+/// one line and exit 2, in simulation and as the real-time operator, before a byte is read: no
+/// session runs (no metrics), so no vehicle moves, and the GoTo is still in the FIFO.
+#[test]
+fn someone_elses_orders_fifo_is_refused_and_its_goto_never_read() {
+    use std::io::Read;
+    use std::os::unix::fs::{OpenOptionsExt, PermissionsExt};
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("orders");
+    nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).unwrap();
+    // The other user's GoTo, waiting in the FIFO (held open for reading and writing, so it
+    // stays there and the FIFO never ends).
+    let mut held = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .custom_flags(nix::fcntl::OFlag::O_NONBLOCK.bits())
+        .open(&fifo)
+        .unwrap();
+    let goto = format!("{GOTO}}}\n");
+    held.write_all(goto.as_bytes()).unwrap();
+    let (_master, port) = crate::common::open_pty();
+    let fifo_path = fifo.to_str().unwrap();
+    let metrics = dir.path().join("m.json");
+    let metrics_path = metrics.to_str().unwrap();
+    let sim = ["--duration", "20", "--ber", "0"];
+    let real_time = ["--role", "operator", "--port", &port, "--duration", "20"];
+    let mut cases = vec![(0o666, None, "permissions 0666 are too open")];
+    if nix::unistd::geteuid().is_root() {
+        cases.push((0o600, Some(65534), "owned by uid 65534, not by this user"));
+    } else {
+        eprintln!("skipped the FIFO owned by another user: making one needs root");
+    }
+    for (mode, owner, said) in cases {
+        std::fs::set_permissions(&fifo, std::fs::Permissions::from_mode(mode)).unwrap();
+        std::os::unix::fs::chown(&fifo, owner, owner).unwrap();
+        for session in [&sim[..], &real_time[..]] {
+            let mut child = crate::common::Reaped(
+                Command::new(TDMA_RUN)
+                    .args(session)
+                    .args(["--orders", fifo_path, "--metrics", metrics_path])
+                    .stdin(Stdio::null())
+                    .stdout(Stdio::null())
+                    .stderr(Stdio::piped())
+                    .spawn()
+                    .unwrap(),
+            );
+            let status = crate::common::wait_for_exit(&mut child, LIMIT);
+            let stderr = std::io::read_to_string(child.stderr.take().unwrap()).unwrap();
+            assert_eq!(status.code(), Some(2), "{session:?}: {stderr}");
+            assert_eq!(stderr.lines().count(), 1, "{session:?}: {stderr}");
+            assert!(
+                stderr.contains(fifo_path) && stderr.contains(said),
+                "{session:?}: {stderr}"
+            );
+            assert!(!metrics.exists(), "{session:?}: a session ran");
+        }
+    }
+    // Not a byte was read: the GoTo is still in the FIFO, whole.
+    let mut left = vec![0u8; 4096];
+    let n = held.read(&mut left).unwrap();
+    assert_eq!(&left[..n], goto.as_bytes());
 }

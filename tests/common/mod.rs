@@ -289,3 +289,20 @@ pub fn fifo_writer(
         std::thread::sleep(std::time::Duration::from_millis(5));
     }
 }
+
+/// The lines of `stream` (a child's stderr), read in a thread as they come.
+pub fn lines_of(stream: impl std::io::Read + Send + 'static) -> std::sync::mpsc::Receiver<String> {
+    use std::io::BufRead;
+    let (tx, lines) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stream)
+            .lines()
+            .map_while(Result::ok)
+        {
+            if tx.send(line).is_err() {
+                return;
+            }
+        }
+    });
+    lines
+}

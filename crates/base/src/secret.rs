@@ -105,6 +105,53 @@ pub fn check_command_source(path: &Path, meta: &Metadata) -> Result<(), SecretFi
     Ok(())
 }
 
+/// Opens a command source (an orders file or FIFO, a script) for reading and checks the open
+/// handle with [`check_command_source`] before a byte is read: the open never waits
+/// (`O_NONBLOCK`: a FIFO without a writer, a serial line without carrier), and what is checked
+/// is what is read, whatever the path names meanwhile (a symlink swapped after the check
+/// changes nothing). Returns the file, reading blocking again, and its metadata.
+///
+/// A FIFO is then reopened through `/proc/self/fd` (the same FIFO, not the path again):
+/// read-only, which waits for a writer as an open of its path would, or, with
+/// `fifo_keep_writer`, for reading and writing, which does not wait and never sees an end of
+/// file while writers come and go (Linux's fifo(7)).
+pub fn open_command_source(
+    path: &Path,
+    fifo_keep_writer: bool,
+) -> Result<(File, Metadata), SecretFileError> {
+    use nix::fcntl::{FcntlArg, OFlag, fcntl};
+    use std::os::fd::AsRawFd;
+    use std::os::unix::fs::FileTypeExt;
+    let read_err = |source| SecretFileError::Read {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(OFlag::O_NONBLOCK.bits())
+        .open(path)
+        .map_err(read_err)?;
+    let meta = file.metadata().map_err(read_err)?;
+    check_command_source(path, &meta)?;
+    if !meta.file_type().is_fifo() {
+        fcntl(&file, FcntlArg::F_SETFL(OFlag::empty()))
+            .map_err(|e| read_err(io::Error::from(e)))?;
+        return Ok((file, meta));
+    }
+    let same = PathBuf::from(format!("/proc/self/fd/{}", file.as_raw_fd()));
+    let reopened = std::fs::OpenOptions::new()
+        .read(true)
+        .write(fifo_keep_writer)
+        .open(&same)
+        .map_err(read_err)?;
+    let again = reopened.metadata().map_err(read_err)?;
+    if (again.dev(), again.ino()) != (meta.dev(), meta.ino()) {
+        let changed = io::Error::other("the FIFO changed while it was opened");
+        return Err(read_err(changed));
+    }
+    Ok((reopened, meta))
+}
+
 /// Checks a key file's metadata: a regular file, owned by this user, mode allowing nothing
 /// to group or others.
 fn check_secret(path: &Path, meta: &Metadata) -> Result<(), SecretFileError> {
@@ -256,6 +303,41 @@ mod tests {
         let err = create_secret_file(&path, b"other").unwrap_err().to_string();
         assert!(err.contains("exists"), "{err}");
         assert_eq!(std::fs::read(&path).unwrap(), b"k");
+    }
+
+    #[test]
+    fn a_command_source_is_checked_on_its_handle_and_a_fifo_opens_without_waiting() {
+        use nix::sys::stat::Mode;
+        let dir = tempfile::tempdir().unwrap();
+        let ok = with_mode(dir.path(), "orders", b"{}\n", 0o600);
+        let (mut file, meta) = open_command_source(&ok, false).unwrap();
+        assert!(meta.is_file());
+        let mut text = String::new();
+        file.read_to_string(&mut text).unwrap();
+        assert_eq!(text, "{}\n");
+        let open = with_mode(dir.path(), "open", b"{}\n", 0o666);
+        let err = open_command_source(&open, false).unwrap_err().to_string();
+        assert!(err.contains("0666 are too open"), "{err}");
+        // A FIFO of ours, kept open for writers: no writer is waited for.
+        let fifo = dir.path().join("fifo");
+        nix::unistd::mkfifo(&fifo, Mode::from_bits_truncate(0o600)).unwrap();
+        let (mut file, meta) = open_command_source(&fifo, true).unwrap();
+        assert!(std::os::unix::fs::FileTypeExt::is_fifo(&meta.file_type()));
+        std::fs::OpenOptions::new()
+            .write(true)
+            .open(&fifo)
+            .unwrap()
+            .write_all(b"line\n")
+            .unwrap();
+        let mut buf = [0u8; 5];
+        file.read_exact(&mut buf).unwrap();
+        assert_eq!(&buf, b"line\n");
+        // Someone else's FIFO mode: refused before the open could wait for a writer.
+        let shared = dir.path().join("shared");
+        nix::unistd::mkfifo(&shared, Mode::from_bits_truncate(0o600)).unwrap();
+        std::fs::set_permissions(&shared, std::fs::Permissions::from_mode(0o622)).unwrap();
+        let err = open_command_source(&shared, false).unwrap_err().to_string();
+        assert!(err.contains("0622 are too open"), "{err}");
     }
 
     #[test]

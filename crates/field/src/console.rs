@@ -26,6 +26,11 @@
 //! reader thread; the thread holds at most a few lines, and orders read but not yet due are at
 //! most [`MAX_PENDING`] (then the thread waits). Only a path that cannot be opened is an error
 //! ([`ConsoleError`]), at start.
+//!
+//! Whoever can write to the orders commands the vehicle: a path (a file or a FIFO) owned by
+//! another user, or writable by group or others, is refused before a byte of it is read
+//! ([`rovlink_base::secret::open_command_source`]: checked on the open handle, opened without
+//! waiting for a FIFO's writer). Standard input (`-`) is what the user gave the tool.
 
 use std::collections::VecDeque;
 use std::fs::File;
@@ -33,6 +38,7 @@ use std::io::{self, BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{Receiver, SyncSender, TryRecvError, sync_channel};
 
+use rovlink_base::secret::SecretFileError;
 use rovlink_link::SimTime;
 use rovlink_rcp::config::MAX_DURATION_S;
 use rovlink_rcp::orders::{Live, LiveError, OrderSource, Script, object_of};
@@ -65,6 +71,10 @@ pub enum ConsoleError {
         /// The reason.
         source: io::Error,
     },
+    /// The path is owned by another user or writable by group or others: whoever can write
+    /// to it could command the vehicle.
+    #[error("{0}")]
+    Refused(SecretFileError),
     /// The path is a directory.
     #[error(
         "{}: a directory: --orders reads a file, a FIFO or - (standard input)",
@@ -245,7 +255,8 @@ struct LiveLines {
 }
 
 /// Opens `--orders PATH` (`-` is standard input); `live` chooses how it is read (see the
-/// module doc). A path that does not exist, cannot be opened or is a directory is an error;
+/// module doc). A path that does not exist, cannot be opened, is a directory, is owned by
+/// another user or is writable by group or others is an error;
 /// in simulation so is input that cannot be read or is over [`MAX_ORDERS_BYTES`]. Bad lines
 /// are warnings, never errors.
 pub fn open_orders(path: &Path, live: bool) -> Result<JsonOrders, ConsoleError> {
@@ -254,29 +265,23 @@ pub fn open_orders(path: &Path, live: bool) -> Result<JsonOrders, ConsoleError> 
     let source = if stdin {
         Source::Stdin
     } else {
-        let open_error = |source| ConsoleError::Open {
-            path: path.to_path_buf(),
-            source,
-        };
-        let meta = std::fs::metadata(path).map_err(open_error)?;
+        // Checked on the open handle before a byte is read (see the module doc); a live
+        // FIFO is kept open for writing too, so writers may come and go (Linux's fifo(7))
+        // without a line written between one writer's close and a reopen being lost.
+        let (file, meta) =
+            rovlink_base::secret::open_command_source(path, live).map_err(|e| match e {
+                SecretFileError::Read { source, .. } => ConsoleError::Open {
+                    path: path.to_path_buf(),
+                    source,
+                },
+                refused => ConsoleError::Refused(refused),
+            })?;
         if meta.is_dir() {
             return Err(ConsoleError::Directory {
                 path: path.to_path_buf(),
             });
         }
-        if live && std::os::unix::fs::FileTypeExt::is_fifo(&meta.file_type()) {
-            // Read and write: the open does not wait for a writer, and with a writer of our
-            // own the FIFO never ends, so writers may come and go (Linux's fifo(7)) without
-            // a line written between one writer's close and a reopen being lost.
-            let file = std::fs::OpenOptions::new()
-                .read(true)
-                .write(true)
-                .open(path)
-                .map_err(open_error)?;
-            Source::File(file)
-        } else {
-            Source::File(File::open(path).map_err(open_error)?)
-        }
+        Source::File(file)
     };
     let mut warnings = Warnings::default();
     let mode = if live {
@@ -630,6 +635,44 @@ mod tests {
             );
             let error = open_orders(dir.path(), live).err().unwrap();
             assert!(matches!(error, ConsoleError::Directory { .. }), "{error}");
+        }
+    }
+
+    #[test]
+    fn orders_someone_else_could_write_are_refused_before_a_byte_is_read() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("shared.fifo");
+        nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).unwrap();
+        std::fs::set_permissions(&fifo, std::fs::Permissions::from_mode(0o666)).unwrap();
+        let file = dir.path().join("group.jsonl");
+        std::fs::write(&file, format!("{GOTO}}}\n")).unwrap();
+        std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o664)).unwrap();
+        // Refused, in simulation too, without waiting for the FIFO's writer.
+        for live in [false, true] {
+            for (path, mode) in [(&fifo, "0666"), (&file, "0664")] {
+                let error = open_orders(path, live).err().unwrap();
+                assert!(matches!(error, ConsoleError::Refused(_)), "{error}");
+                let text = error.to_string();
+                assert!(
+                    text.contains(&format!("permissions {mode} are too open")),
+                    "{text}"
+                );
+            }
+        }
+        if !nix::unistd::geteuid().is_root() {
+            eprintln!("skipped: a file owned by another user needs root to make");
+            return;
+        }
+        let theirs = dir.path().join("theirs.jsonl");
+        std::fs::write(&theirs, format!("{GOTO}}}\n")).unwrap();
+        std::os::unix::fs::chown(&theirs, Some(65534), Some(65534)).unwrap();
+        for live in [false, true] {
+            let text = open_orders(&theirs, live).err().unwrap().to_string();
+            assert!(
+                text.contains("owned by uid 65534, not by this user"),
+                "{text}"
+            );
         }
     }
 

@@ -7,15 +7,17 @@
 //! | `serial:PATH:BAUD` | a serial port at BAUD bit/s (the path may hold colons) |
 //! | `tcp:HOST:PORT` | a TCP connection to HOST:PORT (a modem's TCP console) |
 //! | `tcpin:HOST:PORT` | listen on HOST:PORT; the peer is the one that connects |
-//! | `udp:BIND=PEER` | a UDP socket bound to BIND that sends to PEER (both IP:PORT) |
-//! | `udpin:HOST:PORT` | a UDP socket bound to HOST:PORT that answers whoever sent to it last |
-//! | `udpout:HOST:PORT` | a UDP socket on an ephemeral port that sends to HOST:PORT |
+//! | `udp:BIND=PEER` | a UDP socket bound to BIND that sends to PEER and takes only PEER's datagrams (both IP:PORT) |
+//! | `udpin:HOST:PORT` | a UDP socket bound to HOST:PORT whose peer is the first that sends to it |
+//! | `udpout:HOST:PORT` | a UDP socket on an ephemeral port that sends to HOST:PORT and takes only its datagrams |
 //! | `pty` | a new pseudo-terminal pair (where a tool offers one: link-sim) |
 //!
 //! Aliases, the spellings of earlier versions ([`ALIASES`]): `tcpout:HOST:PORT` is
 //! `tcp:HOST:PORT`, and `udp:HOST:PORT` (no `=`) is `udpin:HOST:PORT`. HOST is a name or an
 //! address, an IPv6 address in brackets (`[::1]:14550`); port 0 (any free port) only where the
-//! device listens. A UDP device carries one packet per datagram.
+//! device listens. A UDP device carries one packet per datagram, and takes only its peer's:
+//! a datagram from any other source address or port is dropped, counted and its source named
+//! once on standard error ([`Datagrams`]).
 //!
 //! [`open`] does what each kind did when the tools opened it themselves: a serial port at its
 //! baud rate with the caller's timeout (a path that is not a terminal is named as such), a TCP
@@ -29,6 +31,7 @@ use std::io::{self, Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream, ToSocketAddrs, UdpSocket};
 use std::os::unix::fs::OpenOptionsExt;
 use std::str::FromStr;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
@@ -52,16 +55,16 @@ pub enum DeviceSpec {
     Tcp(String),
     /// `tcpin:HOST:PORT`: listen there.
     TcpIn(String),
-    /// `udp:BIND=PEER`: bind BIND, send to PEER.
+    /// `udp:BIND=PEER`: bind BIND, send to PEER, take only PEER's datagrams.
     Udp {
         /// The local address.
         bind: SocketAddr,
         /// Where packets go.
         peer: SocketAddr,
     },
-    /// `udpin:HOST:PORT`: bind there, answer whoever sent last.
+    /// `udpin:HOST:PORT`: bind there; the first sender is the peer.
     UdpIn(String),
-    /// `udpout:HOST:PORT`: send there from an ephemeral port.
+    /// `udpout:HOST:PORT`: send there from an ephemeral port, take only its datagrams.
     UdpOut(String),
     /// `pty`: a new pseudo-terminal pair.
     Pty,
@@ -81,11 +84,12 @@ Devices (every device flag):
   tcp:HOST:PORT       connect there (a modem's TCP console)
   tcpin:HOST:PORT     listen there; the peer is the one that connects
   udp:BIND=PEER       bind BIND, send to PEER (both IP:PORT); one datagram per packet
-  udpin:HOST:PORT     bind there; answer whoever sent last
+  udpin:HOST:PORT     bind there; the first sender is the peer, kept until the end
   udpout:HOST:PORT    send there, from an ephemeral port
   pty                 a new pseudo-terminal (link-sim; its path is printed)
 Aliases (earlier spellings): tcpout:HOST:PORT = tcp:HOST:PORT; udp:HOST:PORT (no =) =
-udpin:HOST:PORT. An IPv6 host goes in brackets ([::1]:14550).";
+udpin:HOST:PORT. An IPv6 host goes in brackets ([::1]:14550). A UDP device takes only its
+peer's datagrams: others are dropped and their source named once on stderr.";
 
 /// The forms, for error messages.
 const FORMS: &str = "a path, serial:PATH:BAUD, tcp:HOST:PORT, tcpin:HOST:PORT, udp:BIND=PEER, \
@@ -382,21 +386,33 @@ pub fn open(spec: &DeviceSpec, options: &OpenOptions) -> Result<Device, OpenErro
         }
         DeviceSpec::Udp { bind, peer } => {
             let socket = UdpSocket::bind(bind).map_err(fail("bind"))?;
-            Io::Udp(Datagrams::new(socket, Some(*peer), options).map_err(fail("bind"))?)
+            let peer = Peer::Fixed {
+                to: *peer,
+                from: vec![*peer],
+            };
+            Io::Udp(Datagrams::new(spec, socket, peer, options).map_err(fail("bind"))?)
         }
         DeviceSpec::UdpIn(address) => {
             let at = resolve(address).map_err(fail("resolve"))?;
             let socket = UdpSocket::bind(at).map_err(fail("bind"))?;
-            Io::Udp(Datagrams::new(socket, None, options).map_err(fail("bind"))?)
+            let peer = Peer::Learned(Arc::default());
+            Io::Udp(Datagrams::new(spec, socket, peer, options).map_err(fail("bind"))?)
         }
         DeviceSpec::UdpOut(address) => {
-            let to = resolve(address).map_err(fail("resolve"))?;
+            // Every address of the host may answer: the one sent to is the first.
+            let from: Vec<SocketAddr> = address
+                .as_str()
+                .to_socket_addrs()
+                .map_err(fail("resolve"))?
+                .collect();
+            let to = *from.first().ok_or_else(|| fail("resolve")(no_address()))?;
             let any: SocketAddr = match to {
                 SocketAddr::V4(_) => (std::net::Ipv4Addr::UNSPECIFIED, 0).into(),
                 SocketAddr::V6(_) => (std::net::Ipv6Addr::UNSPECIFIED, 0).into(),
             };
             let socket = UdpSocket::bind(any).map_err(fail("bind"))?;
-            Io::Udp(Datagrams::new(socket, Some(to), options).map_err(fail("bind"))?)
+            let peer = Peer::Fixed { to, from };
+            Io::Udp(Datagrams::new(spec, socket, peer, options).map_err(fail("bind"))?)
         }
     };
     let name = match &io {
@@ -410,10 +426,12 @@ pub fn open(spec: &DeviceSpec, options: &OpenOptions) -> Result<Device, OpenErro
 
 /// The first address of `HOST:PORT`.
 pub fn resolve(address: &str) -> io::Result<SocketAddr> {
-    address
-        .to_socket_addrs()?
-        .next()
-        .ok_or_else(|| io::Error::new(io::ErrorKind::NotFound, "the host has no address"))
+    address.to_socket_addrs()?.next().ok_or_else(no_address)
+}
+
+/// A host that resolved to no address.
+fn no_address() -> io::Error {
+    io::Error::new(io::ErrorKind::NotFound, "the host has no address")
 }
 
 /// A TCP stream set up as `options` say: blocking, without Nagle's delay, with its timeouts.
@@ -496,41 +514,111 @@ impl TimedRead for Datagrams {
     }
 }
 
-/// Where a UDP device's packets go.
+/// Where a UDP device's packets go, and whose datagrams it takes.
 #[derive(Debug, Clone)]
 enum Peer {
-    /// Always there.
-    Fixed(SocketAddr),
-    /// To whoever sent the last datagram (nobody yet: packets are dropped).
+    /// Always there: `to` gets the packets; datagrams are taken only from one of `from` (the
+    /// addresses PEER or HOST resolved to when the device opened).
+    Fixed {
+        /// Where packets go.
+        to: SocketAddr,
+        /// The sources whose datagrams are taken.
+        from: Vec<SocketAddr>,
+    },
+    /// The first sender, kept for the life of the device (nobody yet: packets are dropped).
     Learned(Arc<Mutex<Option<SocketAddr>>>),
 }
 
-/// A UDP socket and its peer: one datagram per packet. As a byte stream ([`Read`],
-/// [`Write`]) each read is one datagram's bytes (an empty datagram reads as
-/// [`io::ErrorKind::Interrupted`], not as an end of file) and each write one datagram; a write
-/// before a learned peer has spoken is dropped.
+/// The most foreign sources a UDP device names on standard error; later ones are counted.
+const MAX_FOREIGN_SOURCES_SAID: usize = 64;
+
+/// Datagrams a UDP device dropped because they came from someone other than its peer,
+/// shared by every handle on the device.
+#[derive(Debug, Default)]
+struct Foreign {
+    /// The device as given (`udp:BIND=PEER`), for messages.
+    device: String,
+    /// How many were dropped.
+    dropped: AtomicU64,
+    /// The sources already named on standard error (at most [`MAX_FOREIGN_SOURCES_SAID`]).
+    said: Mutex<Vec<SocketAddr>>,
+}
+
+/// How many datagrams a UDP device dropped because they were not its peer's (a handle that
+/// stays valid after the device is split into a reader and a writer).
+#[derive(Debug, Clone, Default)]
+pub struct ForeignDrops(Arc<Foreign>);
+
+impl ForeignDrops {
+    /// The count so far.
+    pub fn count(&self) -> u64 {
+        self.0.dropped.load(Ordering::Relaxed)
+    }
+}
+
+/// The same host and port (an IPv4 address mapped into IPv6 is the IPv4 address; an IPv6
+/// scope or flow label does not make another source).
+fn same_source(a: SocketAddr, b: SocketAddr) -> bool {
+    a.ip().to_canonical() == b.ip().to_canonical() && a.port() == b.port()
+}
+
+/// The name this program was started as, for its own lines on standard error.
+fn program_name() -> String {
+    std::env::args_os()
+        .next()
+        .map(std::path::PathBuf::from)
+        .and_then(|path| path.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .unwrap_or_else(|| "rovlink".to_string())
+}
+
+/// A UDP socket and its peer: one datagram per packet. Only the peer's datagrams are taken:
+/// those from any other source are dropped, counted ([`Datagrams::foreign_drops`]) and each
+/// source is named once on standard error. A fixed peer (`udp:BIND=PEER`, `udpout:`) is known
+/// at open; a learned one (`udpin:`) is the first source heard, kept until the device closes.
+///
+/// The socket is not `connect()`ed, although the kernel would then filter by source too: a
+/// connected UDP socket reports an ICMP "port unreachable" as `ECONNREFUSED` on its next
+/// receive, so a peer that is not up yet (the other end is started second) would end the
+/// run; the kernel would also drop foreign datagrams without a word. The filter here is one
+/// comparison per datagram.
+///
+/// As a byte stream ([`Read`], [`Write`]) each read is one datagram's bytes (an empty or a
+/// dropped datagram reads as [`io::ErrorKind::Interrupted`], not as an end of file) and each
+/// write one datagram; a write before a learned peer has spoken is dropped.
 #[derive(Debug)]
 pub struct Datagrams {
     socket: UdpSocket,
     peer: Peer,
+    foreign: ForeignDrops,
 }
 
 impl Datagrams {
-    fn new(socket: UdpSocket, peer: Option<SocketAddr>, options: &OpenOptions) -> io::Result<Self> {
+    fn new(
+        device: &DeviceSpec,
+        socket: UdpSocket,
+        peer: Peer,
+        options: &OpenOptions,
+    ) -> io::Result<Self> {
         socket.set_read_timeout(options.read_timeout)?;
         socket.set_write_timeout(options.write_timeout)?;
-        let peer = match peer {
-            Some(addr) => Peer::Fixed(addr),
-            None => Peer::Learned(Arc::new(Mutex::new(None))),
-        };
-        Ok(Datagrams { socket, peer })
+        let foreign = ForeignDrops(Arc::new(Foreign {
+            device: device.to_string(),
+            ..Foreign::default()
+        }));
+        Ok(Datagrams {
+            socket,
+            peer,
+            foreign,
+        })
     }
 
-    /// A second handle on the same socket and peer (a learned peer is shared).
+    /// A second handle on the same socket and peer (a learned peer and the count of dropped
+    /// datagrams are shared).
     pub fn try_clone(&self) -> io::Result<Datagrams> {
         Ok(Datagrams {
             socket: self.socket.try_clone()?,
             peer: self.peer.clone(),
+            foreign: self.foreign.clone(),
         })
     }
 
@@ -542,18 +630,66 @@ impl Datagrams {
     /// Where packets go now (none before a learned peer has spoken).
     pub fn peer(&self) -> Option<SocketAddr> {
         match &self.peer {
-            Peer::Fixed(addr) => Some(*addr),
+            Peer::Fixed { to, .. } => Some(*to),
             Peer::Learned(learned) => *learned.lock().unwrap_or_else(PoisonError::into_inner),
         }
     }
 
-    /// Receives one datagram (its length, maybe 0), learning the peer from it.
-    pub fn recv(&self, buf: &mut [u8]) -> io::Result<usize> {
+    /// The datagrams dropped so far because they were not the peer's.
+    pub fn foreign_drops(&self) -> ForeignDrops {
+        self.foreign.clone()
+    }
+
+    /// Receives one datagram: its length (maybe 0) when it is the peer's (the first sender
+    /// becomes a learned peer), `None` when it came from someone else and was dropped.
+    pub fn recv(&self, buf: &mut [u8]) -> io::Result<Option<usize>> {
         let (n, from) = self.socket.recv_from(buf)?;
-        if let Peer::Learned(learned) = &self.peer {
-            *learned.lock().unwrap_or_else(PoisonError::into_inner) = Some(from);
+        let (peer, which) = match &self.peer {
+            Peer::Fixed { to, from: sources } => {
+                if sources.iter().any(|&source| same_source(source, from)) {
+                    return Ok(Some(n));
+                }
+                (*to, "")
+            }
+            Peer::Learned(learned) => {
+                let mut learned = learned.lock().unwrap_or_else(PoisonError::into_inner);
+                match *learned {
+                    Some(peer) if !same_source(peer, from) => (peer, " (its first sender)"),
+                    Some(_) => return Ok(Some(n)),
+                    None => {
+                        *learned = Some(from);
+                        return Ok(Some(n));
+                    }
+                }
+            }
+        };
+        self.drop_foreign(from, peer, which);
+        Ok(None)
+    }
+
+    /// Counts a datagram from `from`, not the peer (`which` says how the peer was chosen),
+    /// and names its source once.
+    fn drop_foreign(&self, from: SocketAddr, peer: SocketAddr, which: &str) {
+        let foreign = &self.foreign.0;
+        foreign.dropped.fetch_add(1, Ordering::Relaxed);
+        let mut said = foreign.said.lock().unwrap_or_else(PoisonError::into_inner);
+        if said.iter().any(|&source| same_source(source, from)) {
+            return;
         }
-        Ok(n)
+        let line = match said.len() {
+            n if n < MAX_FOREIGN_SOURCES_SAID => format!(
+                "{}: dropped datagrams from {from}, not the peer {peer}{which}",
+                foreign.device
+            ),
+            MAX_FOREIGN_SOURCES_SAID => format!(
+                "{}: dropped datagrams from more than {MAX_FOREIGN_SOURCES_SAID} sources, \
+                 not the peer {peer}{which}; further sources are counted, not named",
+                foreign.device
+            ),
+            _ => return,
+        };
+        said.push(from);
+        rovlink_base::io::warn(&program_name(), &line);
     }
 
     /// Sends one datagram to the peer; false when there is no peer yet (the packet is lost).
@@ -573,8 +709,8 @@ impl Datagrams {
 impl Read for Datagrams {
     fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
         match self.recv(buf)? {
-            0 => Err(io::ErrorKind::Interrupted.into()),
-            n => Ok(n),
+            Some(0) | None => Err(io::ErrorKind::Interrupted.into()),
+            Some(n) => Ok(n),
         }
     }
 }
@@ -642,6 +778,8 @@ pub struct Halves {
     pub datagrams: bool,
     /// A pseudo-terminal's slave, to keep open as long as the halves are used.
     pub keep: Option<File>,
+    /// A UDP device's count of datagrams dropped because they were not its peer's.
+    pub foreign: Option<ForeignDrops>,
 }
 
 /// A pseudo-terminal's master, shared by its reader and its writer.
@@ -671,6 +809,7 @@ impl Io {
             writer,
             datagrams: false,
             keep: None,
+            foreign: None,
         };
         Ok(match self {
             Io::Serial(port) => {
@@ -695,6 +834,7 @@ impl Io {
                 let writer = datagrams.try_clone()?;
                 Halves {
                     datagrams: true,
+                    foreign: Some(datagrams.foreign_drops()),
                     ..halves(Box::new(datagrams), Box::new(writer))
                 }
             }
@@ -918,31 +1058,85 @@ mod tests {
         assert!(halves.keep.is_some() && !halves.datagrams);
     }
 
-    #[test]
-    fn udpin_answers_whoever_sent_last_and_udpout_sends_to_its_host() {
-        let spec: DeviceSpec = "udpin:127.0.0.1:0".parse().unwrap();
+    /// A UDP device opened with reads that wait 5 s at most.
+    fn open_udp(spec: &str) -> Datagrams {
         let options = OpenOptions {
             read_timeout: Some(Duration::from_secs(5)),
             ..OpenOptions::default()
         };
-        let Io::Udp(mut listening) = open(&spec, &options).unwrap().io else {
-            panic!("not UDP");
+        let Io::Udp(datagrams) = open(&spec.parse().unwrap(), &options).unwrap().io else {
+            panic!("{spec}: not UDP");
         };
+        datagrams
+    }
+
+    /// The next datagram the device takes, with how many it dropped before it.
+    fn next_taken(device: &Datagrams) -> (Vec<u8>, u64) {
+        let mut buf = [0u8; 64];
+        let before = device.foreign_drops().count();
+        loop {
+            if let Some(n) = device.recv(&mut buf).unwrap() {
+                return (buf[..n].to_vec(), device.foreign_drops().count() - before);
+            }
+        }
+    }
+
+    #[test]
+    fn udpin_keeps_its_first_sender_and_udpout_sends_to_its_host() {
+        let mut listening = open_udp("udpin:127.0.0.1:0");
         // Nobody has spoken: a packet is dropped, not an error.
         assert!(!listening.send(b"lost").unwrap());
         let at = listening.local_addr().unwrap();
-        let out: DeviceSpec = format!("udpout:{at}").parse().unwrap();
-        let Io::Udp(mut sending) = open(&out, &options).unwrap().io else {
-            panic!("not UDP");
-        };
+        let mut sending = open_udp(&format!("udpout:{at}"));
         sending.write_all(b"hello").unwrap();
         let mut buf = [0u8; 16];
         assert_eq!(listening.read(&mut buf).unwrap(), 5);
         let learned = listening.peer().map(|peer| peer.port());
         assert_eq!(learned, Some(sending.local_addr().unwrap().port()));
+        // Someone else speaks next: dropped, and the peer stays the first sender.
+        let intruder = UdpSocket::bind("127.0.0.1:0").unwrap();
+        intruder.send_to(b"mine now", at).unwrap();
+        sending.write_all(b"again").unwrap();
+        assert_eq!(next_taken(&listening), (b"again".to_vec(), 1));
+        assert_eq!(listening.peer().map(|peer| peer.port()), learned);
         listening.write_all(b"back").unwrap();
         assert_eq!(sending.read(&mut buf).unwrap(), 4);
+        // The answer goes to the first sender, not to the intruder.
         assert_eq!(&buf[..4], b"back");
+    }
+
+    #[test]
+    fn udp_bind_peer_takes_only_datagrams_from_its_peer() {
+        let peer = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let device = open_udp(&format!("udp:127.0.0.1:0={}", peer.local_addr().unwrap()));
+        let at = device.local_addr().unwrap();
+        let foreign = UdpSocket::bind("127.0.0.1:0").unwrap();
+        foreign.send_to(b"forged", at).unwrap();
+        foreign.send_to(b"forged again", at).unwrap();
+        peer.send_to(b"frame", at).unwrap();
+        assert_eq!(next_taken(&device), (b"frame".to_vec(), 2));
+        // A split device still counts (the reader half's drops are the device's).
+        let Halves {
+            foreign: Some(count),
+            ..
+        } = Io::Udp(device).split().unwrap()
+        else {
+            panic!("a UDP device's halves carry its count");
+        };
+        assert_eq!(count.count(), 2);
+    }
+
+    #[test]
+    fn a_source_is_its_address_and_port_whatever_its_family() {
+        let v4: SocketAddr = "127.0.0.1:9001".parse().unwrap();
+        let mapped: SocketAddr = "[::ffff:127.0.0.1]:9001".parse().unwrap();
+        assert!(same_source(v4, mapped));
+        assert!(!same_source(v4, "127.0.0.1:9002".parse().unwrap()));
+        assert!(!same_source(v4, "127.0.0.2:9001".parse().unwrap()));
+        assert!(!same_source(
+            "[::1]:9001".parse().unwrap(),
+            "[::2]:9001".parse().unwrap()
+        ));
     }
 
     #[test]

@@ -235,6 +235,7 @@ impl PairCounters {
             "real_time": {
                 "bytes_read": info.bytes_read,
                 "bytes_skipped": info.bytes_skipped,
+                "foreign_datagrams_dropped": info.foreign_datagrams_dropped,
                 "deliveries_not_taken": info.not_taken,
                 "delivery_lateness_ms_p50": info.lateness_quantile_ms(0.5),
                 "delivery_lateness_ms_p99": info.lateness_quantile_ms(0.99),

@@ -27,7 +27,7 @@ use super::channel::{Link, Report, Side};
 use super::dialect::Emulator;
 use super::medium::{Medium, MediumReport};
 use super::sched::SimTime;
-use crate::device::{self, DeviceSpec, OpenOptions};
+use crate::device::{self, DeviceSpec, ForeignDrops, OpenOptions};
 use rovlink_base::stats::Quantiles;
 use rovlink_wire::{DeframeEvent, Deframer};
 
@@ -133,6 +133,8 @@ pub struct RunInfo {
     pub bytes_read: [u64; 2],
     /// Bytes that were not part of any frame, per side (frame framing only).
     pub bytes_skipped: [u64; 2],
+    /// Datagrams dropped because they came from someone other than the side's UDP peer.
+    pub foreign_datagrams_dropped: [u64; 2],
     /// How late each delivery was handed to its writer after the model's time (fixed memory,
     /// however long the run).
     pub lateness: Quantiles,
@@ -183,6 +185,8 @@ pub struct PortsInfo {
     pub bytes_read: Vec<u64>,
     /// Bytes that were not part of any frame (frame framing only).
     pub bytes_skipped: Vec<u64>,
+    /// Datagrams dropped because they came from someone other than the port's UDP peer.
+    pub foreign_datagrams_dropped: Vec<u64>,
     /// How late each delivery was handed to its writer after the model's time.
     pub lateness: Quantiles,
 }
@@ -193,6 +197,7 @@ impl PortsInfo {
             not_taken: vec![0; ports],
             bytes_read: vec![0; ports],
             bytes_skipped: vec![0; ports],
+            foreign_datagrams_dropped: vec![0; ports],
             lateness: Quantiles::default(),
         }
     }
@@ -221,6 +226,7 @@ impl From<PortsInfo> for RunInfo {
             not_taken: two(&info.not_taken),
             bytes_read: two(&info.bytes_read),
             bytes_skipped: two(&info.bytes_skipped),
+            foreign_datagrams_dropped: two(&info.foreign_datagrams_dropped),
             lateness: info.lateness,
         }
     }
@@ -253,6 +259,8 @@ pub struct Ports {
     inbox: Receiver<Message>,
     /// Pseudo-terminal slaves kept open so the pairs live while programs come and go.
     _slaves: Vec<File>,
+    /// Each UDP port's count of datagrams that were not its peer's (none for other ports).
+    foreign: Vec<Option<ForeignDrops>>,
     /// Run the threads under real-time scheduling.
     realtime_priority: bool,
 }
@@ -355,17 +363,20 @@ impl Ports {
         }
         let (sender, inbox) = mpsc::channel();
         let (mut names, mut writers, mut slaves) = (Vec::new(), Vec::new(), Vec::new());
+        let mut foreign = Vec::new();
         for (port, (spec, label)) in specs.iter().zip(labels).enumerate() {
-            let (name, writer, slave) = open_side(port, label, spec, options, sender.clone())?;
-            names.push(name);
-            writers.push(writer);
-            slaves.extend(slave);
+            let side = open_side(port, label, spec, options, sender.clone())?;
+            names.push(side.name);
+            writers.push(side.writer);
+            slaves.extend(side.keep);
+            foreign.push(side.foreign);
         }
         Ok(Ports {
             names,
             writers,
             inbox,
             _slaves: slaves,
+            foreign,
             realtime_priority: options.realtime_priority,
         })
     }
@@ -416,10 +427,26 @@ impl Ports {
         )
     }
 
-    /// The loop both drivers share. `deliver` handles a report (and returns its arrival time,
-    /// for the lateness); `receive` may take bytes a port read before framing (returning none)
-    /// or hand them on.
+    /// The loop both drivers share ([`Ports::drive_loop`]), with each UDP port's count of
+    /// datagrams dropped because they were not its peer's.
     fn drive<A: Air>(
+        &self,
+        air: &mut A,
+        framing: Framing,
+        stop: &AtomicBool,
+        deliver: impl FnMut(&mut A, A::Report, &mut PortsInfo) -> Option<SimTime>,
+        receive: impl FnMut(&mut A, usize, Vec<u8>, &mut PortsInfo) -> Option<Vec<u8>>,
+    ) -> (PortEnded, PortsInfo) {
+        let (ended, mut info) = self.drive_loop(air, framing, stop, deliver, receive);
+        for (count, foreign) in info.foreign_datagrams_dropped.iter_mut().zip(&self.foreign) {
+            *count = foreign.as_ref().map_or(0, ForeignDrops::count);
+        }
+        (ended, info)
+    }
+
+    /// The loop: `deliver` handles a report (and returns its arrival time, for the lateness);
+    /// `receive` may take bytes a port read before framing (returning none) or hand them on.
+    fn drive_loop<A: Air>(
         &self,
         air: &mut A,
         framing: Framing,
@@ -653,15 +680,26 @@ impl Framer {
     }
 }
 
-/// Opens one port with the one opener and starts its reader and writer threads: its name (for
-/// a new pseudo-terminal, the path programs open), its writer, and a slave to keep open.
+/// One port opened by [`open_side`].
+struct OpenSide {
+    /// Its name (for a new pseudo-terminal, the path programs open).
+    name: String,
+    /// Where its deliveries go.
+    writer: Writer,
+    /// A pseudo-terminal's slave to keep open.
+    keep: Option<File>,
+    /// A UDP port's count of datagrams that were not its peer's.
+    foreign: Option<ForeignDrops>,
+}
+
+/// Opens one port with the one opener and starts its reader and writer threads.
 fn open_side(
     port: usize,
     label: &'static str,
     spec: &DeviceSpec,
     options: SideOptions,
     inbox: Sender<Message>,
-) -> Result<(String, Writer, Option<File>), OpenError> {
+) -> Result<OpenSide, OpenError> {
     let opened = device::open(spec, &options.open_options()).map_err(|e| OpenError {
         side: label,
         name: e.device,
@@ -684,7 +722,12 @@ fn open_side(
         writer.write_all(bytes)?;
         writer.flush()
     });
-    Ok((name, Writer { queue }, halves.keep))
+    Ok(OpenSide {
+        name,
+        writer: Writer { queue },
+        keep: halves.keep,
+        foreign: halves.foreign,
+    })
 }
 
 fn spawn_reader(

@@ -210,6 +210,10 @@ impl Counters {
             json["real_time"] = serde_json::json!({
                 "bytes_read": {"a": info.bytes_read[0], "b": info.bytes_read[1]},
                 "bytes_skipped": {"a": info.bytes_skipped[0], "b": info.bytes_skipped[1]},
+                "foreign_datagrams_dropped": {
+                    "a": info.foreign_datagrams_dropped[0],
+                    "b": info.foreign_datagrams_dropped[1],
+                },
                 "deliveries_not_taken": {"a": info.not_taken[0], "b": info.not_taken[1]},
                 "delivery_lateness_ms_p50": info.lateness_quantile_ms(0.5),
                 "delivery_lateness_ms_p99": info.lateness_quantile_ms(0.99),

@@ -62,5 +62,8 @@ pub fn run(
         guards,
     };
     let (metrics, ended) = driver::run(setup, &mut air, stop, observer);
-    (session::single(metrics), ended)
+    drop(air);
+    let mut metrics = session::single(metrics);
+    metrics.foreign_datagrams_dropped = endpoint.foreign_datagrams_dropped();
+    (metrics, ended)
 }

@@ -74,6 +74,10 @@ pub struct Metrics {
     /// then by reason (`unsecured`, `malformed`, `no_key`, `bad_tag`, `replay`).
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub frames_refused: BTreeMap<String, BTreeMap<&'static str, u64>>,
+    /// Real time over UDP: datagrams dropped because they came from someone other than the
+    /// endpoint's peer (absent when none).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub foreign_datagrams_dropped: u64,
     /// Real time, operator: mean time from a slot's frame to the ROV's answer, ms.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub round_trip_ms: Option<f64>,

@@ -15,6 +15,9 @@
 //! `"waypoints"` (`[t_s, x, y, z, heading_deg]` GoTo orders); the scenario may give `"image"`
 //! (`{"size_bytes":2000,"trunk_bytes":39}`).
 //!
+//! Its waypoints are orders: a file owned by another user, or writable by group or others, is
+//! refused before it is read ([`rovlink_base::secret::open_command_source`]).
+//!
 //! The TDMA cycle ([`Scenario::cycle`]) gives each vehicle, in address order, one slot; an
 //! `auto` slot is the time its exchange takes along its routed path: on every hop out, the
 //! operator frame's air time, the modem's intrinsic delay and the propagation over the hop's
@@ -33,6 +36,7 @@ use crate::config::{
 };
 use crate::routing::{MAX_VEHICLE, Routes, RoutesError};
 use crate::rules;
+use rovlink_base::secret::SecretFileError;
 use rovlink_link::{Model, ModelError};
 
 /// Largest scenario file read, bytes.
@@ -92,6 +96,10 @@ pub enum ScenarioError {
     /// The routes.
     #[error(transparent)]
     Routes(#[from] RoutesError),
+    /// The file is owned by another user or writable by group or others: its waypoints are
+    /// GoTo orders, and whoever can write to it could command the vehicles.
+    #[error(transparent)]
+    Refused(SecretFileError),
     /// A medium's model.
     #[error("{at}: {error}")]
     Model {
@@ -186,8 +194,14 @@ impl Scenario {
     pub fn from_file(path: &Path) -> Result<Scenario, ScenarioError> {
         let name = path.display();
         regular_file(path).map_err(|what| field(name.to_string(), what))?;
-        let bytes = rovlink_base::io::read_file_bounded(path, MAX_SCENARIO_FILE_BYTES)
-            .map_err(|e| field(name.to_string(), format!("cannot read: {e}")))?
+        let cannot_read = |e: std::io::Error| field(name.to_string(), format!("cannot read: {e}"));
+        let (file, _) =
+            rovlink_base::secret::open_command_source(path, false).map_err(|e| match e {
+                SecretFileError::Read { source, .. } => cannot_read(source),
+                refused => ScenarioError::Refused(refused),
+            })?;
+        let bytes = rovlink_base::io::read_bounded(file, MAX_SCENARIO_FILE_BYTES)
+            .map_err(cannot_read)?
             .ok_or_else(|| {
                 field(
                     name.to_string(),
@@ -204,6 +218,7 @@ impl Scenario {
                 error,
             },
             ScenarioError::Routes(error) => field(name.to_string(), error.to_string()),
+            refused @ ScenarioError::Refused(_) => refused,
         })
     }
 
@@ -772,6 +787,20 @@ pub(crate) mod tests {
         }
         let text = THREE.replace(r#""name":"rf""#, &format!("\"name\":{:?}", "é".repeat(64)));
         assert_eq!(parse(&text).unwrap().media[0].name.chars().count(), 64);
+    }
+
+    #[test]
+    fn a_scenario_file_others_may_write_is_refused_and_ours_is_read() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("three.json");
+        std::fs::write(&path, THREE).unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
+        assert_eq!(Scenario::from_file(&path).unwrap().vehicles(), [1, 2]);
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o662)).unwrap();
+        let error = Scenario::from_file(&path).unwrap_err();
+        assert!(matches!(error, ScenarioError::Refused(_)), "{error}");
+        assert!(error.to_string().contains("0662 are too open"), "{error}");
     }
 
     #[test]

@@ -5,9 +5,13 @@
 //! from `t_s` on), `--waypoints` files `t_s,x_m,y_m,z_m,heading_deg` (a GoTo order queued at
 //! `t_s`; NED metres). Every row is checked ([`JoystickChange::check`], [`Waypoint::check`]) and
 //! an error names the file and line; rows are returned sorted by time. `-` reads standard
-//! input (for one of the two).
+//! input (for one of the two). A file that another user owns or that group or others may
+//! write is refused before it is read, as the orders are
+//! ([`rovlink_base::secret::open_command_source`]).
 
 use std::path::{Path, PathBuf};
+
+use rovlink_base::secret::SecretFileError;
 
 use crate::config::{JoystickChange, Waypoint};
 use crate::operator::Joystick;
@@ -26,6 +30,10 @@ pub enum ScriptError {
         /// The reason.
         source: std::io::Error,
     },
+    /// The file is owned by another user or writable by group or others: whoever can write
+    /// to it could command the vehicle.
+    #[error("{0}")]
+    Refused(SecretFileError),
     /// The file is larger than [`MAX_FILE_BYTES`].
     #[error("{path}: more than {MAX_FILE_BYTES} bytes: not a script or waypoint file")]
     TooBig {
@@ -50,7 +58,14 @@ fn table(path: &Path, columns: &[&str]) -> Result<Vec<(u64, Vec<f64>)>, ScriptEr
     };
     let read = match path.as_os_str() == "-" {
         true => read_stdin_at_most(MAX_FILE_BYTES),
-        false => rovlink_base::io::read_file_bounded(path, MAX_FILE_BYTES),
+        false => {
+            let (file, _) =
+                rovlink_base::secret::open_command_source(path, false).map_err(|e| match e {
+                    SecretFileError::Read { source, .. } => read_error(source),
+                    refused => ScriptError::Refused(refused),
+                })?;
+            rovlink_base::io::read_bounded(file, MAX_FILE_BYTES)
+        }
     };
     let Some(text) = read.map_err(read_error)? else {
         return Err(ScriptError::TooBig {
@@ -204,5 +219,12 @@ mod tests {
         std::fs::write(&path, "t_s,vx,vy,vz,vyaw\n3,0,0,0,0\n1,50,0,0,0\n").unwrap();
         let script = read_script(&path).unwrap();
         assert_eq!(script.iter().map(|c| c.t_s).collect::<Vec<_>>(), [1.0, 3.0]);
+        // Whoever may write it could command the vehicle: refused before it is read.
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o664)).unwrap();
+        let error = read_script(&path).unwrap_err().to_string();
+        assert!(error.contains("permissions 0664 are too open"), "{error}");
+        let error = read_waypoints(&path).unwrap_err().to_string();
+        assert!(error.contains("permissions 0664 are too open"), "{error}");
     }
 }

@@ -80,6 +80,10 @@ pub trait Endpoint {
     fn refusals(&self) -> &[String] {
         &[]
     }
+    /// Datagrams dropped because they came from someone other than the peer (UDP only).
+    fn foreign_datagrams_dropped(&self) -> u64 {
+        0
+    }
 }
 
 /// Reads once from `port`, waiting until `deadline` at most: `Ok(None)` on timeout.
@@ -213,7 +217,7 @@ impl Udp {
             .map_or_else(|_| "?".to_string(), |a| a.to_string());
         let peer = socket
             .peer()
-            .map_or_else(|| "the last sender".to_string(), |a| a.to_string());
+            .map_or_else(|| "the first sender".to_string(), |a| a.to_string());
         Udp {
             name: format!("udp {local} -> {peer}"),
             socket,
@@ -234,32 +238,67 @@ impl Endpoint for Udp {
     }
 
     fn receive(&mut self, deadline: Instant) -> Result<Option<Received>, GllError> {
-        let wait = deadline.saturating_duration_since(Instant::now());
-        if wait.is_zero() {
-            return Ok(None);
-        }
-        self.socket
-            .set_timeout(Some(wait))
-            .map_err(|e| closed(&self.name, "set timeout", e))?;
         let mut buf = vec![0u8; 65_536];
-        match self.socket.recv(&mut buf) {
-            Ok(n) => {
-                buf.truncate(n);
-                Ok(Some(Received {
-                    at: Instant::now(),
-                    bytes: buf,
-                    damaged: false,
-                }))
+        loop {
+            let wait = deadline.saturating_duration_since(Instant::now());
+            if wait.is_zero() {
+                return Ok(None);
             }
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock
-                ) =>
-            {
-                Ok(None)
+            self.socket
+                .set_timeout(Some(wait))
+                .map_err(|e| closed(&self.name, "set timeout", e))?;
+            match self.socket.recv(&mut buf) {
+                Ok(Some(n)) => {
+                    buf.truncate(n);
+                    return Ok(Some(Received {
+                        at: Instant::now(),
+                        bytes: buf,
+                        damaged: false,
+                    }));
+                }
+                // Not the peer's: dropped (and counted); wait for the rest of the time.
+                Ok(None) => {}
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock
+                    ) =>
+                {
+                    return Ok(None);
+                }
+                Err(e) => return Err(closed(&self.name, "receive failed", e)),
             }
-            Err(e) => Err(closed(&self.name, "receive failed", e)),
         }
+    }
+
+    fn foreign_datagrams_dropped(&self) -> u64 {
+        self.socket.foreign_drops().count()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_udp_endpoint_receives_its_peers_packets_and_counts_the_others() {
+        let peer = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let spec = format!("udp:127.0.0.1:0={}", peer.local_addr().unwrap());
+        let opened = crate::device::open(&spec.parse().unwrap(), &Default::default()).unwrap();
+        let crate::device::Io::Udp(socket) = opened.io else {
+            panic!("{spec}: not UDP");
+        };
+        let at = socket.local_addr().unwrap();
+        let mut endpoint = Udp::new(socket);
+        let foreign = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        foreign.send_to(b"forged", at).unwrap();
+        peer.send_to(b"frame", at).unwrap();
+        let deadline = Instant::now() + Duration::from_secs(10);
+        let received = endpoint
+            .receive(deadline)
+            .unwrap()
+            .expect("the peer's packet");
+        assert_eq!(received.bytes, b"frame");
+        assert_eq!(endpoint.foreign_datagrams_dropped(), 1);
     }
 }

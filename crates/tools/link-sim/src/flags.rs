@@ -48,7 +48,7 @@ B), --pty or --udp-a/--udp-b, the link runs in real time between the two sides u
 closes (exit 1), or SIGINT/SIGTERM/SIGHUP (exit 0).
 
 Aliases (the flags of earlier versions): --pty is --a pty --b pty; --udp-a ADDR is --a
-udpin:ADDR (packets to whoever sent last), and with --udp-a-peer PEER it is --a udp:ADDR=PEER
+udpin:ADDR (packets to its first sender), and with --udp-a-peer PEER it is --a udp:ADDR=PEER
 (likewise --udp-b, --udp-b-peer); --a PATH is a serial port at --baud, as before.
 
 Shared medium: --pty N (3 ..= 16) creates N pseudo-terminals on one medium with one model:

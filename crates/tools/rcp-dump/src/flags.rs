@@ -12,7 +12,7 @@ Examples:
   rcp-dump --format csv -o frames.csv frames.bin              a table for analysis
   rcp-dump --port /dev/ttyUSB0 --baud 9600     watch a modem's serial line until Ctrl-C
   rcp-dump --port tcp:192.168.0.209:9200       a modem's TCP console
-  rcp-dump --port udp:0.0.0.0:5000=127.0.0.1:5001   datagrams from link-sim --a udpin:...
+  rcp-dump --port udp:127.0.0.1:5000=127.0.0.1:5001   datagrams from 127.0.0.1:5001 only
   link-sim ... | rcp-dump -                    read a pipe
 
 Corrupted frames (CRC failures, truncated frames, skipped bytes) are reported on stderr with

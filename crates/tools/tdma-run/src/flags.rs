@@ -31,8 +31,8 @@ Real modems: --port /dev/ttyUSB0 (transparent, e.g. WFS S100), --dialect evologi
 --port tcp:192.168.0.209:9200, or --port udp:BIND=PEER. Start the ROV end first.
 
 In the field (docs/tdma-mavlink.md, docs/tdma-console.md, docs/tdma-foxglove.md):
-  tdma-run --role rov --port /dev/ttyUSB0 --vehicle mavlink:udpin:0.0.0.0:14550 --camera cam/
-  mkfifo orders; tdma-run --role operator --port /dev/ttyUSB0 --orders orders --telemetry - &
+  tdma-run --role rov --port /dev/ttyUSB0 --vehicle mavlink:udpin:127.0.0.1:14550 --camera cam/
+  mkfifo -m 600 orders; tdma-run --role operator --port /dev/ttyUSB0 --orders orders --telemetry - &
   echo '{\"type\":\"goto\",\"x_cm\":300,\"y_cm\":0,\"z_cm\":50,\"heading_deg\":90}' > orders
   tdma-run --role operator --port /dev/ttyUSB0 --foxglove 127.0.0.1:8765 --images-out rx/ --preview
 With keys (docs/threat-model.md): rcp-pack --new-key keys (copy it to the vehicle), then
@@ -254,8 +254,8 @@ pub struct Args {
     pub mcap: Option<PathBuf>,
 
     /// What moves the vehicle: `sim` (the built-in model) or `mavlink:ENDPOINT`, an ArduSub
-    /// autopilot (real time, --role rov) at a device (see Devices below): udpin:0.0.0.0:14550
-    /// (listen, answer the sender), udpout:HOST:PORT, tcp:HOST:PORT, tcpin:HOST:PORT or
+    /// autopilot (real time, --role rov) at a device (see Devices below): udpin:127.0.0.1:14550
+    /// (listen; the first sender is the autopilot), udpout:HOST:PORT, tcp:HOST:PORT, tcpin:HOST:PORT or
     /// serial:/dev/ttyACM0:115200. Aliases, as before: udp:HOST:PORT = udpin:HOST:PORT (here
     /// as for --port, udp: with = is BIND=PEER), tcpout:HOST:PORT = tcp:HOST:PORT.
     #[arg(long, value_name = "sim|mavlink:ENDPOINT", default_value = "sim",
@@ -280,7 +280,8 @@ pub struct Args {
     /// Live orders: JSON Lines, each an order in wire.md's JSON form or {"type":"cancel"},
     /// read as they come (a pipe or FIFO; - for standard input), each sent at the next free
     /// slot. In simulation a line's "t_s" says when. Without --script/--waypoints the
-    /// built-in script is then not played.
+    /// built-in script is then not played. A file or FIFO another user owns or group or
+    /// others may write is refused (make it with mkfifo -m 600 orders).
     #[arg(long, value_name = "FILE|-", help_heading = "Field")]
     pub orders: Option<PathBuf>,
 
@@ -349,7 +350,7 @@ fn vehicle(text: &str) -> Result<Vehicle, String> {
             Ok(Vehicle::Mavlink(endpoint.to_string()))
         }
         _ => Err(format!(
-            "expected sim or mavlink:ENDPOINT (e.g. mavlink:udpin:0.0.0.0:14550), found {text:?}"
+            "expected sim or mavlink:ENDPOINT (e.g. mavlink:udpin:127.0.0.1:14550), found {text:?}"
         )),
     }
 }
