@@ -18,7 +18,7 @@ use rovlink_rcp::vehicle::Command;
 use rovlink_wire::Nav;
 use rovlink_wire::rov::Why;
 
-fn free_udp_port() -> u16 {
+pub(crate) fn free_udp_port() -> u16 {
     std::net::UdpSocket::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
@@ -1060,7 +1060,7 @@ fn frame_from_system_1(message: &mavlink::dialects::ardupilotmega::MavMessage) -
 
 /// A spoofer's frames as system 1: a disarmed submarine in STABILIZE at (40, 40, 4), heading
 /// 180 degrees.
-fn spoofed_frames() -> Vec<Vec<u8>> {
+pub(crate) fn spoofed_frames() -> Vec<Vec<u8>> {
     use mavlink::dialects::ardupilotmega::{
         ATTITUDE_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavMessage,
         MavModeFlag, MavState, MavType,
@@ -1196,7 +1196,7 @@ fn a_spoofer_on_another_port_moves_nothing_and_diverts_nothing() {
 }
 
 /// A key file with `key` in hex, mode 0600, in `dir`.
-fn key_file(dir: &std::path::Path, key: [u8; 32]) -> std::path::PathBuf {
+pub(crate) fn key_file(dir: &std::path::Path, key: [u8; 32]) -> std::path::PathBuf {
     let path = dir.join("mavlink.key");
     let hex: String = key.iter().map(|b| format!("{b:02x}")).collect();
     use std::io::Write;
