@@ -21,7 +21,9 @@ signing, pymavlink's) and takes only messages signed with that key, as ArduSub d
 SETUP_SIGNING gave it the key; what it refused is counted (bad_signatures). With --forgeries it
 also sends, from its own address, every second: a LOCAL_POSITION_NED at (40, 40, 4) unsigned,
 the same signed with another key, and a replay of its first signed LOCAL_POSITION_NED
-(forgeries: how many of each were sent).
+(forgeries: how many of each were sent). With --key-behind S its signing clock starts S seconds
+behind the wall clock (an autopilot without a clock of its own, on the time it last saved) and,
+as ArduPilot's and pymavlink's do, catches up with the newest signed timestamp it accepts.
 
 At exit (after --seconds, or on SIGTERM/SIGINT) it writes what it saw as JSON to --report:
 armed (ever), armed_now, modes (every mode switched to), max_manual_x, manual_controls,
@@ -30,7 +32,8 @@ component] of the GCS heartbeats), gcs_heartbeats, position ([x, y, z] NED m), h
 
 Usage: ardusub.py (--connect udpout:HOST:PORT | --listen udpin:HOST:PORT | tcp:HOST:PORT ...)
                   --report FILE [--seconds N] [--deny-arm] [--start X,Y,Z]
-                  [--position-after S | --no-position] [--key-file FILE [--forgeries]]
+                  [--position-after S | --no-position]
+                  [--key-file FILE [--forgeries] [--key-behind S]]
 """
 
 import argparse
@@ -254,6 +257,7 @@ def main():
     fix.add_argument("--no-position", action="store_true", help="never a position (GPS1_TYPE 0)")
     parser.add_argument("--key-file", help="sign with this key, take only what it signed")
     parser.add_argument("--forgeries", action="store_true", help="also send forged positions (with --key-file)")
+    parser.add_argument("--key-behind", type=float, default=0.0, help="start the signing clock this many s behind")
     args = parser.parse_args()
     if args.forgeries and not args.key_file:
         parser.error("--forgeries needs --key-file")
@@ -269,7 +273,8 @@ def main():
         autoreconnect=True,
     )
     if args.key_file:
-        conn.setup_signing(read_key(args.key_file), sign_outgoing=True)
+        initial = int((time.time() - 1420070400 - args.key_behind) * 100000)
+        conn.setup_signing(read_key(args.key_file), sign_outgoing=True, initial_timestamp=initial)
     sub = Sub(conn, args.deny_arm, start, None if args.no_position else args.position_after)
     stopping = []
     signal.signal(signal.SIGTERM, lambda *_: stopping.append(1))

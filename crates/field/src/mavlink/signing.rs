@@ -11,8 +11,9 @@
 //! backwards within a run (each is at least the previous one plus one): nothing has to be
 //! kept between runs. Incoming, per stream (link id, system, component): a timestamp must be
 //! greater than the stream's last one, and a stream not heard before must not be more than
-//! [`NEW_STREAM_SLACK_10US`] older than the newest timestamp accepted so far (a replay of a
-//! recorded session is refused that way).
+//! [`NEW_STREAM_SLACK_10US`] older than our own time, the wall clock's or the newest timestamp
+//! accepted if later (a replay of a recorded session is refused that way, as the MAVLink
+//! library and ArduPilot refuse it).
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -218,6 +219,11 @@ impl Signing {
     /// Checks a frame heard: `Ok` when it is signed with our key and its timestamp is new for
     /// its stream (which then remembers it).
     pub fn check(&self, raw: &MAVLinkMessageRaw) -> Result<(), Refusal> {
+        self.check_at(raw, wall_timestamp())
+    }
+
+    /// [`Signing::check`] with the wall clock at `now` (signing timestamp units).
+    fn check_at(&self, raw: &MAVLinkMessageRaw, now: u64) -> Result<(), Refusal> {
         let MAVLinkMessageRaw::V2(frame) = raw else {
             return Err(Refusal::Unsigned);
         };
@@ -240,7 +246,7 @@ impl Signing {
             Some(&last) if timestamp <= last => return Err(Refusal::Replayed),
             Some(_) => {}
             None => {
-                if timestamp.saturating_add(NEW_STREAM_SLACK_10US) < streams.newest
+                if timestamp.saturating_add(NEW_STREAM_SLACK_10US) < streams.newest.max(now)
                     || streams.last.len() >= MAX_STREAMS
                 {
                     return Err(Refusal::Replayed);
@@ -297,15 +303,22 @@ mod tests {
         assert_eq!(hex(&frame), PYMAVLINK_HEARTBEAT);
         assert_eq!(frame.len(), 12 + 9 + SIGNATURE_BYTES);
         // And it is accepted once, then refused as a replay.
+        // (At a clock of that time: it is 2015's first seconds.)
         let reader = Signing::new(key(), 0);
-        assert_eq!(reader.check(&raw(&frame)), Ok(()));
-        assert_eq!(reader.check(&raw(&frame)), Err(Refusal::Replayed));
+        assert_eq!(reader.check_at(&raw(&frame), 123_456), Ok(()));
+        assert_eq!(
+            reader.check_at(&raw(&frame), 123_456),
+            Err(Refusal::Replayed)
+        );
     }
 
     #[test]
     fn unsigned_badly_signed_and_old_frames_are_refused_each_for_its_reason() {
         let ours = Signing::new(key(), 1);
         let checker = Signing::new(key(), 0);
+        // The wall clock of the checks: some time in 2026.
+        let now = 3_600_000_000_000;
+        let check = |frame: &[u8]| checker.check_at(&raw(frame), now);
         let mut unsigned = Vec::new();
         mavlink::write_versioned_msg(
             &mut unsigned,
@@ -314,7 +327,7 @@ mod tests {
             &heartbeat(),
         )
         .unwrap();
-        assert_eq!(checker.check(&raw(&unsigned)), Err(Refusal::Unsigned));
+        assert_eq!(check(&unsigned), Err(Refusal::Unsigned));
         let mut v1 = Vec::new();
         mavlink::write_versioned_msg(
             &mut v1,
@@ -323,44 +336,50 @@ mod tests {
             &heartbeat(),
         )
         .unwrap();
-        assert_eq!(checker.check(&raw(&v1)), Err(Refusal::Unsigned));
+        assert_eq!(check(&v1), Err(Refusal::Unsigned));
         let other_key = Signing::new(SigningKey([9; KEY_BYTES]), 1);
-        let forged = other_key.frame_at(header(0), &heartbeat(), 1_000_000_000);
-        assert_eq!(checker.check(&raw(&forged)), Err(Refusal::BadSignature));
+        assert_eq!(
+            check(&other_key.frame_at(header(0), &heartbeat(), now)),
+            Err(Refusal::BadSignature)
+        );
         // A stream's timestamps must increase.
-        let t = 1_000_000_000;
+        let t = now + 500;
+        assert_eq!(check(&ours.frame_at(header(0), &heartbeat(), t)), Ok(()));
         assert_eq!(
-            checker.check(&raw(&ours.frame_at(header(0), &heartbeat(), t))),
-            Ok(())
-        );
-        assert_eq!(
-            checker.check(&raw(&ours.frame_at(header(1), &heartbeat(), t))),
+            check(&ours.frame_at(header(1), &heartbeat(), t)),
             Err(Refusal::Replayed)
         );
         assert_eq!(
-            checker.check(&raw(&ours.frame_at(header(1), &heartbeat(), t - 5))),
+            check(&ours.frame_at(header(1), &heartbeat(), t - 5)),
             Err(Refusal::Replayed)
         );
         assert_eq!(
-            checker.check(&raw(&ours.frame_at(header(2), &heartbeat(), t + 1))),
+            check(&ours.frame_at(header(2), &heartbeat(), t + 1)),
             Ok(())
         );
         // Another stream (link 2) may start up to a minute behind the newest, not more.
         let link2 = Signing::new(key(), 2);
         let old = t + 1 - NEW_STREAM_SLACK_10US - 1;
         assert_eq!(
-            checker.check(&raw(&link2.frame_at(header(0), &heartbeat(), old))),
+            check(&link2.frame_at(header(0), &heartbeat(), old)),
             Err(Refusal::Replayed)
         );
         assert_eq!(
-            checker.check(&raw(&link2.frame_at(header(0), &heartbeat(), old + 1))),
+            check(&link2.frame_at(header(0), &heartbeat(), old + 1)),
             Ok(())
         );
+        // Nor more than a minute behind our clock, the first stream too: a recorded session
+        // replayed to a fresh checker is refused.
+        let fresh = Signing::new(key(), 0);
+        let recorded = ours.frame_at(header(4), &heartbeat(), now - NEW_STREAM_SLACK_10US - 1);
+        assert_eq!(fresh.check_at(&raw(&recorded), now), Err(Refusal::Replayed));
+        let recent = ours.frame_at(header(5), &heartbeat(), now - NEW_STREAM_SLACK_10US);
+        assert_eq!(fresh.check_at(&raw(&recent), now), Ok(()));
         // A flipped signature byte is a bad signature.
         let mut flipped = ours.frame_at(header(3), &heartbeat(), t + 10);
         let last = flipped.len() - 1;
         flipped[last] ^= 1;
-        assert_eq!(checker.check(&raw(&flipped)), Err(Refusal::BadSignature));
+        assert_eq!(check(&flipped), Err(Refusal::BadSignature));
     }
 
     #[test]
