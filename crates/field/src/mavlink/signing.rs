@@ -431,4 +431,28 @@ mod tests {
         let error = SigningKey::read(&short).unwrap_err().to_string();
         assert!(error.ends_with("found 4 bytes"), "{error}");
     }
+
+    proptest::proptest! {
+        #[test]
+        fn any_bytes_are_a_key_or_say_what_they_are(bytes in proptest::collection::vec(proptest::num::u8::ANY, 0..80)) {
+            match SigningKey::parse(&bytes) {
+                Ok(_) => proptest::prop_assert!(bytes.len() == 32 || bytes.len() >= 64),
+                Err(found) => proptest::prop_assert!(!found.is_empty() && !found.contains('\n')),
+            }
+        }
+
+        #[test]
+        fn any_signed_looking_frame_is_checked_without_a_panic(
+            tail in proptest::collection::vec(proptest::num::u8::ANY, 0..300),
+        ) {
+            // A signed frame's start, then anything: the reader keeps what checks out.
+            let mut bytes = vec![0xfd, 9, 1, 0, 7, 1, 1, 0, 0, 0];
+            bytes.extend(tail);
+            let checker = Signing::new(key(), 0);
+            let mut reader = mavlink::MavlinkReader::new(&bytes[..]);
+            while let Ok(frame) = reader.read_any_raw_message::<MavMessage>() {
+                let _ = checker.check(&frame);
+            }
+        }
+    }
 }
