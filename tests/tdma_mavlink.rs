@@ -18,7 +18,7 @@ use rovlink_rcp::vehicle::Command;
 use rovlink_wire::Nav;
 use rovlink_wire::rov::Why;
 
-fn free_udp_port() -> u16 {
+pub(crate) fn free_udp_port() -> u16 {
     std::net::UdpSocket::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
@@ -77,6 +77,17 @@ fn drive_until(
         std::thread::sleep(next.saturating_duration_since(Instant::now()));
     }
     (events, false)
+}
+
+/// The notes among `events` that start with `prefix`.
+fn notes_starting<'a>(events: &'a [DriveEvent], prefix: &str) -> Vec<&'a String> {
+    events
+        .iter()
+        .filter_map(|e| match e {
+            DriveEvent::Note(n) if n.starts_with(prefix) => Some(n),
+            _ => None,
+        })
+        .collect()
 }
 
 fn acks(events: &[DriveEvent]) -> Vec<(String, String, bool)> {
@@ -413,6 +424,57 @@ fn pymavlink_standin(args: &[&str]) -> Child {
         .expect("python3 runs")
 }
 
+/// Starts the pymavlink stand-in sending to `port` (with `extra` arguments; its report to
+/// `report`) and has `drive` arm it with half a stick forward, in MANUAL; returns it and the
+/// session clock.
+fn pymavlink_standin_armed(
+    drive: &mut MavlinkDrive,
+    port: u16,
+    report: &std::path::Path,
+    extra: &[&str],
+) -> (Child, Instant) {
+    let to = format!("udpout:127.0.0.1:{port}");
+    let report = report.to_str().unwrap();
+    let args = ["--connect", &to, "--report", report, "--seconds", "60"];
+    let python = pymavlink_standin(&[&args[..], extra].concat());
+    let clock = Instant::now();
+    let (events, armed) = drive_until(
+        drive,
+        clock,
+        15.0, // python3 and pymavlink take a while to start
+        |_| demand(thrust(50.0), true, Nav::Manual),
+        |d| d.state().armed,
+    );
+    assert!(armed, "{events:?}");
+    (python, clock)
+}
+
+/// Stops the pymavlink stand-in (it writes its report on SIGTERM, once it catches it) and
+/// returns its report, in which it was armed by our ground station, system 255 component 190,
+/// and (`guided`) switched to GUIDED (4) for a GoTo.
+fn stop_pymavlink_standin(
+    python: &mut Child,
+    report: &std::path::Path,
+    guided: bool,
+) -> serde_json::Value {
+    signal_once(python, nix::sys::signal::Signal::SIGTERM, &|| true, LIMIT);
+    let status = crate::common::wait_for_exit(python, LIMIT);
+    assert!(status.success(), "{status:?}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(report).unwrap()).unwrap();
+    assert_eq!(report["armed"], true, "{report}");
+    assert_eq!(report["gcs"], serde_json::json!([255, 190]), "{report}");
+    assert!(
+        !guided
+            || report["modes"]
+                .as_array()
+                .unwrap()
+                .contains(&serde_json::json!(4)),
+        "{report}"
+    );
+    report
+}
+
 #[test]
 fn the_drive_works_against_the_pymavlink_standin() {
     let dir = tempfile::tempdir().unwrap();
@@ -423,23 +485,7 @@ fn the_drive_works_against_the_pymavlink_standin() {
         &MavlinkOptions::default(),
     )
     .unwrap();
-    let mut python = pymavlink_standin(&[
-        "--connect",
-        &format!("udpout:127.0.0.1:{port}"),
-        "--report",
-        report.to_str().unwrap(),
-        "--seconds",
-        "60",
-    ]);
-    let clock = Instant::now();
-    let (events, armed) = drive_until(
-        &mut drive,
-        clock,
-        15.0, // python3 and pymavlink take a while to start
-        |_| demand(thrust(50.0), true, Nav::Manual),
-        |d| d.state().armed,
-    );
-    assert!(armed, "{events:?}");
+    let (mut python, clock) = pymavlink_standin_armed(&mut drive, port, &report, &[]);
     // Half stick until it has moved forward (about 0.5 m/s: under a second, later on a loaded
     // machine), then a GoTo.
     let (_, moved) = drive_until(
@@ -483,28 +529,9 @@ fn the_drive_works_against_the_pymavlink_standin() {
     });
     assert!(still, "still moving: {:?}", drive.state());
     let ours = drive.state().position_m;
-    // It writes its report on SIGTERM, once it catches it.
-    signal_once(
-        &mut python,
-        nix::sys::signal::Signal::SIGTERM,
-        &|| true,
-        LIMIT,
-    );
-    let status = crate::common::wait_for_exit(&mut python, LIMIT);
-    assert!(status.success(), "{status:?}");
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-    assert_eq!(report["armed"], true, "{report}");
-    assert_eq!(report["gcs"], serde_json::json!([255, 190]), "{report}");
+    let report = stop_pymavlink_standin(&mut python, &report, true);
     let max_x = report["max_manual_x"].as_i64().unwrap();
     assert!((495..=510).contains(&max_x), "{report}");
-    assert!(
-        report["modes"]
-            .as_array()
-            .unwrap()
-            .contains(&serde_json::json!(4)),
-        "{report}"
-    );
     let setpoint = &report["setpoints"].as_array().unwrap().last().unwrap();
     for k in 0..3 {
         assert!(
@@ -541,79 +568,131 @@ fn last_track_position(track: &std::path::Path) -> [f64; 3] {
     [fields[0], fields[1], fields[2]]
 }
 
+/// A field session in `dir`: link-sim between `tdma-run --role rov --vehicle
+/// mavlink:udpin:...` (17 s, metrics in rov.json, with `rov_args`) and an operator (15 s,
+/// orders from the FIFO `orders`, op.json, telemetry.jsonl), the Rust stand-in as the
+/// autopilot.
+struct FieldSession {
+    link: crate::common::Reaped,
+    rov: Child,
+    /// The ROV end's stderr from "answering every slot" on (read aside).
+    rov_said: std::thread::JoinHandle<String>,
+    standin: StandIn,
+    operator: Child,
+    /// The operator's stderr, read aside.
+    op_said: std::thread::JoinHandle<String>,
+    /// The operator's orders, open until dropped.
+    fifo: std::fs::File,
+    /// The UDP port the ROV end listens on for the autopilot.
+    port: u16,
+}
+
+impl FieldSession {
+    fn start(dir: &std::path::Path, rov_args: &[&str]) -> FieldSession {
+        let path = |name: &str| dir.join(name).to_str().unwrap().to_string();
+        nix::unistd::mkfifo(dir.join("orders").as_path(), nix::sys::stat::Mode::S_IRWXU).unwrap();
+        let (link, a, b) =
+            crate::common::link_sim_pty(&["--model", "s100", "--half-duplex", "false"]);
+        let port = free_udp_port();
+        let mut rov = Process::new(TDMA_RUN)
+            .args(["--role", "rov", "--port", &b, "--duration", "17"])
+            .args(["--vehicle", &format!("mavlink:udpin:127.0.0.1:{port}")])
+            .args(["--image-size", "400", "--metrics", &path("rov.json")])
+            .args(rov_args)
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // The stand-in and the operator start once the ROV listens (on the vehicle's port and
+        // the link's: it says so), not after a guess.
+        let rov_said = crate::common::said_until(&mut rov, "ROV: answering every slot", LIMIT);
+        let standin = StandIn::start(&format!("udpout:127.0.0.1:{port}"), Config::default());
+        let mut operator = Process::new(TDMA_RUN)
+            .args(["--role", "operator", "--port", &a, "--duration", "15"])
+            .args(["--ipg", "200", "--image-size", "400"])
+            .args(["--orders", &path("orders"), "--metrics", &path("op.json")])
+            .args(["--telemetry", &path("telemetry.jsonl")])
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let op_stderr = operator.stderr.take().unwrap();
+        let op_said = std::thread::spawn(move || std::io::read_to_string(op_stderr).unwrap());
+        let fifo = crate::common::fifo_writer(path("orders"), &mut operator, LIMIT);
+        FieldSession {
+            link,
+            rov,
+            rov_said,
+            standin,
+            operator,
+            op_said,
+            fifo,
+            port,
+        }
+    }
+
+    /// Waits for both ends to end (the operator first, then its FIFO is closed), stops the
+    /// stand-in and link-sim; checks that both ends succeeded and returns the ROV end's stderr
+    /// and what the stand-in saw.
+    fn finish(self) -> (String, ardusub::Seen) {
+        let FieldSession {
+            mut link,
+            mut rov,
+            rov_said,
+            standin,
+            mut operator,
+            op_said,
+            fifo,
+            ..
+        } = self;
+        let op_status = crate::common::wait_for_exit(&mut operator, LIMIT);
+        drop(fifo);
+        let op_err = op_said.join().unwrap();
+        let rov_status = crate::common::wait_for_exit(&mut rov, LIMIT);
+        let seen = standin.stop();
+        let _ = link.kill();
+        let _ = link.wait();
+        let rov_err = rov_said.join().unwrap();
+        assert!(op_status.success(), "{op_err}");
+        assert!(rov_status.success(), "{rov_err}");
+        (rov_err, seen)
+    }
+
+    /// Sends the operator an order line.
+    fn order(&mut self, line: &str) {
+        use std::io::Write;
+        writeln!(self.fifo, "{line}").unwrap();
+        self.fifo.flush().unwrap();
+    }
+}
+
 #[test]
 fn tdma_run_drives_the_standin_through_link_sim_with_live_orders() {
     let dir = tempfile::tempdir().unwrap();
     let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
-    nix::unistd::mkfifo(
-        dir.path().join("orders").as_path(),
-        nix::sys::stat::Mode::S_IRWXU,
-    )
-    .unwrap();
-    let (mut link, a, b) =
-        crate::common::link_sim_pty(&["--model", "s100", "--half-duplex", "false"]);
-    let port = free_udp_port();
-    let mut rov = Process::new(TDMA_RUN)
-        .args(["--role", "rov", "--port", &b, "--duration", "17"])
-        .args(["--vehicle", &format!("mavlink:udpin:127.0.0.1:{port}")])
-        .args(["--image-size", "400", "--metrics", &path("rov.json")])
-        .args(["--track", &path("track.csv")])
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    // The stand-in and the operator start once the ROV listens (on the vehicle's port and the
-    // link's: it says so), not after a guess.
-    let rov_said = crate::common::said_until(&mut rov, "ROV: answering every slot", LIMIT);
-    let standin = StandIn::start(&format!("udpout:127.0.0.1:{port}"), Config::default());
-    let mut operator = Process::new(TDMA_RUN)
-        .args(["--role", "operator", "--port", &a, "--duration", "15"])
-        .args(["--ipg", "200", "--image-size", "400"])
-        .args(["--orders", &path("orders"), "--metrics", &path("op.json")])
-        .args(["--telemetry", &path("telemetry.jsonl")])
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let op_stderr = operator.stderr.take().unwrap();
-    let op_said = std::thread::spawn(move || std::io::read_to_string(op_stderr).unwrap());
+    let mut session = FieldSession::start(dir.path(), &["--track", &path("track.csv")]);
     // Half stick forward until the autopilot has it, then stop and go to a point; the FIFO
     // stays open until the operator ends.
-    let mut fifo = crate::common::fifo_writer(path("orders"), &mut operator, LIMIT);
-    let mut type_order = |line: &str| {
-        use std::io::Write;
-        writeln!(fifo, "{line}").unwrap();
-        fifo.flush().unwrap();
-    };
-    type_order(
+    session.order(
         r#"{"type":"velocity","vx":64,"vy":0,"vz":0,"vyaw":0,"arm":true,"disarm":false,"nav":"manual"}"#,
     );
     let typed = Instant::now();
-    while standin.seen().max_manual_x < 495 {
+    while session.standin.seen().max_manual_x < 495 {
         assert!(
-            operator.try_wait().unwrap().is_none(),
+            session.operator.try_wait().unwrap().is_none(),
             "the operator ended before the half stick reached the autopilot: {:?}",
-            standin.seen()
+            session.standin.seen()
         );
         assert!(
             typed.elapsed() < LIMIT,
             "the half stick never reached the autopilot: {:?}",
-            standin.seen()
+            session.standin.seen()
         );
         std::thread::sleep(Duration::from_millis(20));
     }
-    type_order(
+    session.order(
         r#"{"type":"velocity","vx":0,"vy":0,"vz":0,"vyaw":0,"arm":true,"disarm":false,"nav":"manual"}"#,
     );
-    type_order(r#"{"type":"goto","x_cm":150,"y_cm":50,"z_cm":50,"heading_deg":90}"#);
-    let op_status = crate::common::wait_for_exit(&mut operator, LIMIT);
-    drop(fifo);
-    let op_err = op_said.join().unwrap();
-    let rov_status = crate::common::wait_for_exit(&mut rov, LIMIT);
-    let seen = standin.stop();
-    let _ = link.kill();
-    let _ = link.wait();
-    let rov_err = rov_said.join().unwrap();
-    assert!(op_status.success(), "{op_err}");
-    assert!(rov_status.success(), "{rov_err}");
+    session.order(r#"{"type":"goto","x_cm":150,"y_cm":50,"z_cm":50,"heading_deg":90}"#);
+    let (rov_err, seen) = session.finish();
     assert!(seen.ever_armed, "{seen:?}\n{rov_err}");
     // vx 64 of 127 is 50.4 % of full stick: x 504.
     assert!((495..=510).contains(&seen.max_manual_x), "{seen:?}");
@@ -793,13 +872,7 @@ fn garbage_and_non_finite_numbers_on_the_link_change_nothing() {
     );
     assert_eq!(state.heading_deg, 0.0, "an angle beyond 2π is dropped");
     // One warning per kind of message, however many were dropped.
-    let warnings: Vec<&String> = events
-        .iter()
-        .filter_map(|e| match e {
-            DriveEvent::Note(n) if n.starts_with("warning:") => Some(n),
-            _ => None,
-        })
-        .collect();
+    let warnings = notes_starting(&events, "warning:");
     assert_eq!(warnings.len(), 2, "{events:?}");
     assert!(
         warnings[0].contains("LOCAL_POSITION_NED dropped: field x"),
@@ -811,7 +884,9 @@ fn garbage_and_non_finite_numbers_on_the_link_change_nothing() {
     );
     assert!(
         events.iter().all(|e| matches!(e, DriveEvent::Note(n)
-            if n.contains("autopilot found") || n.starts_with("warning:"))),
+            if n.contains("autopilot found")
+                || n.contains("UDP: the autopilot is system 1 at")
+                || n.starts_with("warning:"))),
         "{events:?}"
     );
 }
@@ -974,4 +1049,307 @@ fn the_stand_in_disarms_on_a_lost_gcs_as_ardusub_does() {
     }
     assert!(gone.elapsed() >= Duration::from_secs_f64(ardusub::GCS_FAILSAFE_S - 0.2));
     assert_eq!(standin.stop().failsafes, 1);
+}
+
+/// A MAVLink 2 frame from system 1 component 1, unsigned.
+fn frame_from_system_1(message: &mavlink::dialects::ardupilotmega::MavMessage) -> Vec<u8> {
+    let mut bytes = Vec::new();
+    let header = mavlink::MavHeader {
+        system_id: 1,
+        component_id: 1,
+        sequence: 0,
+    };
+    mavlink::write_versioned_msg(&mut bytes, mavlink::MavlinkVersion::V2, header, message).unwrap();
+    bytes
+}
+
+/// A spoofer's frames as system 1: a disarmed submarine in STABILIZE at (40, 40, 4), heading
+/// 180 degrees.
+pub(crate) fn spoofed_frames() -> Vec<Vec<u8>> {
+    use mavlink::dialects::ardupilotmega::{
+        ATTITUDE_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavMessage,
+        MavModeFlag, MavState, MavType,
+    };
+    [
+        MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: 0,
+            mavtype: MavType::MAV_TYPE_SUBMARINE,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+            base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+            system_status: MavState::MAV_STATE_ACTIVE,
+            mavlink_version: 3,
+        }),
+        MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
+            x: 40.0,
+            y: 40.0,
+            z: 4.0,
+            ..LOCAL_POSITION_NED_DATA::DEFAULT
+        }),
+        MavMessage::ATTITUDE(ATTITUDE_DATA {
+            yaw: std::f32::consts::PI,
+            ..ATTITUDE_DATA::DEFAULT
+        }),
+    ]
+    .iter()
+    .map(frame_from_system_1)
+    .collect()
+}
+
+#[test]
+fn a_spoofer_on_another_port_moves_nothing_and_diverts_nothing() {
+    // The issue's attack on udpin: HEARTBEAT, position and attitude as system 1 from another
+    // port, after the real autopilot was heard.
+    let dir = tempfile::tempdir().unwrap();
+    let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let mut session = FieldSession::start(dir.path(), &[]);
+    session.order(
+        r#"{"type":"velocity","vx":0,"vy":0,"vz":0,"vyaw":0,"arm":true,"disarm":false,"nav":"manual"}"#,
+    );
+    let port = session.port;
+    let standin = &session.standin;
+    // Armed through the ROV end: the autopilot is known (MANUAL_CONTROL needs it).
+    let wait = |what: &str, done: &dyn Fn(&ardusub::Seen) -> bool| {
+        let since = Instant::now();
+        while !done(&standin.seen()) {
+            assert!(since.elapsed() < LIMIT, "{what}: {:?}", standin.seen());
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    wait("armed by the ROV end", &|s| {
+        s.armed && s.manual_controls > 0
+    });
+    // The spoofer: from its own port, every 20 ms, until told to stop.
+    let spoofer = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let spoofer_port = spoofer.local_addr().unwrap().port();
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let spoofing = {
+        let (socket, stop) = (spoofer.try_clone().unwrap(), std::sync::Arc::clone(&stop));
+        std::thread::spawn(move || {
+            let frames = spoofed_frames();
+            let mut sent = 0u64;
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) && sent < 3000 {
+                for frame in &frames {
+                    let _ = socket.send_to(frame, ("127.0.0.1", port));
+                    sent += 1;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            sent
+        })
+    };
+    // While it spoofs, the ROV end's heartbeats and sticks still reach the real autopilot.
+    let before = standin.seen();
+    wait("heartbeats and sticks during the spoof", &|s| {
+        s.gcs_heartbeats >= before.gcs_heartbeats + 3
+            && s.manual_controls >= before.manual_controls + 30
+    });
+    let (rov_err, seen) = session.finish();
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let spoofed = spoofing.join().unwrap();
+    assert!(spoofed > 0);
+    // The autopilot was never left without its GCS, and nothing went to the spoofer.
+    assert_eq!(seen.failsafes, 0, "{seen:?}");
+    assert!(seen.armed, "{seen:?}");
+    spoofer.set_nonblocking(true).unwrap();
+    let mut buf = [0u8; 512];
+    let answered = spoofer.recv_from(&mut buf);
+    assert!(
+        matches!(&answered, Err(e) if e.kind() == std::io::ErrorKind::WouldBlock),
+        "the ROV end answered the spoofer: {answered:?}"
+    );
+    // The operator saw the real autopilot's pose and state, never the spoofer's.
+    let statuses: Vec<serde_json::Value> = std::fs::read_to_string(path("telemetry.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .filter(|t| t["type"] == "rov")
+        .collect();
+    assert!(statuses.len() > 10, "{statuses:?}");
+    for status in &statuses {
+        let xyz = ["x_cm", "y_cm", "z_cm"].map(|k| status[k].as_f64().unwrap() / 100.0);
+        assert!(
+            xyz.iter().all(|v| v.abs() < 5.0),
+            "the spoofer's position reached the operator: {status}"
+        );
+    }
+    assert_eq!(statuses.last().unwrap()["arm"], true);
+    // Counted, and said once: the pin, and the spoofer's address.
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path("rov.json")).unwrap()).unwrap();
+    let dropped = r["mavlink_refused"]["other_address"].as_u64().unwrap_or(0);
+    assert!(dropped > 0 && dropped <= spoofed, "{r}");
+    let pinned: Vec<&str> = rov_err
+        .lines()
+        .filter(|l| l.contains("the autopilot is system 1 at 127.0.0.1:"))
+        .collect();
+    assert_eq!(pinned.len(), 1, "{rov_err}");
+    let refusals: Vec<&str> = rov_err
+        .lines()
+        .filter(|l| l.contains("mavlink: refused"))
+        .collect();
+    assert_eq!(refusals.len(), 1, "{rov_err}");
+    assert!(
+        refusals[0].starts_with(&format!(
+            "tdma-run: mavlink: refused a datagram from 127.0.0.1:{spoofer_port}: "
+        )),
+        "{rov_err}"
+    );
+    assert!(
+        rov_err.contains("tdma-run: warning: MAVLink is unsigned"),
+        "{rov_err}"
+    );
+}
+
+/// A key file with `key` in hex, mode 0600, in `dir`.
+pub(crate) fn key_file(dir: &std::path::Path, key: [u8; 32]) -> std::path::PathBuf {
+    let path = dir.join("mavlink.key");
+    let hex: String = key.iter().map(|b| format!("{b:02x}")).collect();
+    use std::io::Write;
+    use std::os::unix::fs::OpenOptionsExt;
+    let mut file = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(0o600)
+        .open(&path)
+        .unwrap();
+    writeln!(file, "{hex}").unwrap();
+    path
+}
+
+/// A drive on a free UDP port (`udpin:`) signing with `key`, read from a key file in `dir`:
+/// the key file, where a stand-in's report goes, the port and the drive.
+fn signed_drive(
+    dir: &std::path::Path,
+    key: [u8; 32],
+) -> (std::path::PathBuf, std::path::PathBuf, u16, MavlinkDrive) {
+    let key_path = key_file(dir, key);
+    let port = free_udp_port();
+    let options = MavlinkOptions {
+        key: Some(rovlink_field::mavlink::SigningKey::read(&key_path).unwrap()),
+        ..MavlinkOptions::default()
+    };
+    let drive = connect(&format!("udpin:127.0.0.1:{port}"), &options).unwrap();
+    (key_path, dir.join("report.json"), port, drive)
+}
+
+fn refused(drive: &MavlinkDrive, reason: &str) -> u64 {
+    drive
+        .refused()
+        .iter()
+        .find(|(r, _)| r.name() == reason)
+        .map_or(0, |(_, n)| *n)
+}
+
+#[test]
+fn a_signed_session_with_the_pymavlink_standin_uses_only_what_the_key_signed() {
+    let dir = tempfile::tempdir().unwrap();
+    let key: [u8; 32] = std::array::from_fn(|k| (k as u8).wrapping_mul(37) ^ 0xa5);
+    let (key_path, report, port, mut drive) = signed_drive(dir.path(), key);
+    assert!(drive.signed());
+    // The stand-in signs with the key (pymavlink's signing), takes only what it signed, and
+    // sends every second an unsigned position at (40, 40, 4), one signed with another key and
+    // a replay of its first signed position.
+    let extra = ["--key-file", key_path.to_str().unwrap(), "--forgeries"];
+    let (mut python, clock) = pymavlink_standin_armed(&mut drive, port, &report, &extra);
+    let forged = [40.0, 40.0, 4.0];
+    let goal = [1.0, -0.5, 1.0];
+    let goto = Command::GoTo {
+        x: goal[0],
+        y: goal[1],
+        z: goal[2],
+        heading_deg: 45.0,
+    };
+    let mut worst = f64::INFINITY;
+    let (events, reached) = drive_until(
+        &mut drive,
+        clock,
+        30.0,
+        |_| demand(goto, true, Nav::Guided),
+        |d| {
+            worst = worst.min(d.state().distance_to(forged));
+            d.reached(goal, 45.0)
+                && ["unsigned", "bad_signature", "replayed"]
+                    .iter()
+                    .all(|r| refused(d, r) >= 2)
+        },
+    );
+    assert!(
+        reached,
+        "{events:?} {:?} {:?}",
+        drive.state(),
+        drive.refused()
+    );
+    assert!(
+        worst > 30.0,
+        "a forged position was used: {worst} m from it"
+    );
+    // Each refusal said once, naming the stand-in's address.
+    let notes = notes_starting(&events, "mavlink: refused");
+    assert!(notes.len() <= 3, "{notes:?}");
+    assert_eq!(refused(&drive, "other_address"), 0);
+    let report = stop_pymavlink_standin(&mut python, &report, true);
+    // Everything the drive sent verified with pymavlink's signing.
+    assert_eq!(report["bad_signatures"], 0, "{report}");
+    assert!(report["forgeries"].as_u64().unwrap() >= 2, "{report}");
+}
+
+#[test]
+fn an_autopilot_whose_signing_clock_is_behind_catches_up_with_ours() {
+    // Its first signed messages are ten minutes old (refused: a replay would look so), but it
+    // is answered, hears our newer timestamps and catches up, as ArduPilot does.
+    let dir = tempfile::tempdir().unwrap();
+    let (key_path, report, port, mut drive) = signed_drive(dir.path(), [0x3c; 32]);
+    let extra = [
+        "--key-file",
+        key_path.to_str().unwrap(),
+        "--key-behind",
+        "600",
+    ];
+    let (mut python, _) = pymavlink_standin_armed(&mut drive, port, &report, &extra);
+    assert!(refused(&drive, "replayed") > 0, "{:?}", drive.refused());
+    assert_eq!(drive.autopilot(), Some((1, 1)));
+    let report = stop_pymavlink_standin(&mut python, &report, false);
+    assert_eq!(report["bad_signatures"], 0, "{report}");
+}
+
+#[test]
+fn with_a_key_an_unsigned_autopilot_is_never_listened_to() {
+    let options = MavlinkOptions {
+        key: Some(rovlink_field::mavlink::SigningKey([7; 32])),
+        ..MavlinkOptions::default()
+    };
+    let (mut drive, standin) = udp_pair(&options, Config::default());
+    let clock = Instant::now();
+    let (events, _) = drive_until(
+        &mut drive,
+        clock,
+        10.0,
+        |_| demand(thrust(50.0), true, Nav::Manual),
+        |d| refused(d, "unsigned") >= 30,
+    );
+    assert!(refused(&drive, "unsigned") >= 30, "{events:?}");
+    assert_eq!(drive.autopilot(), None);
+    assert!(!drive.state().responsive);
+    assert_eq!(drive.state().position_m, [0.0; 3]);
+    // Nothing was sent to it (no autopilot is known, and a udpin socket answers only a
+    // signed sender), so it never armed.
+    let seen = standin.stop();
+    assert_eq!(seen.gcs_heartbeats, 0, "{seen:?}");
+    assert!(!seen.ever_armed);
+    let said: Vec<&DriveEvent> = events
+        .iter()
+        .filter(|e| matches!(e, DriveEvent::Note(n) if n.starts_with("mavlink: refused an unsigned message")))
+        .collect();
+    // Once per source: the stand-in's autopilot component, and its camera if any.
+    assert_eq!(said.len(), 1, "{events:?}");
+    assert!(
+        events.iter().any(|e| matches!(
+            e,
+            DriveEvent::MessagesRefused {
+                reason: "unsigned",
+                ..
+            }
+        )),
+        "{events:?}"
+    );
 }

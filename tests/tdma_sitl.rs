@@ -3,8 +3,14 @@
 //! a FIFO, the acoustic link emulated by `link-sim --model s100 --pty`, the autopilot's own
 //! reports read from its second MAVLink port (SERIAL1) by `tests/mavlink/sitl_watch.py`.
 //!
+//! A third session is signed: the key goes into SITL with `scripts/mavlink-setup-signing.py`
+//! over SERIAL0 (the port ArduPilot trusts unsigned, its USB), the ROV end talks to SERIAL1
+//! over UDP (`--serial1 udpclient:...` to its `udpin:`) with `--mavlink-key-file`, the watcher
+//! listens on SERIAL0, and an attacker without the key speaks on SERIAL2 and to the ROV end's
+//! UDP port.
+//!
 //! SITL runs in real time and its EKF has a position only about 40 s after boot, so these tests
-//! take about two minutes; the two sessions run side by side on SITL instances of their own
+//! take about two minutes; the sessions run side by side on SITL instances of their own
 //! (numbers derived from the test's PID). SITL is killed by its PID whatever happens.
 //!
 //! The SITL directory: `ROVLINK_ARDUSUB_DIR`, else `CARGO_MANIFEST_DIR/../shared/peers/ardusub`,
@@ -139,6 +145,13 @@ fn wait_for<T>(
     }
 }
 
+/// A signed session's setup: the key file, and the UDP port the ROV end listens on
+/// (`udpin:`) for SITL's SERIAL1 (`--serial1 udpclient:127.0.0.1:PORT`).
+struct Signed {
+    key: PathBuf,
+    udp_port: u16,
+}
+
 /// A session: SITL, its watcher, link-sim, the ROV end and the operator end with a FIFO for
 /// orders. Everything stops when it is dropped.
 struct Session {
@@ -151,11 +164,27 @@ struct Session {
     /// When the operator started (its telemetry's t_s counts from there), wall s.
     operator_t0: f64,
     sitl: Sitl,
+    /// A signed session's UDP port, where the ROV end listens for SITL.
+    udp_port: Option<u16>,
 }
 
 impl Session {
     fn start(first_instance: u32, extra_parameters: Option<&str>) -> Session {
+        Session::start_with(first_instance, extra_parameters, false)
+    }
+
+    /// A session as [`Session::start`]; `signed`: the ROV end talks to SITL's SERIAL1 over
+    /// UDP (`udpin:`), signed with a key loaded into SITL first with
+    /// `scripts/mavlink-setup-signing.py` over SERIAL0, where the watcher then listens.
+    fn start_with(first_instance: u32, extra_parameters: Option<&str>, signed: bool) -> Session {
         let dir = tempfile::tempdir().unwrap();
+        let signed = signed.then(|| Signed {
+            key: crate::tdma_mavlink::key_file(
+                dir.path(),
+                std::array::from_fn(|k| (k as u8) ^ (std::process::id() as u8)),
+            ),
+            udp_port: crate::tdma_mavlink::free_udp_port(),
+        });
         let mut extra = Vec::new();
         if let Some(parameters) = extra_parameters {
             let file = dir.path().join("extra.parm");
@@ -166,15 +195,40 @@ impl Session {
                 format!("{},{}", defaults.display(), file.display()),
             ];
         }
+        if let Some(signed) = &signed {
+            extra.push("--serial1".to_string());
+            extra.push(format!("udpclient:127.0.0.1:{}", signed.udp_port));
+        }
         let sitl = Sitl::start(dir.path(), first_instance, &extra);
         let path = |name: &str| dir.path().join(name);
+        // The key goes in over SERIAL0 (SITL's USB, the link ArduPilot trusts unsigned), as
+        // before a dive over the tether; the script waits for a HEARTBEAT signed with it.
+        let mut watch_port = sitl.port(2);
+        if let Some(signed) = &signed {
+            let out = Command::new("python3")
+                .arg(concat!(
+                    env!("CARGO_MANIFEST_DIR"),
+                    "/scripts/mavlink-setup-signing.py"
+                ))
+                .args(["--connect", &format!("tcp:127.0.0.1:{}", sitl.port(0))])
+                .arg("--key-file")
+                .arg(&signed.key)
+                .args(["--timeout", "60"])
+                .stdin(Stdio::null())
+                .output()
+                .expect("python3 runs");
+            let said = String::from_utf8_lossy(&out.stderr);
+            assert!(out.status.success(), "mavlink-setup-signing.py: {said}");
+            eprintln!("{}", said.trim());
+            watch_port = sitl.port(0);
+        }
         let watch = Guard(
             Command::new("python3")
                 .arg(concat!(
                     env!("CARGO_MANIFEST_DIR"),
                     "/tests/mavlink/sitl_watch.py"
                 ))
-                .args(["--connect", &format!("tcp:127.0.0.1:{}", sitl.port(2))])
+                .args(["--connect", &format!("tcp:127.0.0.1:{watch_port}")])
                 .arg("--out")
                 .arg(path("watch.jsonl"))
                 .stdout(Stdio::null())
@@ -182,12 +236,22 @@ impl Session {
                 .expect("python3 runs"),
         );
         let (link, a, b) = crate::common::link_sim_pty(&crate::common::TEST_S100);
-        let mut rov = Command::new(TDMA_RUN)
-            .args(["--role", "rov", "--port", &b, "--duration", "600"])
-            .args([
+        let mut rov = Command::new(TDMA_RUN);
+        rov.args(["--role", "rov", "--port", &b, "--duration", "600"]);
+        match &signed {
+            Some(signed) => rov
+                .args([
+                    "--vehicle",
+                    &format!("mavlink:udpin:127.0.0.1:{}", signed.udp_port),
+                ])
+                .arg("--mavlink-key-file")
+                .arg(&signed.key),
+            None => rov.args([
                 "--vehicle",
                 &format!("mavlink:tcpout:127.0.0.1:{}", sitl.port(0)),
-            ])
+            ]),
+        };
+        let mut rov = rov
             .args(["--image-size", "400"])
             .arg("--metrics")
             .arg(path("rov.json"))
@@ -252,6 +316,7 @@ impl Session {
             _link: link,
             _watch: watch,
             operator_t0,
+            udp_port: signed.as_ref().map(|s| s.udp_port),
             sitl,
         }
     }
@@ -264,6 +329,83 @@ impl Session {
         let fifo = self.fifo.as_mut().unwrap();
         writeln!(fifo, "{line}").unwrap();
         fifo.flush().unwrap();
+    }
+
+    /// Arms in stabilize with neutral sticks; returns when SITL reported it armed (wall s).
+    fn arm(&mut self) -> f64 {
+        self.order(&velocity(0, "stabilize"));
+        wait_for(
+            "armed",
+            LIMIT,
+            || {
+                self.watched("mode")
+                    .iter()
+                    .find(|m| m["armed"] == true)
+                    .map(|m| m["t"].as_f64().unwrap())
+            },
+            || self.story(),
+        )
+    }
+
+    /// Waits until the operator's status has a position (no longer NP); returns when (wall s).
+    fn position_known(&self) -> f64 {
+        wait_for(
+            "a position in the operator's status",
+            LIMIT,
+            || {
+                self.statuses()
+                    .last()
+                    .filter(|(_, st)| st["position_known"] != false)
+                    .map(|(t, _)| *t)
+            },
+            || self.story(),
+        )
+    }
+
+    /// Sends the GoTo to [`GOTO_TARGET`] and waits until SITL's LOCAL_POSITION_NED is within
+    /// 0.3 m of it (the ROV's arrival bound); returns when it was sent and when reached (wall
+    /// s).
+    fn goto_reached(&mut self) -> (f64, f64) {
+        self.order(r#"{"type":"goto","x_cm":300,"y_cm":100,"z_cm":100,"heading_deg":0}"#);
+        let goto_at = wall_s();
+        let arrived_at = wait_for(
+            "the GoTo reached within 0.3 m",
+            LIMIT,
+            || {
+                self.watched("pos")
+                    .iter()
+                    .find(|p| {
+                        p["t"].as_f64().unwrap() > goto_at && distance(xyz(p), GOTO_TARGET) <= 0.3
+                    })
+                    .map(|p| p["t"].as_f64().unwrap())
+            },
+            || self.story(),
+        );
+        (goto_at, arrived_at)
+    }
+
+    /// Half a stick forward for `seconds`, then neutral: how far SITL's truth (SIMSTATE) says
+    /// the vehicle went, m.
+    fn half_stick_moves(&mut self, seconds: u64) -> f64 {
+        let before = self.watched("sim").last().cloned().unwrap();
+        self.order(&velocity(64, "stabilize"));
+        std::thread::sleep(Duration::from_secs(seconds));
+        self.order(&velocity(0, "stabilize"));
+        let after = wait_for(
+            "a SIMSTATE after the stick",
+            LIMIT,
+            || {
+                self.watched("sim")
+                    .last()
+                    .filter(|l| {
+                        l["t"].as_f64().unwrap() > before["t"].as_f64().unwrap() + seconds as f64
+                    })
+                    .cloned()
+            },
+            || self.story(),
+        );
+        (after["n"].as_f64().unwrap() - before["n"].as_f64().unwrap())
+            .hypot(after["e"].as_f64().unwrap() - before["e"].as_f64().unwrap())
     }
 
     fn watched(&self, kind: &str) -> Vec<Value> {
@@ -330,6 +472,9 @@ impl Session {
     }
 }
 
+/// The GoTo of the sessions, NED m.
+const GOTO_TARGET: [f64; 3] = [3.0, 1.0, 1.0];
+
 fn velocity(vx: i8, nav: &str) -> String {
     format!(
         r#"{{"type":"velocity","vx":{vx},"vy":0,"vz":0,"vyaw":0,"arm":true,"disarm":false,"nav":"{nav}"}}"#
@@ -354,20 +499,9 @@ fn first_instance() -> u32 {
 fn a_goto_on_the_real_ardusub_is_reached_and_held_and_the_pose_is_the_autopilots() {
     let started = Instant::now();
     let mut s = Session::start(first_instance(), None);
-    let target = [3.0, 1.0, 1.0];
+    let target = GOTO_TARGET;
     // Arm in stabilize, sticks neutral: armed, in ALT_HOLD (stick modes hold depth).
-    s.order(&velocity(0, "stabilize"));
-    let armed_at = wait_for(
-        "armed",
-        LIMIT,
-        || {
-            s.watched("mode")
-                .iter()
-                .find(|m| m["armed"] == true)
-                .map(|m| m["t"].as_f64().unwrap())
-        },
-        || s.story(),
-    );
+    let armed_at = s.arm();
     // Half forward stick for 14 s: it moves along its heading (SITL's own truth, SIMSTATE,
     // since the EKF may have no position yet).
     s.order(&velocity(64, "stabilize"));
@@ -420,33 +554,11 @@ fn a_goto_on_the_real_ardusub_is_reached_and_held_and_the_pose_is_the_autopilots
     );
     // The GoTo once the ROV has a position (the status no longer says NP): before that it
     // would be refused at once (the other test).
-    let position_at = wait_for(
-        "a position in the operator's status",
-        LIMIT,
-        || {
-            s.statuses()
-                .last()
-                .filter(|(_, st)| st["position_known"] != false)
-                .map(|(t, _)| *t)
-        },
-        || s.story(),
-    );
-    s.order(r#"{"type":"goto","x_cm":300,"y_cm":100,"z_cm":100,"heading_deg":0}"#);
-    let goto_at = wall_s();
-    let error_at = |p: &Value| distance(xyz(p), target);
+    let position_at = s.position_known();
     // Reached: within the ROV's own arrival bound, 0.3 m (depth included), from which on it
     // holds; then held within 0.5 m for 15 s.
-    let arrived_at = wait_for(
-        "the GoTo reached within 0.3 m",
-        LIMIT,
-        || {
-            s.watched("pos")
-                .iter()
-                .find(|p| p["t"].as_f64().unwrap() > goto_at && error_at(p) <= 0.3)
-                .map(|p| p["t"].as_f64().unwrap())
-        },
-        || s.story(),
-    );
+    let (goto_at, arrived_at) = s.goto_reached();
+    let error_at = |p: &Value| distance(xyz(p), target);
     let hold_to = arrived_at + 15.0;
     wait_for(
         "15 s of positions after the GoTo was reached",
@@ -553,18 +665,7 @@ fn a_goto_on_the_real_ardusub_is_reached_and_held_and_the_pose_is_the_autopilots
 #[test]
 fn without_a_position_source_a_goto_is_refused_at_once_and_the_sticks_still_work() {
     let mut s = Session::start(first_instance() + 1, Some("GPS1_TYPE 0\n"));
-    s.order(&velocity(0, "stabilize"));
-    wait_for(
-        "armed",
-        LIMIT,
-        || {
-            s.watched("mode")
-                .iter()
-                .find(|m| m["armed"] == true)
-                .map(|_| ())
-        },
-        || s.story(),
-    );
+    s.arm();
     // Past the time a GPS gives SITL a position (about 40 s after boot): still none.
     wait_for(
         "50 s of SITL's time",
@@ -582,23 +683,7 @@ fn without_a_position_source_a_goto_is_refused_at_once_and_the_sticks_still_work
         "LOCAL_POSITION_NED without GPS"
     );
     // The sticks work: half forward for 4 s moves it (SITL's truth).
-    let before = s.watched("sim").last().cloned().unwrap();
-    s.order(&velocity(64, "stabilize"));
-    std::thread::sleep(Duration::from_secs(4));
-    s.order(&velocity(0, "stabilize"));
-    let after = wait_for(
-        "a SIMSTATE after the stick",
-        LIMIT,
-        || {
-            s.watched("sim")
-                .last()
-                .filter(|l| l["t"].as_f64().unwrap() > before["t"].as_f64().unwrap() + 4.0)
-                .cloned()
-        },
-        || s.story(),
-    );
-    let moved = (after["n"].as_f64().unwrap() - before["n"].as_f64().unwrap())
-        .hypot(after["e"].as_f64().unwrap() - before["e"].as_f64().unwrap());
+    let moved = s.half_stick_moves(4);
     assert!(moved > 0.5, "moved {moved} m\n{}", s.story());
     // The GoTo: refused at once, with the reason, in the operator's status.
     s.order(r#"{"type":"goto","x_cm":300,"y_cm":100,"z_cm":100,"heading_deg":0}"#);
@@ -648,4 +733,243 @@ fn without_a_position_source_a_goto_is_refused_at_once_and_the_sticks_still_work
         op["statuses_without_position"].as_u64().unwrap() > 10,
         "{op}"
     );
+}
+
+/// What a spoofer heard on its own connection to SITL: the COMMAND_ACKs (answers to its own
+/// commands), by command id, and how many messages came at all.
+#[derive(Default)]
+struct Heard {
+    acks: Vec<u32>,
+    messages: u64,
+}
+
+/// A spoofer on SITL's SERIAL2 (TCP), speaking as the GCS (system 255 component 190) without
+/// the key; what SITL sends it is read aside into `heard`.
+struct Spoofer {
+    stream: std::net::TcpStream,
+    heard: std::sync::Arc<std::sync::Mutex<Heard>>,
+    sequence: u8,
+}
+
+impl Spoofer {
+    fn connect(port: u32) -> Spoofer {
+        use mavlink::dialects::ardupilotmega::MavMessage;
+        let stream = std::net::TcpStream::connect(("127.0.0.1", port as u16)).unwrap();
+        let heard = std::sync::Arc::new(std::sync::Mutex::new(Heard::default()));
+        let (reading, into) = (stream.try_clone().unwrap(), std::sync::Arc::clone(&heard));
+        std::thread::spawn(move || {
+            let mut reader = mavlink::MavlinkReader::new(reading);
+            loop {
+                match reader.read_any_message::<MavMessage>() {
+                    Ok((_, message)) => {
+                        let mut heard = into.lock().unwrap();
+                        heard.messages += 1;
+                        // ArduPilot answers a command on the port it came in by.
+                        if let MavMessage::COMMAND_ACK(ack) = message {
+                            heard.acks.push(ack.command as u32);
+                        }
+                    }
+                    Err(mavlink::error::MessageReadError::Io(_)) => return,
+                    Err(_) => {}
+                }
+            }
+        });
+        Spoofer {
+            stream,
+            heard,
+            sequence: 0,
+        }
+    }
+
+    /// Sends `message` as the GCS, signed with `signing` when given.
+    fn send(
+        &mut self,
+        message: &mavlink::dialects::ardupilotmega::MavMessage,
+        signing: Option<&mavlink::SigningData>,
+    ) {
+        let header = mavlink::MavHeader {
+            system_id: 255,
+            component_id: 190,
+            sequence: self.sequence,
+        };
+        self.sequence = self.sequence.wrapping_add(1);
+        mavlink::write_versioned_msg_signed(
+            &mut self.stream,
+            mavlink::MavlinkVersion::V2,
+            header,
+            message,
+            signing,
+        )
+        .unwrap();
+    }
+}
+
+fn command(
+    command: mavlink::dialects::ardupilotmega::MavCmd,
+    params: [f32; 2],
+) -> mavlink::dialects::ardupilotmega::MavMessage {
+    use mavlink::dialects::ardupilotmega::{COMMAND_LONG_DATA, MavMessage};
+    MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+        param1: params[0],
+        param2: params[1],
+        command,
+        target_system: 1,
+        target_component: 1,
+        ..COMMAND_LONG_DATA::DEFAULT
+    })
+}
+
+#[test]
+fn a_signed_session_on_the_real_ardusub_works_and_unsigned_commands_are_ignored_by_both() {
+    use mavlink::dialects::ardupilotmega::{MANUAL_CONTROL_DATA, MavCmd, MavMessage};
+    let mut s = Session::start_with(first_instance() + 101, None, true);
+    // Armed, sticks, a GoTo: as in the unsigned session, through the signed link.
+    s.arm();
+    let moved = s.half_stick_moves(5);
+    assert!(moved > 0.5, "the stick moved it {moved} m\n{}", s.story());
+    s.position_known();
+    let target = GOTO_TARGET;
+    let (goto_at, arrived_at) = s.goto_reached();
+    // The attack, for 8 s while the vehicle holds its GoTo: on SITL's SERIAL2, as the GCS
+    // (255) but unsigned, a forced disarm, MANUAL and full reverse sticks; on the ROV end's
+    // UDP port, from another port, a disarmed system 1 at (40, 40, 4).
+    let mut spoofer = Spoofer::connect(s.sitl.port(3));
+    let udp = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let udp_port = s.udp_port.unwrap();
+    let frames = crate::tdma_mavlink::spoofed_frames();
+    let spoof_from = wall_s();
+    for k in 0..80 {
+        let reverse = MavMessage::MANUAL_CONTROL(MANUAL_CONTROL_DATA {
+            x: -1000,
+            z: 500,
+            target: 1,
+            ..MANUAL_CONTROL_DATA::DEFAULT
+        });
+        spoofer.send(&reverse, None);
+        if k % 5 == 0 {
+            let disarm = command(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0, 21196.0]);
+            spoofer.send(&disarm, None);
+            spoofer.send(&command(MavCmd::MAV_CMD_DO_SET_MODE, [1.0, 19.0]), None);
+        }
+        for frame in &frames {
+            udp.send_to(frame, ("127.0.0.1", udp_port)).unwrap();
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let spoof_to = wall_s();
+    // The spoofer's link works: SITL talks to it, and a command signed with the key (a
+    // harmless one: send a HEARTBEAT) is answered, where none of the unsigned ones was.
+    let key_text = std::fs::read_to_string(s.dir.path().join("mavlink.key")).unwrap();
+    let key: [u8; 32] =
+        std::array::from_fn(|k| u8::from_str_radix(&key_text[2 * k..2 * k + 2], 16).unwrap());
+    let signing =
+        mavlink::SigningData::from_config(mavlink::SigningConfig::new(key, 1, true, false));
+    let request = command(MavCmd::MAV_CMD_REQUEST_MESSAGE, [0.0, 0.0]);
+    wait_for(
+        "an answer to the signed command",
+        LIMIT,
+        || {
+            spoofer.send(&request, Some(&signing));
+            let heard = spoofer.heard.lock().unwrap();
+            heard
+                .acks
+                .contains(&(MavCmd::MAV_CMD_REQUEST_MESSAGE as u32))
+                .then_some(())
+        },
+        || s.story(),
+    );
+    {
+        let heard = spoofer.heard.lock().unwrap();
+        assert!(heard.messages > 10, "SITL never spoke to the spoofer");
+        let answered: Vec<&u32> = heard
+            .acks
+            .iter()
+            .filter(|&&c| c != MavCmd::MAV_CMD_REQUEST_MESSAGE as u32)
+            .collect();
+        assert!(
+            answered.is_empty(),
+            "unsigned commands answered: {answered:?}"
+        );
+    }
+    // ArduSub stayed armed in GUIDED and held its place through the attack (2 s more for
+    // what was in flight).
+    wait_for(
+        "2 s of positions after the attack",
+        LIMIT,
+        || {
+            s.watched("pos")
+                .last()
+                .filter(|p| p["t"].as_f64().unwrap() >= spoof_to + 2.0)
+                .map(|_| ())
+        },
+        || s.story(),
+    );
+    let modes = s.watched("mode");
+    let last_mode = modes
+        .iter()
+        .rfind(|m| m["t"].as_f64().unwrap() <= arrived_at);
+    assert!(
+        modes
+            .iter()
+            .filter(|m| m["t"].as_f64().unwrap() > arrived_at)
+            .chain(last_mode)
+            .all(|m| m["armed"] == true && m["mode"] == 4),
+        "the attack changed the arm state or mode: {modes:?}\n{}",
+        s.story()
+    );
+    let held: Vec<f64> = s
+        .watched("pos")
+        .iter()
+        .filter(|p| (spoof_from..=spoof_to + 2.0).contains(&p["t"].as_f64().unwrap()))
+        .map(|p| distance(xyz(p), target))
+        .collect();
+    let worst = held.iter().copied().fold(0.0, f64::max);
+    assert!(
+        held.len() >= 10 && worst <= 0.5,
+        "held within {worst:.2} m ({} positions) under the attack\n{}",
+        held.len(),
+        s.story()
+    );
+    // And the operator never saw the spoofer's vehicle.
+    let statuses = s.statuses();
+    assert!(
+        statuses.iter().all(|(_, st)| {
+            let ours = ["x_cm", "y_cm", "z_cm"].map(|k| st[k].as_f64().unwrap() / 100.0);
+            distance(ours, [40.0, 40.0, 4.0]) > 30.0
+        }),
+        "the spoofer's position reached the operator\n{}",
+        s.story()
+    );
+    let last = statuses.last().map(|(_, st)| st.clone()).unwrap();
+    assert_eq!(last["arm"], true, "{last}");
+    assert_eq!(last["nav"], "guided", "{last}");
+    eprintln!(
+        "signed SITL session: moved {moved:.2} m on the stick; GoTo reached {:.1} s after it \
+         was sent; held within {worst:.2} m ({} positions) through 8 s of unsigned disarm, \
+         MANUAL and full-reverse commands; {} messages from SITL on the spoofer's port, no \
+         answer to an unsigned command",
+        arrived_at - goto_at,
+        held.len(),
+        spoofer.heard.lock().unwrap().messages
+    );
+    // What the ROV end said (its stderr file goes with the session).
+    let said = std::fs::read_to_string(s.path("rov.err")).unwrap();
+    let (op, rov) = s.finish();
+    assert_eq!(op["orders_acknowledged"], 1, "{op}");
+    assert_eq!(rov["orders_executed"], 1, "{rov}");
+    let refused = &rov["mavlink_refused"];
+    assert!(refused["other_address"].as_u64().unwrap_or(0) > 0, "{rov}");
+    // Everything SITL sent was signed with the key and new.
+    for reason in ["unsigned", "bad_signature", "replayed", "other_system"] {
+        assert!(refused.get(reason).is_none(), "{reason}: {rov}");
+    }
+    assert!(
+        said.contains("signed: only messages signed with the key are used"),
+        "{said}"
+    );
+    let refusal_lines = said
+        .lines()
+        .filter(|l| l.contains("mavlink: refused"))
+        .count();
+    assert_eq!(refusal_lines, 1, "{said}");
 }

@@ -16,6 +16,15 @@ has a position (--position-after S; --no-position: never, like GPS1_TYPE 0); pos
 (rises at 0.08 m/s to the surface unless ALT_HOLD, POSHOLD or GUIDED holds its depth); the GCS
 failsafe (armed, a GCS once heard, then 5 s without its HEARTBEAT and MANUAL_CONTROL: disarmed).
 
+With --key-file FILE (64 hex digits, or 32 raw bytes) it signs everything it sends (MAVLink 2
+signing, pymavlink's) and takes only messages signed with that key, as ArduSub does once
+SETUP_SIGNING gave it the key; what it refused is counted (bad_signatures). With --forgeries it
+also sends, from its own address, every second: a LOCAL_POSITION_NED at (40, 40, 4) unsigned,
+the same signed with another key, and a replay of its first signed LOCAL_POSITION_NED
+(forgeries: how many of each were sent). With --key-behind S its signing clock starts S seconds
+behind the wall clock (an autopilot without a clock of its own, on the time it last saved) and,
+as ArduPilot's and pymavlink's do, catches up with the newest signed timestamp it accepts.
+
 At exit (after --seconds, or on SIGTERM/SIGINT) it writes what it saw as JSON to --report:
 armed (ever), armed_now, modes (every mode switched to), max_manual_x, manual_controls,
 last_manual, setpoints ([x, y, z, yaw]), setpoint_frame, commands (names), gcs ([system,
@@ -24,6 +33,7 @@ component] of the GCS heartbeats), gcs_heartbeats, position ([x, y, z] NED m), h
 Usage: ardusub.py (--connect udpout:HOST:PORT | --listen udpin:HOST:PORT | tcp:HOST:PORT ...)
                   --report FILE [--seconds N] [--deny-arm] [--start X,Y,Z]
                   [--position-after S | --no-position]
+                  [--key-file FILE [--forgeries] [--key-behind S]]
 """
 
 import argparse
@@ -76,6 +86,9 @@ class Sub:
         self.gcs_heard = None
         self.failsafes = 0
         self.modes_refused = 0
+        self.bad_signatures = 0
+        self.forgeries = 0
+        self.first_position = None
 
     def has_position(self):
         return self.position_after is not None and time.monotonic() - self.started >= self.position_after
@@ -177,8 +190,27 @@ class Sub:
         x, y, z = self.position
         vx, vy, vz = self.velocity
         if self.has_position():
-            self.mav.local_position_ned_send(self.boot_ms(), x, y, z, vx, vy, vz)
+            msg = self.mav.local_position_ned_encode(self.boot_ms(), x, y, z, vx, vy, vz)
+            self.mav.send(msg)
+            if self.first_position is None:
+                self.first_position = bytes(msg.get_msgbuf())
         self.mav.attitude_send(self.boot_ms(), 0.0, 0.0, self.yaw, 0.0, 0.0, self.yaw_rate)
+
+    def send_forgeries(self):
+        """A LOCAL_POSITION_NED at (40, 40, 4) unsigned and signed with another key, and a
+        replay of the first signed one (needs signing)."""
+        signing = self.mav.signing
+        fake = self.mav.local_position_ned_encode(self.boot_ms(), 40.0, 40.0, 4.0, 0, 0, 0)
+        signing.sign_outgoing = False
+        self.mav.send(fake)
+        signing.sign_outgoing = True
+        key = signing.secret_key
+        signing.secret_key = bytes(32 * [0x5A])
+        self.mav.send(self.mav.local_position_ned_encode(self.boot_ms(), 40.0, 40.0, 4.0, 0, 0, 0))
+        signing.secret_key = key
+        if self.first_position is not None:
+            self.conn.write(self.first_position)
+        self.forgeries += 1
 
     def report(self):
         return {
@@ -198,7 +230,17 @@ class Sub:
             "heading_deg": math.degrees(self.yaw) % 360.0,
             "modes_refused": self.modes_refused,
             "failsafes": self.failsafes,
+            "bad_signatures": self.bad_signatures,
+            "forgeries": self.forgeries,
         }
+
+
+def read_key(path):
+    """A key file: 64 hex digits (and a newline), or 32 raw bytes."""
+    data = open(path, "rb").read()
+    if len(data) == 32:
+        return data
+    return bytes.fromhex(data.decode().strip())
 
 
 def main():
@@ -213,7 +255,12 @@ def main():
     fix = parser.add_mutually_exclusive_group()
     fix.add_argument("--position-after", type=float, default=0.0, help="a position this many s after start")
     fix.add_argument("--no-position", action="store_true", help="never a position (GPS1_TYPE 0)")
+    parser.add_argument("--key-file", help="sign with this key, take only what it signed")
+    parser.add_argument("--forgeries", action="store_true", help="also send forged positions (with --key-file)")
+    parser.add_argument("--key-behind", type=float, default=0.0, help="start the signing clock this many s behind")
     args = parser.parse_args()
+    if args.forgeries and not args.key_file:
+        parser.error("--forgeries needs --key-file")
     start = [float(v) for v in args.start.split(",")]
     if len(start) != 3:
         parser.error("--start: expected X,Y,Z")
@@ -225,6 +272,9 @@ def main():
         dialect="ardupilotmega",
         autoreconnect=True,
     )
+    if args.key_file:
+        initial = int((time.time() - 1420070400 - args.key_behind) * 100000)
+        conn.setup_signing(read_key(args.key_file), sign_outgoing=True, initial_timestamp=initial)
     sub = Sub(conn, args.deny_arm, start, None if args.no_position else args.position_after)
     stopping = []
     signal.signal(signal.SIGTERM, lambda *_: stopping.append(1))
@@ -241,12 +291,16 @@ def main():
             if now >= next_heartbeat:
                 next_heartbeat += 1.0
                 sub.send_heartbeat()
+                if args.forgeries:
+                    sub.send_forgeries()
             sub.send_state()
         try:
             msg = conn.recv_match(blocking=True, timeout=max(0.0, min(0.05, next_tick - time.monotonic())))
         except (ConnectionError, OSError):
             msg = None
-        if msg is not None and msg.get_type() != "BAD_DATA":
+        if msg is not None and msg.get_type() == "BAD_DATA" and "signature" in str(msg.reason):
+            sub.bad_signatures += 1
+        elif msg is not None and msg.get_type() != "BAD_DATA":
             sub.handle(msg)
 
     with open(args.report, "w") as out:

@@ -561,6 +561,8 @@ impl View {
                 rovlink_rcp::autopilot::DriveEvent::Note(note) => {
                     events(INFO, &format!("vehicle: {note}"))
                 }
+                // Counted in the metrics; the drive's note said it once per source.
+                rovlink_rcp::autopilot::DriveEvent::MessagesRefused { .. } => Vec::new(),
             },
             Event::CameraFailed(why) => events(WARNING, &format!("camera: {why}")),
             Event::AnswersLost => line(Topic::Log, WARNING, "answers lost: no ROV frame for 5 s"),

@@ -692,6 +692,19 @@ impl Datagrams {
         rovlink_base::io::warn(&program_name(), &line);
     }
 
+    /// Receives one datagram and says who sent it, without learning the sender as the peer:
+    /// the caller decides whom to answer ([`Datagrams::set_peer`]).
+    pub fn recv_from(&self, buf: &mut [u8]) -> io::Result<(usize, SocketAddr)> {
+        self.socket.recv_from(buf)
+    }
+
+    /// Makes `addr` the peer of a socket that learns its peer (`udpin:`); a fixed peer stays.
+    pub fn set_peer(&self, addr: SocketAddr) {
+        if let Peer::Learned(learned) = &self.peer {
+            *learned.lock().unwrap_or_else(PoisonError::into_inner) = Some(addr);
+        }
+    }
+
     /// Sends one datagram to the peer; false when there is no peer yet (the packet is lost).
     pub fn send(&self, packet: &[u8]) -> io::Result<bool> {
         match self.peer() {

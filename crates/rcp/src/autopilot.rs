@@ -100,6 +100,16 @@ pub enum DriveEvent {
     },
     /// Anything else worth a line (e.g. a mode the autopilot has no number for).
     Note(String),
+    /// Messages from the link that were not used since the last step, `count` of them for
+    /// `reason` (a MAVLink autopilot's: `unsigned`, `bad_signature`, `replayed`,
+    /// `other_address`, `other_system`): summed in the metrics, said once per source as a
+    /// [`DriveEvent::Note`] by the drive.
+    MessagesRefused {
+        /// Why, as the metrics name it.
+        reason: &'static str,
+        /// How many.
+        count: u64,
+    },
 }
 
 /// A vehicle the ROV engine drives, stepped every vehicle step.

@@ -75,6 +75,12 @@ impl Tally {
             (Role::Rov, Event::Vehicle(crate::autopilot::DriveEvent::Refused { .. })) => {
                 m.refusals += 1;
             }
+            (
+                Role::Rov,
+                Event::Vehicle(crate::autopilot::DriveEvent::MessagesRefused { reason, count }),
+            ) => {
+                *m.mavlink_refused.entry(*reason).or_default() += count;
+            }
             (Role::Operator, Event::Status(repr)) => {
                 if let rovlink_wire::Message::Rov(rovlink_wire::rov::Repr {
                     status: rovlink_wire::rov::Status::Basic(status),

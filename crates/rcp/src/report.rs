@@ -67,6 +67,10 @@ pub struct Metrics {
     /// vehicle refused); the operator counts each status whose WHY turned to a reason.
     #[serde(skip_serializing_if = "is_zero")]
     pub refusals: u64,
+    /// ROV with a MAVLink autopilot: messages from the link not used, by reason (`unsigned`,
+    /// `bad_signature`, `replayed`, `other_address`, `other_system`; absent when none).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub mavlink_refused: BTreeMap<&'static str, u64>,
     /// Operator: statuses that said the vehicle has no position estimate (absent when none).
     #[serde(skip_serializing_if = "is_zero")]
     pub statuses_without_position: u64,

@@ -6,7 +6,8 @@ use std::collections::VecDeque;
 
 use mavlink::MavHeader;
 use mavlink::dialects::ardupilotmega::{
-    HEARTBEAT_DATA, MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavResult, MavSeverity, MavType,
+    HEARTBEAT_DATA, MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavResult, MavSeverity,
+    MavState, MavType,
 };
 
 use super::MAX_QUEUED;
@@ -117,6 +118,18 @@ pub fn manual_control_axes(thrust_percent: [f64; 4]) -> [i16; 4] {
 /// MANUAL_CONTROL with the sticks centred.
 pub const NEUTRAL_AXES: [i16; 4] = [0, 0, 500, 0];
 
+/// Our HEARTBEAT: a ground station (MAV_TYPE_GCS, no autopilot), active.
+pub(super) fn gcs_heartbeat() -> MavMessage {
+    MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+        custom_mode: 0,
+        mavtype: MavType::MAV_TYPE_GCS,
+        autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+        base_mode: MavModeFlag::empty(),
+        system_status: MavState::MAV_STATE_ACTIVE,
+        mavlink_version: 3,
+    })
+}
+
 /// The autopilot the link settled on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) struct Autopilot {
@@ -144,6 +157,8 @@ pub(super) struct Inbox {
     pub(super) attitude_warned: bool,
     pub(super) acks: VecDeque<(MavCmd, MavResult)>,
     pub(super) notes: VecDeque<String>,
+    /// Frames refused, by [`super::Refusal`] (its order).
+    pub(super) refused: [u64; 5],
 }
 
 /// The fields of LOCAL_POSITION_NED kept, with the largest magnitude each may have: x, y, z

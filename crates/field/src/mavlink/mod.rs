@@ -40,20 +40,33 @@
 //! The messages kept between two steps are bounded ([`MAX_QUEUED`]). Dropping the drive stops
 //! the thread and waits for it (at most a read timeout, or a reconnect attempt).
 //!
+//! Who is listened to. With a key ([`MavlinkOptions::key`], tdma-run's `--mavlink-key-file`)
+//! every frame sent is signed (MAVLink 2 signing, 13 bytes more a frame) and a frame heard is
+//! used only when it is signed with that key and its timestamp is newer than its stream's last
+//! one; without a key nothing is signed or checked. Over UDP the first autopilot heard (its
+//! address and system id; with a key, a signed HEARTBEAT) is the only one listened to and
+//! answered from then on: a `udpin:` socket no longer follows whoever sent last. What is
+//! refused is counted by reason ([`Refusal`], [`DriveEvent::MessagesRefused`], the metrics'
+//! `mavlink_refused`) and said once per reason and source ([`DriveEvent::Note`], and on stderr
+//! when [`MavlinkOptions::tool`] is set).
+//!
 //! By concern: `transport.rs` is the connection (the endpoint in the one device grammar, opened
-//! by the one opener, MAVLink framing over it, the receiving thread and TCP's reconnects);
+//! by the one opener, MAVLink framing over it, the receiving thread and its gate, TCP's
+//! reconnects); `signing.rs` the key and the signatures;
 //! `codec.rs` what the messages mean (ArduSub's modes and NAV, the stick axes, what the heard
 //! messages leave in the inbox); this file the options and the drive's state machine. The
 //! public paths are this module's (`rcp::mavlink::manual_control_axes`, ...).
 
 mod codec;
+mod signing;
 mod transport;
 
 pub use codec::{
     ALT_HOLD, GUIDED, NEUTRAL_AXES, OTHER_MODE_NAV, POSHOLD, ardusub_mode_name, custom_mode_of,
     demanded_mode, manual_control_axes, nav_of_custom_mode,
 };
-pub use transport::parse_endpoint;
+pub use signing::{KEY_BYTES, KeyError, Refusal, SIGNATURE_BYTES, SigningKey};
+pub use transport::{MAX_SOURCES_SAID, parse_endpoint};
 
 use std::io;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -63,9 +76,8 @@ use std::time::Duration;
 
 use mavlink::MavHeader;
 use mavlink::dialects::ardupilotmega::{
-    COMMAND_LONG_DATA, HEARTBEAT_DATA, MANUAL_CONTROL_DATA, MavAutopilot, MavCmd, MavFrame,
-    MavMessage, MavModeFlag, MavResult, MavState, MavType, PositionTargetTypemask,
-    SET_POSITION_TARGET_LOCAL_NED_DATA,
+    COMMAND_LONG_DATA, MANUAL_CONTROL_DATA, MavCmd, MavFrame, MavMessage, MavModeFlag, MavResult,
+    PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
 
 use codec::{Autopilot, Inbox};
@@ -75,7 +87,8 @@ use rovlink_rcp::autopilot::{Demand, Drive, DriveEvent, DriveState};
 use rovlink_rcp::vehicle::{Command, Vehicle, angle_diff_deg};
 use rovlink_wire::Nav;
 use rovlink_wire::rov::Why;
-use transport::{Shared, lock, receive};
+use signing::Signing;
+use transport::{Gate, Shared, lock, receive};
 
 /// How often an arm or mode request the autopilot has not met is sent again, s.
 pub const COMMAND_RETRY_S: f64 = 1.5;
@@ -159,6 +172,13 @@ pub struct MavlinkOptions {
     /// GoTo arrival heading error, degrees. 5: the built-in model's bound and about what a
     /// compass on a small ROV can be trusted to.
     pub arrival_deg: f64,
+    /// The MAVLink 2 signing key: everything sent is signed with it and only what is signed
+    /// with it (each frame newer than its stream's last) is used. `None`: nothing signed,
+    /// nothing checked.
+    pub key: Option<SigningKey>,
+    /// A tool's name: refusals are also said on stderr as `TOOL: mavlink: refused ...`
+    /// (`None`: only as notes).
+    pub tool: Option<&'static str>,
 }
 
 impl Default for MavlinkOptions {
@@ -171,6 +191,8 @@ impl Default for MavlinkOptions {
             silence_s: 3.0,
             arrival_m: 0.3,
             arrival_deg: 5.0,
+            key: None,
+            tool: None,
         }
     }
 }
@@ -350,6 +372,8 @@ pub struct MavlinkDrive {
     mode_text: Option<String>,
     /// The refusals last reported (arm, mode), so that each is said once.
     refusals_said: [Option<String>; 2],
+    /// Frames refused by the gate so far, by [`Refusal`] (its order), as last reported.
+    refused: [u64; 5],
     send_error: Option<String>,
 }
 
@@ -366,12 +390,17 @@ pub fn connect(endpoint: &str, options: &MavlinkOptions) -> Result<MavlinkDrive,
         conn: Mutex::new(conn),
         inbox: Mutex::new(Inbox::default()),
         stop: AtomicBool::new(false),
+        // Link id 0: our one link to the autopilot.
+        signing: options
+            .key
+            .clone()
+            .map(|key| Arc::new(Signing::new(key, 0))),
     });
     let thread_shared = Arc::clone(&shared);
-    let our_system = options.system_id;
+    let gate = Gate::new(options.system_id, options.tool);
     let thread = std::thread::Builder::new()
         .name("mavlink-receive".to_string())
-        .spawn(move || receive(&thread_shared, reopen, our_system))
+        .spawn(move || receive(&thread_shared, reopen, gate))
         .map_err(|source| MavlinkError::Open {
             endpoint: endpoint.to_string(),
             action: "start its receiving thread",
@@ -417,6 +446,7 @@ pub fn connect(endpoint: &str, options: &MavlinkOptions) -> Result<MavlinkDrive,
         mode_result: None,
         mode_text: None,
         refusals_said: [None, None],
+        refused: [0; 5],
         send_error: None,
     })
 }
@@ -430,6 +460,17 @@ impl MavlinkDrive {
     /// The autopilot's system and component ids, once its HEARTBEAT was heard.
     pub fn autopilot(&self) -> Option<(u8, u8)> {
         self.target.map(|a| (a.system, a.component))
+    }
+
+    /// Frames refused so far, by reason (those not yet taken by a step included).
+    pub fn refused(&self) -> [(Refusal, u64); 5] {
+        let counts = lock(&self.shared.inbox).refused;
+        std::array::from_fn(|k| (Refusal::ALL[k], counts[k]))
+    }
+
+    /// True when what is sent is signed (a key was given).
+    pub fn signed(&self) -> bool {
+        self.shared.signing.is_some()
     }
 
     /// The autopilot's custom mode from its last HEARTBEAT.
@@ -447,7 +488,7 @@ impl MavlinkDrive {
             component_id: self.options.component_id,
             sequence: 0,
         };
-        match conn.send(&header, message) {
+        match conn.send(&header, message, self.shared.signing.as_deref()) {
             Ok(_) => self.send_error = None,
             Err(error) => {
                 let text = format!("mavlink {}: send failed: {error}", self.endpoint);
@@ -538,7 +579,7 @@ impl MavlinkDrive {
 
     /// Takes over what the receiving thread learnt.
     fn absorb(&mut self, now: SimTime) {
-        let (autopilot, heard, heartbeat, position, attitude, counts, acks, notes) = {
+        let (autopilot, heard, heartbeat, position, attitude, counts, acks, notes, refused) = {
             let mut inbox = lock(&self.shared.inbox);
             (
                 inbox.autopilot,
@@ -549,6 +590,7 @@ impl MavlinkDrive {
                 [inbox.attitudes, inbox.positions],
                 std::mem::take(&mut inbox.acks),
                 std::mem::take(&mut inbox.notes),
+                inbox.refused,
             )
         };
         for note in &notes {
@@ -557,6 +599,16 @@ impl MavlinkDrive {
             }
         }
         self.events.extend(notes.into_iter().map(DriveEvent::Note));
+        for (k, reason) in Refusal::ALL.into_iter().enumerate() {
+            let count = refused[k] - self.refused[k];
+            if count > 0 {
+                self.events.push(DriveEvent::MessagesRefused {
+                    reason: reason.name(),
+                    count,
+                });
+            }
+        }
+        self.refused = refused;
         if autopilot != self.target {
             self.target = autopilot;
             self.streams = [Stream::new(30), Stream::new(32)];
@@ -678,14 +730,7 @@ impl Drive for MavlinkDrive {
             0.0
         };
         if self.heartbeat.due(now, slack_s) {
-            self.send(&MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-                custom_mode: 0,
-                mavtype: MavType::MAV_TYPE_GCS,
-                autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
-                base_mode: MavModeFlag::empty(),
-                system_status: MavState::MAV_STATE_ACTIVE,
-                mavlink_version: 3,
-            }));
+            self.send(&codec::gcs_heartbeat());
         }
         let goto = match demand.command {
             Command::GoTo {

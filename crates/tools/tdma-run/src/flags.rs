@@ -255,12 +255,23 @@ pub struct Args {
 
     /// What moves the vehicle: `sim` (the built-in model) or `mavlink:ENDPOINT`, an ArduSub
     /// autopilot (real time, --role rov) at a device (see Devices below): udpin:127.0.0.1:14550
-    /// (listen; the first sender is the autopilot), udpout:HOST:PORT, tcp:HOST:PORT, tcpin:HOST:PORT or
+    /// (listen; the first autopilot heard, its address and system id, is the only one listened
+    /// to and answered), udpout:HOST:PORT, tcp:HOST:PORT, tcpin:HOST:PORT or
     /// serial:/dev/ttyACM0:115200. Aliases, as before: udp:HOST:PORT = udpin:HOST:PORT (here
     /// as for --port, udp: with = is BIND=PEER), tcpout:HOST:PORT = tcp:HOST:PORT.
     #[arg(long, value_name = "sim|mavlink:ENDPOINT", default_value = "sim",
           value_parser = vehicle, help_heading = "Field")]
     pub vehicle: Vehicle,
+
+    /// With --vehicle mavlink:...: sign every MAVLink message sent to the autopilot with this
+    /// MAVLink 2 signing key and use only messages signed with it (unsigned, badly signed and
+    /// replayed ones are refused, counted in --metrics as mavlink_refused, said once per
+    /// source). FILE holds 64 hex digits and an optional newline, or exactly 32 raw bytes,
+    /// mode 0600, e.g. made with `head -c 32 /dev/urandom | xxd -p -c 64 > key; chmod 600
+    /// key` and loaded into ArduSub with scripts/mavlink-setup-signing.py (see
+    /// docs/tdma-mavlink.md). Without it MAVLink is unsigned (said once on stderr).
+    #[arg(long, value_name = "FILE", help_heading = "Field")]
+    pub mavlink_key_file: Option<PathBuf>,
 
     /// Camera: the newest image file in DIR at each capture.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["images", "camera_cmd"],
@@ -375,6 +386,7 @@ impl Args {
             &self.model.model_file,
             &self.scenario,
             &self.routes,
+            &self.mavlink_key_file,
         ]
         .into_iter()
         .flatten()

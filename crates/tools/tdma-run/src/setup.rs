@@ -54,6 +54,13 @@ pub(super) fn field_usage(args: &Args, role: Option<Role>) -> Result<()> {
         )
         .into());
     }
+    if args.mavlink_key_file.is_some() && !matches!(args.vehicle, Vehicle::Mavlink(_)) {
+        return Err(UsageError(
+            "--mavlink-key-file signs the MAVLink of --vehicle mavlink:...: found --vehicle sim"
+                .into(),
+        )
+        .into());
+    }
     let checks = [
         (rov_side, "--camera", args.camera.is_some(), "the ROV end"),
         (
@@ -82,10 +89,33 @@ pub(super) fn field_usage(args: &Args, role: Option<Role>) -> Result<()> {
 pub(super) fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
     let mut parts = Parts::from_config(config);
     if let Vehicle::Mavlink(endpoint) = &args.vehicle {
-        let options = rovlink_field::mavlink::MavlinkOptions::default();
-        let drive = rovlink_field::mavlink::connect(endpoint, &options)
+        use rovlink_field::mavlink::{MavlinkOptions, SigningKey, connect};
+        let key = (args.mavlink_key_file.as_deref())
+            .map(SigningKey::read)
+            .transpose()
+            .map_err(|e| rovlink_base::UsageError(format!("--mavlink-key-file: {e}")))?;
+        let options = MavlinkOptions {
+            key,
+            tool: Some(crate::TOOL),
+            ..MavlinkOptions::default()
+        };
+        let drive = connect(endpoint, &options)
             .map_err(|e| rovlink_base::UsageError(format!("--vehicle: {e}")))?;
-        say!("vehicle: ArduSub over MAVLink at {}", drive.endpoint());
+        if drive.signed() {
+            say!(
+                "vehicle: ArduSub over MAVLink at {}, signed: only messages signed with the key \
+                 are used",
+                drive.endpoint()
+            );
+        } else {
+            say!("vehicle: ArduSub over MAVLink at {}", drive.endpoint());
+            say!(
+                "warning: MAVLink is unsigned: anyone who can reach {} can command the \
+                 autopilot and feed the operator a pose (give --mavlink-key-file; see \
+                 docs/tdma-mavlink.md)",
+                drive.endpoint()
+            );
+        }
         parts.drive = Box::new(drive);
     }
     if let Some(dir) = &args.camera {

@@ -272,6 +272,8 @@ impl Telemetry {
                 "note",
                 [("text", text.as_str().into())],
             ),
+            // Counted in the metrics; the drive's note said it once per source.
+            DriveEvent::MessagesRefused { .. } => Ok(()),
         }
     }
 
