@@ -838,3 +838,87 @@ fn hostile_key_files_are_refused_in_one_line() {
         }
     }
 }
+
+#[test]
+fn secured_frames_match_an_independent_python_implementation() {
+    use std::process::Command;
+    let probe = Command::new("python3")
+        .args(["-c", "import cryptography"])
+        .output();
+    match probe {
+        Err(e) => {
+            println!("skipped: python3 cannot be started ({e})");
+            return;
+        }
+        Ok(o) if !o.status.success() => {
+            println!(
+                "skipped: the Python module `cryptography` is missing (pip install cryptography)"
+            );
+            return;
+        }
+        Ok(_) => {}
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let k128 = key_file(dir.path(), "k128", KEY_128);
+    let key_256 = "603deb1015ca71be2b73aef0857d77811f352c073b6108d72d9810a30914dff4";
+    let k256 = key_file(dir.path(), "k256", key_256);
+    let rov = String::from_utf8(vectors_jsonl())
+        .unwrap()
+        .lines()
+        .next()
+        .unwrap()
+        .to_string();
+    let mut groups: Vec<String> = Vec::new();
+    let cases = [
+        (&k128, KEY_128, GOTO, "1", false),
+        (&k128, KEY_128, GOTO, "16385", true),
+        (&k128, KEY_128, rov.as_str(), "16385", false),
+        (&k128, KEY_128, rov.as_str(), "1", true),
+        (&k256, key_256, GOTO, "12345", true),
+    ];
+    for (file, key, line, counter, encrypt) in cases {
+        let plain = packed_frames(&[], &format!("{line}\n")).concat();
+        let mut args = vec!["--key-file", file.to_str().unwrap(), "--counter", counter];
+        if encrypt {
+            args.push("--encrypt");
+        }
+        let sealed = packed_frames(&args, &format!("{line}\n")).concat();
+        groups.extend([
+            key.to_string(),
+            if encrypt {
+                format!("e:{counter}")
+            } else {
+                counter.to_string()
+            },
+            rovlink_wire::json::encode_hex(&plain),
+            rovlink_wire::json::encode_hex(&sealed),
+        ]);
+    }
+    let script =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/secured-frame-check.py");
+    let out = Command::new("python3")
+        .arg(&script)
+        .args(&groups)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(
+        stdout.lines().filter(|l| l.starts_with("ok ")).count(),
+        cases.len(),
+        "{stdout}"
+    );
+    // The script tells a wrong frame from a right one.
+    let mut wrong = groups[..4].to_vec();
+    wrong[1] = "2".into();
+    let out = Command::new("python3")
+        .arg(&script)
+        .args(&wrong)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+}

@@ -21,6 +21,8 @@ pub mod key;
 pub mod sealed;
 pub mod stream;
 pub mod suite;
+#[cfg(test)]
+mod vectors;
 
 pub use guard::{Guard, Opened, Refusal, SealError};
 pub use key::{Key, KeyError, KeyRing};
