@@ -660,6 +660,22 @@ fn a_wrong_key_a_replay_and_a_plain_frame_fail_verification() {
         stderr.contains("offset 44: frame 0->2 refused: replay"),
         "{stderr}"
     );
+    let summary = dir.path().join("summary.json");
+    let out = run(
+        DUMP,
+        &[
+            "-q",
+            "--key-file",
+            k,
+            "--summary",
+            summary.to_str().unwrap(),
+        ],
+        &replayed.concat(),
+    );
+    assert_eq!(out.code, 1);
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    assert_eq!(v["verdicts"], serde_json::json!({"ok": 2, "replay": 2}));
     // Every frame is listed: a refused one as its raw payload.
     assert_eq!(
         lines[2]["payload"].as_str().unwrap(),

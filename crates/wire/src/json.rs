@@ -11,6 +11,11 @@
 //! Fields the reader does not know (such as the `offset` and `error` that `rcp-dump` adds) are
 //! ignored. Every field the type needs is required.
 //!
+//! Secured frames (docs/wire-extensions.md): `rcp-dump --key-file` adds `secured`,
+//! `encrypted`, `ctr` (the verified counter) or `ctr_low` (the low bits carried) and `verdict`;
+//! `rcp-pack --key-file` reads `ctr` ([`counter_field`]) to seal a frame with that counter and
+//! ignores the rest.
+//!
 //! No-panic contract: [`parse_line`] returns a [`JsonError`] naming the field, what was
 //! expected and what was found, on any text.
 

@@ -20,9 +20,10 @@ Examples:
 Secured frames (docs/wire-extensions.md): without --key-file a secured frame is printed as a
 raw payload marked `secured, ctr low bits N: unverified`. With --key-file every frame gets
 `secured`, `encrypted`, `ctr` (the full counter, when verified) or `ctr_low`, and `verdict`: ok,
-or why a receiving node would refuse it: bad_tag (forged, damaged or another key), replay (at or
-below a counter already accepted from that SRC to that DST earlier in the stream), no_key,
-malformed, unsecured (a plain frame). A refused frame is still printed, as its raw payload; an
+or why a receiving node would refuse it: bad_tag (forged, damaged or another key), replay
+(authentic, but at or below the highest counter accepted from that SRC to that DST earlier in the
+stream; a copy more than 2^14 counters older reads as bad_tag), no_key, malformed, unsecured (a
+plain frame). A refused frame is still printed, as its raw payload; an
 ok frame as the message inside, decrypted. CSV adds these columns only with --key-file (without
 it the note is in the error column).
 

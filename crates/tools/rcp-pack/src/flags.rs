@@ -19,7 +19,8 @@ Secured frames (docs/wire-extensions.md; the key file as tdma-run --key-file rea
   rcp-pack --key-file rov.key messages.jsonl -o sealed.bin            tagged, counters from 1
   rcp-pack --key-file rov.key --encrypt --counter 16385 --hex < messages.jsonl
   rcp-dump --key-file rov.key -f ndjson sealed.bin | rcp-pack --key-file rov.key > again.bin
-      (a dump's \"ctr\" fields seal each frame with the counter it had)
+      (a dump's \"ctr\" fields seal each frame with the counter it had; add --encrypt for an
+      encrypted stream)
 
 A line's optional \"ctr\" field (1 ..= 2^48-1) seals that frame with that counter; its (SRC, DST)
 goes on from there. A counter at or below one already sealed for the pair is said on stderr: a
