@@ -938,3 +938,36 @@ fn secured_frames_match_an_independent_python_implementation() {
         .unwrap();
     assert_eq!(out.status.code(), Some(1));
 }
+
+#[test]
+fn image_trunks_are_sealed_and_a_trunk_without_room_for_the_tag_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let key = key_file(dir.path(), "rov.key", KEY_128);
+    let k = key.to_str().unwrap();
+    let image = dir.path().join("image.bin");
+    std::fs::write(&image, (0..500u32).map(|i| i as u8).collect::<Vec<_>>()).unwrap();
+    let i = image.to_str().unwrap();
+    let sealed = run(PACK, &["--image", i, "--key-file", k, "--encrypt"], b"");
+    assert_eq!(sealed.code, 0, "{}", sealed.stderr);
+    let (code, lines, stderr) = dumped(&["--key-file", k], &sealed.stdout);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(lines.len(), 13);
+    assert!(
+        lines
+            .iter()
+            .all(|l| l["verdict"] == "ok" && l["type"] == "rov")
+    );
+    assert_eq!(lines[12]["ctr"], 13);
+    let full = run(
+        PACK,
+        &["--image", i, "--trunk", "242", "--key-file", k],
+        b"",
+    );
+    assert_eq!(full.code, 2);
+    assert_eq!(
+        full.stderr.trim(),
+        format!(
+            "rcp-pack: {i}: trunk 0: message of 255 bytes: a secured frame carries at most 249"
+        )
+    );
+}
