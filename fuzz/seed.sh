@@ -73,6 +73,21 @@ hex_to_file "020390""5502ff""${frames[1]}""${frames[4]}""55010b80" "$corpus/defr
 hex_to_file "0547010203" "$corpus/rov/seed-unknown-status"
 hex_to_file "9c00000102030405060708" "$corpus/operator/seed-unknown-order"
 
+# secured_frame: mode byte 0 (the frame as it is), then the secured forms of wire.md's GoTo and
+# ROV frames (crates/security/src/vectors.rs: counters 1 and 16385, plain and encrypted); mode 1
+# wraps a plain vector's payload in a frame (address byte, payload).
+secured=(
+    550211200144ffff0604b001360167007218fbe734d1
+    550211a0016cc7dc35aa3e5d6066a2341b58bf6cabef
+    55101720018080dcff0604b001c702d00367000102037fc944163375
+    551017a001e0df28111103f5d9ad30a46abb793b711ca9fed683ac58
+)
+mkdir -p "$corpus/secured_frame"
+for i in "${!secured[@]}"; do
+    hex_to_file "00${secured[$i]}" "$corpus/secured_frame/seed-vector$((i + 1))"
+done
+hex_to_file "0102${frames[2]:6:22}" "$corpus/secured_frame/seed-wrapped-goto"
+
 for i in "${!lines[@]}"; do
     printf '%s' "${lines[$i]}" >"$corpus/json_line/seed-vector$((i + 1))"
 done

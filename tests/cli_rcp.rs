@@ -474,3 +474,500 @@ fn status_version_1_packs_dumps_and_reads_back() {
         refused.stderr
     );
 }
+
+/// RFC 4493's key, the AES-128 key of the secured-frame test vectors.
+const KEY_128: &str = "2b7e151628aed2a6abf7158809cf4f3c";
+
+/// wire.md's GoTo operator frame as a JSON line.
+const GOTO: &str = r#"{"type":"operator","src":0,"dst":2,"oid":0,"clo":true,"eisn":1,"ic":true,"rit":63,"order":{"type":"goto","x_cm":-250,"y_cm":1200,"z_cm":310,"heading_deg":359}}"#;
+
+/// A key file `name` in `dir` holding `* KEY`, mode 0600.
+fn key_file(dir: &std::path::Path, name: &str, key: &str) -> std::path::PathBuf {
+    use std::os::unix::fs::PermissionsExt;
+    let path = dir.join(name);
+    std::fs::write(&path, format!("* {key}\n")).unwrap();
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
+    path
+}
+
+/// The frames rcp-pack makes of `input` with `args` (and --hex), one a line.
+fn packed_frames(args: &[&str], input: &str) -> Vec<Vec<u8>> {
+    let out = run(PACK, &[args, &["--hex"]].concat(), input.as_bytes());
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    out.stdout_text()
+        .lines()
+        .map(|l| rovlink_wire::json::decode_hex(l).unwrap())
+        .collect()
+}
+
+/// rcp-dump's JSON Lines of `frames` with `args`: the exit code and the objects.
+fn dumped(args: &[&str], frames: &[u8]) -> (i32, Vec<serde_json::Value>, String) {
+    let out = run(DUMP, &[args, &["-f", "ndjson"]].concat(), frames);
+    let lines = out
+        .stdout_text()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    (out.code, lines, out.stderr)
+}
+
+/// A dumped object without what rcp-dump adds (offset, security fields): wire.md's line.
+fn message_only(mut v: serde_json::Value) -> String {
+    let map = v.as_object_mut().unwrap();
+    for key in [
+        "offset",
+        "secured",
+        "encrypted",
+        "ctr",
+        "ctr_low",
+        "verdict",
+    ] {
+        map.shift_remove(key);
+    }
+    v.to_string()
+}
+
+#[test]
+fn secured_frames_pack_and_dump_to_the_same_messages() {
+    let dir = tempfile::tempdir().unwrap();
+    let key = key_file(dir.path(), "rov.key", KEY_128);
+    let k = key.to_str().unwrap();
+    let vectors = String::from_utf8(vectors_jsonl()).unwrap();
+    let expected: Vec<&str> = vectors.lines().collect();
+    for extra in [&[][..], &["--encrypt"][..]] {
+        let frames = packed_frames(&[&["--key-file", k], extra].concat(), &vectors);
+        let plain = vector_frames();
+        for (sealed, plain) in frames.iter().zip(&plain) {
+            assert_eq!(sealed.len(), plain.len() + 6);
+        }
+        let stream = frames.concat();
+        let (code, lines, stderr) = dumped(&["--key-file", k], &stream);
+        assert_eq!(code, 0, "{stderr}");
+        assert!(stderr.contains("verdicts: 5 ok"), "{stderr}");
+        let messages: Vec<String> = lines.iter().cloned().map(message_only).collect();
+        assert_eq!(messages, expected);
+        // Counters per (SRC, DST) from 1: 0->1 appears twice in the vectors.
+        let ctrs: Vec<u64> = lines.iter().map(|l| l["ctr"].as_u64().unwrap()).collect();
+        assert_eq!(ctrs, [1, 1, 1, 2, 1]);
+        for l in &lines {
+            assert_eq!(l["secured"], true);
+            assert_eq!(l["verdict"], "ok");
+            assert_eq!(l["encrypted"], !extra.is_empty());
+        }
+        // A keyed dump packs back, with its counters, to the same bytes.
+        let ndjson = run(DUMP, &["--key-file", k, "-f", "ndjson", "-q"], &stream).stdout;
+        let again = run(PACK, &[&["--key-file", k], extra].concat(), &ndjson);
+        assert_eq!(again.code, 0, "{}", again.stderr);
+        assert_eq!(again.stdout, stream);
+        // Without the key: each frame is named secured and unverified, its payload raw.
+        let (code, blind, stderr) = dumped(&[], &stream);
+        assert_eq!(code, 0, "{stderr}");
+        for (l, f) in blind.iter().zip(&frames) {
+            assert_eq!(l["type"], "raw");
+            assert_eq!(l["verdict"], "unverified");
+            assert_eq!(l["secured"], true);
+            assert_eq!(l["ctr_low"], 1 + u64::from(l["offset"] == 72));
+            assert_eq!(
+                l["payload"].as_str().unwrap(),
+                rovlink_wire::json::encode_hex(&f[3..f.len() - 2])
+            );
+        }
+        // ... and that dump packs back byte for byte without a key, as any dump does.
+        let raw = run(DUMP, &["-f", "ndjson", "-q"], &stream).stdout;
+        assert_eq!(run(PACK, &[], &raw).stdout, stream);
+    }
+}
+
+#[test]
+fn secured_dump_text_and_csv_say_the_verdict() {
+    let dir = tempfile::tempdir().unwrap();
+    let key = key_file(dir.path(), "rov.key", KEY_128);
+    let k = key.to_str().unwrap();
+    let frames = packed_frames(
+        &["--key-file", k, "--encrypt", "--counter", "16385"],
+        &format!("{GOTO}\n"),
+    )
+    .concat();
+    let text = run(DUMP, &["--key-file", k], &frames);
+    assert_eq!(text.code, 0, "{}", text.stderr);
+    assert_eq!(
+        text.stdout_text(),
+        "@0         0->2  operator oid=0 eisn=1 rit=63 CLO IC | goto ned=(-2.50,12.00,3.10)m \
+         heading=359deg  [secured, encrypted, ctr 16385: ok]\n"
+    );
+    let blind = run(DUMP, &[], &frames);
+    assert!(
+        blind
+            .stdout_text()
+            .ends_with("  [secured, encrypted, ctr low bits 1: unverified]\n"),
+        "{}",
+        blind.stdout_text()
+    );
+    let csv = run(DUMP, &["--key-file", k, "-f", "csv"], &frames).stdout_text();
+    let mut rows = csv.lines();
+    assert!(
+        rows.next()
+            .unwrap()
+            .ends_with(",error,secured,encrypted,ctr,ctr_low,verdict")
+    );
+    assert!(
+        rows.next().unwrap().ends_with(",,true,true,16385,,ok"),
+        "{csv}"
+    );
+    // Without the key the CSV keeps version 0's columns and says it in the error column.
+    let csv = run(DUMP, &["-f", "csv"], &frames).stdout_text();
+    assert!(csv.lines().next().unwrap().ends_with(",payload,error"));
+    assert!(
+        csv.lines()
+            .nth(1)
+            .unwrap()
+            .ends_with(",\"secured, encrypted, ctr low bits 1: unverified\""),
+        "{csv}"
+    );
+}
+
+#[test]
+fn a_wrong_key_a_replay_and_a_plain_frame_fail_verification() {
+    let dir = tempfile::tempdir().unwrap();
+    let key = key_file(dir.path(), "rov.key", KEY_128);
+    let other = key_file(dir.path(), "other.key", &"00".repeat(16));
+    let k = key.to_str().unwrap();
+    let frames = packed_frames(&["--key-file", k], &format!("{GOTO}\n{GOTO}\n"));
+    let stream = frames.concat();
+
+    let (code, lines, stderr) = dumped(&["--key-file", other.to_str().unwrap()], &stream);
+    assert_eq!(code, 1, "{stderr}");
+    for l in &lines {
+        assert_eq!(l["verdict"], "bad_tag");
+        assert_eq!(l["type"], "raw");
+        assert!(l.get("ctr").is_none());
+    }
+    assert!(
+        stderr.contains("rcp-dump: --key-file: 2 frames of <stdin> failed verification"),
+        "{stderr}"
+    );
+
+    // The first frame again after the second, and the second twice in a row: replays.
+    let replayed = [&frames[0], &frames[1], &frames[0], &frames[1]].map(|f| f.as_slice());
+    let (code, lines, stderr) = dumped(&["--key-file", k], &replayed.concat());
+    assert_eq!(code, 1, "{stderr}");
+    let verdicts: Vec<&str> = lines
+        .iter()
+        .map(|l| l["verdict"].as_str().unwrap())
+        .collect();
+    assert_eq!(verdicts, ["ok", "ok", "replay", "replay"]);
+    assert!(
+        stderr.contains("offset 44: frame 0->2 refused: replay"),
+        "{stderr}"
+    );
+    let summary = dir.path().join("summary.json");
+    let out = run(
+        DUMP,
+        &[
+            "-q",
+            "--key-file",
+            k,
+            "--summary",
+            summary.to_str().unwrap(),
+        ],
+        &replayed.concat(),
+    );
+    assert_eq!(out.code, 1);
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    assert_eq!(v["verdicts"], serde_json::json!({"ok": 2, "replay": 2}));
+    // Every frame is listed: a refused one as its raw payload.
+    assert_eq!(
+        lines[2]["payload"].as_str().unwrap(),
+        rovlink_wire::json::encode_hex(&frames[0][3..frames[0].len() - 2])
+    );
+
+    let plain = vector_frames().concat();
+    let (code, lines, _) = dumped(&["--key-file", k], &plain);
+    assert_eq!(code, 1);
+    assert!(lines.iter().all(|l| l["verdict"] == "unsecured"));
+    assert_eq!(
+        lines
+            .iter()
+            .map(|l| message_only(l.clone()))
+            .collect::<Vec<_>>(),
+        String::from_utf8(vectors_jsonl())
+            .unwrap()
+            .lines()
+            .collect::<Vec<_>>()
+    );
+}
+
+#[test]
+fn counters_can_be_set_per_line_and_bad_ones_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let key = key_file(dir.path(), "rov.key", KEY_128);
+    let k = key.to_str().unwrap();
+    let with = |ctr: &str| GOTO.replace("}}", &format!("}},\"ctr\":{ctr}}}"));
+    // A replay is named as one when its counter is within 2^14 of the highest accepted (a
+    // receiver restores a counter from its low bits); one older than that fails as bad_tag.
+    let input = format!(
+        "{}\n{GOTO}\n{}\n{}\n",
+        with("40000"),
+        with("39999"),
+        with("3")
+    );
+    let out = run(PACK, &["--key-file", k], input.as_bytes());
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    assert!(
+        out.stderr.contains(
+            "<stdin>:3: counter 39999 of 0>2 is not above 40001, sealed before: a receiver \
+             refuses this frame as a replay"
+        ),
+        "{}",
+        out.stderr
+    );
+    let (_, lines, _) = dumped(&["--key-file", k], &out.stdout);
+    let seen: Vec<(u64, &str)> = lines
+        .iter()
+        .map(|l| {
+            (
+                l["ctr"].as_u64().or(l["ctr_low"].as_u64()).unwrap(),
+                l["verdict"].as_str().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        seen,
+        [
+            (40000, "ok"),
+            (40001, "ok"),
+            (39999 % 16384, "replay"),
+            (3, "bad_tag")
+        ]
+    );
+    for (ctr, expected) in [
+        ("0", "found 0"),
+        ("281474976710656", "found 281474976710656"),
+        ("\"7\"", "found \"7\""),
+    ] {
+        let out = run(
+            PACK,
+            &["--key-file", k],
+            format!("{}\n", with(ctr)).as_bytes(),
+        );
+        assert_eq!(out.code, 2);
+        assert_eq!(
+            out.stderr.trim(),
+            format!(
+                "rcp-pack: <stdin>:1: field ctr: expected an integer 1..=281474976710655, {expected}"
+            )
+        );
+    }
+    // Without --key-file the field is ignored, as before.
+    let plain = run(PACK, &[], format!("{}\n", with("0")).as_bytes());
+    assert_eq!((plain.code, plain.stdout), (0, vector_frames()[2].clone()));
+    // A frame no key covers (vehicle to vehicle) is a bad line.
+    let between = r#"{"type":"raw","src":1,"dst":2,"payload":"00"}"#;
+    let out = run(PACK, &["--key-file", k], format!("{between}\n").as_bytes());
+    assert_eq!(out.code, 2);
+    assert!(
+        out.stderr
+            .starts_with("rcp-pack: <stdin>:1: no key for frames from 1 to 2 in the key file"),
+        "{}",
+        out.stderr
+    );
+    assert_eq!(out.stderr.lines().count(), 1);
+    assert_eq!(run(PACK, &["--key-file", k, "--counter", "0"], b"").code, 2);
+    assert_eq!(run(PACK, &["--encrypt"], b"").code, 2);
+}
+
+#[test]
+fn new_key_writes_a_private_file_once_and_never_shows_the_key() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("new.key");
+    let p = path.to_str().unwrap();
+    let out = run(PACK, &["--new-key", p, "--key-bits", "256"], b"");
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    assert!(out.stdout.is_empty());
+    let text = std::fs::read_to_string(&path).unwrap();
+    let key = text.lines().find(|l| l.starts_with("* ")).unwrap();
+    assert_eq!(key.len(), 2 + 64);
+    assert!(!out.stderr.contains(&key[2..18]), "{}", out.stderr);
+    assert!(out.stderr.contains("256-bit"), "{}", out.stderr);
+    let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
+    assert_eq!(mode, 0o600);
+    // It serves at once: what it seals, it verifies.
+    let frames = packed_frames(&["--key-file", p], &format!("{GOTO}\n")).concat();
+    assert_eq!(run(DUMP, &["--key-file", p], &frames).code, 0);
+
+    let again = run(PACK, &["--new-key", p], b"");
+    assert_eq!(again.code, 2);
+    assert_eq!(
+        again.stderr.trim(),
+        format!(
+            "rcp-pack: --new-key: {p}: exists; a key file is never overwritten (remove it first)"
+        )
+    );
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), text);
+    for args in [
+        vec!["--new-key", p, "--key-bits", "64"],
+        vec!["--key-bits", "128"],
+        vec!["--new-key", p, "--key-file", p],
+    ] {
+        let out = run(PACK, &args, b"");
+        assert_eq!(out.code, 2, "{args:?}");
+        assert_eq!(out.stderr.lines().count(), 1, "{}", out.stderr);
+    }
+}
+
+#[test]
+fn hostile_key_files_are_refused_in_one_line() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let open = key_file(dir.path(), "open.key", KEY_128);
+    std::fs::set_permissions(&open, std::fs::Permissions::from_mode(0o644)).unwrap();
+    let empty = dir.path().join("empty.key");
+    std::fs::write(&empty, b"").unwrap();
+    std::fs::set_permissions(&empty, std::fs::Permissions::from_mode(0o600)).unwrap();
+    let short = key_file(dir.path(), "short.key", &KEY_128[..30]);
+    let cases = [
+        (open.clone(), "permissions 0644 are too open"),
+        (empty, "0 bytes: expected 1..="),
+        (
+            dir.path().to_path_buf(),
+            "expected a regular file, found a directory",
+        ),
+        ("/dev/zero".into(), "expected a regular file"),
+        (
+            short,
+            "line 1: key: expected 32 hex digits (128 bits) or 64 (256 bits), found 30",
+        ),
+        (dir.path().join("absent.key"), "cannot read"),
+    ];
+    for (path, expected) in cases {
+        let p = path.to_str().unwrap();
+        for (bin, stdin) in [(PACK, format!("{GOTO}\n")), (DUMP, String::new())] {
+            let out = run(bin, &["--key-file", p], stdin.as_bytes());
+            assert_eq!(out.code, 2, "{p}: {}", out.stderr);
+            assert!(out.stdout.is_empty(), "{p}");
+            assert_eq!(out.stderr.lines().count(), 1, "{p}: {}", out.stderr);
+            assert!(out.stderr.contains("--key-file: "), "{}", out.stderr);
+            assert!(out.stderr.contains(expected), "{p}: {}", out.stderr);
+            assert!(!out.stderr.contains(&KEY_128[..16]), "{}", out.stderr);
+        }
+    }
+}
+
+#[test]
+fn secured_frames_match_an_independent_python_implementation() {
+    use std::process::Command;
+    let probe = Command::new("python3")
+        .args(["-c", "import cryptography"])
+        .output();
+    match probe {
+        Err(e) => {
+            println!("skipped: python3 cannot be started ({e})");
+            return;
+        }
+        Ok(o) if !o.status.success() => {
+            println!(
+                "skipped: the Python module `cryptography` is missing (pip install cryptography)"
+            );
+            return;
+        }
+        Ok(_) => {}
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let k128 = key_file(dir.path(), "k128", KEY_128);
+    let key_256 = "603deb1015ca71be2b73aef0857d77811f352c073b6108d72d9810a30914dff4";
+    let k256 = key_file(dir.path(), "k256", key_256);
+    let rov = String::from_utf8(vectors_jsonl())
+        .unwrap()
+        .lines()
+        .next()
+        .unwrap()
+        .to_string();
+    let mut groups: Vec<String> = Vec::new();
+    let cases = [
+        (&k128, KEY_128, GOTO, "1", false),
+        (&k128, KEY_128, GOTO, "16385", true),
+        (&k128, KEY_128, rov.as_str(), "16385", false),
+        (&k128, KEY_128, rov.as_str(), "1", true),
+        (&k256, key_256, GOTO, "12345", true),
+    ];
+    for (file, key, line, counter, encrypt) in cases {
+        let plain = packed_frames(&[], &format!("{line}\n")).concat();
+        let mut args = vec!["--key-file", file.to_str().unwrap(), "--counter", counter];
+        if encrypt {
+            args.push("--encrypt");
+        }
+        let sealed = packed_frames(&args, &format!("{line}\n")).concat();
+        groups.extend([
+            key.to_string(),
+            if encrypt {
+                format!("e:{counter}")
+            } else {
+                counter.to_string()
+            },
+            rovlink_wire::json::encode_hex(&plain),
+            rovlink_wire::json::encode_hex(&sealed),
+        ]);
+    }
+    let script =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/secured-frame-check.py");
+    let out = Command::new("python3")
+        .arg(&script)
+        .args(&groups)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(
+        stdout.lines().filter(|l| l.starts_with("ok ")).count(),
+        cases.len(),
+        "{stdout}"
+    );
+    // The script tells a wrong frame from a right one.
+    let mut wrong = groups[..4].to_vec();
+    wrong[1] = "2".into();
+    let out = Command::new("python3")
+        .arg(&script)
+        .args(&wrong)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+}
+
+#[test]
+fn image_trunks_are_sealed_and_a_trunk_without_room_for_the_tag_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let key = key_file(dir.path(), "rov.key", KEY_128);
+    let k = key.to_str().unwrap();
+    let image = dir.path().join("image.bin");
+    std::fs::write(&image, (0..500u32).map(|i| i as u8).collect::<Vec<_>>()).unwrap();
+    let i = image.to_str().unwrap();
+    let sealed = run(PACK, &["--image", i, "--key-file", k, "--encrypt"], b"");
+    assert_eq!(sealed.code, 0, "{}", sealed.stderr);
+    let (code, lines, stderr) = dumped(&["--key-file", k], &sealed.stdout);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(lines.len(), 13);
+    assert!(
+        lines
+            .iter()
+            .all(|l| l["verdict"] == "ok" && l["type"] == "rov")
+    );
+    assert_eq!(lines[12]["ctr"], 13);
+    let full = run(
+        PACK,
+        &["--image", i, "--trunk", "242", "--key-file", k],
+        b"",
+    );
+    assert_eq!(full.code, 2);
+    assert_eq!(
+        full.stderr.trim(),
+        format!(
+            "rcp-pack: {i}: trunk 0: message of 255 bytes: a secured frame carries at most 249"
+        )
+    );
+}

@@ -7,7 +7,9 @@
 //!   one frame with a given counter;
 //! - [`counter`]: counters, the high-water mark, restoring a counter from its low bits, the
 //!   counter file;
-//! - [`guard`]: a node's gate: seal what it sends, open what it takes, refuse the rest.
+//! - [`guard`]: a node's gate: seal what it sends, open what it takes, refuse the rest;
+//! - [`stream`]: a stream of frames as the tools pack and dump it (counters set by hand, a
+//!   verdict per frame).
 //!
 //! docs/threat-model.md says what this protects, from whom, and what it does not.
 #![deny(unsafe_code)]
@@ -17,7 +19,10 @@ pub mod counter;
 pub mod guard;
 pub mod key;
 pub mod sealed;
+pub mod stream;
 pub mod suite;
+#[cfg(test)]
+mod vectors;
 
 pub use guard::{Guard, Opened, Refusal, SealError};
 pub use key::{Key, KeyError, KeyRing};

@@ -11,6 +11,11 @@
 //! Fields the reader does not know (such as the `offset` and `error` that `rcp-dump` adds) are
 //! ignored. Every field the type needs is required.
 //!
+//! Secured frames (docs/wire-extensions.md): `rcp-dump --key-file` adds `secured`,
+//! `encrypted`, `ctr` (the verified counter) or `ctr_low` (the low bits carried) and `verdict`;
+//! `rcp-pack --key-file` reads `ctr` ([`counter_field`]) to seal a frame with that counter and
+//! ignores the rest.
+//!
 //! No-panic contract: [`parse_line`] returns a [`JsonError`] naming the field, what was
 //! expected and what was found, on any text.
 
@@ -178,17 +183,44 @@ pub fn encode_hex(bytes: &[u8]) -> String {
 
 /// Reads one JSON line into a frame value, checked with [`MessageRepr::validate`].
 pub fn parse_line(line: &str) -> Result<MessageRepr, JsonError> {
+    parse_object(&line_object(line)?)
+}
+
+/// Reads one JSON line into a frame value and the counter it asks for when it is sealed (the
+/// optional field `ctr`, [`counter_field`]).
+pub fn parse_line_with_counter(line: &str) -> Result<(MessageRepr, Option<u64>), JsonError> {
+    let map = line_object(line)?;
+    Ok((parse_object(&map)?, counter_field(&map)?))
+}
+
+/// The JSON object a line holds.
+fn line_object(line: &str) -> Result<Map<String, Value>, JsonError> {
     let value: Value =
         rovlink_base::strict_json::from_str(line).map_err(|e| JsonError::Syntax {
             column: e.column(),
             message: e.to_string(),
         })?;
-    let map = value.as_object().ok_or_else(|| JsonError::BadValue {
-        field: "(line)".into(),
-        expected: "a JSON object".into(),
-        found: show(&value),
-    })?;
-    parse_object(map)
+    match value {
+        Value::Object(map) => Ok(map),
+        other => Err(JsonError::BadValue {
+            field: "(line)".into(),
+            expected: "a JSON object".into(),
+            found: show(&other),
+        }),
+    }
+}
+
+/// The highest frame counter of a secured frame (48 bits; docs/wire-extensions.md).
+pub const MAX_COUNTER: u64 = (1 << 48) - 1;
+
+/// The optional field `ctr` of a line: the counter a secured frame is sealed with (`rcp-pack
+/// --key-file`) or was verified with (`rcp-dump --key-file`), 1..=[`MAX_COUNTER`].
+pub fn counter_field(map: &Map<String, Value>) -> Result<Option<u64>, JsonError> {
+    let f = Fields { map, prefix: "" };
+    match map.get("ctr") {
+        None => Ok(None),
+        Some(_) => Ok(Some(f.int("ctr", 1, MAX_COUNTER as i64)? as u64)),
+    }
 }
 
 /// Reads a JSON object into a frame value, checked with [`MessageRepr::validate`].
@@ -542,9 +574,19 @@ pub const CSV_COLUMNS: [&str; 48] = [
     "error",
 ];
 
+/// The columns a dump with a key file adds after [`CSV_COLUMNS`]: what it found of each frame's
+/// security (`rcp-dump --key-file`).
+pub const CSV_SECURITY_COLUMNS: [&str; 5] = ["secured", "encrypted", "ctr", "ctr_low", "verdict"];
+
 /// Flattens a JSON object of [`write_fields`] (plus any extra fields) into one CSV record in
 /// [`CSV_COLUMNS`] order; absent fields are empty, arrays are space-separated.
 pub fn csv_record(map: &Map<String, Value>) -> Vec<String> {
+    csv_record_in(map, &CSV_COLUMNS)
+}
+
+/// [`csv_record`] with the columns `columns` (such as [`CSV_COLUMNS`] then
+/// [`CSV_SECURITY_COLUMNS`]).
+pub fn csv_record_in(map: &Map<String, Value>, columns: &[&str]) -> Vec<String> {
     let mut flat: Map<String, Value> = Map::new();
     for (key, value) in map {
         match (key.as_str(), value) {
@@ -569,7 +611,7 @@ pub fn csv_record(map: &Map<String, Value>) -> Vec<String> {
         Value::Null => String::new(),
         other => other.to_string(),
     };
-    CSV_COLUMNS
+    columns
         .iter()
         .map(|c| flat.get(*c).map(cell).unwrap_or_default())
         .collect()

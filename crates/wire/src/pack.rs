@@ -37,6 +37,16 @@ impl LineError {
     }
 }
 
+/// One input line: its message, and the counter it asks for when sealed (`"ctr"`, read only
+/// by [`Lines::with_counters`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Line {
+    /// The message.
+    pub repr: MessageRepr,
+    /// The line's `ctr` field ([`json::counter_field`]).
+    pub ctr: Option<u64>,
+}
+
 /// The messages of a JSON Lines input, with their 1-based line numbers; blank lines are
 /// skipped, each line is read up to [`MAX_LINE_BYTES`], and a fatal error ends the lines.
 pub struct Lines<R: BufRead> {
@@ -44,22 +54,45 @@ pub struct Lines<R: BufRead> {
     number: usize,
     line: Vec<u8>,
     done: bool,
+    counters: bool,
 }
 
 impl<R: BufRead> Lines<R> {
-    /// The lines of `reader`.
+    /// The lines of `reader`; a `ctr` field is ignored like any field the form does not have.
     pub fn new(reader: R) -> Lines<R> {
         Lines {
             reader,
             number: 0,
             line: Vec::new(),
             done: false,
+            counters: false,
         }
+    }
+
+    /// The lines of `reader`, each with its `ctr` field read and checked (frames to be
+    /// sealed).
+    pub fn with_counters(reader: R) -> Lines<R> {
+        Lines {
+            counters: true,
+            ..Lines::new(reader)
+        }
+    }
+
+    /// One line's text as a [`Line`].
+    fn parse(&self, text: &str) -> Result<Line, LineError> {
+        if self.counters {
+            let (repr, ctr) = json::parse_line_with_counter(text)?;
+            return Ok(Line { repr, ctr });
+        }
+        Ok(Line {
+            repr: json::parse_line(text)?,
+            ctr: None,
+        })
     }
 }
 
 impl<R: BufRead> Iterator for Lines<R> {
-    type Item = (usize, Result<MessageRepr, LineError>);
+    type Item = (usize, Result<Line, LineError>);
 
     fn next(&mut self) -> Option<Self::Item> {
         while !self.done {
@@ -77,7 +110,7 @@ impl<R: BufRead> Iterator for Lines<R> {
                 Ok(_) => match std::str::from_utf8(&self.line) {
                     Err(e) => Err(LineError::Utf8(e.valid_up_to())),
                     Ok(text) if text.trim().is_empty() => continue,
-                    Ok(text) => json::parse_line(text.trim()).map_err(LineError::from),
+                    Ok(text) => self.parse(text.trim()),
                 },
             };
             self.done = outcome.as_ref().is_err_and(LineError::is_fatal);
@@ -185,8 +218,31 @@ mod tests {
         assert!(matches!(lines[0], (1, Ok(_))));
         assert!(matches!(lines[1], (3, Err(LineError::Json(_)))));
         assert!(matches!(lines[2], (4, Err(LineError::TooLong))));
-        let frame_line = frame(lines[0].1.as_ref().unwrap(), true).unwrap();
+        let frame_line = frame(&lines[0].1.as_ref().unwrap().repr, true).unwrap();
         assert!(frame_line.ends_with(b"\n") && frame_line.starts_with(b"55"));
+    }
+
+    #[test]
+    fn counters_are_read_only_when_asked_and_checked() {
+        let good = r#"{"type":"raw","src":1,"dst":0,"payload":"00","ctr":16385}"#;
+        let text = format!(
+            "{good}\n{}\n{}\n{}\n",
+            good.replace("16385", "0"),
+            good.replace("16385", "281474976710656"),
+            good.replace(r#","ctr":16385"#, "")
+        );
+        let plain: Vec<_> = Lines::new(text.as_bytes()).collect();
+        assert!(plain.iter().all(|(_, l)| l.as_ref().unwrap().ctr.is_none()));
+        let lines: Vec<_> = Lines::with_counters(text.as_bytes()).collect();
+        assert_eq!(lines[0].1.as_ref().unwrap().ctr, Some(16385));
+        for bad in &lines[1..3] {
+            let err = bad.1.as_ref().unwrap_err().to_string();
+            assert!(
+                err.starts_with("field ctr: expected an integer 1..=281474976710655, found"),
+                "{err}"
+            );
+        }
+        assert_eq!(lines[3].1.as_ref().unwrap().ctr, None);
     }
 
     #[test]

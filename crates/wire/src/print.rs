@@ -6,7 +6,14 @@
 //! Where records and notices go is the caller's [`Sink`]; [`capture`] reads a live port until
 //! it closes or a stop flag is set, giving up an incomplete frame when the line goes quiet;
 //! [`read_stream`] reads a file or pipe to its end or until the flag is set.
+//!
+//! Secured frames (docs/wire-extensions.md) are the business of an [`Inspector`] the caller
+//! gives (`rovlink-security` has one: this crate knows no keys): it says what it found of each
+//! frame ([`Security`]) and hands back the plain frame to print when it opened one. Without an
+//! inspector every frame prints as version 0 reads it.
 
+use std::collections::BTreeMap;
+use std::fmt;
 use std::io::{self, Read};
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -15,11 +22,98 @@ use std::time::{Duration, Instant};
 use serde_json::{Map, Value};
 
 use super::frame::Frame;
-use super::{DeframeEvent, DeframeStats, Deframer, MessageRepr, json};
+use super::{DeframeEvent, DeframeStats, Deframer, Message, MessageRepr, json};
 use rovlink_base::io::{IoError, StopReader};
 
 /// The columns of a CSV of frames, in order ([`Record::csv_fields`]).
 pub const CSV_COLUMNS: [&str; 48] = json::CSV_COLUMNS;
+
+/// The columns of a CSV of frames with their security ([`Record::csv_fields_secured`]).
+pub fn csv_columns_secured() -> Vec<&'static str> {
+    CSV_COLUMNS
+        .iter()
+        .chain(&json::CSV_SECURITY_COLUMNS)
+        .copied()
+        .collect()
+}
+
+/// The verdict of a frame that passed verification.
+pub const VERDICT_OK: &str = "ok";
+/// The verdict of a secured frame shown without a key: nothing was checked.
+pub const VERDICT_UNVERIFIED: &str = "unverified";
+
+/// True when `verdict` says verification was asked for and the frame did not pass it.
+fn verdict_failed(verdict: &str) -> bool {
+    verdict != VERDICT_OK && verdict != VERDICT_UNVERIFIED
+}
+
+/// What was found of one frame's security (docs/wire-extensions.md, secured frames), shown
+/// beside its message.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Security {
+    /// The payload is marked as a secured frame's (the S bit).
+    pub secured: bool,
+    /// The message is encrypted (the E bit).
+    pub encrypted: bool,
+    /// The full counter, when the tag was verified.
+    pub ctr: Option<u64>,
+    /// The counter's low bits as the frame carries them, when it was not verified.
+    pub ctr_low: Option<u16>,
+    /// [`VERDICT_OK`], [`VERDICT_UNVERIFIED`], or why the frame was refused (`bad_tag`,
+    /// `replay`, `no_key`, `malformed`, `unsecured`).
+    pub verdict: &'static str,
+}
+
+impl Security {
+    /// True when verification was asked for and the frame did not pass it.
+    pub fn failed(&self) -> bool {
+        verdict_failed(self.verdict)
+    }
+
+    /// For people: `secured, encrypted, ctr 16385: ok`.
+    pub fn note(&self) -> String {
+        let mut text = String::from(if self.secured { "secured" } else { "plain" });
+        if self.encrypted {
+            text.push_str(", encrypted");
+        }
+        if let Some(c) = self.ctr {
+            text.push_str(&format!(", ctr {c}"));
+        } else if let Some(low) = self.ctr_low {
+            text.push_str(&format!(", ctr low bits {low}"));
+        }
+        text.push_str(&format!(": {}", self.verdict));
+        text
+    }
+
+    /// Appends the fields `secured`, `encrypted`, `ctr` or `ctr_low`, `verdict`.
+    fn write_fields(&self, map: &mut Map<String, Value>) {
+        map.insert("secured".into(), self.secured.into());
+        map.insert("encrypted".into(), self.encrypted.into());
+        if let Some(c) = self.ctr {
+            map.insert("ctr".into(), c.into());
+        } else if let Some(low) = self.ctr_low {
+            map.insert("ctr_low".into(), low.into());
+        }
+        map.insert("verdict".into(), self.verdict.into());
+    }
+}
+
+/// What an [`Inspector`] found of a frame, and what to print of it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Inspected {
+    /// What was found.
+    pub security: Security,
+    /// The plain link frame to print (the message inside, decrypted), or `None` to print the
+    /// payload as it is, as a `raw` message.
+    pub plain: Option<Vec<u8>>,
+}
+
+/// Checks each frame's security for the [`Printer`].
+pub trait Inspector: fmt::Debug {
+    /// Looks at one whole link frame whose CRC checks: `None` leaves it to print as version 0
+    /// reads it. Any bytes, never a panic.
+    fn inspect(&mut self, frame: &[u8]) -> Option<Inspected>;
+}
 
 /// One frame as printed: where it started, when it arrived (live ports), its message, and why
 /// the message is not valid if it is not (then the message is `raw`).
@@ -33,6 +127,9 @@ pub struct Record {
     pub repr: MessageRepr,
     /// Why the payload is not a valid message.
     pub error: Option<String>,
+    /// What an [`Inspector`] found of its security (`None`: none looked, or a plain frame
+    /// without a key).
+    pub security: Option<Security>,
 }
 
 impl Record {
@@ -45,12 +142,16 @@ impl Record {
         if let Some(e) = &self.error {
             line.push_str(&format!("  [invalid: {e}]"));
         }
+        if let Some(s) = &self.security {
+            line.push_str(&format!("  [{}]", s.note()));
+        }
         line.push('\n');
         line
     }
 
     /// The JSON object of wire.md's form, with `offset` first (and `t_s`, rounded to the
-    /// microsecond) and `error` last; `rcp-pack` reads it back.
+    /// microsecond), then the [`Security`] fields if any, and `error` last; `rcp-pack` reads
+    /// it back.
     pub fn object(&self) -> Map<String, Value> {
         let mut map = Map::new();
         map.insert("offset".into(), self.offset.into());
@@ -58,15 +159,33 @@ impl Record {
             map.insert("t_s".into(), Value::from((t * 1e6).round() / 1e6));
         }
         json::write_fields(&self.repr, &mut map);
+        if let Some(s) = &self.security {
+            s.write_fields(&mut map);
+        }
         if let Some(e) = &self.error {
             map.insert("error".into(), e.as_str().into());
         }
         map
     }
 
-    /// The fields of the CSV row, one per [`CSV_COLUMNS`] entry.
+    /// The fields of the CSV row, one per [`CSV_COLUMNS`] entry; a frame's [`Security`], which
+    /// has no column there, is said in the `error` column.
     pub fn csv_fields(&self) -> Vec<String> {
-        json::csv_record(&self.object())
+        let mut map = self.object();
+        if let Some(s) = &self.security {
+            let text = match &self.error {
+                Some(e) => format!("{e}; {}", s.note()),
+                None => s.note(),
+            };
+            map.insert("error".into(), text.into());
+        }
+        json::csv_record(&map)
+    }
+
+    /// The fields of the CSV row with the security columns: one per [`CSV_COLUMNS`] entry,
+    /// then one per [`json::CSV_SECURITY_COLUMNS`] entry.
+    pub fn csv_fields_secured(&self) -> Vec<String> {
+        json::csv_record_in(&self.object(), &csv_columns_secured())
     }
 }
 
@@ -94,6 +213,9 @@ pub struct Summary {
     pub stats: DeframeStats,
     /// Frames with a good CRC whose payload is not a valid message.
     pub invalid_messages: u64,
+    /// Frames per [`Security::verdict`], when an [`Inspector`] gave any (absent otherwise).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub verdicts: BTreeMap<&'static str, u64>,
 }
 
 /// The printer: a deframer, the notices it gives, and the counters.
@@ -104,6 +226,8 @@ pub struct Printer {
     started: Option<Instant>,
     deframer: Deframer,
     invalid: u64,
+    inspector: Option<Box<dyn Inspector>>,
+    verdicts: BTreeMap<&'static str, u64>,
 }
 
 impl Printer {
@@ -116,7 +240,24 @@ impl Printer {
             started: timestamps.then(Instant::now),
             deframer: Deframer::new(),
             invalid: 0,
+            inspector: None,
+            verdicts: BTreeMap::new(),
         }
+    }
+
+    /// The same printer, with `inspector` looking at every frame's security.
+    pub fn with_inspector(mut self, inspector: Box<dyn Inspector>) -> Printer {
+        self.inspector = Some(inspector);
+        self
+    }
+
+    /// Frames that did not pass verification ([`Security::failed`]).
+    pub fn failed_verification(&self) -> u64 {
+        self.verdicts
+            .iter()
+            .filter(|(v, _)| verdict_failed(v))
+            .map(|(_, n)| n)
+            .sum()
     }
 
     /// The input's name.
@@ -153,13 +294,14 @@ impl Printer {
             input: self.name.clone(),
             stats: self.deframer.stats(),
             invalid_messages: self.invalid,
+            verdicts: self.verdicts.clone(),
         }
     }
 
     /// The summary as one line for people.
     pub fn summary_line(&self) -> String {
         let s = self.deframer.stats();
-        format!(
+        let mut line = format!(
             "{}: {} frames ok ({} invalid messages), {} CRC failures, {} truncated, {} of {} bytes skipped",
             self.name,
             s.frames,
@@ -168,7 +310,16 @@ impl Printer {
             s.truncated,
             s.bytes_skipped,
             s.bytes_in
-        )
+        );
+        if !self.verdicts.is_empty() {
+            let counts: Vec<String> = self
+                .verdicts
+                .iter()
+                .map(|(v, n)| format!("{n} {v}"))
+                .collect();
+            line.push_str(&format!("; verdicts: {}", counts.join(", ")));
+        }
+        line
     }
 
     /// True when every byte so far was part of a valid message.
@@ -187,8 +338,35 @@ impl Printer {
         while let Some(event) = self.deframer.next_event() {
             match event {
                 DeframeEvent::Frame { offset, frame } => {
-                    let (repr, error) =
-                        MessageRepr::parse_lenient(&Frame::new_unchecked(frame.into_inner()));
+                    let bytes = frame.into_inner();
+                    let inspected = self.inspector.as_mut().and_then(|i| i.inspect(bytes));
+                    let (repr, error, security) = match inspected {
+                        None => {
+                            let (repr, error) =
+                                MessageRepr::parse_lenient(&Frame::new_unchecked(bytes));
+                            (repr, error, None)
+                        }
+                        Some(Inspected {
+                            security,
+                            plain: Some(plain),
+                        }) => {
+                            let (repr, error) =
+                                MessageRepr::parse_lenient(&Frame::new_unchecked(&plain[..]));
+                            (repr, error, Some(security))
+                        }
+                        Some(Inspected {
+                            security,
+                            plain: None,
+                        }) => {
+                            let f = Frame::new_unchecked(bytes);
+                            let repr = MessageRepr {
+                                src: f.src(),
+                                dst: f.dst(),
+                                message: Message::Raw(f.payload().to_vec()),
+                            };
+                            (repr, None, Some(security))
+                        }
+                    };
                     let error = error.map(|e| e.to_string());
                     if let Some(e) = &error {
                         self.invalid += 1;
@@ -197,11 +375,24 @@ impl Printer {
                             format!("offset {offset}: invalid message from {}: {e}", repr.src),
                         );
                     }
+                    if let Some(s) = &security {
+                        *self.verdicts.entry(s.verdict).or_default() += 1;
+                        if s.failed() {
+                            say(
+                                sink,
+                                format!(
+                                    "offset {offset}: frame {}->{} refused: {}",
+                                    repr.src, repr.dst, s.verdict
+                                ),
+                            );
+                        }
+                    }
                     sink.record(&Record {
                         offset,
                         t_s,
                         repr,
                         error,
+                        security,
                     })?;
                 }
                 DeframeEvent::BadCrc {
@@ -424,6 +615,91 @@ mod tests {
             printer
                 .summary_line()
                 .starts_with("in.bin: 2 frames ok (1 invalid messages), 1 CRC failures")
+        );
+    }
+
+    /// Names every frame with a payload of 3 bytes or more secured, opening those 0->1.
+    #[derive(Debug)]
+    struct Marks;
+
+    impl Inspector for Marks {
+        fn inspect(&mut self, frame: &[u8]) -> Option<Inspected> {
+            let f = Frame::new_checked(frame).ok()?;
+            (f.payload_len() >= 3).then(|| {
+                let open = f.dst() == 1;
+                Inspected {
+                    security: Security {
+                        secured: true,
+                        encrypted: open,
+                        ctr: open.then_some(7),
+                        ctr_low: (!open).then_some(7),
+                        verdict: if open { VERDICT_OK } else { "bad_tag" },
+                    },
+                    plain: open.then(|| frame.to_vec()),
+                }
+            })
+        }
+    }
+
+    #[test]
+    fn an_inspector_adds_the_verdict_and_failures_are_counted() {
+        let good = frame(0x01, &[0x80, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]);
+        let refused = frame(0x02, &[0x20, 7, 1, 2, 3, 4]);
+        let plain = frame(0x10, &[0x80, 0]);
+        let mut printer = Printer::new("s", false, false).with_inspector(Box::new(Marks));
+        let mut sink = Collect::default();
+        printer
+            .push(&[good, refused, plain].concat(), &mut sink)
+            .unwrap();
+        let [ok, bad, other] = &sink.records[..] else {
+            panic!("{:?}", sink.records)
+        };
+        assert!(
+            ok.text_line()
+                .ends_with("  [secured, encrypted, ctr 7: ok]\n"),
+            "{}",
+            ok.text_line()
+        );
+        let json = Value::Object(bad.object()).to_string();
+        assert!(
+            json.ends_with(
+                r#""payload":"200701020304","secured":true,"encrypted":false,"ctr_low":7,"verdict":"bad_tag"}"#
+            ),
+            "{json}"
+        );
+        assert_eq!(other.security, None);
+        let csv = bad.csv_fields();
+        assert_eq!(
+            csv.last().unwrap(),
+            "secured, ctr low bits 7: bad_tag",
+            "no security columns: the note is in the error column"
+        );
+        let secured = ok.csv_fields_secured();
+        assert_eq!(secured.len(), csv_columns_secured().len());
+        assert_eq!(
+            &secured[secured.len() - 5..],
+            ["true", "true", "7", "", "ok"]
+        );
+        assert_eq!(printer.failed_verification(), 1);
+        assert_eq!(sink.notices[0], "s: offset 16: frame 0->2 refused: bad_tag");
+        let summary = serde_json::to_value(printer.summary()).unwrap();
+        assert_eq!(
+            summary["verdicts"],
+            serde_json::json!({"bad_tag": 1, "ok": 1})
+        );
+        assert!(
+            printer
+                .summary_line()
+                .ends_with("; verdicts: 1 bad_tag, 1 ok"),
+            "{}",
+            printer.summary_line()
+        );
+        let quiet = Printer::new("q", true, false);
+        assert!(
+            serde_json::to_value(quiet.summary())
+                .unwrap()
+                .get("verdicts")
+                .is_none()
         );
     }
 

@@ -14,13 +14,26 @@ Examples:
   rcp-dump --port tcp:192.168.0.209:9200       a modem's TCP console
   rcp-dump --port udp:127.0.0.1:5000=127.0.0.1:5001   datagrams from 127.0.0.1:5001 only
   link-sim ... | rcp-dump -                    read a pipe
+  rcp-dump --key-file rov.key sealed.bin       verify and open secured frames
+  rcp-dump --key-file rov.key -f csv -o frames.csv --port tcp:192.168.0.209:9200
+
+Secured frames (docs/wire-extensions.md): without --key-file a secured frame is printed as a
+raw payload marked `secured, ctr low bits N: unverified`. With --key-file every frame gets
+`secured`, `encrypted`, `ctr` (the full counter, when verified) or `ctr_low`, and `verdict`: ok,
+or why a receiving node would refuse it: bad_tag (forged, damaged or another key), replay
+(authentic, but at or below the highest counter accepted from that SRC to that DST earlier in the
+stream; a copy more than 2^14 counters older reads as bad_tag), no_key, malformed, unsecured (a
+plain frame). A refused frame is still printed, as its raw payload; an
+ok frame as the message inside, decrypted. CSV adds these columns only with --key-file (without
+it the note is in the error column).
 
 Corrupted frames (CRC failures, truncated frames, skipped bytes) are reported on stderr with
 their stream offset; a summary ends every run. They are data, not errors: the exit code is 0
 unless --strict asks for a clean stream.
 
-Exit codes: 0 ok (also Ctrl-C on --port), 1 --strict and the stream was not clean, or the port
-closed, 2 bad usage or unreadable input.";
+Exit codes: 0 ok (also Ctrl-C on --port), 1 --strict and the stream was not clean, or
+--key-file and a frame failed verification (any verdict but ok), or the port closed, 2 bad usage,
+unreadable input or a refused key file.";
 
 /// Output format.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -83,4 +96,10 @@ pub struct Args {
     /// Do not report each corrupted frame on stderr (the summary is still printed).
     #[arg(short, long)]
     pub quiet: bool,
+
+    /// Verify every frame with the keys in FILE (lines `ADDRESS KEY`, the file yours and
+    /// private: chmod 600), open the encrypted ones, and give each its verdict (see below);
+    /// exit 1 if any frame fails. Example: `--key-file rov.key`.
+    #[arg(long, value_name = "FILE")]
+    pub key_file: Option<PathBuf>,
 }

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::ExitCode;
 use std::time::Duration;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use flags::{Args, Format};
 use rovlink_base::io::{CheckFailed, EXIT_OK, IoError, Output};
 use rovlink_base::output::{Dest, Kind, Outputs};
@@ -17,15 +17,18 @@ use rovlink_cli::say;
 use rovlink_cli::{only_with, stop};
 use rovlink_link::device::DeviceSpec;
 use rovlink_link::gll::PortOptions;
+use rovlink_security::KeyRing;
+use rovlink_security::stream::Checker;
 use rovlink_wire::print::{self, CSV_COLUMNS, CaptureEnd, Printer, Record};
 
 /// The tool's name, prefixed to everything it says on stderr.
 const TOOL: &str = "rcp-dump";
 
-/// Where records go: whole text, or a row stream (JSON Lines, CSV).
+/// Where records go: whole text, or a row stream (JSON Lines, CSV; with the security columns
+/// when true).
 enum Sink {
     Text(Output),
-    Rows(RowWriter, Format),
+    Rows(RowWriter, Format, bool),
 }
 
 impl print::Sink for Sink {
@@ -34,8 +37,9 @@ impl print::Sink for Sink {
     fn record(&mut self, record: &Record) -> Result<(), IoError> {
         match self {
             Sink::Text(out) => out.write_bytes(record.text_line().as_bytes()),
-            Sink::Rows(rows, Format::Csv) => rows.row(&record.csv_fields()),
-            Sink::Rows(rows, _) => rows.row(&record.object()),
+            Sink::Rows(rows, Format::Csv, false) => rows.row(&record.csv_fields()),
+            Sink::Rows(rows, Format::Csv, true) => rows.row(&record.csv_fields_secured()),
+            Sink::Rows(rows, ..) => rows.row(&record.object()),
         }
     }
 
@@ -52,18 +56,29 @@ impl print::Sink for Sink {
 }
 
 impl Sink {
-    fn open(format: Format, dest: Dest) -> Result<Sink, IoError> {
+    fn open(format: Format, dest: Dest, secured: bool) -> Result<Sink, IoError> {
         Ok(match format {
             Format::Text => Sink::Text(dest.open()?),
-            Format::Ndjson => Sink::Rows(RowWriter::new(dest, RowFormat::Ndjson, &[]), format),
-            Format::Csv => Sink::Rows(RowWriter::new(dest, RowFormat::Csv, &CSV_COLUMNS), format),
+            Format::Ndjson => {
+                Sink::Rows(RowWriter::new(dest, RowFormat::Ndjson, &[]), format, false)
+            }
+            Format::Csv if secured => Sink::Rows(
+                RowWriter::new(dest, RowFormat::Csv, &print::csv_columns_secured()),
+                format,
+                true,
+            ),
+            Format::Csv => Sink::Rows(
+                RowWriter::new(dest, RowFormat::Csv, &CSV_COLUMNS),
+                format,
+                false,
+            ),
         })
     }
 
     fn finish(self) -> Result<(), IoError> {
         match self {
             Sink::Text(out) => out.finish(),
-            Sink::Rows(rows, _) => rows.finish(),
+            Sink::Rows(rows, ..) => rows.finish(),
         }
     }
 }
@@ -109,6 +124,14 @@ fn run(args: &Args) -> Result<u8> {
             ("--idle-ms", args.idle_ms.is_some()),
         ],
     )?;
+    // The key file is read first: a refused one ends the run before anything is written.
+    let ring = args
+        .key_file
+        .as_deref()
+        .map(KeyRing::load)
+        .transpose()
+        .context("--key-file")?;
+    let keyed = ring.is_some();
     // Every output is claimed before reading, so a bad path fails before a long capture.
     let mut outs = Outputs::new();
     outs.input(args.input.as_deref());
@@ -119,12 +142,13 @@ fn run(args: &Args) -> Result<u8> {
     )?;
     let summary = outs.claim_opt("--summary", args.summary.as_deref(), Kind::Text)?;
     let summary = summary.map(|d| d.open()).transpose()?;
-    let mut sink = Sink::open(args.format, out)?;
+    let mut sink = Sink::open(args.format, out, keyed)?;
     let name = match &args.port {
         Some(dev) => dev.clone(),
         None => rovlink_base::io::display_name(args.input.as_deref(), "<stdin>"),
     };
-    let mut printer = Printer::new(&name, args.quiet, args.port.is_some());
+    let mut printer = Printer::new(&name, args.quiet, args.port.is_some())
+        .with_inspector(Box::new(Checker::new(ring)));
     let pumped = pump(args, &mut printer, &mut sink);
     // A file or pipe stopped by a signal is an interrupted run (a port's normal end). The
     // summary is said even when the run ends early (a closed pipe, a read error), once
@@ -149,6 +173,11 @@ fn run(args: &Args) -> Result<u8> {
     }
     if note.is_some() {
         return Ok(stop::code_or(EXIT_OK));
+    }
+    let failed = printer.failed_verification();
+    if keyed && failed > 0 {
+        let text = format!("--key-file: {failed} frames of {name} failed verification");
+        return Err(CheckFailed(text).into());
     }
     if args.strict && !printer.clean() {
         let text = format!("--strict: {name} is not a clean frame stream");

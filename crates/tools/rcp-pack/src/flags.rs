@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use clap::Parser;
+use clap::builder::{PossibleValuesParser, TypedValueParser};
 use rovlink_cli::value;
 use rovlink_wire::rov;
 
@@ -13,7 +14,19 @@ Examples:
   rcp-dump --format ndjson in.bin | rcp-pack > out.bin   round trip, byte for byte
   rcp-pack --image photo.debt --trunk 39 -o image.bin    cut a file into ROV trunks
 
-Exit codes: 0 ok, 2 bad usage or a bad input line.";
+Secured frames (docs/wire-extensions.md; the key file as tdma-run --key-file reads it):
+  rcp-pack --new-key rov.key                 a new AES-128 key file, mode 0600
+  rcp-pack --key-file rov.key messages.jsonl -o sealed.bin            tagged, counters from 1
+  rcp-pack --key-file rov.key --encrypt --counter 16385 --hex < messages.jsonl
+  rcp-dump --key-file rov.key -f ndjson sealed.bin | rcp-pack --key-file rov.key > again.bin
+      (a dump's \"ctr\" fields seal each frame with the counter it had; add --encrypt for an
+      encrypted stream)
+
+A line's optional \"ctr\" field (1 ..= 2^48-1) seals that frame with that counter; its (SRC, DST)
+goes on from there. A counter at or below one already sealed for the pair is said on stderr: a
+receiver refuses that frame as a replay.
+
+Exit codes: 0 ok, 2 bad usage, a bad input line or key file, or a frame with no key.";
 
 /// Pack remote-control-protocol messages into link frames.
 ///
@@ -59,4 +72,35 @@ pub struct Args {
     /// Image sequence number (ISN) for --image, 0 or 1 [default: 0].
     #[arg(long, value_parser = value::count(0, 1))]
     pub isn: Option<u64>,
+
+    /// Write a new key file here (one random key for every vehicle, `* KEY`, mode 0600) and
+    /// exit; an existing file is never replaced. Example: `--new-key rov.key`.
+    #[arg(
+        long,
+        value_name = "FILE",
+        conflicts_with_all = ["input", "output", "image", "key_file", "keep_going", "hex"]
+    )]
+    pub new_key: Option<PathBuf>,
+
+    /// Size of the --new-key key: 128 or 256 bits [default: 128]. Example: `--key-bits 256`.
+    #[arg(long, value_name = "BITS",
+          value_parser = PossibleValuesParser::new(["128", "256"])
+              .map(|bits| if bits == "256" { 256usize } else { 128 }))]
+    pub key_bits: Option<usize>,
+
+    /// Seal every frame with the keys in FILE (lines `ADDRESS KEY`, the file yours and
+    /// private: chmod 600): a 4-byte tag and the counter's low bits, 6 bytes a frame. Example:
+    /// `--key-file rov.key`.
+    #[arg(long, value_name = "FILE")]
+    pub key_file: Option<PathBuf>,
+
+    /// With --key-file: also encrypt every message (AES-CTR). Example: `--key-file rov.key
+    /// --encrypt`.
+    #[arg(long)]
+    pub encrypt: bool,
+
+    /// With --key-file: the first counter of every (SRC, DST), 1 ..= 2^48-1; each frame takes
+    /// the next [default: 1]. Example: `--counter 16385`.
+    #[arg(long, value_name = "N", value_parser = value::count(1, rovlink_wire::json::MAX_COUNTER))]
+    pub counter: Option<u64>,
 }
