@@ -13,6 +13,9 @@
 #    to a ROV standing still (an all-zero joystick script);
 #  - network: `tdma-run --scenario scenarios/relay-rf.json --pace 1`, on its own layout
 #    (layout-network.json: both vehicles in 3D, vehicle 2's image, /network/frames.delay_ms).
+# The sim and the operator hold a control token (`tdma-run --new-foxglove-token`), which the URL
+# Studio opens carries (`ws://...:PORT/?token=...`: a viewer without it may not publish); the
+# network is view only.
 # Studio opens each live (`?ds=foxglove-websocket&ds.url=ws://...`) on a layout with 3D, Image,
 # Plot (/link/frames.delay_ms), Log (/session/log, /link/log), Publish and Teleop, watches,
 # sends the Publish panel's GoTo (not to the network: its orders are its waypoints) and waits
@@ -104,9 +107,13 @@ wait_for_line() { # FILE PATTERN SECONDS WHAT PID: wait until FILE has a line wi
 }
 
 mkdir -p "$work/data"
+"$BIN/tdma-run" --new-foxglove-token "$work/foxglove.token" 2>/dev/null \
+  || fail_setup "tdma-run --new-foxglove-token failed"
+token=$(cat "$work/foxglove.token")
 # Session 1: a simulation at real time (both ends in one process: frames have a delay).
 sim_port=$(free_port)
 "$BIN/tdma-run" --sim --pace 1 --duration "$seconds_max" --foxglove "127.0.0.1:$sim_port" \
+  --foxglove-token-file "$work/foxglove.token" \
   --mcap "$work/data/sim.mcap" --metrics "$work/sim.json" 2>"$work/sim.err" &
 sim=$!
 pids+=($sim)
@@ -131,6 +138,7 @@ pids+=($rov)
 op_port=$(free_port)
 "$BIN/tdma-run" --role operator --port "$side_a" --ipg 150 --duration "$seconds_max" \
   --image-size 400 --script "$work/still.csv" --foxglove "127.0.0.1:$op_port" \
+  --foxglove-token-file "$work/foxglove.token" \
   --mcap "$work/data/operator.mcap" --metrics "$work/op.json" 2>"$work/op.err" &
 operator=$!
 pids+=($operator)
@@ -167,9 +175,9 @@ stop() { # PID ERR NAME: SIGINT (Ctrl-C), which ends a session keeping its outpu
   wait "$1" || rc=$?
   [ "$rc" = 0 ] || [ "$rc" = 130 ] || fail_setup "$3 exited $rc: $(tail -3 "$2")"
 }
-check sim-live --ws "ws://127.0.0.1:$sim_port" --publish --expect "$live_topics" --expect-delay
+check sim-live --ws "ws://127.0.0.1:$sim_port/?token=$token" --publish --expect "$live_topics" --expect-delay
 stop "$sim" "$work/sim.err" "the simulation"
-check operator-live --ws "ws://127.0.0.1:$op_port" --publish --expect "$live_topics"
+check operator-live --ws "ws://127.0.0.1:$op_port/?token=$token" --publish --expect "$live_topics"
 stop "$operator" "$work/op.err" "the operator"
 stop "$rov" "$work/rov.err" "the ROV"
 net_topics=/vehicle/1/rov/pose,/vehicle/2/rov/pose,/vehicle/1/tf,/network/frames
@@ -188,10 +196,16 @@ done
 for session in sim op net; do
   { grep -v "Foxglove: ws://" "$work/$session.err" | grep -i "foxglove" || true; } | sed "s/^/$session: /"
   # The 3D panel's three channels are refused (docs/tdma-foxglove.md); the Publish and Teleop
-  # panels' are not, and nothing Studio sends is skipped.
+  # panels' are not (Studio holds the token), and nothing Studio sends is skipped. The network
+  # takes no orders: Studio's publishing is refused there, once.
   unexpected=$(grep "foxglove client" "$work/$session.err" | grep -v \
     -e "(/move_base_simple/goal): refused" -e "(/clicked_point): refused" \
-    -e "(/initialpose): refused" || true)
+    -e "(/initialpose): refused" -e "publishing refused: this live view takes no orders" \
+    || true)
+  if grep -q -F "$token" "$work/$session.err"; then
+    echo "$session: tdma-run said the control token"
+    status=1
+  fi
   if [ -n "$unexpected" ]; then
     echo "$session: tdma-run warned of what Studio sent:"
     echo "$unexpected"

@@ -40,6 +40,7 @@ import re
 import sys
 import time
 from pathlib import Path
+from urllib.parse import quote
 
 from playwright.sync_api import Error as PlaywrightError
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
@@ -324,7 +325,8 @@ def run(args):
     layout = json.loads((Path(__file__).parent / args.layout).read_text())
     PANELS.update({panel_id: PANEL_NAMES.get(panel_id, panel_id) for panel_id in layout["configById"]})
     if args.ws:
-        query = f"?ds=foxglove-websocket&ds.url={args.ws}&layout={args.layout}"
+        # Encoded whole: the URL may carry the control token as its own query (?token=...).
+        query = f"?ds=foxglove-websocket&ds.url={quote(args.ws, safe='')}&layout={args.layout}"
     elif args.remote_file:
         query = f"?ds=remote-file&ds.url={args.remote_file}&layout={args.layout}"
     else:
