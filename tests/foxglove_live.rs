@@ -604,6 +604,75 @@ fn with_a_token_only_the_client_that_carries_it_gives_orders() {
     );
 }
 
+/// A policy with the control token and TLS, from testdata/tls (a self-signed `localhost`).
+fn with_tls() -> Policy {
+    let read = |name: &str| std::fs::read(crate::common::testdata(&format!("tls/{name}"))).unwrap();
+    Policy {
+        tls: Some(
+            rovlink_field::foxglove_gate::tls_config(
+                &read("localhost.crt"),
+                &read("localhost.key"),
+            )
+            .unwrap(),
+        ),
+        ..with_token()
+    }
+}
+
+#[test]
+fn over_tls_the_token_holder_drives_and_plain_clients_are_not_served() {
+    let (view, mut orders) = foxglove::start("127.0.0.1:0", Role::Operator, &with_tls()).unwrap();
+    assert_eq!(view.scheme(), "wss");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("seen.json");
+    let cafile = crate::common::testdata("tls/localhost.crt");
+    let goto = r#"{"type":"goto","x_cm":700,"y_cm":-500,"z_cm":300,"heading_deg":90}"#;
+    let child = client_at(
+        &format!("wss://127.0.0.1:{}/?token={TOKEN}", view.port()),
+        &out,
+        &[
+            "--seconds",
+            "2",
+            "--publish-order",
+            goto,
+            "--cafile",
+            cafile.to_str().unwrap(),
+        ],
+    );
+    let seen = finish(child, &out, Duration::from_secs(15));
+    assert_eq!(seen["server"]["name"], "tdma-run operator", "{seen}");
+    let start = Instant::now();
+    let mut got = Vec::new();
+    while got.is_empty() {
+        assert!(
+            start.elapsed() < Duration::from_secs(10),
+            "no order over TLS"
+        );
+        got.extend(orders.poll(SimTime::ZERO));
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert_eq!(
+        got,
+        [Live::Order(Order::GoTo {
+            x_cm: 700,
+            y_cm: -500,
+            z_cm: 300,
+            heading_deg: 90
+        })]
+    );
+    // A plain ws:// client gets no WebSocket from a TLS port.
+    let status = Command::new("python3")
+        .arg(CLIENT)
+        .args(["--url", &format!("ws://127.0.0.1:{}/", view.port())])
+        .args(["--out", dir.path().join("plain.json").to_str().unwrap()])
+        .args(["--seconds", "1"])
+        .stderr(Stdio::null())
+        .status()
+        .unwrap();
+    assert!(!status.success());
+    assert!(orders.poll(SimTime::ZERO).is_empty());
+}
+
 #[test]
 fn control_off_loopback_needs_insecure() {
     let error = foxglove::start("0.0.0.0:0", Role::Operator, &with_token())
@@ -623,6 +692,11 @@ fn control_off_loopback_needs_insecure() {
     assert!(view.exposed());
     let (view, _orders) = foxglove::start("0.0.0.0:0", Role::Operator, &Policy::default()).unwrap();
     assert!(view.exposed(), "view-only needs nothing more");
+    let (view, _orders) = foxglove::start("0.0.0.0:0", Role::Operator, &with_tls()).unwrap();
+    assert!(
+        view.exposed() && view.scheme() == "wss",
+        "TLS needs nothing more"
+    );
 }
 
 #[test]

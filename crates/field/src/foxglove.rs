@@ -29,7 +29,7 @@
 //! control on an operator end started with a [`Policy::token`]; every other client's
 //! advertisement is refused, once per client on stderr and in a status to the client. Without a
 //! token the view is view-only. Control over plain `ws://` on an address other than loopback
-//! is refused unless [`Policy::insecure`].
+//! is refused unless [`Policy::insecure`]; with [`Policy::tls`] the gate serves `wss://`.
 //!
 //! The contract: nothing a client sends stops the session, panics, or grows memory without
 //! bound. Junk frames, unknown operations and messages on channels never advertised are
@@ -115,11 +115,12 @@ pub enum FoxgloveError {
         /// The system's reason.
         source: std::io::Error,
     },
-    /// Control on an address other than loopback without TLS, and without --foxglove-insecure.
+    /// Control on an address other than loopback without TLS and without --foxglove-insecure.
     #[error(
         "--foxglove {addr}: control (--foxglove-token-file) on an address other than loopback \
-         would send the token and the orders in clear (ws://, no TLS here): bind 127.0.0.1 and \
-         reach it through an SSH tunnel, or add --foxglove-insecure"
+         would send the token and the orders in clear: serve wss:// (--foxglove-tls-cert and \
+         --foxglove-tls-key), or bind 127.0.0.1 and reach it through an SSH tunnel, or add \
+         --foxglove-insecure"
     )]
     Exposed {
         /// The address.
@@ -587,6 +588,8 @@ pub struct LiveView {
     addr: String,
     /// What clients published (a view without [`LiveOrders`] reports its refusals itself).
     inbox: Arc<Mutex<Inbox>>,
+    /// Whether it serves `wss://`.
+    tls: bool,
 }
 
 /// One vehicle's part of the view.
@@ -797,7 +800,11 @@ fn serve(
         addr: addr.to_string(),
         source,
     })?;
-    if orders == Orders::FromControl && !gate.local_addr().ip().is_loopback() && !policy.insecure {
+    if orders == Orders::FromControl
+        && !gate.local_addr().ip().is_loopback()
+        && !policy.insecure
+        && policy.tls.is_none()
+    {
         drop(gate);
         handle.stop().detach_all();
         return Err(FoxgloveError::Exposed {
@@ -826,6 +833,7 @@ fn serve(
         extra,
         addr: addr.to_string(),
         inbox: inbox.clone(),
+        tls: policy.tls.is_some(),
     };
     let reports = view.gate.as_ref().map(Gate::reports);
     Ok((view, LiveOrders { inbox, reports }))
@@ -855,6 +863,11 @@ impl LiveView {
         let mut lines: Vec<String> = lock(&self.inbox).warnings.drain(..).collect();
         lines.extend(self.gate.iter().flat_map(|g| g.reports().take()));
         lines
+    }
+
+    /// The URL scheme clients use: `wss` with TLS, else `ws`.
+    pub fn scheme(&self) -> &'static str {
+        if self.tls { "wss" } else { "ws" }
     }
 
     /// Whether it listens on an address other than loopback.

@@ -38,7 +38,7 @@ use std::collections::HashSet;
 use std::io::{self, Read, Write};
 use std::net::{IpAddr, Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
 /// The subprotocol name stock viewers offer.
@@ -224,6 +224,34 @@ pub struct Policy {
     /// Control may be served over plain `ws://` on an address other than loopback (the live
     /// view refuses that otherwise; the gate does not look at it).
     pub insecure: bool,
+    /// Serve `wss://`: TLS terminated here with this configuration ([`tls_config`]).
+    pub tls: Option<Arc<rustls::ServerConfig>>,
+}
+
+/// A TLS configuration from a PEM certificate chain (the server's first) and a PEM private key
+/// (PKCS#8, PKCS#1 or SEC1); `Err` says which is wrong and why.
+pub fn tls_config(cert_pem: &[u8], key_pem: &[u8]) -> Result<Arc<rustls::ServerConfig>, String> {
+    use rustls::pki_types::pem::PemObject;
+    use rustls::pki_types::{CertificateDer, PrivateKeyDer};
+    let certs: Vec<CertificateDer<'static>> = CertificateDer::pem_slice_iter(cert_pem)
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("certificate: expected PEM CERTIFICATE blocks: {e}"))?;
+    if certs.is_empty() {
+        return Err("certificate: expected a PEM CERTIFICATE block, found none".into());
+    }
+    let key = PrivateKeyDer::from_pem_slice(key_pem)
+        .map_err(|e| format!("key: expected a PEM private key: {e}"))?;
+    // ring, not aws-lc-rs (rustls' default, which needs cmake and a long C build): its key
+    // exchange has no post-quantum group, which rustls 0.23.48 marks by deprecating it.
+    #[allow(deprecated)]
+    let provider = Arc::new(rustls::crypto::ring::default_provider());
+    rustls::ServerConfig::builder_with_provider(provider)
+        .with_safe_default_protocol_versions()
+        .map_err(|e| format!("TLS: {e}"))?
+        .with_no_client_auth()
+        .with_single_cert(certs, key)
+        .map(Arc::new)
+        .map_err(|e| format!("certificate and key: {e}"))
 }
 
 /// The gate: its listening thread, stopped when dropped.
@@ -396,7 +424,7 @@ fn head_end(buf: &[u8]) -> Option<usize> {
 }
 
 /// Reads an HTTP head from `stream`: the head and whatever came after it in the same reads.
-fn read_head(stream: &mut TcpStream) -> io::Result<(Vec<u8>, Vec<u8>)> {
+fn read_head(stream: &mut impl Read) -> io::Result<(Vec<u8>, Vec<u8>)> {
     let mut buf = Vec::with_capacity(1024);
     let mut chunk = [0u8; 2048];
     loop {
@@ -538,14 +566,171 @@ fn marker_frame(secret: &str, access: Access) -> Vec<u8> {
 }
 
 /// Answers `client` with status 403 and `why`, and closes it.
-fn forbid(mut client: TcpStream, why: &str) -> io::Result<()> {
+fn forbid(mut client: ClientSide, why: &str) -> io::Result<()> {
     let answer = format!(
         "HTTP/1.1 403 Forbidden\r\nContent-Type: text/plain\r\nContent-Length: {}\r\n\
          Connection: close\r\n\r\n{why}",
         why.len()
     );
     client.write_all(answer.as_bytes())?;
-    client.shutdown(Shutdown::Both)
+    client.close()
+}
+
+/// The client's side of a connection: plain, or TLS terminated here.
+enum ClientSide {
+    Plain(TcpStream),
+    Tls(Box<rustls::StreamOwned<rustls::ServerConnection, TcpStream>>),
+}
+
+impl ClientSide {
+    fn tcp(&self) -> &TcpStream {
+        match self {
+            ClientSide::Plain(tcp) => tcp,
+            ClientSide::Tls(tls) => &tls.sock,
+        }
+    }
+
+    /// Ends the connection (a TLS one with its close_notify).
+    fn close(mut self) -> io::Result<()> {
+        if let ClientSide::Tls(tls) = &mut self {
+            tls.conn.send_close_notify();
+            tls.flush()?;
+        }
+        self.tcp().shutdown(Shutdown::Both)
+    }
+
+    /// Copies bytes both ways between this and `server` until either side closes.
+    fn pump(self, mut server: TcpStream) -> io::Result<()> {
+        match self {
+            ClientSide::Plain(mut client) => {
+                // Client to server on a thread of its own; server to client here.
+                let (mut from_client, mut to_server) = (client.try_clone()?, server.try_clone()?);
+                let upstream = std::thread::Builder::new()
+                    .name("foxglove-up".into())
+                    .stack_size(64 * 1024)
+                    .spawn(move || {
+                        let _ = io::copy(&mut from_client, &mut to_server);
+                        let _ = to_server.shutdown(Shutdown::Write);
+                    })?;
+                let _ = io::copy(&mut server, &mut client);
+                let _ = client.shutdown(Shutdown::Both);
+                let _ = server.shutdown(Shutdown::Both);
+                let _ = upstream.join();
+            }
+            ClientSide::Tls(tls) => {
+                let rustls::StreamOwned { conn, sock } = *tls;
+                let tls = Arc::new(Mutex::new((conn, sock.try_clone()?)));
+                let (mut from_client, mut to_server) = (sock.try_clone()?, server.try_clone()?);
+                let up = tls.clone();
+                let upstream = std::thread::Builder::new()
+                    .name("foxglove-up".into())
+                    .stack_size(64 * 1024)
+                    .spawn(move || {
+                        let _ = tls_upstream(&up, &mut from_client, &mut to_server);
+                        let _ = to_server.shutdown(Shutdown::Write);
+                    })?;
+                let _ = tls_downstream(&tls, &mut server);
+                let _ = sock.shutdown(Shutdown::Both);
+                let _ = server.shutdown(Shutdown::Both);
+                let _ = upstream.join();
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A TLS connection and the socket its records are written to, used by both directions: each
+/// holds the lock while it decrypts or encrypts and writes, so records go out in order.
+type SharedTls = Mutex<(rustls::ServerConnection, TcpStream)>;
+
+fn lock_tls(tls: &SharedTls) -> MutexGuard<'_, (rustls::ServerConnection, TcpStream)> {
+    tls.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Client to server: TLS records read from `from_client`, decrypted, written to `server`.
+fn tls_upstream(
+    tls: &SharedTls,
+    from_client: &mut TcpStream,
+    server: &mut TcpStream,
+) -> io::Result<()> {
+    let mut records = [0u8; 16 * 1024];
+    let mut plain = Vec::with_capacity(16 * 1024);
+    loop {
+        let n = from_client.read(&mut records)?;
+        if n == 0 {
+            return Ok(());
+        }
+        plain.clear();
+        let closed = {
+            let mut guard = lock_tls(tls);
+            let (conn, sock) = &mut *guard;
+            let mut fed = &records[..n];
+            while !fed.is_empty() {
+                conn.read_tls(&mut fed)?;
+                let state = conn
+                    .process_new_packets()
+                    .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e))?;
+                let ready = state.plaintext_bytes_to_read();
+                let start = plain.len();
+                plain.resize(start + ready, 0);
+                conn.reader().read_exact(&mut plain[start..])?;
+            }
+            while conn.wants_write() {
+                conn.write_tls(sock)?;
+            }
+            conn.is_handshaking() || !conn.wants_read()
+        };
+        server.write_all(&plain)?;
+        if closed {
+            return Ok(());
+        }
+    }
+}
+
+/// Server to client: bytes read from `server`, encrypted, written as TLS records.
+fn tls_downstream(tls: &SharedTls, server: &mut TcpStream) -> io::Result<()> {
+    let mut buf = [0u8; 16 * 1024];
+    loop {
+        let n = server.read(&mut buf)?;
+        let mut guard = lock_tls(tls);
+        let (conn, sock) = &mut *guard;
+        if n == 0 {
+            conn.send_close_notify();
+        } else {
+            conn.writer().write_all(&buf[..n])?;
+        }
+        while conn.wants_write() {
+            conn.write_tls(sock)?;
+        }
+        if n == 0 {
+            return Ok(());
+        }
+    }
+}
+
+impl Read for ClientSide {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        match self {
+            ClientSide::Plain(tcp) => tcp.read(buf),
+            ClientSide::Tls(tls) => tls.read(buf),
+        }
+    }
+}
+
+impl Write for ClientSide {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        match self {
+            ClientSide::Plain(tcp) => tcp.write(buf),
+            ClientSide::Tls(tls) => tls.write(buf),
+        }
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        match self {
+            ClientSide::Plain(tcp) => tcp.flush(),
+            ClientSide::Tls(tls) => tls.flush(),
+        }
+    }
 }
 
 /// At most 80 characters of `text`, without control characters, for a report.
@@ -587,9 +772,18 @@ fn admit(head: &str, policy: &Policy) -> Result<Access, (&'static str, String, &
     }
 }
 
-fn carry(mut client: TcpStream, peer: SocketAddr, shared: &Shared) -> io::Result<()> {
-    client.set_nonblocking(false)?;
-    client.set_read_timeout(Some(REQUEST_TIMEOUT))?;
+fn carry(tcp: TcpStream, peer: SocketAddr, shared: &Shared) -> io::Result<()> {
+    tcp.set_nonblocking(false)?;
+    tcp.set_read_timeout(Some(REQUEST_TIMEOUT))?;
+    tcp.set_write_timeout(Some(REQUEST_TIMEOUT))?;
+    let mut client = match &shared.policy.tls {
+        None => ClientSide::Plain(tcp),
+        Some(config) => {
+            let conn = rustls::ServerConnection::new(config.clone())
+                .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e))?;
+            ClientSide::Tls(Box::new(rustls::StreamOwned::new(conn, tcp)))
+        }
+    };
     let (head, rest) = read_head(&mut client)?;
     let text = String::from_utf8_lossy(&head).into_owned();
     let report = |reason, line: String| {
@@ -623,7 +817,7 @@ fn carry(mut client: TcpStream, peer: SocketAddr, shared: &Shared) -> io::Result
     };
     let mut server = TcpStream::connect_timeout(&shared.inner, REQUEST_TIMEOUT)?;
     server.set_nodelay(true)?;
-    client.set_nodelay(true)?;
+    client.tcp().set_nodelay(true)?;
     server.write_all(request.as_bytes())?;
     server.set_read_timeout(Some(REQUEST_TIMEOUT))?;
     let (answer, after) = read_head(&mut server)?;
@@ -639,22 +833,11 @@ fn carry(mut client: TcpStream, peer: SocketAddr, shared: &Shared) -> io::Result
     };
     client.write_all(&answer)?;
     client.write_all(&after)?;
-    client.set_read_timeout(None)?;
+    client.flush()?;
+    client.tcp().set_read_timeout(None)?;
+    client.tcp().set_write_timeout(None)?;
     server.set_read_timeout(None)?;
-    // Client to server on a thread of its own; server to client here.
-    let (mut from_client, mut to_server) = (client.try_clone()?, server.try_clone()?);
-    let upstream = std::thread::Builder::new()
-        .name("foxglove-up".into())
-        .stack_size(64 * 1024)
-        .spawn(move || {
-            let _ = io::copy(&mut from_client, &mut to_server);
-            let _ = to_server.shutdown(Shutdown::Write);
-        })?;
-    let _ = io::copy(&mut server, &mut client);
-    let _ = client.shutdown(Shutdown::Both);
-    let _ = server.shutdown(Shutdown::Both);
-    let _ = upstream.join();
-    Ok(())
+    client.pump(server)
 }
 
 /// An HTTP answer `head` with every `Sec-WebSocket-Protocol` header replaced by one naming
@@ -856,5 +1039,18 @@ mod tests {
             marker_topic(&secret, Access::View)
         );
         assert_eq!(client_text_frame("hi")[1], 0x80 | 2);
+    }
+
+    #[test]
+    fn tls_needs_a_certificate_and_its_key() {
+        let cert = include_bytes!("../../../testdata/tls/localhost.crt");
+        let key = include_bytes!("../../../testdata/tls/localhost.key");
+        assert!(tls_config(cert, key).is_ok());
+        let error = tls_config(b"junk", key).unwrap_err();
+        assert!(error.starts_with("certificate: "), "{error}");
+        let error = tls_config(cert, b"junk").unwrap_err();
+        assert!(error.starts_with("key: "), "{error}");
+        let error = tls_config(key, key).unwrap_err();
+        assert!(error.starts_with("certificate: "), "{error}");
     }
 }

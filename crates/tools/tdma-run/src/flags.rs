@@ -322,6 +322,23 @@ pub struct Args {
     #[arg(long, requires = "foxglove_token_file", help_heading = "Field")]
     pub foxglove_insecure: bool,
 
+    /// With --foxglove: serve wss:// with this certificate (PEM, the server's first, then its
+    /// chain) and --foxglove-tls-key, e.g. --foxglove-tls-cert /etc/rovlink/view.crt
+    /// --foxglove-tls-key /etc/rovlink/view.key. Clients then open wss://HOST:PORT/.
+    #[arg(long, value_name = "FILE", requires_all = ["foxglove", "foxglove_tls_key"],
+          help_heading = "Field")]
+    pub foxglove_tls_cert: Option<PathBuf>,
+
+    /// The private key of --foxglove-tls-cert (PEM; yours, mode 0600), e.g.
+    /// --foxglove-tls-key /etc/rovlink/view.key.
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "foxglove_tls_cert",
+        help_heading = "Field"
+    )]
+    pub foxglove_tls_key: Option<PathBuf>,
+
     /// Write a new control token for --foxglove-token-file (64 random hex characters) to FILE,
     /// mode 0600 (an existing file is never replaced), and exit, e.g.
     /// tdma-run --new-foxglove-token ~/.config/rovlink/foxglove.token

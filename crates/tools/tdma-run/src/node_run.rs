@@ -80,8 +80,9 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
             )
             .map_err(|e| UsageError(e.to_string()))?;
             say!(
-                "Foxglove: ws://{}:{} (every vehicle under /vehicle/N/, this node's frames on \
+                "Foxglove: {}://{}:{} (every vehicle under /vehicle/N/, this node's frames on \
                  /link/frames)",
+                view.scheme(),
                 crate::setup::host_of(addr),
                 view.port()
             );

@@ -77,7 +77,8 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
             )
             .map_err(|e| UsageError(e.to_string()))?;
             say!(
-                "Foxglove: ws://{}:{} (every vehicle under /vehicle/N/)",
+                "Foxglove: {}://{}:{} (every vehicle under /vehicle/N/)",
+                view.scheme(),
                 crate::setup::host_of(addr),
                 view.port()
             );

@@ -6,7 +6,7 @@ use std::path::Path;
 use crate::outputs::{Destinations, check_images_out};
 use anyhow::Result;
 use rovlink_base::UsageError;
-use rovlink_base::io::{EXIT_CHECK_FAILED, EXIT_OK};
+use rovlink_base::io::{EXIT_CHECK_FAILED, EXIT_OK, read_at_most};
 use rovlink_base::output::{Dest, Kind, Outputs};
 use rovlink_base::secret::{create_secret_file, read_secret_file};
 use rovlink_cli::say;
@@ -148,6 +148,8 @@ fn open_orders(path: &std::path::Path, live: bool) -> Result<rovlink_field::cons
 
 /// The longest token file read, bytes.
 const MAX_TOKEN_FILE_BYTES: u64 = 4096;
+/// The longest TLS certificate chain or key file read, bytes.
+const MAX_TLS_FILE_BYTES: u64 = 1 << 20;
 
 /// The live view's policy from the flags: the control token of --foxglove-token-file (read as
 /// a key file is: yours, mode 0600), --foxglove-origin, --foxglove-insecure.
@@ -163,10 +165,29 @@ pub(super) fn foxglove_policy(args: &Args) -> Result<Policy> {
             Some(token)
         }
     };
+    let tls = match (&args.foxglove_tls_cert, &args.foxglove_tls_key) {
+        (Some(cert), Some(key)) => {
+            let cert_pem = read_at_most(cert, MAX_TLS_FILE_BYTES)
+                .map_err(|e| UsageError(format!("--foxglove-tls-cert {}: {e}", cert.display())))?;
+            let key_pem = read_secret_file(key, MAX_TLS_FILE_BYTES)
+                .map_err(|e| UsageError(format!("--foxglove-tls-key {e}")))?;
+            let config =
+                rovlink_field::foxglove_gate::tls_config(&cert_pem, &key_pem).map_err(|why| {
+                    UsageError(format!(
+                        "--foxglove-tls-cert {} --foxglove-tls-key {}: {why}",
+                        cert.display(),
+                        key.display()
+                    ))
+                })?;
+            Some(config)
+        }
+        _ => None,
+    };
     Ok(Policy {
         token,
         origins: args.foxglove_origin.clone(),
         insecure: args.foxglove_insecure,
+        tls,
     })
 }
 
@@ -174,7 +195,7 @@ pub(super) fn foxglove_policy(args: &Args) -> Result<Policy> {
 pub(super) fn say_control(view: &LiveView, policy: &Policy) {
     match &policy.token {
         None => say!("Foxglove: live view is view-only; control needs --foxglove-token-file"),
-        Some(_) if view.exposed() => say!(
+        Some(_) if view.exposed() && view.scheme() == "ws" => say!(
             "Foxglove: control over plain ws:// on {} (--foxglove-insecure): the token and the \
              orders travel in clear",
             view.addr()

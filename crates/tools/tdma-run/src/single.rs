@@ -68,7 +68,8 @@ pub fn run(args: &Args) -> Result<u8> {
             let (view, orders) = rovlink_field::foxglove::start(addr, end, &policy)
                 .map_err(|e| rovlink_base::UsageError(e.to_string()))?;
             say!(
-                "Foxglove: ws://{}:{} (open it in Foxglove's WebSocket connection)",
+                "Foxglove: {}://{}:{} (open it in Foxglove's WebSocket connection)",
+                view.scheme(),
                 host_of(addr),
                 view.port()
             );
