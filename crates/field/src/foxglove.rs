@@ -491,7 +491,11 @@ impl ServerListener for Listener {
                     "foxglove client {}: {why} (said once per client)",
                     u32::from(client.id())
                 ));
-                client.send_status(Status::warning(why));
+                // A view that never takes orders does not tell the client: a viewer's panels
+                // advertise on their own (Foxglove's 3D panel), and nothing can change it.
+                if self.orders != Orders::NotHere {
+                    client.send_status(Status::warning(why));
+                }
             }
             return;
         }
