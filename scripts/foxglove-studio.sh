@@ -14,7 +14,8 @@
 #  - network: `tdma-run --scenario scenarios/relay-rf.json --pace 1`, on its own layout
 #    (layout-network.json: both vehicles in 3D, vehicle 2's image, /network/frames.delay_ms).
 # The sim and the operator hold a control token (`tdma-run --new-foxglove-token`), which the URL
-# Studio opens carries (`ws://...:PORT/?token=...`: a viewer without it may not publish); the
+# Studio opens carries (`ws://...:PORT/?token=...`); the operator is first opened without it,
+# where Studio views, its GoTo is refused (Studio lists the refusal) and nothing is sent; the
 # network is view only.
 # Studio opens each live (`?ds=foxglove-websocket&ds.url=ws://...`) on a layout with 3D, Image,
 # Plot (/link/frames.delay_ms), Log (/session/log, /link/log), Publish and Teleop, watches,
@@ -177,6 +178,9 @@ stop() { # PID ERR NAME: SIGINT (Ctrl-C), which ends a session keeping its outpu
 }
 check sim-live --ws "ws://127.0.0.1:$sim_port/?token=$token" --publish --expect "$live_topics" --expect-delay
 stop "$sim" "$work/sim.err" "the simulation"
+# Without the token Studio views, and its GoTo is refused (a problem it lists); with it, drives.
+# (/session/log is not expected before that: no order has gone out yet.)
+check operator-view --ws "ws://127.0.0.1:$op_port" --publish-refused --expect "$file_topics"
 check operator-live --ws "ws://127.0.0.1:$op_port/?token=$token" --publish --expect "$live_topics"
 stop "$operator" "$work/op.err" "the operator"
 stop "$rov" "$work/rov.err" "the ROV"
@@ -185,12 +189,13 @@ check network-live --layout layout-network.json --ws "ws://127.0.0.1:$net_port" 
   --expect "$net_topics" --expect-delay
 stop "$network" "$work/net.err" "the network"
 for session in sim op; do
+  # Exactly one GoTo went out: the one sent with the token.
   python3 -c '
 import json, sys
 metrics = json.load(open(sys.argv[2]))
 sent, acked = metrics.get("orders_sent", 0), metrics.get("orders_acknowledged", 0)
 print(f"{sys.argv[1]}: {sent} order(s) sent, {acked} acknowledged (its --metrics)")
-sys.exit(0 if acked >= 1 else 1)
+sys.exit(0 if acked >= 1 and sent == 1 else 1)
 ' "$session" "$work/$session.json" || status=1
 done
 for session in sim op net; do
@@ -201,6 +206,7 @@ for session in sim op net; do
   unexpected=$(grep "foxglove client" "$work/$session.err" | grep -v \
     -e "(/move_base_simple/goal): refused" -e "(/clicked_point): refused" \
     -e "(/initialpose): refused" -e "publishing refused: this live view takes no orders" \
+    -e "publishing refused: its URL has no control token" \
     || true)
   if grep -q -F "$token" "$work/$session.err"; then
     echo "$session: tdma-run said the control token"

@@ -290,10 +290,11 @@ pub struct Args {
     #[arg(long, requires = "images_out", help_heading = "Field")]
     pub preview: bool,
 
-    /// Serve a live Foxglove WebSocket view here (HOST:PORT; binds only there): the --mcap
-    /// channels live, and client channels /orders (JSON orders) and Twist (Teleop panel) on a
-    /// single session's operator end. With --scenario or --routes, every vehicle under
-    /// /vehicle/N/ (view only).
+    /// Serve a live Foxglove WebSocket view here (HOST:PORT; binds only there), e.g.
+    /// --foxglove 127.0.0.1:8765: the --mcap channels live, and on a single session's operator
+    /// end client channels /orders (JSON orders) and Twist (Teleop panel) for clients holding
+    /// the token of --foxglove-token-file (view-only without it). With --scenario or --routes,
+    /// every vehicle under /vehicle/N/ (view only).
     #[arg(long, value_name = "HOST:PORT", help_heading = "Field")]
     pub foxglove: Option<String>,
 
