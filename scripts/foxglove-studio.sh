@@ -13,6 +13,10 @@
 #    to a ROV standing still (an all-zero joystick script);
 #  - network: `tdma-run --scenario scenarios/relay-rf.json --pace 1`, on its own layout
 #    (layout-network.json: both vehicles in 3D, vehicle 2's image, /network/frames.delay_ms).
+# The sim and the operator hold a control token (`tdma-run --new-foxglove-token`), which the URL
+# Studio opens carries (`ws://...:PORT/?token=...`); the operator is first opened without it,
+# where Studio views, its GoTo is refused (Studio lists the refusal) and nothing is sent; the
+# network is view only.
 # Studio opens each live (`?ds=foxglove-websocket&ds.url=ws://...`) on a layout with 3D, Image,
 # Plot (/link/frames.delay_ms), Log (/session/log, /link/log), Publish and Teleop, watches,
 # sends the Publish panel's GoTo (not to the network: its orders are its waypoints) and waits
@@ -104,9 +108,13 @@ wait_for_line() { # FILE PATTERN SECONDS WHAT PID: wait until FILE has a line wi
 }
 
 mkdir -p "$work/data"
+"$BIN/tdma-run" --new-foxglove-token "$work/foxglove.token" 2>/dev/null \
+  || fail_setup "tdma-run --new-foxglove-token failed"
+token=$(cat "$work/foxglove.token")
 # Session 1: a simulation at real time (both ends in one process: frames have a delay).
 sim_port=$(free_port)
 "$BIN/tdma-run" --sim --pace 1 --duration "$seconds_max" --foxglove "127.0.0.1:$sim_port" \
+  --foxglove-token-file "$work/foxglove.token" \
   --mcap "$work/data/sim.mcap" --metrics "$work/sim.json" 2>"$work/sim.err" &
 sim=$!
 pids+=($sim)
@@ -131,6 +139,7 @@ pids+=($rov)
 op_port=$(free_port)
 "$BIN/tdma-run" --role operator --port "$side_a" --ipg 150 --duration "$seconds_max" \
   --image-size 400 --script "$work/still.csv" --foxglove "127.0.0.1:$op_port" \
+  --foxglove-token-file "$work/foxglove.token" \
   --mcap "$work/data/operator.mcap" --metrics "$work/op.json" 2>"$work/op.err" &
 operator=$!
 pids+=($operator)
@@ -167,9 +176,12 @@ stop() { # PID ERR NAME: SIGINT (Ctrl-C), which ends a session keeping its outpu
   wait "$1" || rc=$?
   [ "$rc" = 0 ] || [ "$rc" = 130 ] || fail_setup "$3 exited $rc: $(tail -3 "$2")"
 }
-check sim-live --ws "ws://127.0.0.1:$sim_port" --publish --expect "$live_topics" --expect-delay
+check sim-live --ws "ws://127.0.0.1:$sim_port/?token=$token" --publish --expect "$live_topics" --expect-delay
 stop "$sim" "$work/sim.err" "the simulation"
-check operator-live --ws "ws://127.0.0.1:$op_port" --publish --expect "$live_topics"
+# Without the token Studio views, and its GoTo is refused (a problem it lists); with it, drives.
+# (/session/log is not expected before that: no order has gone out yet.)
+check operator-view --ws "ws://127.0.0.1:$op_port" --publish-refused --expect "$file_topics"
+check operator-live --ws "ws://127.0.0.1:$op_port/?token=$token" --publish --expect "$live_topics"
 stop "$operator" "$work/op.err" "the operator"
 stop "$rov" "$work/rov.err" "the ROV"
 net_topics=/vehicle/1/rov/pose,/vehicle/2/rov/pose,/vehicle/1/tf,/network/frames
@@ -177,21 +189,29 @@ check network-live --layout layout-network.json --ws "ws://127.0.0.1:$net_port" 
   --expect "$net_topics" --expect-delay
 stop "$network" "$work/net.err" "the network"
 for session in sim op; do
+  # Exactly one GoTo went out: the one sent with the token.
   python3 -c '
 import json, sys
 metrics = json.load(open(sys.argv[2]))
 sent, acked = metrics.get("orders_sent", 0), metrics.get("orders_acknowledged", 0)
 print(f"{sys.argv[1]}: {sent} order(s) sent, {acked} acknowledged (its --metrics)")
-sys.exit(0 if acked >= 1 else 1)
+sys.exit(0 if acked >= 1 and sent == 1 else 1)
 ' "$session" "$work/$session.json" || status=1
 done
 for session in sim op net; do
   { grep -v "Foxglove: ws://" "$work/$session.err" | grep -i "foxglove" || true; } | sed "s/^/$session: /"
   # The 3D panel's three channels are refused (docs/tdma-foxglove.md); the Publish and Teleop
-  # panels' are not, and nothing Studio sends is skipped.
+  # panels' are not (Studio holds the token), and nothing Studio sends is skipped. The network
+  # takes no orders: Studio's publishing is refused there, once.
   unexpected=$(grep "foxglove client" "$work/$session.err" | grep -v \
     -e "(/move_base_simple/goal): refused" -e "(/clicked_point): refused" \
-    -e "(/initialpose): refused" || true)
+    -e "(/initialpose): refused" -e "publishing refused: this live view takes no orders" \
+    -e "publishing refused: its URL has no control token" \
+    || true)
+  if grep -q -F "$token" "$work/$session.err"; then
+    echo "$session: tdma-run said the control token"
+    status=1
+  fi
   if [ -n "$unexpected" ]; then
     echo "$session: tdma-run warned of what Studio sent:"
     echo "$unexpected"

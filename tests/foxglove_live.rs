@@ -3,14 +3,15 @@
 //! images published through the Observer API arrive, decoded, equal to what was published;
 //! a Twist (as Foxglove's Teleop panel publishes it) and JSON orders come out of LiveOrders;
 //! garbage, cut connections and a stuck client break nothing; bad and busy addresses are
-//! errors; stopping is prompt.
+//! errors; stopping is prompt. The clients carry the control token in their URL; without a
+//! token configured, or without it in the URL, nothing a client publishes becomes an order.
 
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use base64::Engine;
-use rovlink_field::foxglove::{self, LiveOrders, LiveView};
+use rovlink_field::foxglove::{self, LiveOrders, LiveView, Policy, Token};
 use rovlink_link::SimTime;
 use rovlink_rcp::orders::{Live, OrderSource};
 use rovlink_rcp::report::Observer;
@@ -21,11 +22,24 @@ use serde_json::Value;
 
 const CLIENT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/foxglove/client.py");
 
-/// Starts the client against `view` with `args`; its JSON goes to `out`.
+/// The control token of the views these tests start.
+const TOKEN: &str = "test-token-0123456789abcdef";
+
+/// Starts the client against `view` with `args`, the control token in its URL; its JSON goes
+/// to `out`.
 fn client(view: &LiveView, out: &Path, args: &[&str]) -> Child {
+    client_at(
+        &format!("ws://127.0.0.1:{}/?token={TOKEN}", view.port()),
+        out,
+        args,
+    )
+}
+
+/// Starts the client against `url` with `args`; its JSON goes to `out`.
+fn client_at(url: &str, out: &Path, args: &[&str]) -> Child {
     Command::new("python3")
         .arg(CLIENT)
-        .args(["--url", &format!("ws://127.0.0.1:{}", view.port())])
+        .args(["--url", url])
         .args(["--out", out.to_str().unwrap()])
         .args(args)
         .stdin(Stdio::null())
@@ -125,8 +139,31 @@ fn png_size(message: &Value) -> (u32, u32) {
     (be(16), be(20))
 }
 
+/// A token file holding [`TOKEN`] in `dir` (mode 0600, as tdma-run wants it).
+fn token_file(dir: &Path) -> std::path::PathBuf {
+    use std::io::Write;
+    use std::os::unix::fs::OpenOptionsExt;
+    let path = dir.join("token");
+    let mut file = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(0o600)
+        .open(&path)
+        .unwrap();
+    writeln!(file, "{TOKEN}").unwrap();
+    path
+}
+
+/// A policy with the control token [`TOKEN`].
+fn with_token() -> Policy {
+    Policy {
+        token: Some(Token::parse(TOKEN.as_bytes()).unwrap()),
+        ..Policy::default()
+    }
+}
+
 fn start(role: Role) -> (LiveView, LiveOrders) {
-    foxglove::start("127.0.0.1:0", role).expect("a server on a free port")
+    foxglove::start("127.0.0.1:0", role, &with_token()).expect("a server on a free port")
 }
 
 #[test]
@@ -490,19 +527,186 @@ fn a_rov_end_offers_no_publishing() {
     );
     let seen = finish(child, &out, Duration::from_secs(10));
     assert_eq!(seen["server"]["name"], "tdma-run rov");
-    let capabilities = seen["server"]["capabilities"].as_array().unwrap();
-    assert!(
-        !capabilities.contains(&Value::from("clientPublish")),
-        "{seen}"
-    );
+    // Refused without a word to the client: nothing it could do would change that.
+    assert_eq!(seen["statuses"], Value::Array(vec![]), "{seen}");
     assert!(orders.poll(SimTime::ZERO).is_empty());
+    let warnings = orders.take_warnings();
+    assert!(
+        warnings.len() == 1 && warnings[0].contains("takes no orders"),
+        "{warnings:?}"
+    );
+}
+
+/// Publishes a GoTo and Twists from a client at `url`; the orders that came of them and the
+/// warnings, once the client has ended.
+fn publish_from(
+    view: &LiveView,
+    url: &str,
+    orders: &mut LiveOrders,
+) -> (Vec<Live>, Vec<String>, Value) {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("seen.json");
+    let goto = r#"{"type":"goto","x_cm":700,"y_cm":-500,"z_cm":300,"heading_deg":90}"#;
+    let child = client_at(
+        url,
+        &out,
+        &["--seconds", "2", "--publish-twist", "--publish-order", goto],
+    );
+    let seen = finish(child, &out, Duration::from_secs(15));
+    // The server has handled all the client sent once it has let the client go.
+    let start = Instant::now();
+    while view.clients() > 0 {
+        assert!(
+            start.elapsed() < Duration::from_secs(10),
+            "the client stays"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let (mut got, mut warnings) = (Vec::new(), Vec::new());
+    got.extend(orders.poll(SimTime::ZERO));
+    warnings.extend(orders.take_warnings());
+    (got, warnings, seen)
+}
+
+#[test]
+fn without_a_token_the_view_takes_no_orders() {
+    let (view, mut orders) =
+        foxglove::start("127.0.0.1:0", Role::Operator, &Policy::default()).unwrap();
+    let url = format!("ws://127.0.0.1:{}", view.port());
+    let (got, warnings, seen) = publish_from(&view, &url, &mut orders);
+    assert!(got.is_empty(), "{got:?}");
+    assert_eq!(warnings.len(), 1, "once per client: {warnings:?}");
+    assert!(
+        warnings[0].contains("the live view is view-only; control needs --foxglove-token-file"),
+        "{warnings:?}"
+    );
+    assert!(seen["statuses"].to_string().contains("view-only"), "{seen}");
+}
+
+#[test]
+fn with_a_token_only_the_client_that_carries_it_gives_orders() {
+    let (view, mut orders) = start(Role::Operator);
+    let url = format!("ws://127.0.0.1:{}", view.port());
+    let (got, warnings, _) = publish_from(&view, &url, &mut orders);
+    assert!(got.is_empty(), "{got:?}");
+    assert!(
+        warnings.len() == 1 && warnings[0].contains("its URL has no control token"),
+        "{warnings:?}"
+    );
+    let (got, warnings, _) = publish_from(&view, &format!("{url}/?token={TOKEN}"), &mut orders);
+    assert!(warnings.is_empty(), "{warnings:?}");
+    assert!(got.contains(&Live::Order(Order::GoTo {
+        x_cm: 700,
+        y_cm: -500,
+        z_cm: 300,
+        heading_deg: 90
+    })));
+    assert!(
+        got.iter().any(|l| matches!(l, Live::Joystick { .. })),
+        "{got:?}"
+    );
+}
+
+/// A policy with the control token and TLS, from testdata/tls (a self-signed `localhost`).
+fn with_tls() -> Policy {
+    let read = |name: &str| std::fs::read(crate::common::testdata(&format!("tls/{name}"))).unwrap();
+    Policy {
+        tls: Some(
+            rovlink_field::foxglove_gate::tls_config(
+                &read("localhost.crt"),
+                &read("localhost.key"),
+            )
+            .unwrap(),
+        ),
+        ..with_token()
+    }
+}
+
+#[test]
+fn over_tls_the_token_holder_drives_and_plain_clients_are_not_served() {
+    let (view, mut orders) = foxglove::start("127.0.0.1:0", Role::Operator, &with_tls()).unwrap();
+    assert_eq!(view.scheme(), "wss");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("seen.json");
+    let cafile = crate::common::testdata("tls/localhost.crt");
+    let goto = r#"{"type":"goto","x_cm":700,"y_cm":-500,"z_cm":300,"heading_deg":90}"#;
+    let child = client_at(
+        &format!("wss://127.0.0.1:{}/?token={TOKEN}", view.port()),
+        &out,
+        &[
+            "--seconds",
+            "2",
+            "--publish-order",
+            goto,
+            "--cafile",
+            cafile.to_str().unwrap(),
+        ],
+    );
+    let seen = finish(child, &out, Duration::from_secs(15));
+    assert_eq!(seen["server"]["name"], "tdma-run operator", "{seen}");
+    let start = Instant::now();
+    let mut got = Vec::new();
+    while got.is_empty() {
+        assert!(
+            start.elapsed() < Duration::from_secs(10),
+            "no order over TLS"
+        );
+        got.extend(orders.poll(SimTime::ZERO));
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert_eq!(
+        got,
+        [Live::Order(Order::GoTo {
+            x_cm: 700,
+            y_cm: -500,
+            z_cm: 300,
+            heading_deg: 90
+        })]
+    );
+    // A plain ws:// client gets no WebSocket from a TLS port.
+    let status = Command::new("python3")
+        .arg(CLIENT)
+        .args(["--url", &format!("ws://127.0.0.1:{}/", view.port())])
+        .args(["--out", dir.path().join("plain.json").to_str().unwrap()])
+        .args(["--seconds", "1"])
+        .stderr(Stdio::null())
+        .status()
+        .unwrap();
+    assert!(!status.success());
+    assert!(orders.poll(SimTime::ZERO).is_empty());
+}
+
+#[test]
+fn control_off_loopback_needs_insecure() {
+    let error = foxglove::start("0.0.0.0:0", Role::Operator, &with_token())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        error.starts_with("--foxglove 0.0.0.0:0: control (--foxglove-token-file)")
+            && error.contains("--foxglove-insecure"),
+        "{error}"
+    );
+    let insecure = Policy {
+        insecure: true,
+        ..with_token()
+    };
+    let (view, _orders) = foxglove::start("0.0.0.0:0", Role::Operator, &insecure).unwrap();
+    assert!(view.exposed());
+    let (view, _orders) = foxglove::start("0.0.0.0:0", Role::Operator, &Policy::default()).unwrap();
+    assert!(view.exposed(), "view-only needs nothing more");
+    let (view, _orders) = foxglove::start("0.0.0.0:0", Role::Operator, &with_tls()).unwrap();
+    assert!(
+        view.exposed() && view.scheme() == "wss",
+        "TLS needs nothing more"
+    );
 }
 
 #[test]
 fn bad_and_busy_addresses_are_errors() {
     let (view, _orders) = start(Role::Operator);
     let busy = format!("127.0.0.1:{}", view.port());
-    let error = foxglove::start(&busy, Role::Operator)
+    let error = foxglove::start(&busy, Role::Operator, &with_token())
         .err()
         .unwrap()
         .to_string();
@@ -511,7 +715,7 @@ fn bad_and_busy_addresses_are_errors() {
         "{error}"
     );
     for bad in ["nonsense", "127.0.0.1:http", ":8765", "::1:8765"] {
-        let error = foxglove::start(bad, Role::Operator)
+        let error = foxglove::start(bad, Role::Operator, &with_token())
             .err()
             .unwrap()
             .to_string();
@@ -520,13 +724,13 @@ fn bad_and_busy_addresses_are_errors() {
             "{bad}: {error}"
         );
     }
-    let error = foxglove::start("no-such-host.invalid:8765", Role::Operator)
+    let error = foxglove::start("no-such-host.invalid:8765", Role::Operator, &with_token())
         .err()
         .unwrap()
         .to_string();
     assert!(error.contains("cannot listen"), "{error}");
     // Not an address of this machine.
-    let error = foxglove::start("192.0.2.1:8765", Role::Operator)
+    let error = foxglove::start("192.0.2.1:8765", Role::Operator, &with_token())
         .err()
         .unwrap()
         .to_string();
@@ -556,7 +760,7 @@ fn stopping_is_prompt_and_tells_the_clients() {
     // loaded machine, has let it go).
     let rebinding = Instant::now();
     let again = loop {
-        match foxglove::start(&format!("127.0.0.1:{port}"), Role::Operator) {
+        match foxglove::start(&format!("127.0.0.1:{port}"), Role::Operator, &with_token()) {
             Ok((again, _orders)) => break again,
             Err(e) => assert!(
                 rebinding.elapsed() < Duration::from_secs(10),
@@ -593,6 +797,8 @@ fn an_operator_driven_from_foxglove_over_link_sim() {
         .args(["--role", "operator", "--port", &a, "--ipg", "150"])
         .args(["--duration", "10", "--image-size", "400"])
         .args(["--foxglove", &address, "--metrics", &path("op.json")])
+        .arg("--foxglove-token-file")
+        .arg(token_file(dir.path()))
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
@@ -600,7 +806,8 @@ fn an_operator_driven_from_foxglove_over_link_sim() {
     let goto = r#"{"type":"goto","x_cm":300,"y_cm":-20,"z_cm":50,"heading_deg":90}"#;
     let seen_by = Command::new("python3")
         .arg(CLIENT)
-        .args(["--url", &format!("ws://{address}"), "--connect-within", "5"])
+        .args(["--url", &format!("ws://{address}/?token={TOKEN}")])
+        .args(["--connect-within", "5"])
         .args(["--out", out.to_str().unwrap(), "--seconds", "8"])
         .args(["--topics", "/rov/pose,/camera/image,/link/frames"])
         .args(["--publish-order", goto])

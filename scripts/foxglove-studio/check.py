@@ -3,7 +3,8 @@
 
 Usage:
   check.py NAME --studio URL (--ws URL | --remote-file URL | --local-file PATH) --out DIR
-           [--layout layout.json|layout-network.json] [--publish] [--expect TOPIC,...]
+           [--layout layout.json|layout-network.json] [--publish | --publish-refused]
+           [--expect TOPIC,...]
            [--absent TOPIC,...] [--expect-delay] [--settle-s S]
 
 The data source: --ws opens Studio on a Foxglove WebSocket server
@@ -27,7 +28,10 @@ Each of these is a failure:
   still waiting for an image, with --expect-delay a Plot with no value of delay_ms, still so
   --within-s (120) after the first --settle-s (15) of watching;
 - with --publish: the Publish panel's GoTo not enabled, or no `order N acknowledged` in the
-  /session/log panel within 45 s of sending it.
+  /session/log panel within 45 s of sending it;
+- with --publish-refused (a URL without the control token): an `order N acknowledged` within
+  15 s of sending the GoTo, or no `publishing refused` entry in the Problems list (that entry is
+  expected, and listed as such).
 
 Writes DIR/NAME.png (the window), DIR/NAME-3d.png and DIR/NAME.json (everything seen, warnings
 too). Prints one line per failure; exits 0 when there is none, 1 when there is one, 2 when the
@@ -40,6 +44,7 @@ import re
 import sys
 import time
 from pathlib import Path
+from urllib.parse import quote
 
 from playwright.sync_api import Error as PlaywrightError
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
@@ -81,6 +86,7 @@ class Findings:
         self.console_warnings = []
         self.page_errors = []
         self.problems = []
+        self.expected_problems = []
         self.panel_errors = []
         self.expected_errors = []
         self.blank = []
@@ -113,7 +119,7 @@ class Findings:
         lines += [f"console error{repeated(n)}: {text}" for text, n in tally(self.console_errors)]
         lines += [f"page error{repeated(n)}: {text}" for text, n in tally(self.page_errors)]
         lines += [f"blank: {b}" for b in self.blank]
-        if self.publish is not None and "acknowledged" not in self.publish:
+        if self.publish is not None and "error" in self.publish:
             lines.append(f"publish: {self.publish['error']}")
         return lines
 
@@ -122,6 +128,7 @@ class Findings:
             "name": self.name,
             "failures": self.failures(),
             "problems": self.problems,
+            "expected_problems": self.expected_problems,
             "panel_errors": self.panel_errors,
             "expected_panel_errors": self.expected_errors,
             "console_errors": self.console_errors,
@@ -273,6 +280,25 @@ def publish_goto(page, findings):
         findings.publish["error"] = "GoTo sent, no 'order N acknowledged' on /session/log within 45 s"
 
 
+def publish_refused(page, findings):
+    """Clicks the Publish panel's button on a view without the token: nothing may be acknowledged."""
+    button = panel(page, "Publish!goto").get_by_role("button", name="Send GoTo")
+    try:
+        wait_for(button.is_enabled, 20, "the Publish panel's button enabled")
+    except Setup as error:
+        findings.publish = {"error": str(error)}
+        return
+    before = set(ACKNOWLEDGED.findall(session_log(page)))
+    button.click()
+    findings.publish = {"sent_at_s": findings.at()}
+    page.wait_for_timeout(15000)
+    new = set(ACKNOWLEDGED.findall(session_log(page))) - before
+    if new:
+        findings.publish["error"] = f"GoTo sent without the token, and {sorted(new)[0]}"
+    else:
+        findings.publish["refused"] = True
+
+
 def blanks(page, expect, expect_delay):
     """What is still blank: (the Topics list's counts, one line per blank)."""
     counts = topic_counts(page)
@@ -324,7 +350,8 @@ def run(args):
     layout = json.loads((Path(__file__).parent / args.layout).read_text())
     PANELS.update({panel_id: PANEL_NAMES.get(panel_id, panel_id) for panel_id in layout["configById"]})
     if args.ws:
-        query = f"?ds=foxglove-websocket&ds.url={args.ws}&layout={args.layout}"
+        # Encoded whole: the URL may carry the control token as its own query (?token=...).
+        query = f"?ds=foxglove-websocket&ds.url={quote(args.ws, safe='')}&layout={args.layout}"
     elif args.remote_file:
         query = f"?ds=remote-file&ds.url={args.remote_file}&layout={args.layout}"
     else:
@@ -356,12 +383,20 @@ def run(args):
             wait_for_data(page, expect, args.expect_delay, args.within_s)
             if args.publish:
                 publish_goto(page, findings)
+            if args.publish_refused:
+                publish_refused(page, findings)
             page.mouse.move(VIEWPORT["width"] - 5, VIEWPORT["height"] - 5)
             page.wait_for_timeout(1000)
             page.screenshot(path=str(out / f"{args.name}.png"))
             panel(page, "3D!rov").screenshot(path=str(out / f"{args.name}-3d.png"))
             findings.counts, findings.blank = blanks(page, expect, args.expect_delay)
             read_problems(page, findings)
+            if args.publish_refused:
+                refused = [p for p in findings.problems if "publishing refused" in p["message"]]
+                findings.problems = [p for p in findings.problems if p not in refused]
+                findings.expected_problems = refused
+                if not refused:
+                    findings.publish = {"error": "no 'publishing refused' in the Problems list"}
             for panel_id in PANELS:
                 read_panel_errors(page, findings, panel_id, [t for t in args.absent.split(",") if t])
         except PlaywrightError as error:
@@ -373,6 +408,9 @@ def run(args):
     failures = findings.failures()
     for line in failures:
         print(f"{args.name}: {line}")
+    if findings.publish and findings.publish.get("refused") and findings.expected_problems:
+        print(f"{args.name}: GoTo from the Publish panel without the token: refused, Studio shows"
+              f" {findings.expected_problems[0]['message']!r}")
     if findings.publish and "acknowledged" in findings.publish:
         print(f"{args.name}: GoTo from the Publish panel: {findings.publish['acknowledged']} after {findings.publish['after_s']} s")
     print(
@@ -392,7 +430,10 @@ def main():
     source.add_argument("--local-file", help="an MCAP file's path")
     parser.add_argument("--out", required=True, help="directory for screenshots and findings")
     parser.add_argument("--layout", default="layout.json", choices=["layout.json", "layout-network.json"])
-    parser.add_argument("--publish", action="store_true", help="send the Publish panel's GoTo")
+    publishing = parser.add_mutually_exclusive_group()
+    publishing.add_argument("--publish", action="store_true", help="send the Publish panel's GoTo")
+    publishing.add_argument("--publish-refused", action="store_true",
+                            help="send it without the token: it must be refused")
     parser.add_argument("--expect", default="", help="topics that must have messages, comma-separated")
     parser.add_argument("--absent", default="", help="topics the source lacks, comma-separated")
     parser.add_argument("--expect-delay", action="store_true", help="the Plot must show delay_ms")

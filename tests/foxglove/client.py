@@ -19,12 +19,14 @@ Teleop panel does) and publishes the Twist at --rate Hz; --publish-order adverti
 publishes each JSON order once. --garbage sends junk first: binary junk, an empty binary frame,
 text that is not JSON, unknown operations, a message on a channel never advertised, channels
 the server must refuse, bad JSON and bad orders on /orders, a NaN Twist, a huge message, and
-connections that are cut mid-handshake or that offer no known subprotocol.
+connections that are cut mid-handshake or that offer no known subprotocol. --cafile trusts
+that certificate for a wss:// URL.
 """
 
 import argparse
 import json
 import socket
+import ssl
 import struct
 import sys
 import time
@@ -93,13 +95,13 @@ def garbage(ws, url):
     ws.send(json.dumps({"op": "unsubscribe", "subscriptionIds": [4242]}))
 
 
-def open_connection(url, within_s):
+def open_connection(url, within_s, context=None):
     """Connects, trying again while the server is not listening yet (a process starting)."""
     give_up = time.monotonic() + within_s
     while True:
         try:
             return connect(url, subprotocols=[SUBPROTOCOL], max_size=None, open_timeout=5,
-                           close_timeout=1)
+                           close_timeout=1, ssl=context)
         except (ConnectionRefusedError, ConnectionResetError):
             if time.monotonic() >= give_up:
                 raise
@@ -120,6 +122,7 @@ def main():
     ap.add_argument("--publish-order", action="append", default=[], metavar="JSON")
     ap.add_argument("--connect-within", type=float, default=0.0, metavar="S",
                     help="retry a refused connection for this long")
+    ap.add_argument("--cafile", help="a certificate to trust for wss://")
     ap.add_argument("--garbage", action="store_true")
     ap.add_argument("--stall", action="store_true",
                     help="once subscribed, stop reading until the time is up (a stuck client)")
@@ -140,7 +143,8 @@ def main():
 
     deadline = time.monotonic() + args.seconds
     try:
-        with open_connection(args.url, args.connect_within) as ws:
+        context = ssl.create_default_context(cafile=args.cafile) if args.cafile else None
+        with open_connection(args.url, args.connect_within, context) as ws:
             while True:
                 now = time.monotonic()
                 if now >= deadline:

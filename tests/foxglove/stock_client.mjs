@@ -3,7 +3,7 @@
 // subprotocol it offers (`foxglove.websocket.v1`) or, with --subprotocol, another name.
 //
 // Usage: node stock_client.mjs --url ws://HOST:PORT --out FILE [--seconds S]
-//            [--subprotocol NAME] [--publish-order JSON]
+//            [--subprotocol NAME] [--publish-order JSON] [--origin ORIGIN]
 //
 // It subscribes to every advertised channel as soon as it is advertised, counts messages and
 // bytes per topic for --seconds, notes when the first message of each topic came (ms after its
@@ -11,6 +11,7 @@
 // encoding) one second after subscribing, and writes --out as JSON:
 //   {"subprotocol": "...", "counts": {topic: n}, "bytes": {topic: n}, "first_ms": {topic: ms},
 //    "seconds": S, "published": n, "statuses": [...], "schemas": {topic: schemaName}}
+// --origin sends that Origin header, as a browser page of that site would.
 // Exit 0 once written; 1 (with the reason on stderr) if it could not connect.
 import { writeFileSync } from "node:fs";
 import wsProtocol from "@foxglove/ws-protocol";
@@ -27,6 +28,7 @@ function args(argv) {
     else if (flag === "--seconds") out.seconds = Number(value);
     else if (flag === "--subprotocol") out.subprotocol = value;
     else if (flag === "--publish-order") out.orders.push(value);
+    else if (flag === "--origin") out.origin = value;
     else {
       console.error(`stock_client: unknown flag ${flag}`);
       process.exit(2);
@@ -36,7 +38,7 @@ function args(argv) {
 }
 
 const opts = args(process.argv);
-const ws = new WebSocket(opts.url, [opts.subprotocol]);
+const ws = new WebSocket(opts.url, [opts.subprotocol], opts.origin ? { origin: opts.origin } : {});
 const client = new FoxgloveClient({ ws });
 const result = {
   subprotocol: null, counts: {}, bytes: {}, first_ms: {}, seconds: opts.seconds,

@@ -21,6 +21,16 @@
 //!     holds for [`TWIST_HOLD`]: with none newer by then, the joystick goes neutral (a JSON
 //!     `velocity` on `/orders` is kept until the next, as wire.md's joystick is).
 //!
+//! Who may do what (docs/tdma-foxglove.md, "Who may control"): every connection comes through
+//! the gate ([`crate::foxglove_gate`]), which refuses browsers from other sites and marks each
+//! client it lets through for [`Access::View`] or, when its URL carries the control token,
+//! [`Access::Control`]. The session's messages go only to marked clients (a program connecting
+//! to the SDK's own loopback port gets none); orders are taken only from clients marked for
+//! control on an operator end started with a [`Policy::token`]; every other client's
+//! advertisement is refused, once per client on stderr and in a status to the client. Without a
+//! token the view is view-only. Control over plain `ws://` on an address other than loopback
+//! is refused unless [`Policy::insecure`]; with [`Policy::tls`] the gate serves `wss://`.
+//!
 //! The contract: nothing a client sends stops the session, panics, or grows memory without
 //! bound. Junk frames, unknown operations and messages on channels never advertised are
 //! refused by the SDK (which tells the client); here, a payload larger than
@@ -33,14 +43,17 @@
 //! dropping the oldest for a slow one. [`LiveView::stop`] (or dropping it) closes the server, waiting at
 //! most [`STOP_WAIT`] for the clients to be told.
 
-use std::collections::VecDeque;
+use std::collections::{HashMap, HashSet, VecDeque};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use foxglove::websocket::{Capability, ChannelView, Client, ClientChannel, ServerListener};
-use foxglove::{Context, PartialMetadata, RawChannel, Schema, WebSocketServerHandle};
+use foxglove::websocket::{
+    Capability, ChannelView, Client, ClientChannel, ClientId, ServerListener, Status,
+};
+use foxglove::{Context, PartialMetadata, RawChannel, Schema, SinkId, WebSocketServerHandle};
 
-use crate::foxglove_gate::{Gate, Reports};
+pub use crate::foxglove_gate::{Access, Policy, Token};
+use crate::foxglove_gate::{Gate, MARKER_CHANNEL_ID, Reports};
 use crate::mcap_log::{Clock, Topic, View, ViewMessage};
 use rovlink_link::SimTime;
 use rovlink_rcp::operator::Joystick;
@@ -101,6 +114,17 @@ pub enum FoxgloveError {
         addr: String,
         /// The system's reason.
         source: std::io::Error,
+    },
+    /// Control on an address other than loopback without TLS and without --foxglove-insecure.
+    #[error(
+        "--foxglove {addr}: control (--foxglove-token-file) on an address other than loopback \
+         would send the token and the orders in clear: serve wss:// (--foxglove-tls-cert and \
+         --foxglove-tls-key), or bind 127.0.0.1 and reach it through an SSH tunnel, or add \
+         --foxglove-insecure"
+    )]
+    Exposed {
+        /// The address.
+        addr: String,
     },
     /// The SDK refused to set up the server or a channel.
     #[error("--foxglove {addr}: {message}")]
@@ -233,7 +257,9 @@ struct Inbox {
     /// When the Twist in force arrived, while one is.
     twist_at: Option<Instant>,
     /// The client topics already warned about (each is warned about once per session).
-    warned_topics: std::collections::HashSet<String>,
+    warned_topics: HashSet<String>,
+    /// The clients whose publishing was refused (each is warned about once).
+    refused_clients: HashSet<ClientId>,
 }
 
 impl Inbox {
@@ -300,15 +326,63 @@ struct Listener {
     inbox: Arc<Mutex<Inbox>>,
     /// The view's channels and their latest messages, for new subscribers.
     latest: Arc<Latest>,
+    /// This process's secret, which the gate's marker carries.
+    secret: Arc<str>,
+    /// Whose orders this view takes.
+    orders: Orders,
 }
 
-/// The view's channels, and the latest message of each [`KEPT`] one.
+/// Whose orders a view takes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Orders {
+    /// Clients marked for control (an operator end with a token).
+    FromControl,
+    /// None: an operator end without a token.
+    NoToken,
+    /// None: a ROV end, a network or a network node (their orders come from elsewhere).
+    NotHere,
+}
+
+/// A client the gate let through.
+#[derive(Clone, Copy, Debug)]
+struct Viewer {
+    sink: SinkId,
+    access: Access,
+}
+
+/// The view's channels, the latest message of each [`KEPT`] one, and the clients that
+/// receive them.
 struct Latest {
     channels: Vec<Option<Arc<RawChannel>>>,
     messages: Mutex<Vec<Option<ViewMessage>>>,
+    /// The clients the gate marked (see the module doc).
+    viewers: Mutex<HashMap<ClientId, Viewer>>,
 }
 
 impl Latest {
+    fn viewers(&self) -> MutexGuard<'_, HashMap<ClientId, Viewer>> {
+        self.viewers.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The access of `client`, if the gate marked it.
+    fn access(&self, client: &Client) -> Option<Access> {
+        self.viewers().get(&client.id()).map(|v| v.access)
+    }
+
+    /// Logs `json` on `channel` to every marked client subscribed to it.
+    fn log_to_viewers(&self, channel: &RawChannel, json: &str, log_time_ns: u64) {
+        let sinks: Vec<SinkId> = self.viewers().values().map(|v| v.sink).collect();
+        for sink in sinks {
+            channel.log_with_meta_to_sink(
+                json.as_bytes(),
+                PartialMetadata {
+                    log_time: Some(log_time_ns),
+                },
+                Some(sink),
+            );
+        }
+    }
+
     /// Channel `index`, if the view has it.
     fn channel(&self, index: usize) -> Option<&Arc<RawChannel>> {
         self.channels.get(index).and_then(Option::as_ref)
@@ -365,12 +439,66 @@ impl Listener {
     }
 }
 
+impl Listener {
+    /// Why `client`'s publishing is refused, if it is.
+    fn refusal(&self, client: &Client) -> Option<&'static str> {
+        match (self.orders, self.latest.access(client)) {
+            (Orders::FromControl, Some(Access::Control)) => None,
+            (Orders::FromControl, _) => Some(
+                "publishing refused: its URL has no control token (?token=...): it may only view",
+            ),
+            (Orders::NoToken, _) => Some(
+                "publishing refused: the live view is view-only; control needs \
+                 --foxglove-token-file and the token in the client's URL",
+            ),
+            (Orders::NotHere, _) => {
+                Some("publishing refused: this live view takes no orders (view only)")
+            }
+        }
+    }
+}
+
 impl ServerListener for Listener {
     fn on_subscribe(&self, client: Client, channel: ChannelView) {
-        self.latest.send_to(&client, &channel);
+        if self.latest.access(&client).is_some() {
+            self.latest.send_to(&client, &channel);
+        }
+    }
+
+    fn on_client_unadvertise(&self, client: Client, channel: &ClientChannel) {
+        if u32::from(channel.id) == MARKER_CHANNEL_ID {
+            self.latest.viewers().remove(&client.id());
+        }
     }
 
     fn on_client_advertise(&self, client: Client, channel: &ClientChannel) {
+        if u32::from(channel.id) == MARKER_CHANNEL_ID {
+            // The gate's marker: its topic carries the secret, so it is never shown.
+            let marked = crate::foxglove_gate::marker_access(&channel.topic, &self.secret);
+            if let (Some(access), Some(sink)) = (marked, client.sink_id()) {
+                self.latest
+                    .viewers()
+                    .insert(client.id(), Viewer { sink, access });
+            }
+            return;
+        }
+        if let Some(why) = self.refusal(&client) {
+            let mut inbox = lock(&self.inbox);
+            if inbox.refused_clients.len() < 4 * MAX_WARNINGS
+                && inbox.refused_clients.insert(client.id())
+            {
+                inbox.warn(format!(
+                    "foxglove client {}: {why} (said once per client)",
+                    u32::from(client.id())
+                ));
+                // A view that never takes orders does not tell the client: a viewer's panels
+                // advertise on their own (Foxglove's 3D panel), and nothing can change it.
+                if self.orders != Orders::NotHere {
+                    client.send_status(Status::warning(why));
+                }
+            }
+            return;
+        }
         if let Err(why) = ClientTopic::of(&channel.topic, &channel.schema_name, &channel.encoding) {
             let warning = format!(
                 "{}: refused: {why} (said once per topic)",
@@ -381,7 +509,11 @@ impl ServerListener for Listener {
     }
 
     fn on_message_data(&self, client: Client, channel: &ClientChannel, payload: &[u8]) {
-        // A refused channel was reported when it was advertised; its messages are ignored.
+        // A refused channel or client was reported when it advertised; its messages are
+        // ignored.
+        if u32::from(channel.id) == MARKER_CHANNEL_ID || self.refusal(&client).is_some() {
+            return;
+        }
         let Ok(kind) = ClientTopic::of(&channel.topic, &channel.schema_name, &channel.encoding)
         else {
             return;
@@ -458,6 +590,10 @@ pub struct LiveView {
     /// What its frames are: a single session's link, a network's hops, a node's own.
     extra: Extra,
     addr: String,
+    /// What clients published (a view without [`LiveOrders`] reports its refusals itself).
+    inbox: Arc<Mutex<Inbox>>,
+    /// Whether it serves `wss://`.
+    tls: bool,
 }
 
 /// One vehicle's part of the view.
@@ -493,23 +629,41 @@ fn host_port(addr: &str) -> Result<(&str, u16), FoxgloveError> {
 /// Starts the server, bound to `addr` only (HOST:PORT; port 0 picks a free one, see
 /// [`LiveView::port`]). A bad address or one that cannot be listened on (a port in use) is an
 /// `Err` naming it. Returns the observer that publishes and the source of client orders; a
-/// `role` of [`Role::Rov`] offers no publishing to clients (its orders come over the link),
-/// and its [`LiveOrders`] stays empty. Must not be called from inside an async runtime.
-pub fn start(addr: &str, role: Role) -> Result<(LiveView, LiveOrders), FoxgloveError> {
+/// `role` of [`Role::Rov`] takes no orders from clients (its orders come over the link), and
+/// its [`LiveOrders`] stays empty; nor does an operator end without a [`Policy::token`].
+/// `policy` says who may connect and who may control (see the module doc); control on an
+/// address other than loopback without [`Policy::insecure`] is [`FoxgloveError::Exposed`].
+/// Must not be called from inside an async runtime.
+pub fn start(
+    addr: &str,
+    role: Role,
+    policy: &Policy,
+) -> Result<(LiveView, LiveOrders), FoxgloveError> {
     let name = format!("tdma-run {}", role.name());
-    serve(addr, &name, role == Role::Operator, &[None], Extra::Nothing)
+    let orders = match (role, &policy.token) {
+        (Role::Operator, Some(_)) => Orders::FromControl,
+        (Role::Operator, None) => Orders::NoToken,
+        (Role::Rov, _) => Orders::NotHere,
+    };
+    serve(addr, &name, orders, policy, &[None], Extra::Nothing)
 }
 
 /// Starts the server of a simulated network's view (see [`start`]): each vehicle's channels
 /// under `/vehicle/N/` (as the network's MCAP log has them: all but the single link's
 /// `link/frames`; its body frame `vehicle_N` on `/vehicle/N/tf`), and `/network/frames`, every
 /// hop of every frame. Clients cannot publish: a network's orders come from its scenario.
-pub fn start_network(addr: &str, vehicles: &[u8]) -> Result<LiveView, FoxgloveError> {
+/// `policy`'s origins are kept; a token gives no control here.
+pub fn start_network(
+    addr: &str,
+    vehicles: &[u8],
+    policy: &Policy,
+) -> Result<LiveView, FoxgloveError> {
     let lanes: Vec<Option<u8>> = vehicles.iter().map(|&v| Some(v)).collect();
     serve(
         addr,
         "tdma-run network",
-        false,
+        Orders::NotHere,
+        policy,
         &lanes,
         Extra::NetworkFrames,
     )
@@ -522,10 +676,24 @@ pub fn start_network(addr: &str, vehicles: &[u8]) -> Result<LiveView, FoxgloveEr
 /// sent and received (`rovlink.LinkFrame`, as a single session's link: a received frame's send
 /// time is the far node's, so it has no `t_sent_s` or `delay_ms`), fed by
 /// [`Observer::frame`]. Clients cannot publish: a node's orders come from its flags.
-pub fn start_node(addr: &str, role: Role, vehicles: &[u8]) -> Result<LiveView, FoxgloveError> {
+/// `policy`'s origins are kept; a token gives no control here.
+pub fn start_node(
+    addr: &str,
+    role: Role,
+    vehicles: &[u8],
+    policy: &Policy,
+) -> Result<LiveView, FoxgloveError> {
     let lanes: Vec<Option<u8>> = vehicles.iter().map(|&v| Some(v)).collect();
     let name = format!("tdma-run {} (network node)", role.name());
-    serve(addr, &name, false, &lanes, Extra::NodeFrames).map(|(view, _)| view)
+    serve(
+        addr,
+        &name,
+        Orders::NotHere,
+        policy,
+        &lanes,
+        Extra::NodeFrames,
+    )
+    .map(|(view, _)| view)
 }
 
 /// A view's channels beyond its lanes'.
@@ -542,7 +710,8 @@ enum Extra {
 fn serve(
     addr: &str,
     name: &str,
-    publish: bool,
+    orders: Orders,
+    policy: &Policy,
     lanes: &[Option<u8>],
     extra: Extra,
 ) -> Result<(LiveView, LiveOrders), FoxgloveError> {
@@ -597,12 +766,20 @@ fn serve(
     let latest = Arc::new(Latest {
         messages: Mutex::new(vec![None; channels.len()]),
         channels,
+        viewers: Mutex::new(HashMap::new()),
     });
+    let secret: Arc<str> = crate::foxglove_gate::random_hex(32)
+        .map_err(|e| FoxgloveError::Server {
+            addr: addr.to_string(),
+            message: format!("cannot read /dev/urandom: {e}"),
+        })?
+        .into();
     let inbox = Arc::new(Mutex::new(Inbox::default()));
     // The SDK listens on a loopback port of its own; the gate, on the address given, carries
     // every viewer's connection to it (see `foxglove_gate`: stock viewers offer the protocol's
-    // older name, which the SDK refuses).
-    let mut server = context
+    // older name, which the SDK refuses) and marks it. Every view offers publishing, since
+    // the marker is a client advertisement; the listener refuses what it does not take.
+    let handle = context
         .websocket_server()
         .name(name)
         .bind("127.0.0.1", 0)
@@ -610,19 +787,34 @@ fn serve(
         .listener(Arc::new(Listener {
             inbox: inbox.clone(),
             latest: latest.clone(),
-        }));
-    if publish {
-        server = server
-            .capabilities([Capability::ClientPublish])
-            .supported_encodings(["json"]);
-    }
-    let handle = server.start_blocking().map_err(sdk)?;
-    let gate = Gate::start(&format!("{host}:{port}"), handle.port()).map_err(|source| {
-        FoxgloveError::Bind {
-            addr: addr.to_string(),
-            source,
-        }
+            secret: secret.clone(),
+            orders,
+        }))
+        .capabilities([Capability::ClientPublish])
+        .supported_encodings(["json"])
+        .start_blocking()
+        .map_err(sdk)?;
+    let gate = Gate::start(
+        &format!("{host}:{port}"),
+        handle.port(),
+        policy.clone(),
+        secret,
+    )
+    .map_err(|source| FoxgloveError::Bind {
+        addr: addr.to_string(),
+        source,
     })?;
+    if orders == Orders::FromControl
+        && !gate.local_addr().ip().is_loopback()
+        && !policy.insecure
+        && policy.tls.is_none()
+    {
+        drop(gate);
+        handle.stop().detach_all();
+        return Err(FoxgloveError::Exposed {
+            addr: addr.to_string(),
+        });
+    }
     let lanes = lanes
         .iter()
         .map(|&vehicle| Lane {
@@ -644,6 +836,8 @@ fn serve(
         node: (extra == Extra::NodeFrames).then(|| View::new(Clock::Wall)),
         extra,
         addr: addr.to_string(),
+        inbox: inbox.clone(),
+        tls: policy.tls.is_some(),
     };
     let reports = view.gate.as_ref().map(Gate::reports);
     Ok((view, LiveOrders { inbox, reports }))
@@ -667,13 +861,24 @@ impl LiveView {
             .map_or(0, WebSocketServerHandle::client_count)
     }
 
-    /// The handshakes the gate refused, not yet reported (a network's view has no
-    /// [`LiveOrders`] to report them).
+    /// The handshakes the gate refused and the clients whose publishing was refused, not yet
+    /// reported (a network's view has no [`LiveOrders`] to report them).
     pub fn take_refusals(&self) -> Vec<String> {
+        let mut lines: Vec<String> = lock(&self.inbox).warnings.drain(..).collect();
+        lines.extend(self.gate.iter().flat_map(|g| g.reports().take()));
+        lines
+    }
+
+    /// The URL scheme clients use: `wss` with TLS, else `ws`.
+    pub fn scheme(&self) -> &'static str {
+        if self.tls { "wss" } else { "ws" }
+    }
+
+    /// Whether it listens on an address other than loopback.
+    pub fn exposed(&self) -> bool {
         self.gate
             .as_ref()
-            .map(|g| g.reports().take())
-            .unwrap_or_default()
+            .is_some_and(|g| !g.local_addr().ip().is_loopback())
     }
 
     /// The lane of `vehicle` (the only one in a single session).
@@ -702,12 +907,7 @@ impl LiveView {
     fn publish_at(&self, index: usize, topic: Topic, json: &str, log_time_ns: u64) {
         self.latest.keep(index, topic, json, log_time_ns);
         if let Some(channel) = self.latest.channel(index) {
-            channel.log_with_meta(
-                json.as_bytes(),
-                PartialMetadata {
-                    log_time: Some(log_time_ns),
-                },
-            );
+            self.latest.log_to_viewers(channel, json, log_time_ns);
         }
     }
 
@@ -847,12 +1047,7 @@ impl LiveView {
         if channel.has_sinks() {
             let now_ns = crate::mcap_log::wall_clock_ns();
             let json = crate::net_mcap::hop_json(e, now_ns);
-            channel.log_with_meta(
-                json.as_bytes(),
-                PartialMetadata {
-                    log_time: Some(now_ns),
-                },
-            );
+            self.latest.log_to_viewers(channel, &json, now_ns);
         }
         // A still vehicle's pose is republished on the network's ticks too.
         for lane in 0..self.lanes.len() {

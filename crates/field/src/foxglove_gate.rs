@@ -1,21 +1,34 @@
-//! The handshake layer in front of the Foxglove SDK's server: one port for every viewer.
+//! The handshake layer in front of the Foxglove SDK's server: one port for every viewer, and
+//! the only way to it.
 //!
 //! The official `foxglove` crate (0.30) accepts only the WebSocket subprotocols
 //! `foxglove.sdk.v1` and `foxglove.sdk.v1.1`. Foxglove Studio 1.x, Lichtblick before its PR
 //! #819, `@foxglove/ws-protocol` 0.8 and the tools built on it offer `foxglove.websocket.v1`,
 //! which is the same protocol under its older name (Foxglove's stated position; Lichtblick's
-//! fix is adding the new name beside the old). The SDK has no option for it and no way to hand
-//! it an accepted connection, so the gate listens on the address the user gave, keeps the SDK
-//! on a loopback port of its own, and for each connection:
+//! fix is adding the new name beside the old). The SDK has no option for it, no way to hand
+//! it an accepted connection and no hook in its handshake (no token, no Origin check), so the
+//! gate listens on the address the user gave, keeps the SDK on a loopback port of its own, and
+//! for each connection:
 //!
 //! 1. reads the client's HTTP upgrade request (at most [`MAX_REQUEST_BYTES`], within
 //!    [`REQUEST_TIMEOUT`]);
-//! 2. if the client offers an SDK name, passes the request on unchanged (the SDK picks the
-//!    newest); if it offers only `foxglove.websocket.v1`, passes it on naming
-//!    `foxglove.sdk.v1` instead and, in the SDK's answer, names `foxglove.websocket.v1` back;
-//!    if it offers neither, passes it on unchanged (the SDK answers 400) and reports the peer
-//!    once ([`Reports::take`]);
-//! 3. then copies bytes both ways until either side closes.
+//! 2. refuses with 403 a request whose `Origin` header is not allowed ([`origin_allowed`]: what
+//!    Foxglove Studio and pages on this machine send, and [`Policy::origins`]) and one whose URL
+//!    carries a `token` that is not the [`Policy::token`]; a request without `Origin` (a program,
+//!    not a browser) passes;
+//! 3. grants [`Access::Control`] to a request whose URL carries the token (`?token=...`,
+//!    compared in constant time), [`Access::View`] to the rest, and takes the query off the URL;
+//! 4. if the client offers an SDK name, passes the request on (the SDK picks the newest); if it
+//!    offers only `foxglove.websocket.v1`, passes it on naming `foxglove.sdk.v1` instead and,
+//!    in the SDK's answer, names `foxglove.websocket.v1` back; if it offers neither, passes it
+//!    on unchanged (the SDK answers 400) and reports the peer once ([`Reports::take`]);
+//! 5. once the SDK has accepted, sends it first, as the client, an advertisement of a channel
+//!    whose topic carries this process's random secret and the access granted
+//!    ([`marker_topic`]): the live view's listener ([`crate::foxglove`]) sends data only to
+//!    clients so marked and takes orders only from those marked for control. A program that
+//!    connects to the SDK's loopback port directly completes the SDK's handshake but cannot
+//!    know the secret: it gets no message and its publishing is refused;
+//! 6. then copies bytes both ways until either side closes.
 //!
 //! At most [`MAX_CONNECTIONS`] connections are carried at once; one more is closed at once.
 //! Contract: nothing a client sends panics or blocks the session: every connection has its
@@ -25,7 +38,7 @@ use std::collections::HashSet;
 use std::io::{self, Read, Write};
 use std::net::{IpAddr, Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
 /// The subprotocol name stock viewers offer.
@@ -40,21 +53,237 @@ pub const REQUEST_TIMEOUT: Duration = Duration::from_secs(5);
 pub const MAX_CONNECTIONS: usize = 256;
 /// Peers remembered as reported (the rest are counted).
 const MAX_REPORTED_PEERS: usize = 1024;
+/// The `Origin`s a browser sends that are allowed without [`Policy::origins`]: Foxglove's web
+/// app, and Foxglove Studio desktop (served from `file://`). Pages served from this machine
+/// (`http://` or `https://` on `localhost`, `127.0.0.1` or `[::1]`, any port) are allowed too
+/// ([`origin_allowed`]).
+pub const DEFAULT_ORIGINS: [&str; 3] = [
+    "https://studio.foxglove.dev",
+    "https://app.foxglove.dev",
+    "file://",
+];
+/// The query parameter of the URL that carries the control token (`ws://HOST:PORT/?token=...`).
+pub const TOKEN_PARAMETER: &str = "token";
+/// The shortest control token accepted, characters.
+pub const MIN_TOKEN_CHARS: usize = 16;
+/// The longest control token accepted, characters.
+pub const MAX_TOKEN_CHARS: usize = 256;
+/// The client channel id of the gate's marker advertisement ([`marker_topic`]); clients number
+/// their channels from 0 or 1 up.
+pub const MARKER_CHANNEL_ID: u32 = u32::MAX;
+/// The start of the marker channel's topic.
+const MARKER_PREFIX: &str = "/rovlink/gate/";
+
+/// What a client connected through the gate may do.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Access {
+    /// Receive the session's channels.
+    View,
+    /// Receive them and publish orders (its URL carried the control token).
+    Control,
+}
+
+impl Access {
+    fn name(self) -> &'static str {
+        match self {
+            Access::View => "view",
+            Access::Control => "control",
+        }
+    }
+}
+
+/// A control token: URL-safe characters (`A-Z a-z 0-9 - . _ ~`), [`MIN_TOKEN_CHARS`] to
+/// [`MAX_TOKEN_CHARS`] of them. Its `Debug` does not show it.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Token(Vec<u8>);
+
+impl std::fmt::Debug for Token {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Token(..)")
+    }
+}
+
+impl Token {
+    /// The token a token file holds (one line; a final newline is not part of it); `Err` says
+    /// what is wrong without showing it.
+    pub fn parse(bytes: &[u8]) -> Result<Token, String> {
+        let text = bytes.strip_suffix(b"\n").unwrap_or(bytes);
+        let text = text.strip_suffix(b"\r").unwrap_or(text);
+        if text.len() < MIN_TOKEN_CHARS || text.len() > MAX_TOKEN_CHARS {
+            return Err(format!(
+                "expected a token of {MIN_TOKEN_CHARS} to {MAX_TOKEN_CHARS} characters on one \
+                 line, found {} bytes",
+                text.len()
+            ));
+        }
+        if let Some(at) = text.iter().position(|&b| !url_safe(b)) {
+            return Err(format!(
+                "expected only A-Z a-z 0-9 - . _ ~ (they go into a URL), found another byte at \
+                 offset {at}"
+            ));
+        }
+        Ok(Token(text.to_vec()))
+    }
+
+    /// Whether `given` is this token (constant time in `given`'s contents).
+    pub fn matches(&self, given: &[u8]) -> bool {
+        constant_time_eq(&self.0, given)
+    }
+}
+
+fn url_safe(b: u8) -> bool {
+    b.is_ascii_alphanumeric() || matches!(b, b'-' | b'.' | b'_' | b'~')
+}
+
+/// Whether `a` equals `b`, taking a time that depends on their lengths but not on where they
+/// differ: every byte of `a` is compared.
+pub fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    let mut diff = u8::from(a.len() != b.len());
+    for (k, x) in a.iter().enumerate() {
+        diff |= x ^ b.get(k).copied().unwrap_or(!x);
+    }
+    std::hint::black_box(diff) == 0
+}
+
+/// `bytes` random bytes from the system (`/dev/urandom`) in lower-case hex.
+pub fn random_hex(bytes: usize) -> io::Result<String> {
+    let mut buf = vec![0u8; bytes];
+    std::fs::File::open("/dev/urandom")?.read_exact(&mut buf)?;
+    Ok(buf.iter().map(|b| format!("{b:02x}")).collect())
+}
+
+/// A new control token: 32 random bytes in hex (64 characters).
+pub fn new_token() -> io::Result<String> {
+    random_hex(32)
+}
+
+/// The topic of the marker channel the gate advertises for a client it let through with
+/// `access`, carrying this process's `secret`.
+pub fn marker_topic(secret: &str, access: Access) -> String {
+    format!("{MARKER_PREFIX}{secret}/{}", access.name())
+}
+
+/// The access a marker topic grants, if it carries `secret` (compared in constant time).
+pub fn marker_access(topic: &str, secret: &str) -> Option<Access> {
+    let rest = topic.strip_prefix(MARKER_PREFIX)?;
+    let (given, access) = rest.rsplit_once('/')?;
+    let access = match access {
+        "view" => Access::View,
+        "control" => Access::Control,
+        _ => return None,
+    };
+    constant_time_eq(secret.as_bytes(), given.as_bytes()).then_some(access)
+}
+
+/// Whether a browser's `Origin` may connect: one of [`DEFAULT_ORIGINS`] or `extra` (exactly,
+/// ASCII case aside), or a page of this machine (`http://` or `https://` on `localhost`,
+/// `127.0.0.1` or `[::1]`, with or without a port). `null` (a sandboxed frame of any site, or
+/// a local file) is allowed only if `extra` names it.
+pub fn origin_allowed(origin: &str, extra: &[String]) -> bool {
+    let origin = origin.trim();
+    let listed = DEFAULT_ORIGINS
+        .iter()
+        .copied()
+        .chain(extra.iter().map(String::as_str))
+        .map(|o| match o.strip_suffix('/') {
+            // `https://host/` as a user may write it; `file://` stays whole.
+            Some(host) if !host.ends_with('/') => host,
+            _ => o,
+        })
+        .any(|o| o.eq_ignore_ascii_case(origin));
+    if listed {
+        return true;
+    }
+    let Some(host_port) = origin
+        .strip_prefix("http://")
+        .or_else(|| origin.strip_prefix("https://"))
+    else {
+        return false;
+    };
+    let host = match host_port.rsplit_once(':') {
+        Some((host, port))
+            if !port.is_empty() && port.bytes().all(|b| b.is_ascii_digit()) && !host.is_empty() =>
+        {
+            host
+        }
+        _ => host_port,
+    };
+    ["localhost", "127.0.0.1", "[::1]"]
+        .iter()
+        .any(|h| h.eq_ignore_ascii_case(host))
+}
+
+/// Who may connect, and who may control.
+#[derive(Debug, Clone, Default)]
+pub struct Policy {
+    /// The control token: a client whose URL carries it gets [`Access::Control`]; none: every
+    /// client gets [`Access::View`], and a URL with a token is refused.
+    pub token: Option<Token>,
+    /// `Origin`s allowed beside [`DEFAULT_ORIGINS`] and this machine's pages.
+    pub origins: Vec<String>,
+    /// Control may be served over plain `ws://` on an address other than loopback (the live
+    /// view refuses that otherwise; the gate does not look at it).
+    pub insecure: bool,
+    /// Serve `wss://`: TLS terminated here with this configuration ([`tls_config`]).
+    pub tls: Option<Arc<rustls::ServerConfig>>,
+}
+
+/// A TLS configuration from a PEM certificate chain (the server's first) and a PEM private key
+/// (PKCS#8, PKCS#1 or SEC1); `Err` says which is wrong and why.
+pub fn tls_config(cert_pem: &[u8], key_pem: &[u8]) -> Result<Arc<rustls::ServerConfig>, String> {
+    use rustls::pki_types::pem::PemObject;
+    use rustls::pki_types::{CertificateDer, PrivateKeyDer};
+    let certs: Vec<CertificateDer<'static>> = CertificateDer::pem_slice_iter(cert_pem)
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("certificate: expected PEM CERTIFICATE blocks: {e}"))?;
+    if certs.is_empty() {
+        return Err("certificate: expected a PEM CERTIFICATE block, found none".into());
+    }
+    let key = PrivateKeyDer::from_pem_slice(key_pem)
+        .map_err(|e| format!("key: expected a PEM private key: {e}"))?;
+    // ring, not aws-lc-rs (rustls' default, which needs cmake and a long C build): its key
+    // exchange has no post-quantum group, which rustls 0.23.48 marks by deprecating it.
+    #[allow(deprecated)]
+    let provider = Arc::new(rustls::crypto::ring::default_provider());
+    rustls::ServerConfig::builder_with_provider(provider)
+        .with_safe_default_protocol_versions()
+        .map_err(|e| format!("TLS: {e}"))?
+        .with_no_client_auth()
+        .with_single_cert(certs, key)
+        .map(Arc::new)
+        .map_err(|e| format!("certificate and key: {e}"))
+}
 
 /// The gate: its listening thread, stopped when dropped.
 pub struct Gate {
-    port: u16,
+    addr: SocketAddr,
     stop: Arc<AtomicBool>,
     refusals: Arc<Mutex<Refusals>>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
-/// Handshakes refused, to be reported once per peer.
+/// Handshakes refused, to be reported once per peer and reason.
 #[derive(Default)]
 struct Refusals {
-    reported: HashSet<IpAddr>,
+    reported: HashSet<(IpAddr, &'static str)>,
     new: Vec<String>,
     unreported: u64,
+}
+
+impl Refusals {
+    /// Notes a refusal of `peer` for `reason` (a short key), said as `line` if new.
+    fn note(&mut self, peer: IpAddr, reason: &'static str, line: impl FnOnce() -> String) {
+        let key = (peer, reason);
+        if self.reported.contains(&key) {
+            return;
+        }
+        if self.reported.len() < MAX_REPORTED_PEERS {
+            self.reported.insert(key);
+            self.new.push(line());
+        } else {
+            self.unreported += 1;
+        }
+    }
 }
 
 /// What the client offered, and what to do with it.
@@ -68,25 +297,43 @@ enum Offer {
     Neither(String),
 }
 
+/// What a connection needs from the gate.
+struct Shared {
+    inner: SocketAddr,
+    policy: Policy,
+    secret: Arc<str>,
+    refusals: Arc<Mutex<Refusals>>,
+}
+
 impl Gate {
     /// Listens on `addr` (as `TcpListener::bind` takes it: `127.0.0.1:8765`, `[::1]:0`) and
-    /// carries connections to the SDK's server on `127.0.0.1:inner_port`.
-    pub fn start(addr: &str, inner_port: u16) -> io::Result<Gate> {
+    /// carries connections to the SDK's server on `127.0.0.1:inner_port` as `policy` says,
+    /// marking each with `secret` ([`marker_topic`]).
+    pub fn start(
+        addr: &str,
+        inner_port: u16,
+        policy: Policy,
+        secret: Arc<str>,
+    ) -> io::Result<Gate> {
         let listener = TcpListener::bind(addr)?;
         listener.set_nonblocking(true)?;
-        let port = listener.local_addr()?.port();
+        let local = listener.local_addr()?;
         let stop = Arc::new(AtomicBool::new(false));
         let refusals = Arc::new(Mutex::new(Refusals::default()));
-        let inner = SocketAddr::from(([127, 0, 0, 1], inner_port));
+        let shared = Arc::new(Shared {
+            inner: SocketAddr::from(([127, 0, 0, 1], inner_port)),
+            policy,
+            secret,
+            refusals: refusals.clone(),
+        });
         let thread = {
             let stop = stop.clone();
-            let refusals = refusals.clone();
             std::thread::Builder::new()
                 .name("foxglove-gate".into())
-                .spawn(move || accept_loop(&listener, inner, &stop, &refusals))?
+                .spawn(move || accept_loop(&listener, &shared, &stop))?
         };
         Ok(Gate {
-            port,
+            addr: local,
             stop,
             refusals,
             thread: Some(thread),
@@ -95,7 +342,12 @@ impl Gate {
 
     /// The port it listens on.
     pub fn port(&self) -> u16 {
-        self.port
+        self.addr.port()
+    }
+
+    /// The address it listens on.
+    pub fn local_addr(&self) -> SocketAddr {
+        self.addr
     }
 
     /// Where the refused handshakes are reported.
@@ -109,7 +361,8 @@ impl Gate {
 pub struct Reports(Arc<Mutex<Refusals>>);
 
 impl Reports {
-    /// The refused handshakes not yet reported, one line each (once per peer address).
+    /// The refused handshakes not yet reported, one line each (once per peer address and
+    /// reason).
     pub fn take(&self) -> Vec<String> {
         let mut r = self.0.lock().unwrap_or_else(|p| p.into_inner());
         let mut lines = std::mem::take(&mut r.new);
@@ -133,12 +386,7 @@ impl Drop for Gate {
     }
 }
 
-fn accept_loop(
-    listener: &TcpListener,
-    inner: SocketAddr,
-    stop: &AtomicBool,
-    refusals: &Arc<Mutex<Refusals>>,
-) {
+fn accept_loop(listener: &TcpListener, shared: &Arc<Shared>, stop: &AtomicBool) {
     let open = Arc::new(AtomicUsize::new(0));
     while !stop.load(Ordering::SeqCst) {
         match listener.accept() {
@@ -149,12 +397,12 @@ fn accept_loop(
                 }
                 open.fetch_add(1, Ordering::SeqCst);
                 let still_open = open.clone();
-                let refusals = refusals.clone();
+                let shared = shared.clone();
                 let spawned = std::thread::Builder::new()
                     .name("foxglove-conn".into())
                     .stack_size(128 * 1024)
                     .spawn(move || {
-                        let _ = carry(client, peer, inner, &refusals);
+                        let _ = carry(client, peer, &shared);
                         still_open.fetch_sub(1, Ordering::SeqCst);
                     });
                 if spawned.is_err() {
@@ -176,7 +424,7 @@ fn head_end(buf: &[u8]) -> Option<usize> {
 }
 
 /// Reads an HTTP head from `stream`: the head and whatever came after it in the same reads.
-fn read_head(stream: &mut TcpStream) -> io::Result<(Vec<u8>, Vec<u8>)> {
+fn read_head(stream: &mut impl Read) -> io::Result<(Vec<u8>, Vec<u8>)> {
     let mut buf = Vec::with_capacity(1024);
     let mut chunk = [0u8; 2048];
     loop {
@@ -198,13 +446,19 @@ fn read_head(stream: &mut TcpStream) -> io::Result<(Vec<u8>, Vec<u8>)> {
     }
 }
 
-/// The subprotocols of every `Sec-WebSocket-Protocol` header of `head`.
-fn offered(head: &str) -> Vec<String> {
+/// The values of every `name` header of `head` (ASCII case ignored), trimmed.
+fn header_values<'a>(head: &'a str, name: &'a str) -> impl Iterator<Item = &'a str> {
     head.split("\r\n")
         .skip(1)
         .filter_map(|line| line.split_once(':'))
-        .filter(|(name, _)| name.trim().eq_ignore_ascii_case("sec-websocket-protocol"))
-        .flat_map(|(_, value)| value.split(','))
+        .filter(move |(n, _)| n.trim().eq_ignore_ascii_case(name))
+        .map(|(_, value)| value.trim())
+}
+
+/// The subprotocols of every `Sec-WebSocket-Protocol` header of `head`.
+fn offered(head: &str) -> Vec<String> {
+    header_values(head, "sec-websocket-protocol")
+        .flat_map(|value| value.split(','))
         .map(|p| p.trim().to_string())
         .filter(|p| !p.is_empty())
         .collect()
@@ -226,69 +480,352 @@ fn classify(offered: &[String]) -> Offer {
     }
 }
 
-/// `head` with every `Sec-WebSocket-Protocol` header replaced by one naming `protocol`.
-fn with_protocol(head: &str, protocol: &str) -> String {
+/// The value of query parameter `name` in the request line of `head` (the last one given).
+fn query_value<'a>(head: &'a str, name: &str) -> Option<&'a str> {
+    let target = head.split("\r\n").next()?.split(' ').nth(1)?;
+    let (_, query) = target.split_once('?')?;
+    let query = query.split('#').next().unwrap_or(query);
+    query
+        .split('&')
+        .rev()
+        .map(|pair| pair.split_once('=').unwrap_or((pair, "")))
+        .find(|(n, _)| *n == name)
+        .map(|(_, v)| v)
+}
+
+/// `head` with its request line's query taken off and every `Sec-WebSocket-Protocol` header
+/// replaced by one naming `protocol` (if one is given).
+fn rewritten(head: &str, protocol: Option<&str>) -> String {
     let mut out = String::with_capacity(head.len());
     let mut replaced = false;
-    for line in head.trim_end_matches("\r\n").split("\r\n") {
+    for (k, line) in head.trim_end_matches("\r\n").split("\r\n").enumerate() {
+        if k == 0 {
+            let mut parts: Vec<&str> = line.split(' ').collect();
+            if let Some(target) = parts.get_mut(1) {
+                *target = target.split('?').next().unwrap_or(target);
+            }
+            out.push_str(&parts.join(" "));
+            out.push_str("\r\n");
+            continue;
+        }
         let is_protocol = line
             .split_once(':')
             .is_some_and(|(n, _)| n.trim().eq_ignore_ascii_case("sec-websocket-protocol"));
-        if is_protocol {
-            if !replaced {
-                out.push_str("Sec-WebSocket-Protocol: ");
-                out.push_str(protocol);
-                out.push_str("\r\n");
-                replaced = true;
+        match protocol {
+            Some(protocol) if is_protocol => {
+                if !replaced {
+                    out.push_str("Sec-WebSocket-Protocol: ");
+                    out.push_str(protocol);
+                    out.push_str("\r\n");
+                    replaced = true;
+                }
             }
-        } else {
-            out.push_str(line);
-            out.push_str("\r\n");
+            _ => {
+                out.push_str(line);
+                out.push_str("\r\n");
+            }
         }
     }
     out.push_str("\r\n");
     out
 }
 
-fn carry(
-    mut client: TcpStream,
-    peer: SocketAddr,
-    inner: SocketAddr,
-    refusals: &Mutex<Refusals>,
-) -> io::Result<()> {
-    client.set_nonblocking(false)?;
-    client.set_read_timeout(Some(REQUEST_TIMEOUT))?;
-    let (head, rest) = read_head(&mut client)?;
-    let text = String::from_utf8_lossy(&head).into_owned();
-    let offer = classify(&offered(&text));
-    let request = match &offer {
-        Offer::Legacy => with_protocol(&text, SDK_SUBPROTOCOLS[0]).into_bytes(),
-        Offer::Sdk => head,
-        Offer::Neither(list) => {
-            let mut r = refusals.lock().unwrap_or_else(|p| p.into_inner());
-            let known = r.reported.contains(&peer.ip());
-            if !known && r.reported.len() < MAX_REPORTED_PEERS {
-                r.reported.insert(peer.ip());
-                r.new.push(format!(
-                    "foxglove: handshake from {} refused: it offered subprotocol(s) {list}; \
-                     expected {LEGACY_SUBPROTOCOL}, {} or {}",
-                    peer.ip(),
-                    SDK_SUBPROTOCOLS[0],
-                    SDK_SUBPROTOCOLS[1]
-                ));
-            } else if !known {
-                r.unreported += 1;
+/// A masked WebSocket text frame carrying `text`, as a client sends one.
+fn client_text_frame(text: &str) -> Vec<u8> {
+    const MASK: [u8; 4] = [0x5a, 0x17, 0x3c, 0x81];
+    let payload = text.as_bytes();
+    let mut frame = vec![0x81];
+    match payload.len() {
+        n @ 0..=125 => frame.push(0x80 | n as u8),
+        n @ 126..=0xffff => {
+            frame.push(0x80 | 126);
+            frame.extend_from_slice(&(n as u16).to_be_bytes());
+        }
+        n => {
+            frame.push(0x80 | 127);
+            frame.extend_from_slice(&(n as u64).to_be_bytes());
+        }
+    }
+    frame.extend_from_slice(&MASK);
+    frame.extend(payload.iter().enumerate().map(|(k, b)| b ^ MASK[k % 4]));
+    frame
+}
+
+/// The client advertisement of the marker channel (see the module doc).
+fn marker_frame(secret: &str, access: Access) -> Vec<u8> {
+    let message = serde_json::json!({
+        "op": "advertise",
+        "channels": [{
+            "id": MARKER_CHANNEL_ID,
+            "topic": marker_topic(secret, access),
+            "encoding": "json",
+            "schemaName": "",
+        }],
+    });
+    client_text_frame(&message.to_string())
+}
+
+/// Answers `client` with status 403 and `why`, and closes it.
+fn forbid(mut client: ClientSide, why: &str) -> io::Result<()> {
+    let answer = format!(
+        "HTTP/1.1 403 Forbidden\r\nContent-Type: text/plain\r\nContent-Length: {}\r\n\
+         Connection: close\r\n\r\n{why}",
+        why.len()
+    );
+    client.write_all(answer.as_bytes())?;
+    client.close()
+}
+
+/// The client's side of a connection: plain, or TLS terminated here.
+enum ClientSide {
+    Plain(TcpStream),
+    Tls(Box<rustls::StreamOwned<rustls::ServerConnection, TcpStream>>),
+}
+
+impl ClientSide {
+    fn tcp(&self) -> &TcpStream {
+        match self {
+            ClientSide::Plain(tcp) => tcp,
+            ClientSide::Tls(tls) => &tls.sock,
+        }
+    }
+
+    /// Ends the connection (a TLS one with its close_notify).
+    fn close(mut self) -> io::Result<()> {
+        if let ClientSide::Tls(tls) = &mut self {
+            tls.conn.send_close_notify();
+            tls.flush()?;
+        }
+        self.tcp().shutdown(Shutdown::Both)
+    }
+
+    /// Copies bytes both ways between this and `server` until either side closes.
+    fn pump(self, mut server: TcpStream) -> io::Result<()> {
+        match self {
+            ClientSide::Plain(mut client) => {
+                // Client to server on a thread of its own; server to client here.
+                let (mut from_client, mut to_server) = (client.try_clone()?, server.try_clone()?);
+                let upstream = std::thread::Builder::new()
+                    .name("foxglove-up".into())
+                    .stack_size(64 * 1024)
+                    .spawn(move || {
+                        let _ = io::copy(&mut from_client, &mut to_server);
+                        let _ = to_server.shutdown(Shutdown::Write);
+                    })?;
+                let _ = io::copy(&mut server, &mut client);
+                let _ = client.shutdown(Shutdown::Both);
+                let _ = server.shutdown(Shutdown::Both);
+                let _ = upstream.join();
             }
-            head
+            ClientSide::Tls(tls) => {
+                let rustls::StreamOwned { conn, sock } = *tls;
+                let tls = Arc::new(Mutex::new((conn, sock.try_clone()?)));
+                let (mut from_client, mut to_server) = (sock.try_clone()?, server.try_clone()?);
+                let up = tls.clone();
+                let upstream = std::thread::Builder::new()
+                    .name("foxglove-up".into())
+                    .stack_size(64 * 1024)
+                    .spawn(move || {
+                        let _ = tls_upstream(&up, &mut from_client, &mut to_server);
+                        let _ = to_server.shutdown(Shutdown::Write);
+                    })?;
+                let _ = tls_downstream(&tls, &mut server);
+                let _ = sock.shutdown(Shutdown::Both);
+                let _ = server.shutdown(Shutdown::Both);
+                let _ = upstream.join();
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A TLS connection and the socket its records are written to, used by both directions: each
+/// holds the lock while it decrypts or encrypts and writes, so records go out in order.
+type SharedTls = Mutex<(rustls::ServerConnection, TcpStream)>;
+
+fn lock_tls(tls: &SharedTls) -> MutexGuard<'_, (rustls::ServerConnection, TcpStream)> {
+    tls.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Client to server: TLS records read from `from_client`, decrypted, written to `server`.
+fn tls_upstream(
+    tls: &SharedTls,
+    from_client: &mut TcpStream,
+    server: &mut TcpStream,
+) -> io::Result<()> {
+    let mut records = [0u8; 16 * 1024];
+    let mut plain = Vec::with_capacity(16 * 1024);
+    loop {
+        let n = from_client.read(&mut records)?;
+        if n == 0 {
+            return Ok(());
+        }
+        plain.clear();
+        let closed = {
+            let mut guard = lock_tls(tls);
+            let (conn, sock) = &mut *guard;
+            let mut fed = &records[..n];
+            while !fed.is_empty() {
+                conn.read_tls(&mut fed)?;
+                let state = conn
+                    .process_new_packets()
+                    .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e))?;
+                let ready = state.plaintext_bytes_to_read();
+                let start = plain.len();
+                plain.resize(start + ready, 0);
+                conn.reader().read_exact(&mut plain[start..])?;
+            }
+            while conn.wants_write() {
+                conn.write_tls(sock)?;
+            }
+            conn.is_handshaking() || !conn.wants_read()
+        };
+        server.write_all(&plain)?;
+        if closed {
+            return Ok(());
+        }
+    }
+}
+
+/// Server to client: bytes read from `server`, encrypted, written as TLS records.
+fn tls_downstream(tls: &SharedTls, server: &mut TcpStream) -> io::Result<()> {
+    let mut buf = [0u8; 16 * 1024];
+    loop {
+        let n = server.read(&mut buf)?;
+        let mut guard = lock_tls(tls);
+        let (conn, sock) = &mut *guard;
+        if n == 0 {
+            conn.send_close_notify();
+        } else {
+            conn.writer().write_all(&buf[..n])?;
+        }
+        while conn.wants_write() {
+            conn.write_tls(sock)?;
+        }
+        if n == 0 {
+            return Ok(());
+        }
+    }
+}
+
+impl Read for ClientSide {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        match self {
+            ClientSide::Plain(tcp) => tcp.read(buf),
+            ClientSide::Tls(tls) => tls.read(buf),
+        }
+    }
+}
+
+impl Write for ClientSide {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        match self {
+            ClientSide::Plain(tcp) => tcp.write(buf),
+            ClientSide::Tls(tls) => tls.write(buf),
+        }
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        match self {
+            ClientSide::Plain(tcp) => tcp.flush(),
+            ClientSide::Tls(tls) => tls.flush(),
+        }
+    }
+}
+
+/// At most 80 characters of `text`, without control characters, for a report.
+fn shown(text: &str) -> String {
+    text.chars().filter(|c| !c.is_control()).take(80).collect()
+}
+
+/// What the gate does with a request: refuse it (the reason's key, the report, the answer) or
+/// let it through with an access.
+fn admit(head: &str, policy: &Policy) -> Result<Access, (&'static str, String, &'static str)> {
+    if let Some(origin) =
+        header_values(head, "origin").find(|o| !origin_allowed(o, &policy.origins))
+    {
+        return Err((
+            "origin",
+            format!(
+                "refused (403): Origin {:?} is not allowed (add it with --foxglove-origin if \
+                 it is your viewer's)",
+                shown(origin)
+            ),
+            "Origin not allowed",
+        ));
+    }
+    match (query_value(head, TOKEN_PARAMETER), &policy.token) {
+        (None, _) => Ok(Access::View),
+        (Some(given), Some(token)) if token.matches(given.as_bytes()) => Ok(Access::Control),
+        (Some(_), Some(_)) => Err((
+            "token",
+            "refused (403): the token in its URL is not the control token".into(),
+            "wrong token",
+        )),
+        (Some(_), None) => Err((
+            "token",
+            "refused (403): its URL has a token, but this live view has no control token \
+             (--foxglove-token-file): open it without ?token="
+                .into(),
+            "no control token on this server",
+        )),
+    }
+}
+
+fn carry(tcp: TcpStream, peer: SocketAddr, shared: &Shared) -> io::Result<()> {
+    tcp.set_nonblocking(false)?;
+    tcp.set_read_timeout(Some(REQUEST_TIMEOUT))?;
+    tcp.set_write_timeout(Some(REQUEST_TIMEOUT))?;
+    let mut client = match &shared.policy.tls {
+        None => ClientSide::Plain(tcp),
+        Some(config) => {
+            let conn = rustls::ServerConnection::new(config.clone())
+                .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e))?;
+            ClientSide::Tls(Box::new(rustls::StreamOwned::new(conn, tcp)))
         }
     };
-    let mut server = TcpStream::connect_timeout(&inner, REQUEST_TIMEOUT)?;
+    let (head, rest) = read_head(&mut client)?;
+    let text = String::from_utf8_lossy(&head).into_owned();
+    let report = |reason, line: String| {
+        let mut r = shared.refusals.lock().unwrap_or_else(|p| p.into_inner());
+        r.note(peer.ip(), reason, || {
+            format!("foxglove: handshake from {}: {line}", peer.ip())
+        });
+    };
+    let access = match admit(&text, &shared.policy) {
+        Ok(access) => access,
+        Err((reason, line, answer)) => {
+            report(reason, line);
+            return forbid(client, answer);
+        }
+    };
+    let offer = classify(&offered(&text));
+    let request = match &offer {
+        Offer::Legacy => rewritten(&text, Some(SDK_SUBPROTOCOLS[0])),
+        Offer::Sdk => rewritten(&text, None),
+        Offer::Neither(list) => {
+            report(
+                "subprotocol",
+                format!(
+                    "refused: it offered subprotocol(s) {list}; expected {LEGACY_SUBPROTOCOL}, \
+                     {} or {}",
+                    SDK_SUBPROTOCOLS[0], SDK_SUBPROTOCOLS[1]
+                ),
+            );
+            rewritten(&text, None)
+        }
+    };
+    let mut server = TcpStream::connect_timeout(&shared.inner, REQUEST_TIMEOUT)?;
     server.set_nodelay(true)?;
-    client.set_nodelay(true)?;
-    server.write_all(&request)?;
-    server.write_all(&rest)?;
+    client.tcp().set_nodelay(true)?;
+    server.write_all(request.as_bytes())?;
     server.set_read_timeout(Some(REQUEST_TIMEOUT))?;
     let (answer, after) = read_head(&mut server)?;
+    if answer.starts_with(b"HTTP/1.1 101") {
+        // The marker goes first: before any frame of the client's.
+        server.write_all(&marker_frame(&shared.secret, access))?;
+    }
+    server.write_all(&rest)?;
     let answer = if offer == Offer::Legacy {
         with_protocol(&String::from_utf8_lossy(&answer), LEGACY_SUBPROTOCOL).into_bytes()
     } else {
@@ -296,22 +833,17 @@ fn carry(
     };
     client.write_all(&answer)?;
     client.write_all(&after)?;
-    client.set_read_timeout(None)?;
+    client.flush()?;
+    client.tcp().set_read_timeout(None)?;
+    client.tcp().set_write_timeout(None)?;
     server.set_read_timeout(None)?;
-    // Client to server on a thread of its own; server to client here.
-    let (mut from_client, mut to_server) = (client.try_clone()?, server.try_clone()?);
-    let upstream = std::thread::Builder::new()
-        .name("foxglove-up".into())
-        .stack_size(64 * 1024)
-        .spawn(move || {
-            let _ = io::copy(&mut from_client, &mut to_server);
-            let _ = to_server.shutdown(Shutdown::Write);
-        })?;
-    let _ = io::copy(&mut server, &mut client);
-    let _ = client.shutdown(Shutdown::Both);
-    let _ = server.shutdown(Shutdown::Both);
-    let _ = upstream.join();
-    Ok(())
+    client.pump(server)
+}
+
+/// An HTTP answer `head` with every `Sec-WebSocket-Protocol` header replaced by one naming
+/// `protocol`.
+fn with_protocol(head: &str, protocol: &str) -> String {
+    rewritten(head, Some(protocol))
 }
 
 #[cfg(test)]
@@ -348,5 +880,177 @@ mod tests {
         );
         assert_eq!(head_end(renamed.as_bytes()), Some(renamed.len()));
         assert_eq!(head_end(b"GET / HTTP/1.1\r\n"), None);
+    }
+
+    #[test]
+    fn the_constant_time_compare_is_equality() {
+        assert!(constant_time_eq(b"", b""));
+        assert!(constant_time_eq(b"abc", b"abc"));
+        assert!(!constant_time_eq(b"abc", b"abd"));
+        assert!(!constant_time_eq(b"abc", b"ab"));
+        assert!(!constant_time_eq(b"ab", b"abc"));
+        assert!(!constant_time_eq(b"", b"a"));
+        assert!(!constant_time_eq(b"a", b""));
+        // A shorter `b` is padded with bytes that differ from `a`'s, never equal to them.
+        assert!(!constant_time_eq(&[0xff], &[]));
+        assert!(!constant_time_eq(&[0x00], &[]));
+    }
+
+    #[test]
+    fn tokens_are_one_line_of_url_safe_characters() {
+        let token = Token::parse(b"0123456789abcdef-._~XYZ\n").unwrap();
+        assert!(token.matches(b"0123456789abcdef-._~XYZ"));
+        assert!(!token.matches(b"0123456789abcdef-._~XY"));
+        assert_eq!(format!("{token:?}"), "Token(..)");
+        assert!(
+            Token::parse(b"short\n")
+                .unwrap_err()
+                .contains("found 5 bytes")
+        );
+        let error = Token::parse(b"0123456789abcdef&x=1").unwrap_err();
+        assert!(
+            error.contains("offset 16") && !error.contains("x=1"),
+            "{error}"
+        );
+        assert!(Token::parse(b"0123456789abcdef\n\n").is_err(), "two lines");
+        let fresh = new_token().unwrap();
+        assert_eq!(fresh.len(), 64);
+        assert!(Token::parse(fresh.as_bytes()).is_ok());
+        assert_ne!(fresh, new_token().unwrap());
+    }
+
+    #[test]
+    fn origins_are_foxgloves_this_machines_and_the_listed() {
+        let extra = ["https://viewer.example/".to_string()];
+        for allowed in [
+            "https://studio.foxglove.dev",
+            "https://app.foxglove.dev",
+            "file://",
+            "http://localhost:8080",
+            "http://127.0.0.1:5173",
+            "https://[::1]",
+            "http://LOCALHOST",
+            "https://viewer.example",
+        ] {
+            assert!(origin_allowed(allowed, &extra), "{allowed}");
+        }
+        for refused in [
+            "https://evil.example",
+            "null",
+            "http://localhost.evil.example",
+            "http://127.0.0.1.evil.example:80",
+            "http://evil.example/?http://localhost",
+            "http://localhost:80@evil.example",
+            "https://studio.foxglove.dev.evil.example",
+            "",
+        ] {
+            assert!(!origin_allowed(refused, &extra), "{refused}");
+        }
+        assert!(origin_allowed("null", &["null".to_string()]));
+    }
+
+    #[test]
+    fn the_token_comes_from_the_query_and_the_query_is_not_passed_on() {
+        let head = "GET /?a=1&token=s3cret-0123456789#x HTTP/1.1\r\nHost: x\r\n\r\n";
+        assert_eq!(query_value(head, "token"), Some("s3cret-0123456789"));
+        assert_eq!(query_value(head, "b"), None);
+        assert_eq!(query_value("GET / HTTP/1.1\r\n\r\n", "token"), None);
+        assert_eq!(
+            rewritten(head, None),
+            "GET / HTTP/1.1\r\nHost: x\r\n\r\n",
+            "the token stays in the gate"
+        );
+    }
+
+    #[test]
+    fn requests_are_admitted_by_origin_and_token() {
+        let policy = Policy {
+            token: Some(Token::parse(b"0123456789abcdef").unwrap()),
+            ..Policy::default()
+        };
+        let request = |target: &str, origin: Option<&str>| {
+            let origin = origin.map_or(String::new(), |o| format!("Origin: {o}\r\n"));
+            format!("GET {target} HTTP/1.1\r\nHost: x\r\n{origin}\r\n")
+        };
+        assert_eq!(admit(&request("/", None), &policy), Ok(Access::View));
+        assert_eq!(
+            admit(&request("/?token=0123456789abcdef", None), &policy),
+            Ok(Access::Control)
+        );
+        assert_eq!(
+            admit(
+                &request("/?token=0123456789abcdef", Some("http://localhost:3000")),
+                &policy
+            ),
+            Ok(Access::Control)
+        );
+        let refused = |target, origin| admit(&request(target, origin), &policy).unwrap_err().0;
+        assert_eq!(refused("/?token=0123456789abcdeg", None), "token");
+        assert_eq!(refused("/?token=", None), "token");
+        assert_eq!(
+            refused("/?token=0123456789abcdef", Some("https://evil.example")),
+            "origin"
+        );
+        assert_eq!(refused("/", Some("null")), "origin");
+        let open = Policy::default();
+        assert_eq!(admit(&request("/", None), &open), Ok(Access::View));
+        assert_eq!(
+            admit(&request("/?token=0123456789abcdef", None), &open)
+                .unwrap_err()
+                .0,
+            "token"
+        );
+    }
+
+    #[test]
+    fn the_marker_carries_the_secret_and_the_access() {
+        let secret = random_hex(32).unwrap();
+        for access in [Access::View, Access::Control] {
+            assert_eq!(
+                marker_access(&marker_topic(&secret, access), &secret),
+                Some(access)
+            );
+        }
+        let other = random_hex(32).unwrap();
+        assert_eq!(
+            marker_access(&marker_topic(&other, Access::Control), &secret),
+            None
+        );
+        assert_eq!(marker_access("/orders", &secret), None);
+        assert_eq!(
+            marker_access(&format!("/rovlink/gate/{secret}/admin"), &secret),
+            None
+        );
+        // The frame is a masked text frame whose payload unmasks to the advertisement.
+        let frame = marker_frame(&secret, Access::View);
+        assert_eq!(frame[0], 0x81);
+        assert_eq!(frame[1], 0x80 | 126);
+        let len = usize::from(u16::from_be_bytes([frame[2], frame[3]]));
+        let mask = &frame[4..8];
+        let payload: Vec<u8> = (frame[8..].iter().enumerate())
+            .map(|(k, b)| b ^ mask[k % 4])
+            .collect();
+        assert_eq!(payload.len(), len);
+        let message: serde_json::Value = serde_json::from_slice(&payload).unwrap();
+        assert_eq!(message["op"], "advertise");
+        assert_eq!(message["channels"][0]["id"], MARKER_CHANNEL_ID);
+        assert_eq!(
+            message["channels"][0]["topic"],
+            marker_topic(&secret, Access::View)
+        );
+        assert_eq!(client_text_frame("hi")[1], 0x80 | 2);
+    }
+
+    #[test]
+    fn tls_needs_a_certificate_and_its_key() {
+        let cert = include_bytes!("../../../testdata/tls/localhost.crt");
+        let key = include_bytes!("../../../testdata/tls/localhost.key");
+        assert!(tls_config(cert, key).is_ok());
+        let error = tls_config(b"junk", key).unwrap_err();
+        assert!(error.starts_with("certificate: "), "{error}");
+        let error = tls_config(cert, b"junk").unwrap_err();
+        assert!(error.starts_with("key: "), "{error}");
+        let error = tls_config(key, key).unwrap_err();
+        assert!(error.starts_with("certificate: "), "{error}");
     }
 }

@@ -305,10 +305,11 @@ pub struct Args {
     #[arg(long, requires = "images_out", help_heading = "Field")]
     pub preview: bool,
 
-    /// Serve a live Foxglove WebSocket view here (HOST:PORT; binds only there): the --mcap
-    /// channels live, and client channels /orders (JSON orders) and Twist (Teleop panel) on a
-    /// single session's operator end. With --scenario or --routes, every vehicle under
-    /// /vehicle/N/ (view only).
+    /// Serve a live Foxglove WebSocket view here (HOST:PORT; binds only there), e.g.
+    /// --foxglove 127.0.0.1:8765: the --mcap channels live, and on a single session's operator
+    /// end client channels /orders (JSON orders) and Twist (Teleop panel) for clients holding
+    /// the token of --foxglove-token-file (view-only without it). With --scenario or --routes,
+    /// every vehicle under /vehicle/N/ (view only).
     #[arg(long, value_name = "HOST:PORT", help_heading = "Field")]
     pub foxglove: Option<String>,
 
@@ -336,6 +337,54 @@ pub struct Args {
         help_heading = "Security"
     )]
     pub key_state: Option<PathBuf>,
+
+    /// With --foxglove: the file holding the control token (one line of 16 to 256 of
+    /// A-Z a-z 0-9 - . _ ~; yours, mode 0600). A client whose URL carries it
+    /// (ws://127.0.0.1:8765/?token=TOKEN) may send orders; the others only view. Without it
+    /// the live view is view-only. E.g. --foxglove-token-file ~/.config/rovlink/foxglove.token
+    /// (make one with --new-foxglove-token).
+    #[arg(long, value_name = "FILE", requires = "foxglove", help_heading = "Field",
+          conflicts_with_all = ["scenario", "routes"])]
+    pub foxglove_token_file: Option<PathBuf>,
+
+    /// With --foxglove: also let browser pages from this Origin connect (exactly as the
+    /// browser sends it; repeatable), e.g. --foxglove-origin https://viewer.example:8443.
+    /// Allowed already: https://studio.foxglove.dev, https://app.foxglove.dev, file://
+    /// (Foxglove Studio desktop) and pages on localhost, 127.0.0.1 and [::1]; a client that
+    /// sends no Origin (not a browser) always may.
+    #[arg(long, value_name = "ORIGIN", requires = "foxglove", help_heading = "Field",
+          value_parser = origin)]
+    pub foxglove_origin: Vec<String>,
+
+    /// With --foxglove-token-file on an address other than loopback: serve control over plain
+    /// ws:// anyway (the token and the orders travel in clear; better: bind 127.0.0.1 and use
+    /// an SSH tunnel), e.g. --foxglove 192.168.1.5:8765 --foxglove-token-file t
+    /// --foxglove-insecure.
+    #[arg(long, requires = "foxglove_token_file", help_heading = "Field")]
+    pub foxglove_insecure: bool,
+
+    /// With --foxglove: serve wss:// with this certificate (PEM, the server's first, then its
+    /// chain) and --foxglove-tls-key, e.g. --foxglove-tls-cert /etc/rovlink/view.crt
+    /// --foxglove-tls-key /etc/rovlink/view.key. Clients then open wss://HOST:PORT/.
+    #[arg(long, value_name = "FILE", requires_all = ["foxglove", "foxglove_tls_key"],
+          help_heading = "Field")]
+    pub foxglove_tls_cert: Option<PathBuf>,
+
+    /// The private key of --foxglove-tls-cert (PEM; yours, mode 0600), e.g.
+    /// --foxglove-tls-key /etc/rovlink/view.key.
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "foxglove_tls_cert",
+        help_heading = "Field"
+    )]
+    pub foxglove_tls_key: Option<PathBuf>,
+
+    /// Write a new control token for --foxglove-token-file (64 random hex characters) to FILE,
+    /// mode 0600 (an existing file is never replaced), and exit, e.g.
+    /// tdma-run --new-foxglove-token ~/.config/rovlink/foxglove.token
+    #[arg(long, value_name = "FILE", help_heading = "Field", exclusive = true)]
+    pub new_foxglove_token: Option<PathBuf>,
 
     /// True when `--address` is on the command line, not its default ([`Args::from_command_line`]
     /// reads it): with `--routes` the flag is the node's own address, and its default, 2, is
@@ -430,5 +479,16 @@ impl Args {
                 },
             ),
         }
+    }
+}
+
+/// An `Origin` for --foxglove-origin: not empty, printable ASCII without spaces or commas.
+fn origin(text: &str) -> Result<String, String> {
+    if !text.is_empty() && text.bytes().all(|b| b.is_ascii_graphic() && b != b',') {
+        Ok(text.to_string())
+    } else {
+        Err(format!(
+            "expected an Origin such as https://viewer.example:8443, found {text:?}"
+        ))
     }
 }

@@ -35,6 +35,9 @@ fn main() -> ExitCode {
 
 /// Runs the session the flags ask for; the process's exit code.
 fn run(args: &Args) -> anyhow::Result<u8> {
+    if let Some(path) = &args.new_foxglove_token {
+        return setup::new_foxglove_token(path);
+    }
     rovlink_cli::stop::install()?;
     if let Some(path) = &args.scenario {
         return scenario_run::run(args, path);

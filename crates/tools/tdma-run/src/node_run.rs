@@ -73,11 +73,17 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     // and the node's own frames on `/link/frames`.
     let mut live = match &args.foxglove {
         Some(addr) => {
-            let view = rovlink_field::foxglove::start_node(addr, role, &shown)
-                .map_err(|e| UsageError(e.to_string()))?;
+            let view = rovlink_field::foxglove::start_node(
+                addr,
+                role,
+                &shown,
+                &crate::setup::foxglove_policy(args)?,
+            )
+            .map_err(|e| UsageError(e.to_string()))?;
             say!(
-                "Foxglove: ws://{}:{} (every vehicle under /vehicle/N/, this node's frames on \
+                "Foxglove: {}://{}:{} (every vehicle under /vehicle/N/, this node's frames on \
                  /link/frames)",
+                view.scheme(),
                 crate::setup::host_of(addr),
                 view.port()
             );

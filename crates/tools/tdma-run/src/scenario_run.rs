@@ -75,10 +75,15 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     // A live view of every vehicle (`/vehicle/N/...`), as the MCAP log has them.
     let mut live = match &args.foxglove {
         Some(addr) => {
-            let view = rovlink_field::foxglove::start_network(addr, &scenario.vehicles())
-                .map_err(|e| UsageError(e.to_string()))?;
+            let view = rovlink_field::foxglove::start_network(
+                addr,
+                &scenario.vehicles(),
+                &crate::setup::foxglove_policy(args)?,
+            )
+            .map_err(|e| UsageError(e.to_string()))?;
             say!(
-                "Foxglove: ws://{}:{} (every vehicle under /vehicle/N/)",
+                "Foxglove: {}://{}:{} (every vehicle under /vehicle/N/)",
+                view.scheme(),
                 crate::setup::host_of(addr),
                 view.port()
             );

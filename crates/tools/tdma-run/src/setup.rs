@@ -1,12 +1,17 @@
 //! What every tdma-run mode shares: the flags that apply to one end only, the ends' parts
 //! (order sources, the vehicle, the camera), how a real-time run's end is said.
 
+use std::path::Path;
+
 use crate::outputs::{Destinations, check_images_out};
 use anyhow::Result;
-use rovlink_base::io::{EXIT_CHECK_FAILED, EXIT_OK};
+use rovlink_base::UsageError;
+use rovlink_base::io::{EXIT_CHECK_FAILED, EXIT_OK, read_at_most};
 use rovlink_base::output::{Dest, Kind, Outputs};
+use rovlink_base::secret::{create_secret_file, read_secret_file};
 use rovlink_cli::say;
 use rovlink_cli::stop;
+use rovlink_field::foxglove::{LiveView, Policy, Token};
 use rovlink_rcp::camera;
 use rovlink_rcp::realtime::{Ended, Role};
 use rovlink_rcp::report::Observer;
@@ -227,6 +232,81 @@ fn open_orders(path: &std::path::Path, live: bool) -> Result<rovlink_field::cons
             }
         }
     }
+}
+
+/// The longest token file read, bytes.
+const MAX_TOKEN_FILE_BYTES: u64 = 4096;
+/// The longest TLS certificate chain or key file read, bytes.
+const MAX_TLS_FILE_BYTES: u64 = 1 << 20;
+
+/// The live view's policy from the flags: the control token of --foxglove-token-file (read as
+/// a key file is: yours, mode 0600), --foxglove-origin, --foxglove-insecure.
+pub(super) fn foxglove_policy(args: &Args) -> Result<Policy> {
+    let token = match &args.foxglove_token_file {
+        None => None,
+        Some(path) => {
+            let bytes = read_secret_file(path, MAX_TOKEN_FILE_BYTES)
+                .map_err(|e| UsageError(format!("--foxglove-token-file {e}")))?;
+            let token = Token::parse(&bytes).map_err(|why| {
+                UsageError(format!("--foxglove-token-file {}: {why}", path.display()))
+            })?;
+            Some(token)
+        }
+    };
+    let tls = match (&args.foxglove_tls_cert, &args.foxglove_tls_key) {
+        (Some(cert), Some(key)) => {
+            let cert_pem = read_at_most(cert, MAX_TLS_FILE_BYTES)
+                .map_err(|e| UsageError(format!("--foxglove-tls-cert {}: {e}", cert.display())))?;
+            let key_pem = read_secret_file(key, MAX_TLS_FILE_BYTES)
+                .map_err(|e| UsageError(format!("--foxglove-tls-key {e}")))?;
+            let config =
+                rovlink_field::foxglove_gate::tls_config(&cert_pem, &key_pem).map_err(|why| {
+                    UsageError(format!(
+                        "--foxglove-tls-cert {} --foxglove-tls-key {}: {why}",
+                        cert.display(),
+                        key.display()
+                    ))
+                })?;
+            Some(config)
+        }
+        _ => None,
+    };
+    Ok(Policy {
+        token,
+        origins: args.foxglove_origin.clone(),
+        insecure: args.foxglove_insecure,
+        tls,
+    })
+}
+
+/// Says once at start who may control the live view `view` of an end taking orders from it.
+pub(super) fn say_control(view: &LiveView, policy: &Policy) {
+    match &policy.token {
+        None => say!("Foxglove: live view is view-only; control needs --foxglove-token-file"),
+        Some(_) if view.exposed() && view.scheme() == "ws" => say!(
+            "Foxglove: control over plain ws:// on {} (--foxglove-insecure): the token and the \
+             orders travel in clear",
+            view.addr()
+        ),
+        Some(_) => say!(
+            "Foxglove: control for clients whose URL ends in ?token= and the token of \
+             --foxglove-token-file; the others view"
+        ),
+    }
+}
+
+/// --new-foxglove-token FILE: a new control token there (mode 0600, never replacing a file).
+pub(super) fn new_foxglove_token(path: &Path) -> Result<u8> {
+    let token = rovlink_field::foxglove_gate::new_token()
+        .map_err(|e| anyhow::anyhow!("--new-foxglove-token: cannot read /dev/urandom: {e}"))?;
+    create_secret_file(path, format!("{token}\n").as_bytes())
+        .map_err(|e| UsageError(format!("--new-foxglove-token {e}")))?;
+    say!(
+        "wrote a new control token to {} (mode 0600): start with --foxglove-token-file {0} and \
+         open ws://HOST:PORT/?token=<its contents>",
+        path.display()
+    );
+    Ok(EXIT_OK)
 }
 
 /// The host part of HOST:PORT, for the URL said at start.

@@ -69,13 +69,18 @@ pub fn run(args: &Args) -> Result<u8> {
     let mut live = match &args.foxglove {
         Some(addr) => {
             let end = role.unwrap_or(Role::Operator);
-            let (view, orders) = rovlink_field::foxglove::start(addr, end)
+            let policy = crate::setup::foxglove_policy(args)?;
+            let (view, orders) = rovlink_field::foxglove::start(addr, end, &policy)
                 .map_err(|e| rovlink_base::UsageError(e.to_string()))?;
             say!(
-                "Foxglove: ws://{}:{} (open it in Foxglove's WebSocket connection)",
+                "Foxglove: {}://{}:{} (open it in Foxglove's WebSocket connection)",
+                view.scheme(),
                 host_of(addr),
                 view.port()
             );
+            if end == Role::Operator {
+                crate::setup::say_control(&view, &policy);
+            }
             parts.orders.push(Box::new(orders));
             Some(view)
         }
