@@ -1035,6 +1035,19 @@ impl Observer for LiveView {
             self.lane_event(lane, end, t_s, event);
         }
     }
+
+    /// A warning (a source whose frames are refused, a bad order line) goes on every
+    /// vehicle's `/session/log`.
+    fn warning(&mut self, t_s: f64, text: &str) {
+        for lane in 0..self.lanes.len() {
+            self.follow_subscriptions(lane);
+            let Some(l) = self.lanes.get(lane) else {
+                continue;
+            };
+            let messages = l.view.warning(t_s, text);
+            self.publish_all(lane, &messages);
+        }
+    }
 }
 
 impl LiveView {

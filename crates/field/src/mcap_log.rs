@@ -512,6 +512,14 @@ impl View {
         }
     }
 
+    /// A warning for the user (a refused frame's source, an order source's bad line): a
+    /// WARNING line on `/session/log`.
+    pub fn warning(&self, t_s: f64, text: &str) -> Vec<ViewMessage> {
+        self.log(Topic::Events, t_s, WARNING, "tdma-run", text)
+            .into_iter()
+            .collect()
+    }
+
     /// What happened at `end`: a line on `/session/log` (the operator's lost and recovered
     /// answers on `/link/log`), the image in progress on `/camera/preview`. Statuses,
     /// completed images and the ROV's link changes are told through [`View::pose`] and
@@ -911,6 +919,19 @@ mod tests {
         assert_eq!(bad.topic, Topic::Log);
         assert!(bad.json.contains("did not decode"));
         assert!(view.preview(1.0, b"").is_none());
+    }
+
+    #[test]
+    fn a_warning_is_a_warning_line_on_the_session_log() {
+        let view = View::new(Clock::Wall);
+        let said = view.warning(
+            2.0,
+            "node 1: refused a frame claiming to come from 0 (bad_tag)",
+        );
+        assert_eq!(topics(&said), [Topic::Events]);
+        let json: serde_json::Value = serde_json::from_str(&said[0].json).unwrap();
+        assert_eq!(json["level"], WARNING);
+        assert!(json["message"].as_str().unwrap().contains("(bad_tag)"));
     }
 
     #[test]
