@@ -261,18 +261,27 @@ def session_log(page):
     return panel(page, "RosOut!session").inner_text()
 
 
-def publish_goto(page, findings):
-    """Clicks the Publish panel's button; waits for the order's acknowledgement on /session/log."""
+def click_goto(page, findings):
+    """Clicks the Publish panel's button once it is enabled: the acknowledgements seen before,
+    or None (and the failure noted) if it never was."""
     button = panel(page, "Publish!goto").get_by_role("button", name="Send GoTo")
     try:
         wait_for(button.is_enabled, 20, "the Publish panel's button enabled")
     except Setup as error:
         findings.publish = {"error": str(error)}
-        return
+        return None
     before = set(ACKNOWLEDGED.findall(session_log(page)))
-    sent = time.monotonic()
     button.click()
     findings.publish = {"sent_at_s": findings.at()}
+    return before
+
+
+def publish_goto(page, findings):
+    """Clicks the Publish panel's button; waits for the order's acknowledgement on /session/log."""
+    before = click_goto(page, findings)
+    if before is None:
+        return
+    sent = time.monotonic()
     try:
         new = wait_for(lambda: set(ACKNOWLEDGED.findall(session_log(page))) - before, 45, "an acknowledgement")
         findings.publish.update(acknowledged=sorted(new)[0], after_s=round(time.monotonic() - sent, 1))
@@ -282,15 +291,9 @@ def publish_goto(page, findings):
 
 def publish_refused(page, findings):
     """Clicks the Publish panel's button on a view without the token: nothing may be acknowledged."""
-    button = panel(page, "Publish!goto").get_by_role("button", name="Send GoTo")
-    try:
-        wait_for(button.is_enabled, 20, "the Publish panel's button enabled")
-    except Setup as error:
-        findings.publish = {"error": str(error)}
+    before = click_goto(page, findings)
+    if before is None:
         return
-    before = set(ACKNOWLEDGED.findall(session_log(page)))
-    button.click()
-    findings.publish = {"sent_at_s": findings.at()}
     page.wait_for_timeout(15000)
     new = set(ACKNOWLEDGED.findall(session_log(page))) - before
     if new:
