@@ -524,3 +524,84 @@ fn hostile_key_files_are_refused_with_one_line_and_nothing_written() {
         assert!(!metrics.exists(), "nothing written");
     }
 }
+
+#[test]
+fn with_encrypt_an_eavesdropper_reads_neither_positions_nor_images() {
+    let dir = tempfile::tempdir().unwrap();
+    let keys = key_file(dir.path());
+    let keys = keys.to_str().unwrap();
+    let (_link, ports) = medium();
+    let intruder = intruder(&ports[2]);
+    let secured = ["--key-file", keys, "--encrypt"];
+    let mut rov = start(
+        "rov",
+        &ports[1],
+        dir.path(),
+        "rov",
+        &[&secured[..], &["--duration", "8"]].concat(),
+    );
+    rov.wait_for("ROV: answering");
+    let op = start(
+        "operator",
+        &ports[0],
+        dir.path(),
+        "op",
+        &[&secured[..], &["--duration", "5"]].concat(),
+    );
+    // Every frame the vehicle sends, as the eavesdropper hears it: encrypted, so no status and
+    // no trunk parses, while the operator decodes them all.
+    let mut heard = Vec::new();
+    for _ in 0..5 {
+        heard.push(intruder.record(|f| f.len() > 5 && f[1] == 0x10));
+    }
+    let (o, _) = op.finish();
+    let (_, _) = rov.finish();
+    for frame in &heard {
+        assert_eq!(frame[3] & 0xa0, 0xa0, "secured and encrypted: {frame:02x?}");
+        // The message inside the 6 bytes, read as a plain ROV message: the vehicle sits at
+        // its start, (1, 0, 0) m, which a readable status would say.
+        let inner = &frame[5..frame.len() - 6];
+        let read = rovlink_wire::frame::build(1, 0, inner)
+            .ok()
+            .and_then(|plain| {
+                let f = rovlink_wire::frame::Frame::new_checked(plain).ok()?;
+                rovlink_wire::MessageRepr::parse(&f).ok()
+            })
+            .map(|r| rovlink_wire::json::to_line(&r))
+            .unwrap_or_default();
+        assert!(
+            !read.contains(r#""x_cm":100,"y_cm":0,"z_cm":0"#),
+            "a position read off the air: {read}"
+        );
+    }
+    assert!(
+        o["rov_to_operator"]["frames_delivered"].as_u64().unwrap() >= 5,
+        "{o:#}"
+    );
+    // rcp-dump without the key sees only that they are secured; with it, the statuses.
+    let capture = dir.path().join("heard.bin");
+    std::fs::write(&capture, heard.concat()).unwrap();
+    let blind = crate::common::run(env!("TOOL_EXE_rcp-dump"), &[capture.to_str().unwrap()], b"");
+    assert!(
+        blind.stdout_text().contains("unverified"),
+        "{}",
+        blind.stdout_text()
+    );
+    assert!(
+        !blind.stdout_text().contains("ned="),
+        "{}",
+        blind.stdout_text()
+    );
+    let keyed = crate::common::run(
+        env!("TOOL_EXE_rcp-dump"),
+        &["--key-file", keys, capture.to_str().unwrap()],
+        b"",
+    );
+    assert_eq!(keyed.code, 0, "{}", keyed.stderr);
+    assert_eq!(
+        keyed.stdout_text().matches(": ok]").count(),
+        5,
+        "{}",
+        keyed.stdout_text()
+    );
+}
