@@ -323,12 +323,20 @@ fn a_recorded_frame_replayed_is_refused_in_the_same_session_and_the_next() {
     let wp = waypoints.to_str().unwrap();
     let (_link, ports) = medium();
     let mut intruder = intruder(&ports[2]);
+    let events = dir.path().join("rov1-events.csv");
     let mut rov = start(
         "rov",
         &ports[1],
         dir.path(),
         "rov1",
-        &["--key-file", keys, "--duration", "12"],
+        &[
+            "--key-file",
+            keys,
+            "--duration",
+            "12",
+            "--events",
+            events.to_str().unwrap(),
+        ],
     );
     rov.wait_for("ROV: answering");
     let mut op = start(
@@ -351,6 +359,12 @@ fn a_recorded_frame_replayed_is_refused_in_the_same_session_and_the_next() {
     assert_eq!(r["orders_executed"], 1, "{r:#}");
     assert_eq!(o["orders_acknowledged"], 1, "{o:#}");
     assert!(refused(&r, "0", "replay") >= 1, "{r:#}");
+    // --events shows each refused copy with its fate.
+    let rows = std::fs::read_to_string(&events).unwrap();
+    assert!(
+        rows.lines().any(|l| l.ends_with(",refused:replay")),
+        "{rows}"
+    );
 
     // A later session with the same keys and counter files: the old GoTo is still a replay,
     // and the operator's new frames (counters above everything it sent before) are taken.
