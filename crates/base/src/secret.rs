@@ -81,10 +81,15 @@ fn kind(meta: &Metadata) -> &'static str {
     crate::io::kind_name(meta.file_type()).unwrap_or("a device")
 }
 
-/// Checks that a command source (an orders FIFO or file) at `meta` is owned by this user and
-/// not writable by group or others: anyone else who can write to it could command the
-/// vehicle.
-pub fn check_command_source(path: &Path, meta: &Metadata) -> Result<(), SecretFileError> {
+/// Checks that the file at `meta` is owned by this user and that none of the `forbidden`
+/// permission bits are set; `what` says who could then do what, `fix` is the mode to set.
+fn check_owner_and_mode(
+    path: &Path,
+    meta: &Metadata,
+    forbidden: u32,
+    what: &'static str,
+    fix: u32,
+) -> Result<(), SecretFileError> {
     let me = my_uid();
     if meta.uid() != me {
         return Err(SecretFileError::Owner {
@@ -94,15 +99,41 @@ pub fn check_command_source(path: &Path, meta: &Metadata) -> Result<(), SecretFi
         });
     }
     let mode = meta.permissions().mode() & 0o7777;
-    if mode & 0o022 != 0 {
+    if mode & forbidden != 0 {
         return Err(SecretFileError::TooOpen {
             path: path.to_path_buf(),
             mode,
-            what: "group or others may write orders to it",
-            fix: mode & !0o022 & 0o777,
+            what,
+            fix,
         });
     }
     Ok(())
+}
+
+/// Checks that a command source (an orders FIFO or file) at `meta` is owned by this user and
+/// not writable by group or others: anyone else who can write to it could command the
+/// vehicle.
+pub fn check_command_source(path: &Path, meta: &Metadata) -> Result<(), SecretFileError> {
+    let mode = meta.permissions().mode() & 0o7777;
+    let what = "group or others may write orders to it";
+    check_owner_and_mode(path, meta, 0o022, what, mode & !0o022 & 0o777)
+}
+
+/// Opens `path` for reading without waiting (`O_NONBLOCK`: a FIFO without a writer, a serial
+/// line without carrier) and returns the handle with its metadata, so that what is checked is
+/// what is read, whatever the path names meanwhile.
+fn open_nonblocking(path: &Path) -> Result<(File, Metadata), SecretFileError> {
+    let read_err = |source| SecretFileError::Read {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(nix::fcntl::OFlag::O_NONBLOCK.bits())
+        .open(path)
+        .map_err(read_err)?;
+    let meta = file.metadata().map_err(read_err)?;
+    Ok((file, meta))
 }
 
 /// Opens a command source (an orders file or FIFO, a script) for reading and checks the open
@@ -126,12 +157,7 @@ pub fn open_command_source(
         path: path.to_path_buf(),
         source,
     };
-    let file = std::fs::OpenOptions::new()
-        .read(true)
-        .custom_flags(OFlag::O_NONBLOCK.bits())
-        .open(path)
-        .map_err(read_err)?;
-    let meta = file.metadata().map_err(read_err)?;
+    let (file, meta) = open_nonblocking(path)?;
     check_command_source(path, &meta)?;
     if !meta.file_type().is_fifo() {
         fcntl(&file, FcntlArg::F_SETFL(OFlag::empty()))
@@ -161,24 +187,8 @@ fn check_secret(path: &Path, meta: &Metadata) -> Result<(), SecretFileError> {
             found: kind(meta),
         });
     }
-    let me = my_uid();
-    if meta.uid() != me {
-        return Err(SecretFileError::Owner {
-            path: path.to_path_buf(),
-            owner: meta.uid(),
-            me,
-        });
-    }
-    let mode = meta.permissions().mode() & 0o7777;
-    if mode & 0o077 != 0 {
-        return Err(SecretFileError::TooOpen {
-            path: path.to_path_buf(),
-            mode,
-            what: "group or others may read or write it",
-            fix: 0o600,
-        });
-    }
-    Ok(())
+    let what = "group or others may read or write it";
+    check_owner_and_mode(path, meta, 0o077, what, 0o600)
 }
 
 /// Reads a key file of 1..=`max_bytes` bytes after checking it as ssh checks a private key
@@ -186,22 +196,16 @@ fn check_secret(path: &Path, meta: &Metadata) -> Result<(), SecretFileError> {
 /// so a FIFO or device is refused without waiting and a file swapped after the check is not
 /// read.
 pub fn read_secret_file(path: &Path, max_bytes: u64) -> Result<Vec<u8>, SecretFileError> {
-    let read_err = |source| SecretFileError::Read {
-        path: path.to_path_buf(),
-        source,
-    };
-    let file = std::fs::OpenOptions::new()
-        .read(true)
-        .custom_flags(nix::fcntl::OFlag::O_NONBLOCK.bits())
-        .open(path)
-        .map_err(read_err)?;
-    let meta = file.metadata().map_err(read_err)?;
+    let (file, meta) = open_nonblocking(path)?;
     check_secret(path, &meta)?;
     let mut bytes = Vec::new();
     (&file)
         .take(max_bytes.saturating_add(1))
         .read_to_end(&mut bytes)
-        .map_err(read_err)?;
+        .map_err(|source| SecretFileError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
     let len = bytes.len() as u64;
     if len == 0 || len > max_bytes {
         return Err(SecretFileError::Size {
