@@ -8,6 +8,7 @@
 //! No-panic contract: [`Guard::open`] takes any bytes and returns a verdict, never a panic.
 
 use std::collections::HashMap;
+use std::collections::hash_map::Entry;
 
 use rovlink_wire::frame::{self, Frame};
 
@@ -109,13 +110,19 @@ impl Guard {
         self.encrypt
     }
 
-    /// The working keys for frames from `src` to `dst`.
-    fn suite(&mut self, src: u8, dst: u8) -> Option<&Suite> {
-        if !self.suites.contains_key(&(src, dst)) {
-            let suite = Suite::new(self.ring.for_frame(src, dst)?);
-            self.suites.insert((src, dst), suite);
+    /// The working keys for frames from `src` to `dst` (derived from `ring` once, kept in
+    /// `suites`); a function of those two fields only, so that the counters can be used while
+    /// it is held.
+    fn suite<'a>(
+        suites: &'a mut HashMap<(u8, u8), Suite>,
+        ring: &KeyRing,
+        src: u8,
+        dst: u8,
+    ) -> Option<&'a Suite> {
+        match suites.entry((src, dst)) {
+            Entry::Occupied(known) => Some(known.into_mut()),
+            Entry::Vacant(new) => Some(new.insert(Suite::new(ring.for_frame(src, dst)?))),
         }
-        self.suites.get(&(src, dst))
     }
 
     /// Seals the plain frame `plain` with the next counter of its (SRC, DST).
@@ -125,13 +132,10 @@ impl Guard {
         if f.payload_len() > sealed::MAX_MESSAGE_BYTES {
             return Err(SealedError::TooLong(f.payload_len()).into());
         }
-        if self.suite(src, dst).is_none() {
-            return Err(SealError::NoKey { src, dst });
-        }
+        let suite = Self::suite(&mut self.suites, &self.ring, src, dst)
+            .ok_or(SealError::NoKey { src, dst })?;
         let counter = self.store.next_send(src, dst)?;
-        let encrypt = self.encrypt;
-        let suite = self.suite(src, dst).ok_or(SealError::NoKey { src, dst })?;
-        Ok(sealed::seal(suite, plain, counter, encrypt)?)
+        Ok(sealed::seal(suite, plain, counter, self.encrypt)?)
     }
 
     /// Opens the frame `bytes` (a whole link frame whose CRC was checked): the plain frame,
@@ -147,7 +151,7 @@ impl Guard {
         }
         let p = Sealed::new_checked(payload).map_err(|_| Refusal::Malformed)?;
         let last = self.store.last_received(src, dst);
-        let suite = self.suite(src, dst).ok_or(Refusal::NoKey)?;
+        let suite = Self::suite(&mut self.suites, &self.ring, src, dst).ok_or(Refusal::NoKey)?;
         let low = p.counter_low();
         let Some(counter) = candidates(last, low).find(|&c| p.verify(suite, src, dst, c)) else {
             let again = replayed(last, low).is_some_and(|c| p.verify(suite, src, dst, c));
