@@ -49,9 +49,9 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
     let mut metrics_out = metrics_dest.map(|dest| dest.open()).transpose()?;
     let template = "{spinner} {pos}/{len} s [{bar:30}] {msg}";
     let security = crate::setup::security(args)?;
-    if security.is_some() {
+    if let Some(security) = &security {
         scenario.frame_overhead_bytes = rovlink_rcp::secure::OVERHEAD_BYTES;
-        say!("frames authenticated (AES-CMAC, 6 bytes a frame); others are refused");
+        crate::setup::say_secured(security);
     }
     let bar = progress::bar(true, scenario.duration_s.ceil() as u64, template);
     let mut recorder = Recorder::new(

@@ -171,9 +171,14 @@ pub(super) fn guards(
             std::collections::BTreeMap::from([(address, guard)])
         }
     };
+    say_secured(&security);
+    Ok(guards)
+}
+
+/// Says once, at start, that a run's frames are secured and how.
+pub(super) fn say_secured(security: &rovlink_rcp::secure::Security) {
     let encrypted = if security.encrypt { ", encrypted" } else { "" };
     say!("frames authenticated (AES-CMAC, 6 bytes a frame{encrypted}); others are refused");
-    Ok(guards)
 }
 
 /// `--key-file` and `--encrypt`, read and checked (the trunk must leave room for the tag).
