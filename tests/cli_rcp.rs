@@ -483,11 +483,7 @@ const GOTO: &str = r#"{"type":"operator","src":0,"dst":2,"oid":0,"clo":true,"eis
 
 /// A key file `name` in `dir` holding `* KEY`, mode 0600.
 fn key_file(dir: &std::path::Path, name: &str, key: &str) -> std::path::PathBuf {
-    use std::os::unix::fs::PermissionsExt;
-    let path = dir.join(name);
-    std::fs::write(&path, format!("* {key}\n")).unwrap();
-    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
-    path
+    crate::common::private_file(dir, name, &format!("* {key}\n"))
 }
 
 /// The frames rcp-pack makes of `input` with `args` (and --hex), one a line.
@@ -823,9 +819,7 @@ fn hostile_key_files_are_refused_in_one_line() {
     let dir = tempfile::tempdir().unwrap();
     let open = key_file(dir.path(), "open.key", KEY_128);
     std::fs::set_permissions(&open, std::fs::Permissions::from_mode(0o644)).unwrap();
-    let empty = dir.path().join("empty.key");
-    std::fs::write(&empty, b"").unwrap();
-    std::fs::set_permissions(&empty, std::fs::Permissions::from_mode(0o600)).unwrap();
+    let empty = crate::common::private_file(dir.path(), "empty.key", "");
     let short = key_file(dir.path(), "short.key", &KEY_128[..30]);
     let cases = [
         (open.clone(), "permissions 0644 are too open"),

@@ -141,17 +141,7 @@ fn png_size(message: &Value) -> (u32, u32) {
 
 /// A token file holding [`TOKEN`] in `dir` (mode 0600, as tdma-run wants it).
 fn token_file(dir: &Path) -> std::path::PathBuf {
-    use std::io::Write;
-    use std::os::unix::fs::OpenOptionsExt;
-    let path = dir.join("token");
-    let mut file = std::fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .mode(0o600)
-        .open(&path)
-        .unwrap();
-    writeln!(file, "{TOKEN}").unwrap();
-    path
+    crate::common::private_file(dir, "token", &format!("{TOKEN}\n"))
 }
 
 /// A policy with the control token [`TOKEN`].

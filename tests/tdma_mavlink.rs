@@ -1202,18 +1202,8 @@ fn a_spoofer_on_another_port_moves_nothing_and_diverts_nothing() {
 
 /// A key file with `key` in hex, mode 0600, in `dir`.
 pub(crate) fn key_file(dir: &std::path::Path, key: [u8; 32]) -> std::path::PathBuf {
-    let path = dir.join("mavlink.key");
     let hex: String = key.iter().map(|b| format!("{b:02x}")).collect();
-    use std::io::Write;
-    use std::os::unix::fs::OpenOptionsExt;
-    let mut file = std::fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .mode(0o600)
-        .open(&path)
-        .unwrap();
-    writeln!(file, "{hex}").unwrap();
-    path
+    crate::common::private_file(dir, "mavlink.key", &format!("{hex}\n"))
 }
 
 /// A drive on a free UDP port (`udpin:`) signing with `key`, read from a key file in `dir`:

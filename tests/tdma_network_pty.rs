@@ -32,25 +32,20 @@ const THREE: &str = r#"{"duration_s":600,"seed":1,
   "routes":{"0":{"2":1},"2":{"0":1}}}"#;
 
 /// Starts `link-sim --pty 3` with the three nodes' positions; its three ports.
-fn shared_medium() -> (Child, Vec<String>) {
-    use std::io::BufRead;
-    let mut child = Command::new(env!("TOOL_EXE_link-sim"))
-        .args(["--model", "s100", "--pty", "3"])
-        .args(["--position", "0,0,0", "--position", "3,0,1"])
-        .args(["--position", "7,0,1"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("link-sim starts");
-    let mut stdout = std::io::BufReader::new(child.stdout.take().expect("stdout"));
-    let ports = (0..3)
-        .map(|_| {
-            let mut line = String::new();
-            stdout.read_line(&mut line).expect("a port's path");
-            line.trim().to_string()
-        })
-        .collect();
-    (child, ports)
+fn shared_medium() -> (crate::common::Reaped, Vec<String>) {
+    crate::common::link_sim_ptys(
+        3,
+        &[
+            "--model",
+            "s100",
+            "--position",
+            "0,0,0",
+            "--position",
+            "3,0,1",
+            "--position",
+            "7,0,1",
+        ],
+    )
 }
 
 /// Runs the three nodes of `text` over one shared medium: the operator for `duration_s`;
@@ -268,13 +263,11 @@ fn with_keys_the_relay_forwards_the_far_vehicles_secured_frames_unchanged() {
     // vehicle's frames without opening them (a simulation gives it only its own key:
     // rcp::network's tests).
     let dir = tempfile::tempdir().unwrap();
-    let keys = dir.path().join("keys");
-    std::fs::write(
-        &keys,
+    let keys = crate::common::private_file(
+        dir.path(),
+        "keys",
         "1 000102030405060708090a0b0c0d0e0f\n2 f0e0d0c0b0a090807060504030201000\n",
-    )
-    .unwrap();
-    std::fs::set_permissions(&keys, std::os::unix::fs::PermissionsExt::from_mode(0o600)).unwrap();
+    );
     let m = three_nodes(THREE, 16.0, &["--key-file", keys.to_str().unwrap()]);
     let ((o, _), (r, _), (f, f_events)) = (&m[0], &m[1], &m[2]);
     assert_eq!(f["vehicles"]["2"]["orders_executed"], 1, "{f:#}");

@@ -22,39 +22,21 @@ const LIMIT: Duration = Duration::from_secs(30);
 
 /// A private key file holding `KEY` for every vehicle.
 fn key_file(dir: &Path) -> PathBuf {
-    let path = dir.join("keys");
-    std::fs::write(&path, format!("* {KEY}\n")).unwrap();
-    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
-    path
+    crate::common::private_file(dir, "keys", &format!("* {KEY}\n"))
 }
 
 /// `link-sim --pty 3`: the test link (9600 bit/s, full duplex) with three nodes in range of
 /// each other; its ports: operator, ROV, intruder.
 fn medium() -> (Reaped, Vec<String>) {
-    let mut child = Command::new(env!("TOOL_EXE_link-sim"))
-        .args(crate::common::TEST_S100)
-        .args(["--pty", "3"])
-        .args([
-            "--position",
-            "0,0,0",
-            "--position",
-            "1,0,0",
-            "--position",
-            "2,0,0",
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("link-sim starts");
-    let mut stdout = std::io::BufReader::new(child.stdout.take().expect("stdout"));
-    let ports = (0..3)
-        .map(|_| {
-            let mut line = String::new();
-            stdout.read_line(&mut line).expect("a port's path");
-            line.trim().to_string()
-        })
-        .collect();
-    (Reaped(child), ports)
+    let positions = [
+        "--position",
+        "0,0,0",
+        "--position",
+        "1,0,0",
+        "--position",
+        "2,0,0",
+    ];
+    crate::common::link_sim_ptys(3, &[&crate::common::TEST_S100[..], &positions].concat())
 }
 
 /// One `tdma-run` end: the lines it writes (stdout and stderr) as they come.
@@ -488,12 +470,7 @@ fn a_secured_simulation_runs_the_same_session_with_longer_frames() {
 #[test]
 fn hostile_key_files_are_refused_with_one_line_and_nothing_written() {
     let dir = tempfile::tempdir().unwrap();
-    let private = |name: &str, text: &str| {
-        let path = dir.path().join(name);
-        std::fs::write(&path, text).unwrap();
-        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
-        path
-    };
+    let private = |name: &str, text: &str| crate::common::private_file(dir.path(), name, text);
     let empty = private("empty", "");
     let short = private("short", &format!("* {}\n", &KEY[..30]));
     let comments = private("comments", "# no key\n");

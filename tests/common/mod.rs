@@ -150,7 +150,6 @@ pub const TEST_S100: [&str; 10] = [
 
 /// Starts `link-sim --pty` with `args`; returns it and the paths of its sides A and B.
 pub fn link_sim_pty(args: &[&str]) -> (Reaped, String, String) {
-    use std::io::BufRead;
     let mut child = Command::new(env!("TOOL_EXE_link-sim"))
         .arg("--pty")
         .args(args)
@@ -158,11 +157,51 @@ pub fn link_sim_pty(args: &[&str]) -> (Reaped, String, String) {
         .stderr(Stdio::piped())
         .spawn()
         .expect("link-sim starts");
+    let mut ports = pty_paths(&mut child, 2).into_iter();
+    let (a, b) = (ports.next().unwrap(), ports.next().unwrap());
+    (Reaped(child), a, b)
+}
+
+/// Starts `link-sim --pty COUNT` (one shared medium) with `args` (the model, `--position`s);
+/// returns it and the paths of its COUNT pseudo-terminals, in port order.
+pub fn link_sim_ptys(count: usize, args: &[&str]) -> (Reaped, Vec<String>) {
+    let mut child = Command::new(env!("TOOL_EXE_link-sim"))
+        .args(args)
+        .args(["--pty", &count.to_string()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("link-sim starts");
+    let ports = pty_paths(&mut child, count);
+    (Reaped(child), ports)
+}
+
+/// The first `count` lines of a `link-sim --pty`'s standard output: its ports' paths.
+fn pty_paths(child: &mut std::process::Child, count: usize) -> Vec<String> {
+    use std::io::BufRead;
     let mut stdout = std::io::BufReader::new(child.stdout.take().expect("stdout"));
-    let (mut a, mut b) = (String::new(), String::new());
-    stdout.read_line(&mut a).expect("side A's path");
-    stdout.read_line(&mut b).expect("side B's path");
-    (Reaped(child), a.trim().to_string(), b.trim().to_string())
+    (0..count)
+        .map(|_| {
+            let mut line = String::new();
+            stdout.read_line(&mut line).expect("a port's path");
+            line.trim().to_string()
+        })
+        .collect()
+}
+
+/// Writes `text` to a new file `name` in `dir`, created with mode 0600 (as key and token files
+/// must be: never readable by others); its path.
+pub fn private_file(dir: &Path, name: &str, text: &str) -> PathBuf {
+    use std::os::unix::fs::OpenOptionsExt;
+    let path = dir.join(name);
+    let mut file = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(0o600)
+        .open(&path)
+        .unwrap();
+    file.write_all(text.as_bytes()).unwrap();
+    path
 }
 
 /// A child process killed and reaped when dropped, so that a test that fails (panics) leaves
