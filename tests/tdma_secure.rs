@@ -47,6 +47,7 @@ struct End {
     metrics: PathBuf,
 }
 
+/// Starts a `tdma-run` end and waits until it says it is under way.
 fn start(role: &str, port: &str, dir: &Path, name: &str, args: &[&str]) -> End {
     let metrics = dir.join(format!("{name}.json"));
     let mut child = Command::new(TDMA_RUN)
@@ -74,12 +75,26 @@ fn start(role: &str, port: &str, dir: &Path, name: &str, args: &[&str]) -> End {
             }
         });
     }
-    End {
+    let mut end = End {
         child: Reaped(child),
         lines,
         said: String::new(),
         metrics,
-    }
+    };
+    // Under way: the ROV listens, the operator sends its slots.
+    end.wait_for(if role == "rov" {
+        "ROV: answering"
+    } else {
+        "operator: IPG"
+    });
+    end
+}
+
+/// A waypoints file in `dir` with one GoTo, at 1 s, to (2, 0, 1) m.
+fn one_goto(dir: &Path) -> PathBuf {
+    let path = dir.join("wp.csv");
+    std::fs::write(&path, "t_s,x_m,y_m,z_m,heading_deg\n1,2,0,1,90\n").unwrap();
+    path
 }
 
 impl End {
@@ -228,8 +243,7 @@ fn injected_forged_and_spoofed_frames_move_nothing_and_fool_no_one() {
     let dir = tempfile::tempdir().unwrap();
     let keys = key_file(dir.path());
     let keys = keys.to_str().unwrap();
-    let waypoints = dir.path().join("wp.csv");
-    std::fs::write(&waypoints, "t_s,x_m,y_m,z_m,heading_deg\n1,2,0,1,90\n").unwrap();
+    let waypoints = one_goto(dir.path());
     let telemetry = dir.path().join("op.jsonl");
     let (_link, ports) = medium();
     let mut rov = start(
@@ -239,7 +253,6 @@ fn injected_forged_and_spoofed_frames_move_nothing_and_fool_no_one() {
         "rov",
         &["--key-file", keys, "--duration", "14"],
     );
-    rov.wait_for("ROV: answering");
     let mut op = start(
         "operator",
         &ports[0],
@@ -256,7 +269,6 @@ fn injected_forged_and_spoofed_frames_move_nothing_and_fool_no_one() {
             telemetry.to_str().unwrap(),
         ],
     );
-    op.wait_for("operator: IPG");
     let mut intruder = intruder(&ports[2]);
     let gotos: Vec<Vec<u8>> = GOTO_TO_1.iter().map(|l| pack(l)).collect();
     let mut attack = gotos.clone();
@@ -300,8 +312,7 @@ fn a_recorded_frame_replayed_is_refused_in_the_same_session_and_the_next() {
     let dir = tempfile::tempdir().unwrap();
     let keys = key_file(dir.path());
     let keys = keys.to_str().unwrap();
-    let waypoints = dir.path().join("wp.csv");
-    std::fs::write(&waypoints, "t_s,x_m,y_m,z_m,heading_deg\n1,2,0,1,90\n").unwrap();
+    let waypoints = one_goto(dir.path());
     let wp = waypoints.to_str().unwrap();
     let (_link, ports) = medium();
     let mut intruder = intruder(&ports[2]);
@@ -320,15 +331,13 @@ fn a_recorded_frame_replayed_is_refused_in_the_same_session_and_the_next() {
             events.to_str().unwrap(),
         ],
     );
-    rov.wait_for("ROV: answering");
-    let mut op = start(
+    let op = start(
         "operator",
         &ports[0],
         dir.path(),
         "op1",
         &["--key-file", keys, "--duration", "8", "--waypoints", wp],
     );
-    op.wait_for("operator: IPG");
     let goto = intruder.record(|f| is_order(f, 1));
     inject_until(
         &mut intruder,
@@ -357,7 +366,6 @@ fn a_recorded_frame_replayed_is_refused_in_the_same_session_and_the_next() {
         "rov2",
         &["--key-file", keys, "--duration", "8"],
     );
-    rov.wait_for("ROV: answering");
     inject_until(
         &mut intruder,
         &[goto],
@@ -399,7 +407,6 @@ fn frames_sent_after_the_operator_stopped_do_not_hold_the_link_up() {
         "rov",
         &["--key-file", keys, "--duration", "25", "--telemetry", "-"],
     );
-    rov.wait_for("ROV: answering");
     let op = start(
         "operator",
         &ports[0],
@@ -524,14 +531,13 @@ fn with_encrypt_an_eavesdropper_reads_neither_positions_nor_images() {
     let (_link, ports) = medium();
     let intruder = intruder(&ports[2]);
     let secured = ["--key-file", keys, "--encrypt"];
-    let mut rov = start(
+    let rov = start(
         "rov",
         &ports[1],
         dir.path(),
         "rov",
         &[&secured[..], &["--duration", "8"]].concat(),
     );
-    rov.wait_for("ROV: answering");
     let op = start(
         "operator",
         &ports[0],
