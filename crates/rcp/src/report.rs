@@ -370,16 +370,16 @@ pub(crate) fn kind_of(bytes: &[u8]) -> &'static str {
     let Ok(frame) = Frame::new_checked(bytes) else {
         return "raw";
     };
-    if is_sealed(frame.payload()) {
-        return match Sealed::new_checked(frame.payload()) {
-            Ok(p) if p.encrypted() => "encrypted",
-            Ok(p) => rovlink_wire::frame::build(frame.src(), frame.dst(), p.message())
-                .map_or("raw", |plain| kind_of(&plain)),
-            Err(_) => "raw",
-        };
-    }
-    let parsed = MessageRepr::parse(&frame).ok();
-    match parsed.map(|r| r.message) {
+    let message = if is_sealed(frame.payload()) {
+        match Sealed::new_checked(frame.payload()) {
+            Ok(p) if p.encrypted() => return "encrypted",
+            Ok(p) => Message::parse_payload(frame.src(), p.message()).ok(),
+            Err(_) => None,
+        }
+    } else {
+        MessageRepr::parse(&frame).ok().map(|r| r.message)
+    };
+    match message {
         Some(Message::Operator(op)) => op.order.name(),
         Some(Message::Rov(rov)) if !rov.trunk.is_empty() => "image_trunk",
         Some(Message::Rov(_)) => "status",
