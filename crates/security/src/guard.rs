@@ -7,15 +7,12 @@
 //!
 //! No-panic contract: [`Guard::open`] takes any bytes and returns a verdict, never a panic.
 
-use std::collections::HashMap;
-use std::collections::hash_map::Entry;
-
 use rovlink_wire::frame::{self, Frame};
 
 use crate::counter::{CounterStore, StoreError, candidates, replayed};
 use crate::key::KeyRing;
 use crate::sealed::{self, Sealed, SealedError, is_sealed};
-use crate::suite::Suite;
+use crate::suite::Suites;
 
 /// Why a frame was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -91,7 +88,7 @@ pub struct Guard {
     encrypt: bool,
     store: CounterStore,
     /// Working keys per (SRC, DST), derived once.
-    suites: HashMap<(u8, u8), Suite>,
+    suites: Suites,
 }
 
 impl Guard {
@@ -101,28 +98,13 @@ impl Guard {
             ring,
             encrypt,
             store,
-            suites: HashMap::new(),
+            suites: Suites::default(),
         }
     }
 
     /// True when it encrypts what it seals.
     pub fn encrypts(&self) -> bool {
         self.encrypt
-    }
-
-    /// The working keys for frames from `src` to `dst` (derived from `ring` once, kept in
-    /// `suites`); a function of those two fields only, so that the counters can be used while
-    /// it is held.
-    fn suite<'a>(
-        suites: &'a mut HashMap<(u8, u8), Suite>,
-        ring: &KeyRing,
-        src: u8,
-        dst: u8,
-    ) -> Option<&'a Suite> {
-        match suites.entry((src, dst)) {
-            Entry::Occupied(known) => Some(known.into_mut()),
-            Entry::Vacant(new) => Some(new.insert(Suite::new(ring.for_frame(src, dst)?))),
-        }
     }
 
     /// Seals the plain frame `plain` with the next counter of its (SRC, DST).
@@ -132,7 +114,9 @@ impl Guard {
         if f.payload_len() > sealed::MAX_MESSAGE_BYTES {
             return Err(SealedError::TooLong(f.payload_len()).into());
         }
-        let suite = Self::suite(&mut self.suites, &self.ring, src, dst)
+        let suite = self
+            .suites
+            .get(&self.ring, src, dst)
             .ok_or(SealError::NoKey { src, dst })?;
         let counter = self.store.next_send(src, dst)?;
         Ok(sealed::seal(suite, plain, counter, self.encrypt)?)
@@ -151,7 +135,10 @@ impl Guard {
         }
         let p = Sealed::new_checked(payload).map_err(|_| Refusal::Malformed)?;
         let last = self.store.last_received(src, dst);
-        let suite = Self::suite(&mut self.suites, &self.ring, src, dst).ok_or(Refusal::NoKey)?;
+        let suite = self
+            .suites
+            .get(&self.ring, src, dst)
+            .ok_or(Refusal::NoKey)?;
         let low = p.counter_low();
         let Some(counter) = candidates(last, low).find(|&c| p.verify(suite, src, dst, c)) else {
             let again = replayed(last, low).is_some_and(|c| p.verify(suite, src, dst, c));

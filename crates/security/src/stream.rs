@@ -16,7 +16,7 @@ use crate::counter::CounterStore;
 use crate::guard::{Guard, Refusal};
 use crate::key::KeyRing;
 use crate::sealed::{self, MAX_COUNTER, Sealed, SealedError, is_sealed};
-use crate::suite::Suite;
+use crate::suite::Suites;
 
 /// Why a frame could not be sealed.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -73,7 +73,7 @@ pub struct Sealer {
     /// Per pair, the highest counter sealed.
     highest: HashMap<(u8, u8), u64>,
     /// Working keys per pair, derived once.
-    suites: HashMap<(u8, u8), Suite>,
+    suites: Suites,
 }
 
 /// Checks that `counter` is one a sender may use.
@@ -95,7 +95,7 @@ impl Sealer {
             first: check_counter(first)?,
             next: HashMap::new(),
             highest: HashMap::new(),
-            suites: HashMap::new(),
+            suites: Suites::default(),
         })
     }
 
@@ -125,17 +125,13 @@ impl Sealer {
                 None => self.first,
             },
         };
-        if !self.suites.contains_key(&pair) {
-            let key = self
-                .ring
-                .for_frame(pair.0, pair.1)
-                .ok_or(StreamSealError::NoKey {
-                    src: pair.0,
-                    dst: pair.1,
-                })?;
-            self.suites.insert(pair, Suite::new(key));
-        }
-        let suite = &self.suites[&pair];
+        let suite = self
+            .suites
+            .get(&self.ring, pair.0, pair.1)
+            .ok_or(StreamSealError::NoKey {
+                src: pair.0,
+                dst: pair.1,
+            })?;
         let bytes = sealed::seal(suite, plain, counter, self.encrypt)?;
         let not_above = self.highest.get(&pair).copied().filter(|&h| counter <= h);
         self.next.insert(pair, counter + 1);

@@ -124,6 +124,22 @@ impl Suite {
     }
 }
 
+/// Working keys per (SRC, DST), each derived from its frame key once, when first needed: a
+/// node's guard and a stream's sealer keep one.
+#[derive(Debug, Default)]
+pub(crate) struct Suites(std::collections::HashMap<(u8, u8), Suite>);
+
+impl Suites {
+    /// The working keys for frames from `src` to `dst` under `ring`'s key for them.
+    pub(crate) fn get(&mut self, ring: &crate::key::KeyRing, src: u8, dst: u8) -> Option<&Suite> {
+        use std::collections::hash_map::Entry;
+        match self.0.entry((src, dst)) {
+            Entry::Occupied(known) => Some(known.into_mut()),
+            Entry::Vacant(new) => Some(new.insert(Suite::new(ring.for_frame(src, dst)?))),
+        }
+    }
+}
+
 /// Compares two tags in time independent of where they differ.
 pub fn tags_equal(a: &[u8; TAG_BYTES], b: &[u8]) -> bool {
     if b.len() != TAG_BYTES {
