@@ -7,11 +7,13 @@
 //! - [`rng`]: seeded random streams, one per simulated quantity;
 //! - [`stats`]: running statistics (mean, deviation, jitter estimators);
 //! - [`geometry`]: the one distance between two points;
+//! - [`hex`]: hex text in and out;
 //! - [`strict_json`]: JSON objects read with unknown and duplicate fields refused.
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod geometry;
+pub mod hex;
 pub mod io;
 pub mod output;
 pub mod rng;

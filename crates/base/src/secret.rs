@@ -71,6 +71,23 @@ pub enum SecretFileError {
     },
 }
 
+/// Whether `a` equals `b`, taking a time that depends on their lengths but not on where they
+/// differ: every byte of `a` is compared (a token, a tag).
+pub fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    let mut diff = u8::from(a.len() != b.len());
+    for (k, x) in a.iter().enumerate() {
+        diff |= x ^ b.get(k).copied().unwrap_or(!x);
+    }
+    std::hint::black_box(diff) == 0
+}
+
+/// `count` random bytes from the system's source (`/dev/urandom`), for keys and tokens.
+pub fn random_bytes(count: usize) -> io::Result<Vec<u8>> {
+    let mut buf = vec![0u8; count];
+    File::open("/dev/urandom")?.read_exact(&mut buf)?;
+    Ok(buf)
+}
+
 /// The user running this process.
 fn my_uid() -> u32 {
     nix::unistd::geteuid().as_raw()
@@ -257,6 +274,22 @@ mod tests {
         std::fs::write(&path, bytes).unwrap();
         std::fs::set_permissions(&path, std::fs::Permissions::from_mode(mode)).unwrap();
         path
+    }
+
+    #[test]
+    fn the_constant_time_compare_is_equality() {
+        assert!(constant_time_eq(b"", b""));
+        assert!(constant_time_eq(b"abc", b"abc"));
+        assert!(!constant_time_eq(b"abc", b"abd"));
+        assert!(!constant_time_eq(b"abc", b"ab"));
+        assert!(!constant_time_eq(b"ab", b"abc"));
+        assert!(!constant_time_eq(b"", b"a"));
+        assert!(!constant_time_eq(b"a", b""));
+        // A shorter `b` is padded with bytes that differ from `a`'s, never equal to them.
+        assert!(!constant_time_eq(&[0xff], &[]));
+        assert!(!constant_time_eq(&[0x00], &[]));
+        assert_eq!(random_bytes(32).unwrap().len(), 32);
+        assert_ne!(random_bytes(16).unwrap(), random_bytes(16).unwrap());
     }
 
     #[test]

@@ -34,6 +34,7 @@
 //! Contract: nothing a client sends panics or blocks the session: every connection has its
 //! own threads, and a request that is too long, too slow or not HTTP is closed.
 
+use rovlink_base::secret::constant_time_eq;
 use std::collections::HashSet;
 use std::io::{self, Read, Write};
 use std::net::{IpAddr, Shutdown, SocketAddr, TcpListener, TcpStream};
@@ -135,21 +136,11 @@ fn url_safe(b: u8) -> bool {
     b.is_ascii_alphanumeric() || matches!(b, b'-' | b'.' | b'_' | b'~')
 }
 
-/// Whether `a` equals `b`, taking a time that depends on their lengths but not on where they
-/// differ: every byte of `a` is compared.
-pub fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
-    let mut diff = u8::from(a.len() != b.len());
-    for (k, x) in a.iter().enumerate() {
-        diff |= x ^ b.get(k).copied().unwrap_or(!x);
-    }
-    std::hint::black_box(diff) == 0
-}
-
 /// `bytes` random bytes from the system (`/dev/urandom`) in lower-case hex.
 pub fn random_hex(bytes: usize) -> io::Result<String> {
-    let mut buf = vec![0u8; bytes];
-    std::fs::File::open("/dev/urandom")?.read_exact(&mut buf)?;
-    Ok(buf.iter().map(|b| format!("{b:02x}")).collect())
+    Ok(rovlink_base::hex::encode(
+        &rovlink_base::secret::random_bytes(bytes)?,
+    ))
 }
 
 /// A new control token: 32 random bytes in hex (64 characters).
@@ -880,20 +871,6 @@ mod tests {
         );
         assert_eq!(head_end(renamed.as_bytes()), Some(renamed.len()));
         assert_eq!(head_end(b"GET / HTTP/1.1\r\n"), None);
-    }
-
-    #[test]
-    fn the_constant_time_compare_is_equality() {
-        assert!(constant_time_eq(b"", b""));
-        assert!(constant_time_eq(b"abc", b"abc"));
-        assert!(!constant_time_eq(b"abc", b"abd"));
-        assert!(!constant_time_eq(b"abc", b"ab"));
-        assert!(!constant_time_eq(b"ab", b"abc"));
-        assert!(!constant_time_eq(b"", b"a"));
-        assert!(!constant_time_eq(b"a", b""));
-        // A shorter `b` is padded with bytes that differ from `a`'s, never equal to them.
-        assert!(!constant_time_eq(&[0xff], &[]));
-        assert!(!constant_time_eq(&[0x00], &[]));
     }
 
     #[test]

@@ -69,17 +69,17 @@ impl Key {
 
     /// A new key of `bits` (128 or 256) from the operating system's random source.
     pub fn generate(bits: usize) -> Result<Key, KeyError> {
-        let mut bytes = vec![0u8; bits / 8];
         if bits != 128 && bits != 256 {
             return Err(KeyError::Bits(bits));
         }
-        getrandom::getrandom(&mut bytes).map_err(|e| KeyError::Random(e.to_string()))?;
+        let bytes = rovlink_base::secret::random_bytes(bits / 8)
+            .map_err(|e| KeyError::Random(e.to_string()))?;
         Key::from_bytes(&bytes).ok_or(KeyError::Bits(bits))
     }
 
     /// Lowercase hex, for writing a key file.
     fn hex(&self) -> String {
-        self.bytes().iter().map(|b| format!("{b:02x}")).collect()
+        rovlink_base::hex::encode(self.bytes())
     }
 }
 
@@ -139,14 +139,12 @@ fn parse_hex_key(text: &str) -> Result<Key, String> {
             text.len()
         ));
     }
-    let mut bytes = Vec::with_capacity(text.len() / 2);
-    for (i, pair) in text.as_bytes().chunks(2).enumerate() {
-        let digit = |c: u8| (c as char).to_digit(16);
-        match (digit(pair[0]), digit(pair[1])) {
-            (Some(hi), Some(lo)) => bytes.push((hi * 16 + lo) as u8),
-            _ => return Err(format!("key: character {} is not a hex digit", 2 * i + 1)),
+    let bytes = rovlink_base::hex::decode(text.as_bytes()).map_err(|e| match e {
+        rovlink_base::hex::HexError::NotHex(at) => {
+            format!("key: character {} is not a hex digit", at + 1)
         }
-    }
+        odd => format!("key: {odd}"),
+    })?;
     Key::from_bytes(&bytes).ok_or_else(|| "key: bad length".to_string())
 }
 

@@ -27,7 +27,8 @@
 
 use rovlink_wire::frame::{self, Frame, MAX_PAYLOAD_BYTES};
 
-use crate::suite::{Suite, TAG_BYTES, tags_equal};
+use crate::suite::{Suite, TAG_BYTES};
+use rovlink_base::secret::constant_time_eq;
 
 /// The version of the construction, the first byte of what the tag covers.
 pub const VERSION: u8 = 1;
@@ -134,7 +135,7 @@ impl<T: AsRef<[u8]>> Sealed<T> {
     pub fn verify(&self, suite: &Suite, src: u8, dst: u8, counter: u64) -> bool {
         let len = self.buffer.as_ref().len();
         let expected = suite.tag(&[&prefix(src, dst, counter), &[len as u8], self.covered()]);
-        tags_equal(&expected, self.tag())
+        constant_time_eq(&expected, self.tag())
     }
 
     /// The plain message (decrypted when encrypted); call after [`Sealed::verify`].

@@ -157,28 +157,15 @@ impl<'a> Fields<'a> {
     }
 }
 
-/// Decodes lowercase or uppercase hex; `None` on an odd length or a non-hex digit.
+/// Decodes lowercase or uppercase hex; `None` on an odd length or a non-hex digit
+/// ([`rovlink_base::hex::decode`]).
 pub fn decode_hex(text: &str) -> Option<Vec<u8>> {
-    let digits = text.as_bytes();
-    if !digits.len().is_multiple_of(2) {
-        return None;
-    }
-    let nibble = |c: u8| (c as char).to_digit(16).map(|d| d as u8);
-    digits
-        .chunks_exact(2)
-        .map(|p| Some(nibble(p[0])? << 4 | nibble(p[1])?))
-        .collect()
+    rovlink_base::hex::decode(text.as_bytes()).ok()
 }
 
-/// Encodes bytes as lowercase hex.
+/// Encodes bytes as lowercase hex ([`rovlink_base::hex::encode`]).
 pub fn encode_hex(bytes: &[u8]) -> String {
-    const DIGITS: &[u8; 16] = b"0123456789abcdef";
-    let mut out = String::with_capacity(bytes.len() * 2);
-    for &b in bytes {
-        out.push(DIGITS[usize::from(b >> 4)] as char);
-        out.push(DIGITS[usize::from(b & 0x0f)] as char);
-    }
-    out
+    rovlink_base::hex::encode(bytes)
 }
 
 /// Reads one JSON line into a frame value, checked with [`MessageRepr::validate`].

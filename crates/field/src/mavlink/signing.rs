@@ -96,19 +96,9 @@ impl SigningKey {
         if text.len() != 2 * KEY_BYTES {
             return Err(format!("{} bytes", bytes.len()));
         }
-        let digit = |c: u8| (c as char).to_digit(16).map(|d| d as u8);
+        let bytes = rovlink_base::hex::decode(text).map_err(|e| e.to_string())?;
         let mut key = [0u8; KEY_BYTES];
-        for (k, pair) in text.chunks(2).enumerate() {
-            match (digit(pair[0]), digit(pair[1])) {
-                (Some(high), Some(low)) => key[k] = high << 4 | low,
-                _ => {
-                    return Err(format!(
-                        "a character that is not a hex digit at byte {}",
-                        2 * k + usize::from(digit(pair[0]).is_some())
-                    ));
-                }
-            }
-        }
+        key.copy_from_slice(&bytes);
         Ok(SigningKey(key))
     }
 }
