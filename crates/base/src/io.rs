@@ -120,6 +120,15 @@ where
     }
 }
 
+/// Whether a read's error only says that nothing came in time (a timed-out serial port or
+/// socket, a non-blocking read with nothing ready, a signal): the reader tries again.
+pub fn nothing_yet(e: &io::Error) -> bool {
+    matches!(
+        e.kind(),
+        io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
+    )
+}
+
 /// Prints one line on standard error, prefixed with the tool's name; a closed standard error
 /// is ignored (a tool never fails, let alone panics, for want of a place to complain).
 pub fn warn(tool: &str, message: &str) {

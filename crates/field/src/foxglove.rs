@@ -43,17 +43,19 @@
 //! dropping the oldest for a slow one. [`LiveView::stop`] (or dropping it) closes the server, waiting at
 //! most [`STOP_WAIT`] for the clients to be told.
 
-use std::collections::{HashMap, HashSet, VecDeque};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use foxglove::websocket::{
-    Capability, ChannelView, Client, ClientChannel, ClientId, ServerListener, Status,
-};
-use foxglove::{Context, PartialMetadata, RawChannel, Schema, SinkId, WebSocketServerHandle};
+use foxglove::RawChannel;
+use foxglove::websocket::{ChannelView, Client, ClientChannel, ServerListener};
 
 pub use crate::foxglove_gate::{Access, Policy, Token};
-use crate::foxglove_gate::{Gate, MARKER_CHANNEL_ID, Reports};
+use crate::foxglove_gate::{MARKER_CHANNEL_ID, Reports};
+use crate::foxglove_server::{
+    NO_TOKEN_IN_URL, Server, Setup, Viewers, Warnings, channel_name, json_object, lock, say_count,
+    shorten,
+};
 use crate::mcap_log::{Clock, Topic, View, ViewMessage};
 use rovlink_link::SimTime;
 use rovlink_rcp::operator::Joystick;
@@ -172,23 +174,10 @@ impl ClientTopic {
 
     /// One message published on the channel.
     pub fn parse(self, payload: &[u8]) -> Result<Live, String> {
-        if payload.len() > MAX_PAYLOAD_BYTES {
-            return Err(format!(
-                "expected at most {MAX_PAYLOAD_BYTES} bytes, found {}",
-                payload.len()
-            ));
-        }
-        let value: serde_json::Value = rovlink_base::strict_json::from_slice(payload)
-            .map_err(|e| format!("expected a JSON object: {e}"))?;
-        let Some(map) = value.as_object() else {
-            return Err(format!(
-                "expected a JSON object, found {}",
-                shorten(&rovlink_wire::json::show(&value))
-            ));
-        };
+        let map = json_object(payload)?;
         match self {
-            ClientTopic::Orders => Live::from_object(map).map_err(|e| e.to_string()),
-            ClientTopic::Twist => twist_joystick(map),
+            ClientTopic::Orders => Live::from_object(&map).map_err(|e| e.to_string()),
+            ClientTopic::Twist => twist_joystick(&map),
         }
     }
 }
@@ -235,31 +224,14 @@ pub fn twist_joystick(map: &serde_json::Map<String, serde_json::Value>) -> Resul
     })
 }
 
-/// At most 80 characters of `text`, for a warning that must stay one short line.
-fn shorten(text: &str) -> String {
-    const MAX: usize = 80;
-    let line: String = text.chars().filter(|c| !c.is_control()).collect();
-    if line.chars().count() <= MAX {
-        return line;
-    }
-    let mut short: String = line.chars().take(MAX).collect();
-    short.push_str("...");
-    short
-}
-
 /// What clients published, waiting for the session.
 #[derive(Default)]
 struct Inbox {
     orders: VecDeque<Live>,
     dropped_orders: u64,
-    warnings: VecDeque<String>,
-    dropped_warnings: u64,
+    warnings: Warnings,
     /// When the Twist in force arrived, while one is.
     twist_at: Option<Instant>,
-    /// The client topics already warned about (each is warned about once per session).
-    warned_topics: HashSet<String>,
-    /// The clients whose publishing was refused (each is warned about once).
-    refused_clients: HashSet<ClientId>,
 }
 
 impl Inbox {
@@ -295,30 +267,6 @@ impl Inbox {
             self.push(Live::scripted_joystick(Joystick::default()));
         }
     }
-
-    /// Warns about client topic `topic` once for the whole session: a viewer advertises its
-    /// panels' topics again at every layout reload.
-    fn warn_topic(&mut self, topic: &str, warning: String) {
-        if self.warned_topics.len() < 4 * MAX_WARNINGS && self.warned_topics.insert(topic.into()) {
-            self.warn(warning);
-        }
-    }
-
-    fn warn(&mut self, warning: String) {
-        if self.warnings.len() >= MAX_WARNINGS {
-            self.dropped_warnings += 1;
-        } else {
-            self.warnings.push_back(warning);
-        }
-    }
-}
-
-/// The inbox, even if a thread panicked holding it (its contents stay consistent: every
-/// change is one push or pop).
-fn lock(inbox: &Mutex<Inbox>) -> MutexGuard<'_, Inbox> {
-    inbox
-        .lock()
-        .unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
 /// The SDK's callbacks: client channels and their messages, into the inbox.
@@ -326,8 +274,6 @@ struct Listener {
     inbox: Arc<Mutex<Inbox>>,
     /// The view's channels and their latest messages, for new subscribers.
     latest: Arc<Latest>,
-    /// This process's secret, which the gate's marker carries.
-    secret: Arc<str>,
     /// Whose orders this view takes.
     orders: Orders,
 }
@@ -343,46 +289,16 @@ enum Orders {
     NotHere,
 }
 
-/// A client the gate let through.
-#[derive(Clone, Copy, Debug)]
-struct Viewer {
-    sink: SinkId,
-    access: Access,
-}
-
 /// The view's channels, the latest message of each [`KEPT`] one, and the clients that
 /// receive them.
 struct Latest {
     channels: Vec<Option<Arc<RawChannel>>>,
     messages: Mutex<Vec<Option<ViewMessage>>>,
     /// The clients the gate marked (see the module doc).
-    viewers: Mutex<HashMap<ClientId, Viewer>>,
+    viewers: Viewers,
 }
 
 impl Latest {
-    fn viewers(&self) -> MutexGuard<'_, HashMap<ClientId, Viewer>> {
-        self.viewers.lock().unwrap_or_else(|p| p.into_inner())
-    }
-
-    /// The access of `client`, if the gate marked it.
-    fn access(&self, client: &Client) -> Option<Access> {
-        self.viewers().get(&client.id()).map(|v| v.access)
-    }
-
-    /// Logs `json` on `channel` to every marked client subscribed to it.
-    fn log_to_viewers(&self, channel: &RawChannel, json: &str, log_time_ns: u64) {
-        let sinks: Vec<SinkId> = self.viewers().values().map(|v| v.sink).collect();
-        for sink in sinks {
-            channel.log_with_meta_to_sink(
-                json.as_bytes(),
-                PartialMetadata {
-                    log_time: Some(log_time_ns),
-                },
-                Some(sink),
-            );
-        }
-    }
-
     /// Channel `index`, if the view has it.
     fn channel(&self, index: usize) -> Option<&Arc<RawChannel>> {
         self.channels.get(index).and_then(Option::as_ref)
@@ -391,7 +307,7 @@ impl Latest {
     /// Keeps the message published on channel `index` if its topic is [`KEPT`].
     fn keep(&self, index: usize, topic: Topic, json: &str, log_time_ns: u64) {
         if KEPT.contains(&topic) {
-            let mut messages = self.messages.lock().unwrap_or_else(|p| p.into_inner());
+            let mut messages = lock(&self.messages);
             if let Some(slot) = messages.get_mut(index) {
                 *slot = Some(ViewMessage {
                     topic,
@@ -409,44 +325,20 @@ impl Latest {
         else {
             return;
         };
-        let message = self
-            .messages
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .get(index)
-            .cloned()
-            .flatten();
+        let message = lock(&self.messages).get(index).cloned().flatten();
         if let (Some(message), Some(channel)) = (message, self.channel(index)) {
-            channel.log_with_meta_to_sink(
-                message.json.as_bytes(),
-                PartialMetadata {
-                    log_time: Some(message.log_time_ns),
-                },
-                client.sink_id(),
-            );
+            let json = message.json.as_bytes();
+            crate::foxglove_server::send(channel, json, message.log_time_ns, client.sink_id());
         }
-    }
-}
-
-impl Listener {
-    fn name(client: &Client, channel: &ClientChannel) -> String {
-        format!(
-            "foxglove client {} channel {} ({})",
-            u32::from(client.id()),
-            channel.id,
-            shorten(&channel.topic)
-        )
     }
 }
 
 impl Listener {
     /// Why `client`'s publishing is refused, if it is.
     fn refusal(&self, client: &Client) -> Option<&'static str> {
-        match (self.orders, self.latest.access(client)) {
+        match (self.orders, self.latest.viewers.access(client)) {
             (Orders::FromControl, Some(Access::Control)) => None,
-            (Orders::FromControl, _) => Some(
-                "publishing refused: its URL has no control token (?token=...): it may only view",
-            ),
+            (Orders::FromControl, _) => Some(NO_TOKEN_IN_URL),
             (Orders::NoToken, _) => Some(
                 "publishing refused: the live view is view-only; control needs \
                  --foxglove-token-file and the token in the client's URL",
@@ -460,51 +352,34 @@ impl Listener {
 
 impl ServerListener for Listener {
     fn on_subscribe(&self, client: Client, channel: ChannelView) {
-        if self.latest.access(&client).is_some() {
+        if self.latest.viewers.access(&client).is_some() {
             self.latest.send_to(&client, &channel);
         }
     }
 
     fn on_client_unadvertise(&self, client: Client, channel: &ClientChannel) {
-        if u32::from(channel.id) == MARKER_CHANNEL_ID {
-            self.latest.viewers().remove(&client.id());
-        }
+        self.latest.viewers.unadvertised(&client, channel);
     }
 
     fn on_client_advertise(&self, client: Client, channel: &ClientChannel) {
-        if u32::from(channel.id) == MARKER_CHANNEL_ID {
-            // The gate's marker: its topic carries the secret, so it is never shown.
-            let marked = crate::foxglove_gate::marker_access(&channel.topic, &self.secret);
-            if let (Some(access), Some(sink)) = (marked, client.sink_id()) {
-                self.latest
-                    .viewers()
-                    .insert(client.id(), Viewer { sink, access });
-            }
+        if self.latest.viewers.advertised(&client, channel) {
             return;
         }
         if let Some(why) = self.refusal(&client) {
-            let mut inbox = lock(&self.inbox);
-            if inbox.refused_clients.len() < 4 * MAX_WARNINGS
-                && inbox.refused_clients.insert(client.id())
-            {
-                inbox.warn(format!(
-                    "foxglove client {}: {why} (said once per client)",
-                    u32::from(client.id())
-                ));
-                // A view that never takes orders does not tell the client: a viewer's panels
-                // advertise on their own (Foxglove's 3D panel), and nothing can change it.
-                if self.orders != Orders::NotHere {
-                    client.send_status(Status::warning(why));
-                }
-            }
+            // A view that never takes orders does not tell the client: a viewer's panels
+            // advertise on their own (Foxglove's 3D panel), and nothing can change it.
+            let tell = self.orders != Orders::NotHere;
+            lock(&self.inbox).warnings.refuse_client(&client, why, tell);
             return;
         }
         if let Err(why) = ClientTopic::of(&channel.topic, &channel.schema_name, &channel.encoding) {
             let warning = format!(
                 "{}: refused: {why} (said once per topic)",
-                Listener::name(&client, channel)
+                channel_name(&client, channel)
             );
-            lock(&self.inbox).warn_topic(&channel.topic, warning);
+            lock(&self.inbox)
+                .warnings
+                .warn_topic(&channel.topic, warning);
         }
     }
 
@@ -529,9 +404,9 @@ impl ServerListener for Listener {
                 }
                 inbox.push(live);
             }
-            Err(why) => inbox.warn(format!(
+            Err(why) => inbox.warnings.warn(format!(
                 "{}: message skipped: {why}",
-                Listener::name(&client, channel)
+                channel_name(&client, channel)
             )),
         }
     }
@@ -553,22 +428,11 @@ impl OrderSource for LiveOrders {
 
     fn take_warnings(&mut self) -> Vec<String> {
         let mut inbox = lock(&self.inbox);
-        let mut warnings: Vec<String> = inbox.warnings.drain(..).collect();
+        let mut warnings = inbox.warnings.take();
         warnings.extend(self.reports.iter().flat_map(Reports::take));
-        if inbox.dropped_orders > 0 {
-            warnings.push(format!(
-                "foxglove: {} orders dropped: more than {MAX_QUEUED} waiting",
-                inbox.dropped_orders
-            ));
-            inbox.dropped_orders = 0;
-        }
-        if inbox.dropped_warnings > 0 {
-            warnings.push(format!(
-                "foxglove: {} more client messages skipped or channels refused",
-                inbox.dropped_warnings
-            ));
-            inbox.dropped_warnings = 0;
-        }
+        say_count(&mut warnings, &mut inbox.dropped_orders, |n| {
+            format!("foxglove: {n} orders dropped: more than {MAX_QUEUED} waiting")
+        });
         warnings
     }
 }
@@ -576,24 +440,19 @@ impl OrderSource for LiveOrders {
 /// The live view: an [`Observer`] of a single session or of a network (one lane per vehicle
 /// under `/vehicle/N/`) publishing the session on the server's channels.
 pub struct LiveView {
-    /// The handshake layer on the address given (dropped first: no new connections).
-    gate: Option<Gate>,
-    server: Option<WebSocketServerHandle>,
-    /// The channels (they live as long as the context), and the latest message of each kept
+    /// The gate and the SDK's server behind it (closed when the view is dropped).
+    server: Server,
+    /// The channels (they live as long as the server), and the latest message of each kept
     /// one: lane `k`'s topic `t` at `k * Topic::ALL.len() + t.index()` (none for a network
     /// vehicle's link frames), then a network's `/network/frames` or a node's `/link/frames`.
     latest: Arc<Latest>,
-    _context: Arc<Context>,
     lanes: Vec<Lane>,
     /// A real-time network node's view of its own frames (its `/link/frames`).
     node: Option<View>,
     /// What its frames are: a single session's link, a network's hops, a node's own.
     extra: Extra,
-    addr: String,
     /// What clients published (a view without [`LiveOrders`] reports its refusals itself).
     inbox: Arc<Mutex<Inbox>>,
-    /// Whether it serves `wss://`.
-    tls: bool,
 }
 
 /// One vehicle's part of the view.
@@ -605,25 +464,6 @@ struct Lane {
     last_preview: Option<(Instant, usize)>,
     /// The last pose, and when it was published (a still vehicle's is republished).
     last_pose: Option<(PoseSample, Instant)>,
-}
-
-/// Splits HOST:PORT (IPv6 in brackets, `[::1]:8765`).
-fn host_port(addr: &str) -> Result<(&str, u16), FoxgloveError> {
-    let bad = |why| FoxgloveError::Address {
-        found: addr.to_string(),
-        why,
-    };
-    let (host, port) = addr.rsplit_once(':').ok_or_else(|| bad("no port"))?;
-    if host.is_empty() {
-        return Err(bad("no host"));
-    }
-    if host.contains(':') && !(host.starts_with('[') && host.ends_with(']')) {
-        return Err(bad("an IPv6 host goes in brackets: [::1]:8765"));
-    }
-    let port = port
-        .parse::<u16>()
-        .map_err(|_| bad("the port is not a number in 0..=65535"))?;
-    Ok((host, port))
 }
 
 /// Starts the server, bound to `addr` only (HOST:PORT; port 0 picks a free one, see
@@ -715,25 +555,9 @@ fn serve(
     lanes: &[Option<u8>],
     extra: Extra,
 ) -> Result<(LiveView, LiveOrders), FoxgloveError> {
-    let (host, port) = host_port(addr)?;
-    let context = Context::new();
-    let sdk = |e: foxglove::FoxgloveError| match e {
-        foxglove::FoxgloveError::Bind(source) => FoxgloveError::Bind {
-            addr: addr.to_string(),
-            source,
-        },
-        other => FoxgloveError::Server {
-            addr: addr.to_string(),
-            message: other.to_string(),
-        },
-    };
+    let setup = Setup::new(addr)?;
     let channel = |name: &str, schema_name: &str, schema: &'static str| {
-        context
-            .channel_builder(name)
-            .message_encoding("json")
-            .schema(Schema::new(schema_name, "jsonschema", schema.as_bytes()))
-            .build_raw()
-            .map_err(sdk)
+        setup.channel(name, schema_name, schema.as_bytes())
     };
     let mut channels = Vec::with_capacity(lanes.len() * Topic::ALL.len() + 1);
     for lane in lanes {
@@ -766,55 +590,15 @@ fn serve(
     let latest = Arc::new(Latest {
         messages: Mutex::new(vec![None; channels.len()]),
         channels,
-        viewers: Mutex::new(HashMap::new()),
+        viewers: Viewers::new(setup.secret.clone()),
     });
-    let secret: Arc<str> = crate::foxglove_gate::random_hex(32)
-        .map_err(|e| FoxgloveError::Server {
-            addr: addr.to_string(),
-            message: format!("cannot read /dev/urandom: {e}"),
-        })?
-        .into();
     let inbox = Arc::new(Mutex::new(Inbox::default()));
-    // The SDK listens on a loopback port of its own; the gate, on the address given, carries
-    // every viewer's connection to it (see `foxglove_gate`: stock viewers offer the protocol's
-    // older name, which the SDK refuses) and marks it. Every view offers publishing, since
-    // the marker is a client advertisement; the listener refuses what it does not take.
-    let handle = context
-        .websocket_server()
-        .name(name)
-        .bind("127.0.0.1", 0)
-        .message_backlog_size(BACKLOG_MESSAGES)
-        .listener(Arc::new(Listener {
-            inbox: inbox.clone(),
-            latest: latest.clone(),
-            secret: secret.clone(),
-            orders,
-        }))
-        .capabilities([Capability::ClientPublish])
-        .supported_encodings(["json"])
-        .start_blocking()
-        .map_err(sdk)?;
-    let gate = Gate::start(
-        &format!("{host}:{port}"),
-        handle.port(),
-        policy.clone(),
-        secret,
-    )
-    .map_err(|source| FoxgloveError::Bind {
-        addr: addr.to_string(),
-        source,
-    })?;
-    if orders == Orders::FromControl
-        && !gate.local_addr().ip().is_loopback()
-        && !policy.insecure
-        && policy.tls.is_none()
-    {
-        drop(gate);
-        handle.stop().detach_all();
-        return Err(FoxgloveError::Exposed {
-            addr: addr.to_string(),
-        });
-    }
+    let listener = Arc::new(Listener {
+        inbox: inbox.clone(),
+        latest: latest.clone(),
+        orders,
+    });
+    let server = setup.serve(name, policy, orders == Orders::FromControl, listener)?;
     let lanes = lanes
         .iter()
         .map(|&vehicle| Lane {
@@ -827,58 +611,50 @@ fn serve(
             last_pose: None,
         })
         .collect();
+    let reports = server.reports();
     let view = LiveView {
-        gate: Some(gate),
-        server: Some(handle),
+        server,
         latest,
-        _context: context,
         lanes,
         node: (extra == Extra::NodeFrames).then(|| View::new(Clock::Wall)),
         extra,
-        addr: addr.to_string(),
         inbox: inbox.clone(),
-        tls: policy.tls.is_some(),
     };
-    let reports = view.gate.as_ref().map(Gate::reports);
     Ok((view, LiveOrders { inbox, reports }))
 }
 
 impl LiveView {
     /// The port the server listens on (the gate's).
     pub fn port(&self) -> u16 {
-        self.gate.as_ref().map_or(0, Gate::port)
+        self.server.port()
     }
 
     /// The address it was started on, as given.
     pub fn addr(&self) -> &str {
-        &self.addr
+        self.server.addr()
     }
 
     /// Clients connected now.
     pub fn clients(&self) -> usize {
-        self.server
-            .as_ref()
-            .map_or(0, WebSocketServerHandle::client_count)
+        self.server.clients()
     }
 
     /// The handshakes the gate refused and the clients whose publishing was refused, not yet
     /// reported (a network's view has no [`LiveOrders`] to report them).
     pub fn take_refusals(&self) -> Vec<String> {
-        let mut lines: Vec<String> = lock(&self.inbox).warnings.drain(..).collect();
-        lines.extend(self.gate.iter().flat_map(|g| g.reports().take()));
+        let mut lines = lock(&self.inbox).warnings.take();
+        lines.extend(self.server.reports().iter().flat_map(Reports::take));
         lines
     }
 
     /// The URL scheme clients use: `wss` with TLS, else `ws`.
     pub fn scheme(&self) -> &'static str {
-        if self.tls { "wss" } else { "ws" }
+        self.server.scheme()
     }
 
     /// Whether it listens on an address other than loopback.
     pub fn exposed(&self) -> bool {
-        self.gate
-            .as_ref()
-            .is_some_and(|g| !g.local_addr().ip().is_loopback())
+        self.server.exposed()
     }
 
     /// The lane of `vehicle` (the only one in a single session).
@@ -907,7 +683,7 @@ impl LiveView {
     fn publish_at(&self, index: usize, topic: Topic, json: &str, log_time_ns: u64) {
         self.latest.keep(index, topic, json, log_time_ns);
         if let Some(channel) = self.latest.channel(index) {
-            self.latest.log_to_viewers(channel, json, log_time_ns);
+            (self.latest.viewers).log(channel, json.as_bytes(), log_time_ns);
         }
     }
 
@@ -920,25 +696,7 @@ impl LiveView {
 
     /// Closes the server: the clients are told, for at most [`STOP_WAIT`].
     pub fn stop(mut self) {
-        self.shut_down();
-    }
-
-    fn shut_down(&mut self) {
-        self.gate.take();
-        let Some(server) = self.server.take() else {
-            return;
-        };
-        let shutdown = server.stop();
-        let (done_tx, done_rx) = std::sync::mpsc::channel();
-        let waiter = std::thread::Builder::new()
-            .name("foxglove-stop".into())
-            .spawn(move || {
-                shutdown.wait_blocking();
-                let _ = done_tx.send(());
-            });
-        if waiter.is_ok() {
-            let _ = done_rx.recv_timeout(STOP_WAIT);
-        }
+        self.server.shut_down();
     }
 
     fn lane_frame(&mut self, lane: usize, e: &FrameEvent<'_>) {
@@ -1003,12 +761,6 @@ impl LiveView {
     }
 }
 
-impl Drop for LiveView {
-    fn drop(&mut self) {
-        self.shut_down();
-    }
-}
-
 impl Observer for LiveView {
     fn frame(&mut self, e: &FrameEvent<'_>) {
         match self.extra {
@@ -1060,7 +812,7 @@ impl LiveView {
         if channel.has_sinks() {
             let now_ns = crate::mcap_log::wall_clock_ns();
             let json = crate::net_mcap::hop_json(e, now_ns);
-            self.latest.log_to_viewers(channel, &json, now_ns);
+            (self.latest.viewers).log(channel, json.as_bytes(), now_ns);
         }
         // A still vehicle's pose is republished on the network's ticks too.
         for lane in 0..self.lanes.len() {
@@ -1214,10 +966,9 @@ mod tests {
             (3 + 2 * MAX_QUEUED - MAX_QUEUED) as u64
         );
         for k in 0..2 * MAX_WARNINGS {
-            inbox.warn(format!("w{k}"));
+            inbox.warnings.warn(format!("w{k}"));
         }
         assert_eq!(inbox.warnings.len(), MAX_WARNINGS);
-        assert_eq!(inbox.dropped_warnings, MAX_WARNINGS as u64);
         let mut orders = LiveOrders {
             inbox: Arc::new(Mutex::new(inbox)),
             reports: None,
@@ -1227,6 +978,8 @@ mod tests {
         let warnings = orders.take_warnings();
         assert_eq!(warnings.len(), MAX_WARNINGS + 2, "{warnings:?}");
         assert!(warnings.iter().any(|w| w.contains("orders dropped")));
+        let more = format!("{MAX_WARNINGS} more client messages");
+        assert!(warnings.iter().any(|w| w.contains(&more)));
         assert!(orders.take_warnings().is_empty());
     }
 
@@ -1247,22 +1000,6 @@ mod tests {
         inbox.orders.clear();
         inbox.expire(t0 + 10 * TWIST_HOLD);
         assert!(inbox.orders.is_empty(), "neutral once");
-    }
-
-    #[test]
-    fn addresses_are_host_and_port() {
-        assert_eq!(host_port("127.0.0.1:8765").unwrap(), ("127.0.0.1", 8765));
-        assert_eq!(host_port("[::1]:0").unwrap(), ("[::1]", 0));
-        for (bad, why) in [
-            ("8765", "no port"),
-            (":8765", "no host"),
-            ("::1:8765", "brackets"),
-            ("localhost:99999", "0..=65535"),
-            ("localhost:", "0..=65535"),
-        ] {
-            let error = host_port(bad).unwrap_err().to_string();
-            assert!(error.contains(why) && error.contains(bad), "{bad}: {error}");
-        }
     }
 
     proptest::proptest! {
@@ -1304,11 +1041,5 @@ mod tests {
             .unwrap();
         assert_eq!(orders.len(), 5);
         assert_eq!(orders[4], Live::Cancel);
-    }
-
-    #[test]
-    fn warnings_stay_one_short_line() {
-        assert_eq!(shorten("a\nb"), "ab");
-        assert_eq!(shorten(&"x".repeat(200)).len(), 83);
     }
 }

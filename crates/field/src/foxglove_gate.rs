@@ -34,7 +34,7 @@
 //! Contract: nothing a client sends panics or blocks the session: every connection has its
 //! own threads, and a request that is too long, too slow or not HTTP is closed.
 
-use rovlink_base::secret::constant_time_eq;
+use rovlink_base::secret::{constant_time_eq, read_secret_file};
 use std::collections::HashSet;
 use std::io::{self, Read, Write};
 use std::net::{IpAddr, Shutdown, SocketAddr, TcpListener, TcpStream};
@@ -357,13 +357,9 @@ impl Reports {
     pub fn take(&self) -> Vec<String> {
         let mut r = self.0.lock().unwrap_or_else(|p| p.into_inner());
         let mut lines = std::mem::take(&mut r.new);
-        if r.unreported > 0 {
-            lines.push(format!(
-                "foxglove: {} more handshakes refused from other peers",
-                r.unreported
-            ));
-            r.unreported = 0;
-        }
+        crate::foxglove_server::say_count(&mut lines, &mut r.unreported, |n| {
+            format!("foxglove: {n} more handshakes refused from other peers")
+        });
         lines
     }
 }
@@ -835,6 +831,55 @@ fn carry(tcp: TcpStream, peer: SocketAddr, shared: &Shared) -> io::Result<()> {
 /// `protocol`.
 fn with_protocol(head: &str, protocol: &str) -> String {
     rewritten(head, Some(protocol))
+}
+
+/// The longest token file read, bytes.
+const MAX_TOKEN_FILE_BYTES: u64 = 4096;
+/// The longest TLS certificate chain or key file read, bytes.
+const MAX_TLS_FILE_BYTES: u64 = 1 << 20;
+
+/// A policy from a tool's flags: the control token of `--foxglove-token-file` (read as a key
+/// file is: yours, mode 0600), `--foxglove-origin`s, `--foxglove-insecure`, and TLS from
+/// `--foxglove-tls-cert` and `--foxglove-tls-key`; the error names the flag and the file.
+pub fn policy_from_flags(
+    token_file: Option<&std::path::Path>,
+    origins: &[String],
+    insecure: bool,
+    tls: Option<(&std::path::Path, &std::path::Path)>,
+) -> Result<Policy, String> {
+    let token = match token_file {
+        None => None,
+        Some(path) => {
+            let bytes = read_secret_file(path, MAX_TOKEN_FILE_BYTES)
+                .map_err(|e| format!("--foxglove-token-file {e}"))?;
+            let token = Token::parse(&bytes)
+                .map_err(|why| format!("--foxglove-token-file {}: {why}", path.display()))?;
+            Some(token)
+        }
+    };
+    let tls = match tls {
+        Some((cert, key)) => {
+            let cert_pem = rovlink_base::io::read_at_most(cert, MAX_TLS_FILE_BYTES)
+                .map_err(|e| format!("--foxglove-tls-cert {}: {e}", cert.display()))?;
+            let key_pem = read_secret_file(key, MAX_TLS_FILE_BYTES)
+                .map_err(|e| format!("--foxglove-tls-key {e}"))?;
+            let config = tls_config(&cert_pem, &key_pem).map_err(|why| {
+                format!(
+                    "--foxglove-tls-cert {} --foxglove-tls-key {}: {why}",
+                    cert.display(),
+                    key.display()
+                )
+            })?;
+            Some(config)
+        }
+        None => None,
+    };
+    Ok(Policy {
+        token,
+        origins: origins.to_vec(),
+        insecure,
+        tls,
+    })
 }
 
 #[cfg(test)]

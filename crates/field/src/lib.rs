@@ -2,6 +2,7 @@
 //! `rovlink-rcp`:
 //!
 //! - [`foxglove`] and [`foxglove_gate`]: the live Foxglove WebSocket view of a session;
+//! - [`foxglove_map`]: the live Foxglove view of octo-delta's map, behind the same gate;
 //! - [`mcap_log`] and [`net_mcap`]: a session's MCAP log, single vehicle and network;
 //! - [`mavlink`]: the ROV end driving an ArduSub autopilot over MAVLink 2;
 //! - [`console`]: the operator's orders as JSON Lines from a console or a FIFO.
@@ -11,6 +12,8 @@
 pub mod console;
 pub mod foxglove;
 pub mod foxglove_gate;
+pub mod foxglove_map;
+mod foxglove_server;
 pub mod mavlink;
 pub mod mcap_log;
 pub mod net_mcap;

@@ -131,6 +131,8 @@ pub const DEBUG: u8 = 1;
 pub const INFO: u8 = 2;
 /// Foxglove's log level WARNING.
 pub const WARNING: u8 = 3;
+/// Foxglove's log level ERROR.
+pub const ERROR: u8 = 4;
 
 /// A channel of the session's view.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -303,10 +305,7 @@ impl View {
             }
             Clock::Wall => wall_clock_ns(),
         };
-        (
-            ns,
-            json!({"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000}),
-        )
+        (ns, timestamp_json(ns))
     }
 
     fn message(topic: Topic, log_time_ns: u64, json: &serde_json::Value) -> ViewMessage {
@@ -332,8 +331,7 @@ impl View {
         Some(View::message(
             topic,
             ns,
-            &json!({"timestamp": timestamp, "level": level, "message": message,
-                    "name": name, "file": "", "line": 0}),
+            &log_json(&timestamp, level, name, message),
         ))
     }
 
@@ -432,11 +430,16 @@ impl View {
             let (ns, timestamp) = self.stamp(pose.t_s);
             let goal = pose
                 .goal_m
-                .map(|goal| pose_json(&timestamp, goal, pose.heading_deg));
+                .map(|goal| pose_json(&timestamp, NED_FRAME, goal, heading(pose.heading_deg)));
             let messages = [
                 (
                     Topic::Pose,
-                    Some(pose_json(&timestamp, pose.position_m, pose.heading_deg)),
+                    Some(pose_json(
+                        &timestamp,
+                        NED_FRAME,
+                        pose.position_m,
+                        heading(pose.heading_deg),
+                    )),
                 ),
                 (Topic::Goal, goal),
                 (
@@ -724,7 +727,6 @@ impl McapLog {
     }
 }
 
-/// A pose message: NED position, heading as a rotation about the down axis.
 /// `/tf` at a pose: world -> ned (a half turn about north: z down becomes z up) and ned ->
 /// `body` (the position, and the heading as a turn about ned's z).
 fn tf_json(
@@ -744,20 +746,45 @@ fn tf_json(
     ]})
 }
 
-fn pose_json(
-    timestamp: &serde_json::Value,
-    position_m: [f64; 3],
-    heading_deg: f64,
-) -> serde_json::Value {
+/// A heading as a rotation about the down axis (x, y, z, w).
+fn heading(heading_deg: f64) -> [f64; 4] {
     let half = heading_deg.to_radians() / 2.0;
+    [0.0, 0.0, half.sin(), half.cos()]
+}
+
+/// A `foxglove.Timestamp` of `ns` nanoseconds.
+pub fn timestamp_json(ns: u64) -> serde_json::Value {
+    json!({"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000})
+}
+
+/// A `foxglove.PoseInFrame` message: `position_m` and the rotation `orientation` (x, y, z, w)
+/// in `frame_id`.
+pub fn pose_json(
+    timestamp: &serde_json::Value,
+    frame_id: &str,
+    position_m: [f64; 3],
+    orientation: [f64; 4],
+) -> serde_json::Value {
+    let [x, y, z, w] = orientation;
     json!({
         "timestamp": timestamp,
-        "frame_id": NED_FRAME,
+        "frame_id": frame_id,
         "pose": {
             "position": {"x": position_m[0], "y": position_m[1], "z": position_m[2]},
-            "orientation": {"x": 0.0, "y": 0.0, "z": half.sin(), "w": half.cos()},
+            "orientation": {"x": x, "y": y, "z": z, "w": w},
         }
     })
+}
+
+/// A `foxglove.Log` message of `level` ([`INFO`], [`WARNING`], ...) from `name`.
+pub fn log_json(
+    timestamp: &serde_json::Value,
+    level: u8,
+    name: &str,
+    message: &str,
+) -> serde_json::Value {
+    json!({"timestamp": timestamp, "level": level, "message": message,
+           "name": name, "file": "", "line": 0})
 }
 
 fn velocity_json(timestamp: &serde_json::Value, v: [f64; 4]) -> serde_json::Value {

@@ -29,10 +29,9 @@ pub const NETWORK_FRAMES_TOPIC: &str = "/network/frames";
 
 /// A frame's fate at one receiver as a `/network/frames` message, stamped `timestamp_ns`.
 pub fn hop_json(e: &FrameEvent<'_>, timestamp_ns: u64) -> String {
-    let ns = timestamp_ns;
     let delay_ms = e.t_received_s.zip(e.t_sent_s).map(|(r, s)| (r - s) * 1e3);
     let json = json!({
-        "timestamp": {"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000},
+        "timestamp": crate::mcap_log::timestamp_json(timestamp_ns),
         "medium": e.medium, "src": e.src, "dst": e.dst, "tx": e.tx, "rx": e.rx,
         "kind": e.kind, "bytes": e.bytes, "fate": e.fate, "action": e.action,
         "t_sent_s": e.t_sent_s, "t_received_s": e.t_received_s, "delay_ms": delay_ms,

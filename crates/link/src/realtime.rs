@@ -762,13 +762,7 @@ fn spawn_reader(
                         return;
                     }
                 }
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        io::ErrorKind::TimedOut
-                            | io::ErrorKind::Interrupted
-                            | io::ErrorKind::WouldBlock
-                    ) => {}
+                Err(e) if rovlink_base::io::nothing_yet(&e) => {}
                 Err(e) => {
                     let _ = inbox.send(Message::Closed {
                         port,

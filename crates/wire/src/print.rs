@@ -14,7 +14,7 @@
 
 use std::collections::BTreeMap;
 use std::fmt;
-use std::io::{self, Read};
+use std::io::Read;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -470,14 +470,7 @@ pub fn capture<S: Sink>(
                 printer.push(&buf[..n], sink)?;
                 sink.flush()?;
             }
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    io::ErrorKind::TimedOut
-                        | io::ErrorKind::WouldBlock
-                        | io::ErrorKind::Interrupted
-                ) =>
-            {
+            Err(e) if rovlink_base::io::nothing_yet(&e) => {
                 if let Some(idle) = idle
                     && printer.pending_bytes() > 0
                     && last_rx.elapsed() >= idle

@@ -105,14 +105,7 @@ fn read_until(
             reason: "closed (end of file)".into(),
         }),
         Ok(n) => Ok(Some(n)),
-        Err(e)
-            if matches!(
-                e.kind(),
-                io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
-            ) =>
-        {
-            Ok(None)
-        }
+        Err(e) if rovlink_base::io::nothing_yet(&e) => Ok(None),
         Err(e) => Err(closed(name, "read failed", e)),
     }
 }

@@ -6,12 +6,12 @@ use std::path::Path;
 use crate::outputs::{Destinations, check_images_out};
 use anyhow::Result;
 use rovlink_base::UsageError;
-use rovlink_base::io::{EXIT_CHECK_FAILED, EXIT_OK, read_at_most};
+use rovlink_base::io::{EXIT_CHECK_FAILED, EXIT_OK};
 use rovlink_base::output::{Dest, Kind, Outputs};
-use rovlink_base::secret::{create_secret_file, read_secret_file};
+use rovlink_base::secret::create_secret_file;
 use rovlink_cli::say;
 use rovlink_cli::stop;
-use rovlink_field::foxglove::{LiveView, Policy, Token};
+use rovlink_field::foxglove::{LiveView, Policy};
 use rovlink_rcp::camera;
 use rovlink_rcp::realtime::{Ended, Role};
 use rovlink_rcp::report::Observer;
@@ -239,49 +239,20 @@ fn open_orders(path: &std::path::Path, live: bool) -> Result<rovlink_field::cons
     }
 }
 
-/// The longest token file read, bytes.
-const MAX_TOKEN_FILE_BYTES: u64 = 4096;
-/// The longest TLS certificate chain or key file read, bytes.
-const MAX_TLS_FILE_BYTES: u64 = 1 << 20;
-
 /// The live view's policy from the flags: the control token of --foxglove-token-file (read as
-/// a key file is: yours, mode 0600), --foxglove-origin, --foxglove-insecure.
+/// a key file is: yours, mode 0600), --foxglove-origin, --foxglove-insecure, TLS.
 pub(super) fn foxglove_policy(args: &Args) -> Result<Policy> {
-    let token = match &args.foxglove_token_file {
-        None => None,
-        Some(path) => {
-            let bytes = read_secret_file(path, MAX_TOKEN_FILE_BYTES)
-                .map_err(|e| UsageError(format!("--foxglove-token-file {e}")))?;
-            let token = Token::parse(&bytes).map_err(|why| {
-                UsageError(format!("--foxglove-token-file {}: {why}", path.display()))
-            })?;
-            Some(token)
-        }
-    };
-    let tls = match (&args.foxglove_tls_cert, &args.foxglove_tls_key) {
-        (Some(cert), Some(key)) => {
-            let cert_pem = read_at_most(cert, MAX_TLS_FILE_BYTES)
-                .map_err(|e| UsageError(format!("--foxglove-tls-cert {}: {e}", cert.display())))?;
-            let key_pem = read_secret_file(key, MAX_TLS_FILE_BYTES)
-                .map_err(|e| UsageError(format!("--foxglove-tls-key {e}")))?;
-            let config =
-                rovlink_field::foxglove_gate::tls_config(&cert_pem, &key_pem).map_err(|why| {
-                    UsageError(format!(
-                        "--foxglove-tls-cert {} --foxglove-tls-key {}: {why}",
-                        cert.display(),
-                        key.display()
-                    ))
-                })?;
-            Some(config)
-        }
-        _ => None,
-    };
-    Ok(Policy {
-        token,
-        origins: args.foxglove_origin.clone(),
-        insecure: args.foxglove_insecure,
+    let tls = args
+        .foxglove_tls_cert
+        .as_deref()
+        .zip(args.foxglove_tls_key.as_deref());
+    rovlink_field::foxglove_gate::policy_from_flags(
+        args.foxglove_token_file.as_deref(),
+        &args.foxglove_origin,
+        args.foxglove_insecure,
         tls,
-    })
+    )
+    .map_err(|e| UsageError(e).into())
 }
 
 /// Says once at start who may control the live view `view` of an end taking orders from it.
