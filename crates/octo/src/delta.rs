@@ -135,6 +135,22 @@ impl Sender {
         &self.spec
     }
 
+    /// Sends a new region of interest from now on (same resolution and coarse depth); the
+    /// caller sends the coarse voxels that change sides ([`region`](super::region)) and says
+    /// what it sent for them with [`Sender::note_coarse`].
+    pub fn set_roi(&mut self, roi: Option<Roi>) {
+        self.spec.roi = roi;
+    }
+
+    /// Records what the receiver now has for a coarse voxel outside the ROI (`Some(occupied)`),
+    /// or forgets it (`None`: the voxel is now inside the ROI, sent fine).
+    pub fn note_coarse(&mut self, coarse: u64, occupied: Option<bool>) {
+        match occupied {
+            Some(occ) => self.coarse_sent.insert(coarse, occ),
+            None => self.coarse_sent.remove(&coarse),
+        };
+    }
+
     /// The delta of one scan: `changes` from [`OcTree::insert_scan`] (in Morton order) on `tree`.
     pub fn delta(&mut self, tree: &OcTree, changes: &[Change]) -> Delta {
         let mut d = Delta::default();
@@ -635,6 +651,16 @@ pub enum Message {
         /// The view's leaves: (depth-16 Morton code of the first voxel, depth, occupied, colour).
         leaves: Vec<(u64, u32, bool, Option<[u8; 3]>)>,
     },
+    /// The view inside some coarse voxels, replacing the receiver's there
+    /// ([`region`](super::region)).
+    Region {
+        /// Scan number the view is after.
+        scan: u32,
+        /// The coarse voxels replaced (codes at the coarse depth, ascending).
+        coarse: Vec<u64>,
+        /// Their leaves, as a full message's.
+        leaves: Vec<Leaf>,
+    },
 }
 
 /// A message with where it was in the stream and its size.
@@ -735,10 +761,18 @@ pub fn decode_message(
             scan,
             leaves: decode_full(&mut p)?,
         },
+        super::region::KIND_REGION => {
+            let (coarse, leaves) = decode_region(&mut p, spec)?;
+            Message::Region {
+                scan,
+                coarse,
+                leaves,
+            }
+        }
         other => {
             return Err(ParseError::new(
                 base,
-                format!("message kind: expected 1 (delta) or 2 (full), found {other}"),
+                format!("message kind: expected 1 (delta), 2 (full) or 3 (region), found {other}"),
             ));
         }
     };
@@ -753,7 +787,7 @@ pub fn encode_full(scan: u32, view: &OcTree) -> Vec<u8> {
     if let Some(root) = view.root() {
         let v = view.node(root);
         if v.has_children() {
-            full_node(view, root, &mut p, &mut colors);
+            super::region::subtree(view, root, &mut p, &mut colors);
         } else {
             // The whole space is one leaf: flag bit 1 and its code (1 free, 2 occupied).
             p[0] |= 2;
@@ -769,23 +803,8 @@ pub fn encode_full(scan: u32, view: &OcTree) -> Vec<u8> {
     frame_message(KIND_FULL, scan, &p)
 }
 
-fn full_node(t: &OcTree, r: super::tree::NodeRef, out: &mut Vec<u8>, colors: &mut Vec<u8>) {
-    let b = super::files::bt_record(t, r);
-    out.extend_from_slice(&b);
-    // Leaves and subtrees in index order: the order a reader meets the leaves in.
-    for i in 0..8 {
-        if let Some(c) = t.child(r, i) {
-            let v = t.node(c);
-            if v.has_children() {
-                full_node(t, c, out, colors);
-            } else if v.log_odds >= 0.0 {
-                colors.extend_from_slice(&v.color.unwrap_or([255, 255, 255]));
-            }
-        }
-    }
-}
-
-type Leaf = (u64, u32, bool, Option<[u8; 3]>);
+/// A leaf of a view: depth-16 code of its first voxel, depth, occupied, colour.
+pub type Leaf = (u64, u32, bool, Option<[u8; 3]>);
 
 fn decode_full(p: &mut Cursor) -> Result<Vec<Leaf>, ParseError> {
     let at = p.pos;
@@ -809,21 +828,73 @@ fn decode_full(p: &mut Cursor) -> Result<Vec<Leaf>, ParseError> {
         full_level(p, 0, 0, &mut leaves)?;
     }
     if flags & 1 != 0 {
-        let occ = leaves.iter().filter(|l| l.2).count();
-        let raw = p.take(occ * 3, "colours of the occupied leaves")?;
-        let mut it = raw.chunks_exact(3);
-        for l in leaves.iter_mut().filter(|l| l.2) {
-            // White is "no colour" (OctoMap's ColorOcTree default).
-            l.3 = it
-                .next()
-                .map(|c| [c[0], c[1], c[2]])
-                .filter(|c| *c != [255, 255, 255]);
-        }
+        leaf_colors(p, &mut leaves)?;
     }
     if p.left() != 0 {
         return Err(p.err(format!("{} bytes after the full view", p.left())));
     }
     Ok(leaves)
+}
+
+/// Reads r, g, b of every occupied leaf, in order, into the leaves.
+fn leaf_colors(p: &mut Cursor, leaves: &mut [Leaf]) -> Result<(), ParseError> {
+    let occ = leaves.iter().filter(|l| l.2).count();
+    let raw = p.take(occ * 3, "colours of the occupied leaves")?;
+    let mut it = raw.chunks_exact(3);
+    for l in leaves.iter_mut().filter(|l| l.2) {
+        // White is "no colour" (OctoMap's ColorOcTree default).
+        l.3 = it
+            .next()
+            .map(|c| [c[0], c[1], c[2]])
+            .filter(|c| *c != [255, 255, 255]);
+    }
+    Ok(())
+}
+
+/// A region's payload: its coarse voxels and their leaves.
+fn decode_region(p: &mut Cursor, spec: &ViewSpec) -> Result<(Vec<u64>, Vec<Leaf>), ParseError> {
+    let at = p.pos;
+    let flags = p.u8("region flags")?;
+    if flags > 1 {
+        p.pos = at;
+        return Err(p.err(format!("region flags: unknown bits in {flags:#04x}")));
+    }
+    let d = spec.coarse_depth;
+    let coarse = decode_codes(p, d, "region's coarse voxels")?;
+    let shift = spec.coarse_shift();
+    let mut leaves = Vec::new();
+    for &c in &coarse {
+        let at = p.pos;
+        match p.u8("region content code")? {
+            0 => {}
+            1 => leaves.push((c << shift, d, false, None)),
+            2 => leaves.push((c << shift, d, true, None)),
+            3 => full_level(p, d, c << shift, &mut leaves)?,
+            other => {
+                p.pos = at;
+                return Err(p.err(format!(
+                    "region content code: expected 0..=3, found {other}"
+                )));
+            }
+        }
+    }
+    if flags & 1 != 0 {
+        leaf_colors(p, &mut leaves)?;
+    }
+    if p.left() != 0 {
+        return Err(p.err(format!("{} bytes after the region", p.left())));
+    }
+    Ok((coarse, leaves))
+}
+
+/// A region message's bytes (framing included): `view` inside the coarse voxels `coarse`
+/// (ascending codes at `spec`'s coarse depth), replacing the receiver's there.
+pub fn encode_region(spec: &ViewSpec, scan: u32, view: &OcTree, coarse: &[u64]) -> Vec<u8> {
+    frame_message(
+        super::region::KIND_REGION,
+        scan,
+        &super::region::encode_payload(view, spec, coarse),
+    )
 }
 
 fn full_level(
@@ -933,6 +1004,19 @@ fn big_leaf(
     }
 }
 
+/// Sets a view's leaves to their maximum-likelihood values (a full or region message's).
+fn set_leaves(view: &mut OcTree, leaves: &[Leaf]) {
+    let p = Params::default();
+    for &(code, depth, occ, col) in leaves {
+        let v = if occ {
+            p.clamp_max_log
+        } else {
+            p.clamp_min_log
+        };
+        view.set_node(code, depth, v, col);
+    }
+}
+
 /// The operator side: a view built from the messages it received.
 #[derive(Debug, Clone)]
 pub struct Receiver {
@@ -955,6 +1039,17 @@ impl Receiver {
     /// The view so far.
     pub fn view(&self) -> &OcTree {
         &self.view
+    }
+
+    /// The view it receives.
+    pub fn spec(&self) -> &ViewSpec {
+        &self.spec
+    }
+
+    /// Takes a new region of interest, keeping the view (the coarse depth and resolution
+    /// stay: a new coarse depth is a new stream).
+    pub fn set_roi(&mut self, roi: Option<Roi>) {
+        self.spec.roi = roi;
     }
 
     /// Applies one message.
@@ -987,14 +1082,16 @@ impl Receiver {
                 if leaves.iter().any(|l| l.3.is_some()) {
                     self.view.enable_color();
                 }
-                for &(code, depth, occ, col) in leaves {
-                    let v = if occ {
-                        p.clamp_max_log
-                    } else {
-                        p.clamp_min_log
-                    };
-                    self.view.set_node(code, depth, v, col);
+                set_leaves(&mut self.view, leaves);
+            }
+            Message::Region { coarse, leaves, .. } => {
+                let mut view = OcTree::new(self.spec.resolution_m);
+                if self.view.is_colored() || leaves.iter().any(|l| l.3.is_some()) {
+                    view.enable_color();
                 }
+                super::region::keep_outside(&self.view, &self.spec, coarse, &mut view);
+                set_leaves(&mut view, leaves);
+                self.view = view;
             }
         }
     }

@@ -243,6 +243,18 @@ pub fn write(scans: &[Scan]) -> Vec<u8> {
     out
 }
 
+/// The bytes of one node of a `.graph` ([`write`]'s node `id`): what a recorder appends per
+/// scan after the node count, before the edge count.
+///
+/// # Panics
+///
+/// If the scan has more than `u32::MAX` points.
+pub fn node_bytes(scan: &Scan, id: u32) -> Vec<u8> {
+    let mut out = Vec::new();
+    put_node(&mut out, scan, id);
+    out
+}
+
 /// The `.graph` bytes of a whole graph, edges included.
 ///
 /// Node `i` gets id `graph.ids[i]`, or `i` when `ids` is shorter than `scans` (extra ids are

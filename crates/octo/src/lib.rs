@@ -34,6 +34,7 @@ pub mod graph;
 pub mod hashorder;
 mod lanes;
 pub mod math;
+pub mod region;
 pub mod synth;
 pub mod transfer;
 pub mod tree;

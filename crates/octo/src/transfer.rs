@@ -2,8 +2,10 @@
 //! link rate (the DexROV satellite scheme of the second paper: reliable DDS streams whose burst
 //! budget is about 85% of the bandwidth, the rest left for resends).
 //!
-//! Each message is cut into segments of at most [`SEGMENT_BYTES`] (with an 8-byte segment
-//! header: message number, segment number, segment count). The sender paces segments at 85% of
+//! Each message is cut into segments as the live transport cuts it (`rovlink_maplink`,
+//! `octo-delta map`): wire.md link frames of at most [`SEGMENT_BYTES`] on the link, of which
+//! [`SEGMENT_HEADER_BYTES`] are the frame's and the data segment's headers, and acknowledgements
+//! of [`ACK_BYTES`]; so the simulated figures predict the live ones. The sender paces segments at 85% of
 //! the model's bit rate, resends a segment when its acknowledgement has not come back within
 //! a timeout (twice the expected round trip), resends first, and acknowledges nothing out of
 //! band: every acknowledgement is a small frame over the reverse link. The receiver applies
@@ -11,12 +13,17 @@
 
 use rovlink_link::{Distance, Link, Model, ModelError, Side, SimTime};
 
-/// Largest segment on the link, bytes (payload and segment header).
-pub const SEGMENT_BYTES: usize = 1400;
-/// Segment header bytes.
-pub const SEGMENT_HEADER_BYTES: usize = 8;
-/// Acknowledgement frame bytes.
-pub const ACK_BYTES: usize = 8;
+/// Largest segment on the link, bytes: a link frame of the live transport's largest data
+/// segment (260).
+pub const SEGMENT_BYTES: usize =
+    rovlink_maplink::segment::MAX_SEGMENT_BYTES + rovlink_wire::frame::OVERHEAD_BYTES;
+/// Bytes of a segment that are not the message's: the frame's and the data segment's headers
+/// (15).
+pub const SEGMENT_HEADER_BYTES: usize =
+    rovlink_maplink::segment::DATA_HEADER_BYTES + rovlink_wire::frame::OVERHEAD_BYTES;
+/// Acknowledgement frame bytes (22).
+pub const ACK_BYTES: usize =
+    rovlink_maplink::segment::ACK_BYTES + rovlink_wire::frame::OVERHEAD_BYTES;
 /// Longest time between scans a transfer accepts, s (a day).
 pub const MAX_PERIOD_S: f64 = 86_400.0;
 /// Share of the link rate the reliable stream may use.
