@@ -5,7 +5,9 @@
 # UMD module with React 17 external), rendered by scripts/foxglove-studio/{index.html,app.js}
 # as Studio's web app renders it, in headless Chromium (Debian `chromium`) driven by Playwright
 # (PyPI) with executable_path: no browser download, no bundler, no change to Studio. Not a CI
-# test: the first run downloads the 36 MB package (179 MB unpacked) from npm.
+# test: the first run downloads the 36 MB package (179 MB unpacked) from npm. What this script
+# shares with scripts/foxglove-studio-map.sh (octo-delta's live map in Studio) is in
+# scripts/foxglove-studio/common.sh.
 #
 # Three sessions, each with --foxglove and --mcap:
 #  - sim: `tdma-run --sim --pace 1` (both ends in one process, so frames have a delay_ms);
@@ -41,71 +43,16 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+me=foxglove-studio
 out=${1:-target/foxglove-studio/out}
 cache=${STUDIO_CACHE:-target/foxglove-studio/cache}
 # Each session runs until its live check is done, then is stopped as by Ctrl-C (which keeps its
 # outputs); this bounds it if the script dies first.
 seconds_max=${SESSION_MAX_S:-1200}
 here=scripts/foxglove-studio
-
-fail_setup() { echo "foxglove-studio: $*" >&2; exit 2; }
-command -v npm >/dev/null || fail_setup "npm not found (apt-get install nodejs npm)"
-[ -x /usr/bin/chromium ] || fail_setup "/usr/bin/chromium not found (apt-get install chromium)"
-python3 -c 'import playwright, mcap' 2>/dev/null || fail_setup "python3 lacks playwright or mcap (pip install playwright mcap)"
-
-# Studio, installed once: the lock file's hash names what is in the cache.
-mkdir -p "$cache"
-stamp=$(sha256sum "$here/package-lock.json" | cut -c1-16)
-if [ "$(cat "$cache/installed" 2>/dev/null)" != "$stamp" ]; then
-  echo "foxglove-studio: installing @foxglove/studio-base 1.48.0 into $cache" >&2
-  started=$(date +%s)
-  cp "$here/package.json" "$here/package-lock.json" "$cache/"
-  npm ci --prefix "$cache" --no-audit --no-fund --loglevel=error >&2
-  [ -f "$cache/node_modules/@foxglove/studio-base/assets/index.js" ] \
-    || fail_setup "$cache: npm ci left no @foxglove/studio-base/assets/index.js"
-  echo "$stamp" >"$cache/installed"
-  echo "foxglove-studio: installed in $(($(date +%s) - started)) s" >&2
-fi
-
-if [ -z "${BIN:-}" ]; then
-  cargo build --quiet --bin tdma-run --bin link-sim
-  BIN=target/debug
-fi
-for tool in "$BIN/tdma-run" "$BIN/link-sim"; do
-  [ -x "$tool" ] || fail_setup "$tool: not built"
-done
-
-work=$(mktemp -d)
-pids=()
-cleanup() {
-  for pid in "${pids[@]}"; do kill "$pid" 2>/dev/null || true; done
-  wait 2>/dev/null || true
-  if [ "${KEEP:-0}" = 1 ]; then echo "foxglove-studio: kept $work" >&2; else rm -rf "$work"; fi
-}
-trap cleanup EXIT
-trap 'exit 130' INT
-trap 'exit 143' TERM
-
-wait_for_file() { # PATH SECONDS WHAT: wait until PATH has a line
-  local deadline=$(($(date +%s) + $2))
-  until [ -s "$1" ]; do
-    [ "$(date +%s)" -lt "$deadline" ] || fail_setup "$3: not seen within $2 s"
-    sleep 0.2
-  done
-}
-
-free_port() {
-  python3 -c "import socket; s=socket.socket(); s.bind(('127.0.0.1',0)); print(s.getsockname()[1])"
-}
-
-wait_for_line() { # FILE PATTERN SECONDS WHAT PID: wait until FILE has a line with PATTERN
-  local deadline=$(($(date +%s) + $3))
-  until grep -q "$2" "$1"; do
-    [ "$(date +%s)" -lt "$deadline" ] || fail_setup "$4: not seen within $3 s: $(tail -3 "$1")"
-    kill -0 "$5" 2>/dev/null || fail_setup "$4: the process exited: $(tail -3 "$1")"
-    sleep 0.1
-  done
-}
+# shellcheck source=foxglove-studio/common.sh
+. "$here/common.sh"
+need_tools debug tdma-run link-sim
 
 mkdir -p "$work/data"
 "$BIN/tdma-run" --new-foxglove-token "$work/foxglove.token" 2>/dev/null \
@@ -121,16 +68,8 @@ pids+=($sim)
 wait_for_line "$work/sim.err" "Foxglove: ws://" 20 "the simulation's live view" "$sim"
 
 # Session 2: an operator over link-sim's pseudo-terminals, A for the operator, B for the ROV.
-"$BIN/link-sim" --pty --model s100 --bitrate-bps 9600 --intrinsic-delay-ms 20 --jitter-ms 2 \
-  --half-duplex false >"$work/link.out" 2>"$work/link.err" &
-pids+=($!)
-deadline=$(($(date +%s) + 10))
-until [ "$(wc -l <"$work/link.out")" -ge 2 ]; do
-  [ "$(date +%s)" -lt "$deadline" ] || fail_setup "link-sim gave no pty paths: $(cat "$work/link.err")"
-  sleep 0.1
-done
-side_a=$(sed -n 1p "$work/link.out")
-side_b=$(sed -n 2p "$work/link.out")
+start_link_sim --model s100 --bitrate-bps 9600 --intrinsic-delay-ms 20 --jitter-ms 2 \
+  --half-duplex false
 printf 't_s,vx,vy,vz,vyaw\n0,0,0,0,0\n' >"$work/still.csv"
 "$BIN/tdma-run" --role rov --port "$side_b" --duration "$seconds_max" --image-size 400 \
   --metrics "$work/rov.json" 2>"$work/rov.err" &
@@ -154,28 +93,9 @@ network=$!
 pids+=($network)
 wait_for_line "$work/net.err" "Foxglove: ws://" 20 "the network's live view" "$network"
 
-python3 "$here/serve.py" "$here" "$cache/node_modules" "$work/data" "$work/http.port" \
-  2>"$work/http.err" &
-pids+=($!)
-wait_for_file "$work/http.port" 10 "the page server's port"
-studio="http://127.0.0.1:$(cat "$work/http.port")/"
-
-mkdir -p "$out"
-status=0
-check() { # NAME ARGS...: one check.py run; one that could not be made (2) stops the script
-  local rc=0
-  python3 "$here/check.py" "$1" --studio "$studio" --out "$out" "${@:2}" || rc=$?
-  [ "$rc" -le 1 ] || exit "$rc"
-  [ "$rc" = 0 ] || status=1
-}
+start_page_server
 live_topics=/rov/pose,/tf,/camera/image,/link/frames,/session/log
 file_topics=/rov/pose,/tf,/camera/image,/link/frames
-stop() { # PID ERR NAME: SIGINT (Ctrl-C), which ends a session keeping its outputs; its end
-  local rc=0
-  kill -INT "$1" 2>/dev/null || true
-  wait "$1" || rc=$?
-  [ "$rc" = 0 ] || [ "$rc" = 130 ] || fail_setup "$3 exited $rc: $(tail -3 "$2")"
-}
 check sim-live --ws "ws://127.0.0.1:$sim_port/?token=$token" --publish --expect "$live_topics" --expect-delay
 stop "$sim" "$work/sim.err" "the simulation"
 # Without the token Studio views, and its GoTo is refused (a problem it lists); with it, drives.
@@ -199,24 +119,13 @@ sys.exit(0 if acked >= 1 and sent == 1 else 1)
 ' "$session" "$work/$session.json" || status=1
 done
 for session in sim op net; do
-  { grep -v "Foxglove: ws://" "$work/$session.err" | grep -i "foxglove" || true; } | sed "s/^/$session: /"
   # The 3D panel's three channels are refused (docs/tdma-foxglove.md); the Publish and Teleop
   # panels' are not (Studio holds the token), and nothing Studio sends is skipped. The network
   # takes no orders: Studio's publishing is refused there, once.
-  unexpected=$(grep "foxglove client" "$work/$session.err" | grep -v \
-    -e "(/move_base_simple/goal): refused" -e "(/clicked_point): refused" \
-    -e "(/initialpose): refused" -e "publishing refused: this live view takes no orders" \
-    -e "publishing refused: its URL has no control token" \
-    || true)
-  if grep -q -F "$token" "$work/$session.err"; then
-    echo "$session: tdma-run said the control token"
-    status=1
-  fi
-  if [ -n "$unexpected" ]; then
-    echo "$session: tdma-run warned of what Studio sent:"
-    echo "$unexpected"
-    status=1
-  fi
+  warned_of_studio "$session" "$work/$session.err" "$token" \
+    "(/move_base_simple/goal): refused" "(/clicked_point): refused" "(/initialpose): refused" \
+    "publishing refused: this live view takes no orders" \
+    "publishing refused: its URL has no control token"
 done
 
 check sim-file --remote-file "${studio}data/sim.mcap" --expect "$file_topics" \
@@ -242,9 +151,4 @@ else
   cat "$work/control.out"
   status=1
 fi
-if [ "$status" = 0 ]; then
-  echo "foxglove-studio: passed: Foxglove Studio 1.48.0, live and from the logs; screenshots in $out"
-else
-  echo "foxglove-studio: FAILED (the lines above; everything seen in $out/*.json)"
-fi
-exit "$status"
+finish "live and from the logs"

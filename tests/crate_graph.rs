@@ -90,15 +90,24 @@ fn the_engines_have_no_flags_and_no_async_runtime() {
 }
 
 #[test]
-fn only_tdma_run_has_the_field_adapters_and_only_octo_delta_the_bag_readers() {
+fn the_field_adapters_are_the_live_tools_and_only_octo_delta_has_the_bag_readers() {
     check(
         "tdma-run",
         &["rusqlite"],
         &["rovlink-field", "tokio", "mavlink"],
     );
+    // octo-delta's live view serves Foxglove (rovlink-field's foxglove_map, on tokio).
     check(
         "octo-delta",
-        &["tokio", "mavlink"],
-        &["rovlink-scans", "rusqlite"],
+        &[],
+        &[
+            "rovlink-scans",
+            "rusqlite",
+            "rovlink-field",
+            "rovlink-maplink",
+        ],
     );
+    for tool in ["link-sim", "modem-bench", "rcp-pack", "rcp-dump"] {
+        check(tool, &["rovlink-field", "tokio"], &[]);
+    }
 }

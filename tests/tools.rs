@@ -23,6 +23,7 @@ mod hostile_tdma;
 mod hostile_tdma_field;
 mod hostile_tdma_network;
 mod octo_bags;
+mod octo_live;
 mod octo_view;
 mod octomap_color;
 mod serial_pty;

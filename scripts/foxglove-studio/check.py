@@ -3,19 +3,23 @@
 
 Usage:
   check.py NAME --studio URL (--ws URL | --remote-file URL | --local-file PATH) --out DIR
-           [--layout layout.json|layout-network.json] [--publish | --publish-refused]
+           [--layout layout.json|layout-network.json|layout-map.json]
+           [--publish | --publish-refused | --view-only]
            [--expect TOPIC,...]
-           [--absent TOPIC,...] [--expect-delay] [--settle-s S]
+           [--absent TOPIC,...] [--expect-delay] [--expect-drawn PCT] [--settle-s S]
 
 The data source: --ws opens Studio on a Foxglove WebSocket server
 (`?ds=foxglove-websocket&ds.url=...`); --remote-file opens an MCAP log by URL
 (`?ds=remote-file&ds.url=...`, read with HTTP ranges); --local-file opens it as a local file,
 through the file input Studio keeps for test drivers (`input[data-puppeteer-file-upload]`, what
-a file dropped on the window goes through: McapLocalDataSourceFactory). Studio's page comes
+a file dropped on the window goes through: McapLocalDataSourceFactory); a file is then seen
+near its end (a click at 90 % of the playback bar). Studio's page comes
 from --studio (serve.py), its layout from layout.json: 3D, Image (/camera/image), Plot
 (/link/frames.delay_ms), Log (/session/log), Log (/link/log), Publish (/orders) and Teleop;
 or from layout-network.json, for a network: 3D (both vehicles), Image (/vehicle/2/camera/image),
-Plot (/network/frames.delay_ms), Log (/vehicle/1/link/log, /vehicle/2/link/log).
+Plot (/network/frames.delay_ms), Log (/vehicle/1/link/log, /vehicle/2/link/log); or from
+layout-map.json, for octo-delta's live map: 3D (/octo_delta/view, /octo_delta/vehicle in frame
+map), Log (/octo_delta/log).
 
 Each of these is a failure:
 - an entry of the data source's Problems list (its message, and what its dialog says);
@@ -25,13 +29,18 @@ Each of these is a failure:
   no /session/log: it is live only), which is listed as expected;
 - a console error or an uncaught page error;
 - a blank: a topic of --expect with no message counted in the Topics list, the Image panel
-  still waiting for an image, with --expect-delay a Plot with no value of delay_ms, still so
-  --within-s (120) after the first --settle-s (15) of watching;
+  still waiting for an image, with --expect-delay a Plot with no value of delay_ms, with
+  --expect-drawn PCT a 3D panel less than PCT % of which is in the colours of octo-delta's map
+  (red: its voxels near 0 m are; needs Pillow), still so --within-s (120) after the first
+  --settle-s (15) of watching;
 - with --publish: the Publish panel's GoTo not enabled, or no `order N acknowledged` in the
   /session/log panel within 45 s of sending it;
 - with --publish-refused (a URL without the control token): an `order N acknowledged` within
   15 s of sending the GoTo, or no `publishing refused` entry in the Problems list (that entry is
-  expected, and listed as such).
+  expected, and listed as such);
+- with --view-only (a URL without the control token, nothing sent): none more; a `publishing
+  refused` entry, which the server may list when Studio's 3D panel advertises its channels (it
+  does so on its own), is expected and listed as such.
 
 Writes DIR/NAME.png (the window), DIR/NAME-3d.png and DIR/NAME.json (everything seen, warnings
 too). Prints one line per failure; exits 0 when there is none, 1 when there is one, 2 when the
@@ -39,6 +48,7 @@ check could not be made (Studio did not start, the data source never showed topi
 """
 
 import argparse
+import io
 import json
 import re
 import sys
@@ -55,8 +65,13 @@ CHROMIUM = "/usr/bin/chromium"
 # request.
 CHROMIUM_ARGS = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader", "--ignore-gpu-blocklist"]
 VIEWPORT = {"width": 1600, "height": 1000}
+# How long a click or a screenshot may wait for the page: drawing in software WebGL holds it for
+# seconds at a time (octo-delta's map, redrawn whole at each of its messages: half a minute and
+# more on two busy cores).
+ACTION_TIMEOUT_MS = 120_000
 
-# Names for the panels of the layouts, by their ids (layout.json, layout-network.json).
+# Names for the panels of the layouts, by their ids (layout.json, layout-network.json,
+# layout-map.json).
 PANEL_NAMES = {
     "3D!rov": "3D",
     "ImageViewPanel!camera": "Image",
@@ -65,6 +80,8 @@ PANEL_NAMES = {
     "RosOut!link": "Log /link/log",
     "RosOut!vehicle1": "Log /vehicle/1/link/log",
     "RosOut!vehicle2": "Log /vehicle/2/link/log",
+    "3D!map": "3D",
+    "RosOut!map": "Log /octo_delta/log",
     "Publish!goto": "Publish",
     "Teleop!joystick": "Teleop",
 }
@@ -93,6 +110,7 @@ class Findings:
         self.counts = {}
         self.publish = None
         self.ready_s = None
+        self.drawn_pct = None
 
     def at(self):
         return round(time.monotonic() - self.started, 1)
@@ -137,6 +155,7 @@ class Findings:
             "topic_counts": self.counts,
             "publish": self.publish,
             "ready_s": self.ready_s,
+            "drawn_pct": self.drawn_pct,
             "console_warnings": self.console_warnings,
         }
 
@@ -256,6 +275,11 @@ def read_panel_errors(page, findings, panel_id, absent):
         page.mouse.move(VIEWPORT["width"] - 5, VIEWPORT["height"] - 5)
 
 
+def three_d():
+    """The id of the layout's 3D panel."""
+    return next(panel_id for panel_id in PANELS if panel_id.startswith("3D!"))
+
+
 def session_log(page):
     """The text of the /session/log panel."""
     return panel(page, "RosOut!session").inner_text()
@@ -302,14 +326,32 @@ def publish_refused(page, findings):
         findings.publish["refused"] = True
 
 
-def blanks(page, expect, expect_delay):
+def drawn_share(page):
+    """The share of the 3D panel's pixels in the map's colours: red (over green and blue by more
+    than 60 of 255; octo-delta colours fine voxels by height, red at 0 m), which neither the
+    light background, the blue grid, grey nor yellow is (tdma-run's panels, with their axes and
+    yellow transform lines, have none at the quarter scale measured)."""
+    from PIL import Image  # only with --expect-drawn (Pillow)
+
+    shot = Image.open(io.BytesIO(panel(page, three_d()).screenshot())).convert("RGB")
+    rgb = shot.reduce(4).tobytes()
+    red = sum(1 for i in range(0, len(rgb), 3) if rgb[i] - max(rgb[i + 1], rgb[i + 2]) > 60)
+    return red / (len(rgb) // 3)
+
+
+def blanks(page, expect, expect_delay, expect_drawn=None):
     """What is still blank: (the Topics list's counts, one line per blank)."""
     counts = topic_counts(page)
     found = [f"{topic}: no message counted in the Topics list" for topic in expect if counts.get(topic, 0) == 0]
+    if expect_drawn is not None:
+        drawn_pct = 100 * drawn_share(page)
+        if drawn_pct < expect_drawn:
+            found.append(f"3D: the map not drawn ({drawn_pct:.2f} % of it in the map's colours,"
+                         f" at least {expect_drawn} % expected)")
     image = panel(page, "ImageViewPanel!camera")
     if image.get_by_text("Waiting for images", exact=False).count() > 0:
         found.append(f"Image: still '{' '.join(image.inner_text().split())}'")
-    if panel(page, "3D!rov").locator("canvas").count() == 0:
+    if panel(page, three_d()).locator("canvas").count() == 0:
         found.append("3D: no canvas")
     if expect_delay:
         # With values in the legend, the Plot shows the latest delay_ms after the path.
@@ -319,10 +361,10 @@ def blanks(page, expect, expect_delay):
     return counts, found
 
 
-def wait_for_data(page, expect, expect_delay, seconds):
+def wait_for_data(page, expect, expect_delay, expect_drawn, seconds):
     """Waits, at most `seconds`, until nothing is blank (a session's first image takes a while)."""
     deadline = time.monotonic() + seconds
-    while blanks(page, expect, expect_delay)[1] and time.monotonic() < deadline:
+    while blanks(page, expect, expect_delay, expect_drawn)[1] and time.monotonic() < deadline:
         page.wait_for_timeout(1000)
 
 
@@ -366,6 +408,7 @@ def run(args):
             raise Setup(f"{CHROMIUM} did not start: {error.message.splitlines()[0]}")
         try:
             page = browser.new_context(viewport=VIEWPORT).new_page()
+            page.set_default_timeout(ACTION_TIMEOUT_MS)
             page.on("console", findings.on_console)
             page.on("pageerror", findings.on_page_error)
             page.goto(args.studio.rstrip("/") + "/" + query)
@@ -383,7 +426,7 @@ def run(args):
                 seek_near_end(page)
             page.wait_for_timeout(int(args.settle_s * 1000))
             expect = [t for t in args.expect.split(",") if t]
-            wait_for_data(page, expect, args.expect_delay, args.within_s)
+            wait_for_data(page, expect, args.expect_delay, args.expect_drawn, args.within_s)
             if args.publish:
                 publish_goto(page, findings)
             if args.publish_refused:
@@ -391,20 +434,26 @@ def run(args):
             page.mouse.move(VIEWPORT["width"] - 5, VIEWPORT["height"] - 5)
             page.wait_for_timeout(1000)
             page.screenshot(path=str(out / f"{args.name}.png"))
-            panel(page, "3D!rov").screenshot(path=str(out / f"{args.name}-3d.png"))
-            findings.counts, findings.blank = blanks(page, expect, args.expect_delay)
+            panel(page, three_d()).screenshot(path=str(out / f"{args.name}-3d.png"))
+            findings.counts, findings.blank = blanks(page, expect, args.expect_delay, args.expect_drawn)
+            if args.expect_drawn is not None:
+                findings.drawn_pct = round(100 * drawn_share(page), 2)
             read_problems(page, findings)
-            if args.publish_refused:
+            if args.publish_refused or args.view_only:
                 refused = [p for p in findings.problems if "publishing refused" in p["message"]]
                 findings.problems = [p for p in findings.problems if p not in refused]
                 findings.expected_problems = refused
-                if not refused:
+                if args.publish_refused and not refused:
                     findings.publish = {"error": "no 'publishing refused' in the Problems list"}
             for panel_id in PANELS:
                 read_panel_errors(page, findings, panel_id, [t for t in args.absent.split(",") if t])
         except PlaywrightError as error:
-            page.screenshot(path=str(out / f"{args.name}-setup-failure.png"))
-            raise Setup(f"the page did not do what was expected: {error.message.splitlines()[0]}")
+            why = f"the page did not do what was expected: {error.message.splitlines()[0]}"
+            try:
+                page.screenshot(path=str(out / f"{args.name}-setup-failure.png"), timeout=10000)
+            except PlaywrightError:
+                why += " (and no screenshot of it could be taken)"
+            raise Setup(why)
         finally:
             browser.close()
     (out / f"{args.name}.json").write_text(json.dumps(findings.as_json(), indent=2) + "\n")
@@ -414,8 +463,13 @@ def run(args):
     if findings.publish and findings.publish.get("refused") and findings.expected_problems:
         print(f"{args.name}: GoTo from the Publish panel without the token: refused, Studio shows"
               f" {findings.expected_problems[0]['message']!r}")
+    if args.view_only and findings.expected_problems:
+        print(f"{args.name}: without the token, Studio lists (expected)"
+              f" {findings.expected_problems[0]['message']!r}")
     if findings.publish and "acknowledged" in findings.publish:
         print(f"{args.name}: GoTo from the Publish panel: {findings.publish['acknowledged']} after {findings.publish['after_s']} s")
+    if findings.drawn_pct is not None:
+        print(f"{args.name}: the 3D panel: {findings.drawn_pct} % of it in the map's colours")
     print(
         f"{args.name}: {len(failures)} failure(s); topics listed {findings.ready_s} s after opening;"
         f" {out}/{args.name}.png, {args.name}.json"
@@ -432,14 +486,18 @@ def main():
     source.add_argument("--remote-file", help="an MCAP file's URL")
     source.add_argument("--local-file", help="an MCAP file's path")
     parser.add_argument("--out", required=True, help="directory for screenshots and findings")
-    parser.add_argument("--layout", default="layout.json", choices=["layout.json", "layout-network.json"])
+    parser.add_argument("--layout", default="layout.json", choices=["layout.json", "layout-network.json", "layout-map.json"])
     publishing = parser.add_mutually_exclusive_group()
     publishing.add_argument("--publish", action="store_true", help="send the Publish panel's GoTo")
     publishing.add_argument("--publish-refused", action="store_true",
                             help="send it without the token: it must be refused")
+    publishing.add_argument("--view-only", action="store_true",
+                            help="a URL without the token: a 'publishing refused' problem is expected")
     parser.add_argument("--expect", default="", help="topics that must have messages, comma-separated")
     parser.add_argument("--absent", default="", help="topics the source lacks, comma-separated")
     parser.add_argument("--expect-delay", action="store_true", help="the Plot must show delay_ms")
+    parser.add_argument("--expect-drawn", type=float, metavar="PCT",
+                        help="at least PCT %% of the 3D panel in octo-delta's map's colours (Pillow)")
     parser.add_argument("--settle-s", type=float, default=15, help="seconds to watch before checking")
     parser.add_argument(
         "--within-s", type=float, default=120, help="at most this long more for data where it is blank"

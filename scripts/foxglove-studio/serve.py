@@ -21,7 +21,7 @@ import urllib.parse
 RANGE = re.compile(r"bytes=(\d*)-(\d*)$")
 
 
-PAGE_FILES = ("index.html", "app.js", "layout.json", "layout-network.json")
+PAGE_FILES = ("index.html", "app.js", "layout.json", "layout-network.json", "layout-map.json")
 
 
 def handler_for(page_dir, modules_dir, data_dir):

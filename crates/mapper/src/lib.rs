@@ -7,5 +7,6 @@
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod live;
 pub mod pipeline;
 pub mod view;

@@ -174,6 +174,12 @@ fn dump_message(
             leaves.len(),
             leaves.iter().filter(|l| l.2).count()
         )),
+        (Message::Region { scan, coarse, leaves }, DumpFormat::Text) => lines.push(format!(
+            "offset {offset} ({bytes} bytes): region after scan {scan}: {} coarse voxels, {} leaves ({} occupied)",
+            coarse.len(),
+            leaves.len(),
+            leaves.iter().filter(|l| l.2).count()
+        )),
         (Message::Delta { scan, delta: d }, DumpFormat::Csv) => lines.push(format!(
             "{offset},{bytes},delta,{scan},{},{},{},{},",
             d.fine_occupied.len(),
@@ -183,6 +189,9 @@ fn dump_message(
         )),
         (Message::Full { scan, leaves }, DumpFormat::Csv) => {
             lines.push(format!("{offset},{bytes},full,{scan},,,,,{}", leaves.len()))
+        }
+        (Message::Region { scan, leaves, .. }, DumpFormat::Csv) => {
+            lines.push(format!("{offset},{bytes},region,{scan},,,,,{}", leaves.len()))
         }
         (Message::Delta { scan, delta: d }, DumpFormat::Ndjson) => {
             let mut v = serde_json::json!({
@@ -207,6 +216,12 @@ fn dump_message(
         (Message::Full { scan, leaves }, DumpFormat::Ndjson) => lines.push(
             serde_json::json!({"offset": offset, "bytes": bytes, "kind": "full", "scan": scan,
                 "leaves": leaves.len(), "occupied": leaves.iter().filter(|l| l.2).count()})
+            .to_string(),
+        ),
+        (Message::Region { scan, coarse, leaves }, DumpFormat::Ndjson) => lines.push(
+            serde_json::json!({"offset": offset, "bytes": bytes, "kind": "region", "scan": scan,
+                "coarse": coarse.len(), "leaves": leaves.len(),
+                "occupied": leaves.iter().filter(|l| l.2).count()})
             .to_string(),
         ),
     }

@@ -185,7 +185,7 @@ pub fn input_files(inputs: &[PathBuf], format: Option<InputFormat>) -> Vec<PathB
 /// The scans of one input: a stream of scans (a `.graph` file is streamed from disk, so a large
 /// survey never sits in memory whole; cloud files are read whole), or a robot log read cloud by
 /// cloud ([`Recording`]).
-pub(super) enum ScanSource<'a> {
+pub(crate) enum ScanSource<'a> {
     /// Scans, how many there will be, and the format.
     Scans(
         Box<dyn Iterator<Item = Result<Scan, ParseError>> + 'a>,
@@ -198,7 +198,7 @@ pub(super) enum ScanSource<'a> {
 
 /// The scans of one input, read through a [`StopReader`]: a read waiting on a silent pipe
 /// gives up once `stop` is set.
-pub(super) fn open_scans<'a>(
+pub(crate) fn open_scans<'a>(
     path: &Path,
     cfg: &BuildConfig,
     stop: &'a AtomicBool,
@@ -272,7 +272,7 @@ pub(super) fn open_scans<'a>(
 
 /// Inputs without a pose get the sensor origin of `--origin`: the points stay where they are in
 /// the map frame, shifted into the sensor frame.
-pub(super) fn with_origin(mut scan: Scan, origin: Option<[f32; 3]>) -> Scan {
+pub(crate) fn with_origin(mut scan: Scan, origin: Option<[f32; 3]>) -> Scan {
     if let Some(o) = origin
         && scan.pose == Pose::IDENTITY
     {

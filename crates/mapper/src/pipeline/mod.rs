@@ -21,7 +21,7 @@
 mod builder;
 mod commands;
 mod config;
-mod inputs;
+pub(crate) mod inputs;
 
 pub use builder::{
     ARRIVAL_COLUMNS, ArrivalRow, BuildReport, Built, Hooks, STATS_COLUMNS, SinkError, StatsRow,

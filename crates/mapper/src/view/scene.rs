@@ -73,6 +73,30 @@ impl SceneBuilder {
         self.rx.view()
     }
 
+    /// The view it receives.
+    pub fn spec(&self) -> &ViewSpec {
+        &self.spec
+    }
+
+    /// Takes a new region of interest (same resolution and coarse depth), keeping the view:
+    /// the blocks whose colouring changes are sent again by the region message that follows.
+    pub fn set_roi(&mut self, roi: Option<rovlink_octo::delta::Roi>) {
+        self.spec.roi = roi;
+        self.rx.set_roi(roi);
+        self.fine_region = fine_region(&self.spec);
+    }
+
+    /// The whole scene now, stamped `time_ns`, for a client that just subscribed (scene
+    /// updates are incremental): every entity, built afresh from the view.
+    pub fn snapshot(&self, time_ns: u64) -> SceneUpdate {
+        let mut leaves = Vec::new();
+        self.view().for_each_leaf(|code, depth, v| {
+            leaves.push((code, depth, v.log_odds >= 0.0, v.color));
+        });
+        let mut fresh = SceneBuilder::new(self.spec);
+        fresh.apply(&Message::Full { scan: 0, leaves }, time_ns)
+    }
+
     /// Entities in the scene now.
     pub fn entities(&self) -> usize {
         self.published
@@ -184,6 +208,13 @@ impl SceneBuilder {
             }
             Message::Full { .. } => {
                 out.insert((0, 0));
+            }
+            Message::Region { coarse, .. } => {
+                let depth = self.spec.coarse_depth.min(BLOCK_DEPTH);
+                let shift = self.spec.coarse_shift();
+                for &c in coarse {
+                    out.insert((node_code(c << shift, depth), depth));
+                }
             }
         }
         out

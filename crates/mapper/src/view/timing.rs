@@ -73,7 +73,9 @@ pub fn log_times_ns(
             }
             if rows.len() < count {
                 let scan = match &msgs[rows.len()].message {
-                    Message::Delta { scan, .. } | Message::Full { scan, .. } => *scan,
+                    Message::Delta { scan, .. }
+                    | Message::Full { scan, .. }
+                    | Message::Region { scan, .. } => *scan,
                 };
                 return Err(bad(arrivals_error(
                     rows.last().map_or(1, |r| r.line) + 1,
@@ -89,7 +91,9 @@ pub fn log_times_ns(
             let mut out = Vec::with_capacity(count);
             for (k, (row, m)) in rows.iter().zip(msgs).take(count).enumerate() {
                 let scan = match &m.message {
-                    Message::Delta { scan, .. } | Message::Full { scan, .. } => *scan,
+                    Message::Delta { scan, .. }
+                    | Message::Full { scan, .. }
+                    | Message::Region { scan, .. } => *scan,
                 };
                 if row.scan != scan {
                     return Err(bad(arrivals_error(

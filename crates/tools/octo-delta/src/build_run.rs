@@ -25,7 +25,7 @@ pub fn build(a: &BuildArgs) -> Result<u8> {
     let link = link.map_err(|e| UsageError(format!("--link: {e}")))?;
     let mut outs = Outputs::new();
     // A bag's own files (a rosbag2 directory's .db3 files and metadata.yaml) are inputs too.
-    let read = pipeline::input_files(&a.inputs, a.format);
+    let read = pipeline::input_files(&a.inputs, a.map.format);
     outs.inputs(read.iter().map(PathBuf::as_path));
     outs.input(a.link.as_deref().map(Path::new));
     let stream = outs.claim("-o", &a.output, Kind::Binary)?;

@@ -9,7 +9,7 @@ use rovlink_base::output::{Dest, Kind, Outputs};
 use rovlink_cli::stop;
 use rovlink_mapper::pipeline;
 use rovlink_mapper::view;
-use rovlink_octo::files;
+use rovlink_octo::{files, graph};
 
 use crate::flags::{ApplyArgs, DumpArgs, FullArgs, SynthArgs};
 
@@ -66,8 +66,58 @@ pub fn full(a: &FullArgs) -> Result<u8> {
     Ok(EXIT_OK)
 }
 
+/// Runs `synth --pace`: the .graph written scan by scan, `pace_s` apart, each flushed.
+fn synth_paced(a: &SynthArgs, pace_s: f64) -> Result<u8> {
+    use std::io::Write;
+    let params = a.params();
+    params.validate()?;
+    if a.mcap() {
+        return Err(rovlink_base::UsageError("--pace writes a .graph, not MCAP".into()).into());
+    }
+    Outputs::new().claim("-o", &a.output, Kind::Binary)?;
+    stop::install()?;
+    let scans = rovlink_octo::synth::survey(&params);
+    let name = a.output.display().to_string();
+    let mut out: Box<dyn Write> = if rovlink_base::io::is_std(Some(&a.output)) {
+        Box::new(std::io::stdout().lock())
+    } else {
+        Box::new(std::fs::File::create(&a.output).map_err(|source| {
+            rovlink_base::io::IoError::Open {
+                path: a.output.clone(),
+                source,
+            }
+        })?)
+    };
+    let mut put = |bytes: &[u8]| -> Result<()> {
+        out.write_all(bytes)
+            .and_then(|()| out.flush())
+            .map_err(|source| rovlink_base::io::IoError::Write {
+                name: name.clone(),
+                source,
+            })?;
+        Ok(())
+    };
+    put(&(scans.len() as u32).to_le_bytes())?;
+    let started = std::time::Instant::now();
+    for (k, scan) in scans.iter().enumerate() {
+        let due = std::time::Duration::from_secs_f64(pace_s * k as f64);
+        while started.elapsed() < due {
+            if stop::requested() {
+                return Ok(stop::code_or(EXIT_OK));
+            }
+            std::thread::sleep((due - started.elapsed()).min(std::time::Duration::from_millis(50)));
+        }
+        put(&graph::node_bytes(scan, k as u32))?;
+    }
+    put(&0u32.to_le_bytes())?;
+    Ok(stop::code_or(EXIT_OK))
+}
+
 /// Runs `synth`; the process's exit code.
 pub fn synth_cmd(a: &SynthArgs) -> Result<u8> {
+    if let Some(pace_s) = a.pace {
+        return synth_paced(a, pace_s);
+    }
     let params = a.params();
     params.validate()?;
     let dest = Outputs::new().claim("-o", &a.output, Kind::Binary)?;

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use rovlink_cli::value::{self, MAX_COUNT};
+use rovlink_link::device::DeviceSpec;
 use rovlink_mapper::pipeline::{
     BuildConfig, COARSE_FACTOR_MAX, COORDINATE_MAX_M, Coarse, DumpFormat, InputFormat, MAX_RANGE_M,
     RESOLUTION_MAX_M, RESOLUTION_MIN_M, THREADS_MAX,
@@ -25,9 +26,13 @@ Examples:
   octo-delta apply deltas.odl --mcap view.mcap --arrivals arrivals.csv   the view as it grew, for Foxglove
   octo-delta dump deltas.odl --format csv              one line per message
   octo-delta full map.ot --roi -1,-1,-1,1,1,1 -o full.odl
+  octo-delta map survey.graph --follow --port /dev/ttyUSB1 --ot map.ot   on the vehicle, live
+  octo-delta view --port /dev/ttyUSB0 --foxglove 127.0.0.1:8765 --orders requests -o view.ot
+  octo-delta synth --pace 0.5 -o live.graph                a survey as it is recorded, 2 scans/s
 
 Any output may be - (standard output), one per run. SIGINT, SIGTERM or SIGHUP stop a build
-after its current scan: the stream holds every whole message so far, --bt/--ot the map so far.
+after its current scan: the stream holds every whole message so far, --bt/--ot the map so far;
+they stop map (its --ot/--bt whole) and view (its -o, --mcap and --metrics written).
 
 Exit codes: 0 ok, 2 bad usage or bad input (the message names the file and the offset),
 130/143/129 a build stopped by SIGINT/SIGTERM/SIGHUP.";
@@ -62,6 +67,12 @@ pub enum Command {
     Full(FullArgs),
     /// Write a synthetic seabed survey (scans with poses) as a .graph or MCAP file.
     Synth(SynthArgs),
+    /// On the vehicle: map clouds as they come and stream the changes over a link to `view`,
+    /// answering the operator's requests.
+    Map(Box<MapArgs>),
+    /// On the operator's side: the live view of `map`'s stream (a .ot at exit, Foxglove live,
+    /// an MCAP), and the operator's requests to the vehicle.
+    View(Box<ViewRunArgs>),
 }
 
 fn coordinate() -> value::RealParser {
@@ -122,14 +133,9 @@ impl ViewArgs {
     }
 }
 
+/// How clouds go into the map, and the view the operator gets: `build` and `map` alike.
 #[derive(Args, Debug)]
-pub struct BuildArgs {
-    /// Point clouds: OctoMap .graph, PCD, PLY, XYZ, or a ROS 2 bag: MCAP (chunks zstd, lz4 or
-    /// none) or rosbag2 (the directory, its metadata.yaml or a .db3) with PointCloud2 clouds
-    /// posed by /tf + /tf_static or a pose topic; - for standard input.
-    #[arg(required = true, value_name = "INPUT")]
-    pub inputs: Vec<PathBuf>,
-
+pub struct MapConfigArgs {
     /// Voxel edge in metres.
     #[arg(long, value_name = "M", default_value_t = 0.1,
           value_parser = value::real(RESOLUTION_MIN_M, RESOLUTION_MAX_M, "m"), allow_hyphen_values = true)]
@@ -142,30 +148,6 @@ pub struct BuildArgs {
     /// maxrange) [default: no limit].
     #[arg(long, value_name = "M", value_parser = value::positive(MAX_RANGE_M, "m"), allow_hyphen_values = true)]
     pub max_range: Option<f64>,
-
-    /// The delta stream [default: standard output].
-    #[arg(short, long, value_name = "FILE", default_value = "-")]
-    pub output: PathBuf,
-
-    /// One CSV row per scan (one whole line each, flushed): points, message bytes, list sizes,
-    /// and what sending the full map would cost (computing the .bt size takes a copy of the
-    /// map per scan).
-    #[arg(long, value_name = "FILE")]
-    pub stats: Option<PathBuf>,
-
-    /// Write the build's figures (scans, points, times, map and stream sizes; with --link the
-    /// transfer's latencies under `link`) as one line of JSON that also carries every parameter
-    /// of the run and its seed (`-`: standard output, then give -o a file).
-    #[arg(long, value_name = "FILE")]
-    pub metrics: Option<PathBuf>,
-
-    /// Write the final map as OctoMap's maximum-likelihood .bt.
-    #[arg(long, value_name = "FILE")]
-    pub bt: Option<PathBuf>,
-
-    /// Write the final map as OctoMap's .ot (a ColorOcTree when the input has colour).
-    #[arg(long, value_name = "FILE")]
-    pub ot: Option<PathBuf>,
 
     /// Input format, when the file name does not tell (its help lists `InputFormat::names()`).
     #[arg(long, value_name = "FORMAT", value_parser = input_format, help = format_help())]
@@ -202,6 +184,70 @@ pub struct BuildArgs {
     #[arg(long, conflicts_with = "no_color")]
     pub color_updates: bool,
 
+    /// Threads casting scans' rays, a scan each, while the map takes the last one
+    /// [default: the machine's cores, at most 8].
+    #[arg(long, value_name = "N", value_parser = value::CountParser {
+        min: 1, max: THREADS_MAX as u64, unit: "threads" }, allow_hyphen_values = true)]
+    pub threads: Option<u64>,
+}
+
+impl MapConfigArgs {
+    /// The library's build configuration of these flags.
+    pub fn config(&self) -> BuildConfig {
+        BuildConfig {
+            resolution_m: self.res,
+            coarse: self.view.coarse(),
+            roi: self.view.roi,
+            max_range_m: self.max_range,
+            format: self.format,
+            origin_m: self.origin,
+            mcap: McapOptions {
+                cloud_topic: self.cloud_topic.clone(),
+                pose_topic: self.pose_topic.clone(),
+            },
+            fixed_frame: self.fixed_frame.clone(),
+            no_color: self.no_color,
+            color_updates: self.color_updates,
+            threads: self.threads.map(|t| t as usize),
+        }
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct BuildArgs {
+    /// Point clouds: OctoMap .graph, PCD, PLY, XYZ, or a ROS 2 bag: MCAP (chunks zstd, lz4 or
+    /// none) or rosbag2 (the directory, its metadata.yaml or a .db3) with PointCloud2 clouds
+    /// posed by /tf + /tf_static or a pose topic; - for standard input.
+    #[arg(required = true, value_name = "INPUT")]
+    pub inputs: Vec<PathBuf>,
+
+    #[command(flatten)]
+    pub map: MapConfigArgs,
+
+    /// The delta stream [default: standard output].
+    #[arg(short, long, value_name = "FILE", default_value = "-")]
+    pub output: PathBuf,
+
+    /// One CSV row per scan (one whole line each, flushed): points, message bytes, list sizes,
+    /// and what sending the full map would cost (computing the .bt size takes a copy of the
+    /// map per scan).
+    #[arg(long, value_name = "FILE")]
+    pub stats: Option<PathBuf>,
+
+    /// Write the build's figures (scans, points, times, map and stream sizes; with --link the
+    /// transfer's latencies under `link`) as one line of JSON that also carries every parameter
+    /// of the run and its seed (`-`: standard output, then give -o a file).
+    #[arg(long, value_name = "FILE")]
+    pub metrics: Option<PathBuf>,
+
+    /// Write the final map as OctoMap's maximum-likelihood .bt.
+    #[arg(long, value_name = "FILE")]
+    pub bt: Option<PathBuf>,
+
+    /// Write the final map as OctoMap's .ot (a ColorOcTree when the input has colour).
+    #[arg(long, value_name = "FILE")]
+    pub ot: Option<PathBuf>,
+
     /// Send each scan's message over this link model in virtual time (reliable, shaped to 85%
     /// of the link rate) and report when each scan reached the operator.
     #[arg(long, value_name = "MODEL")]
@@ -225,12 +271,6 @@ pub struct BuildArgs {
     )]
     pub seed: u64,
 
-    /// Threads casting scans' rays, a scan each, while the map takes the last one
-    /// [default: the machine's cores, at most 8].
-    #[arg(long, value_name = "N", value_parser = value::CountParser {
-        min: 1, max: THREADS_MAX as u64, unit: "threads" }, allow_hyphen_values = true)]
-    pub threads: Option<u64>,
-
     /// No progress bar, no summary.
     #[arg(short, long)]
     pub quiet: bool,
@@ -239,23 +279,175 @@ pub struct BuildArgs {
 impl BuildArgs {
     /// The library's build configuration of these flags.
     pub fn config(&self) -> BuildConfig {
-        BuildConfig {
-            resolution_m: self.res,
-            coarse: self.view.coarse(),
-            roi: self.view.roi,
-            max_range_m: self.max_range,
-            format: self.format,
-            origin_m: self.origin,
-            mcap: McapOptions {
-                cloud_topic: self.cloud_topic.clone(),
-                pose_topic: self.pose_topic.clone(),
-            },
-            fixed_frame: self.fixed_frame.clone(),
-            no_color: self.no_color,
-            color_updates: self.color_updates,
-            threads: self.threads.map(|t| t as usize),
-        }
+        self.map.config()
     }
+}
+
+fn device(text: &str) -> Result<DeviceSpec, String> {
+    text.parse::<DeviceSpec>().map_err(|e| e.to_string())
+}
+
+/// The link both ends share: device, addresses, model and transport timing.
+#[derive(Args, Debug)]
+pub struct LinkArgs {
+    /// The link's device: a serial port or PTY path, serial:PATH:BAUD, tcp:HOST:PORT,
+    /// tcpin:HOST:PORT, udp:BIND=PEER, udpin:HOST:PORT or udpout:HOST:PORT (each segment is one
+    /// wire.md link frame).
+    #[arg(long, value_name = "DEV", value_parser = device)]
+    pub port: DeviceSpec,
+
+    /// Baud rate of a serial port given as a bare path.
+    #[arg(long, value_name = "BPS", default_value_t = 115_200,
+          value_parser = value::count(50, 4_000_000), allow_hyphen_values = true)]
+    pub baud: u64,
+
+    /// The link's model (a preset such as satellite-up, or a model file): its bit rate and
+    /// delay set the shaper and the resend timeout.
+    #[arg(long, value_name = "MODEL", default_value = "satellite-up")]
+    pub model: String,
+
+    /// Resend timeout in milliseconds [default: twice the model's round trip plus 50 ms].
+    #[arg(long, value_name = "MS", value_parser = value::millis(1.0, 3_600_000.0), allow_hyphen_values = true)]
+    pub rto_ms: Option<f64>,
+}
+
+#[derive(Args, Debug)]
+pub struct MapArgs {
+    /// Point clouds, as `build` takes them; a .graph may be a pipe (-), a FIFO, or with
+    /// --follow a file still being written.
+    #[arg(required = true, value_name = "INPUT")]
+    pub inputs: Vec<PathBuf>,
+
+    #[command(flatten)]
+    pub map: MapConfigArgs,
+
+    #[command(flatten)]
+    pub link: LinkArgs,
+
+    /// Read input files as they grow (as tail -f does), until the scans the .graph announces
+    /// have come or the mapper is stopped.
+    #[arg(long)]
+    pub follow: bool,
+
+    /// Shaped rate of the stream on the link, bit/s, framing included [default: 85% of the
+    /// model's bit rate, the rest left for resends].
+    #[arg(long, value_name = "BPS", value_parser = value::positive(1e10, "bit/s"), allow_hyphen_values = true)]
+    pub rate: Option<f64>,
+
+    /// The most bytes of messages waiting to be sent; past it they are replaced by one full
+    /// map (no change is lost) [default: 30 s of the shaped rate, at least 256 KiB].
+    #[arg(long, value_name = "BYTES", value_parser = value::count(4096, 1 << 32), allow_hyphen_values = true)]
+    pub backlog_bytes: Option<u64>,
+
+    /// End once the inputs are read and the operator has acknowledged everything [default:
+    /// keep answering the operator's requests until stopped].
+    #[arg(long)]
+    pub exit_when_done: bool,
+
+    /// With --exit-when-done: once the inputs are read, end anyway after this many seconds
+    /// without any acknowledgement (the view has gone), saying what was left unacknowledged.
+    #[arg(long, value_name = "S", default_value_t = 60.0, requires = "exit_when_done",
+          value_parser = value::seconds(0.0, 86_400.0), allow_hyphen_values = true)]
+    pub linger: f64,
+
+    /// This vehicle's link address (1..=14); the operator is 0.
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = value::count(1, 14))]
+    pub address: u64,
+
+    /// Write the map as OctoMap's .bt at exit (also when stopped).
+    #[arg(long, value_name = "FILE")]
+    pub bt: Option<PathBuf>,
+
+    /// Write the map as OctoMap's .ot at exit (also when stopped).
+    #[arg(long, value_name = "FILE")]
+    pub ot: Option<PathBuf>,
+
+    /// One CSV row per scan, flushed as it goes: arrival time, points, message bytes, bytes on
+    /// the link with the transport, and the full map's .bt size (a copy of the map per scan).
+    #[arg(long, value_name = "FILE")]
+    pub stats: Option<PathBuf>,
+
+    /// The run's figures as one line of JSON at exit: scans, transport (segments, resends,
+    /// link bytes, use of the shaped rate), requests answered, bad bytes counted.
+    #[arg(long, value_name = "FILE")]
+    pub metrics: Option<PathBuf>,
+
+    /// Say nothing but warnings.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct ViewRunArgs {
+    #[command(flatten)]
+    pub link: LinkArgs,
+
+    /// The view as a .ot file, written at exit (also when stopped) and on a {"type":"save"}
+    /// order.
+    #[arg(short, long, value_name = "FILE")]
+    pub output: Option<PathBuf>,
+
+    /// Record the view as it grew: foxglove.SceneUpdate on /octo_delta/view, the pose on
+    /// /octo_delta/vehicle and the log on /octo_delta/log, committed at exit.
+    #[arg(long, value_name = "FILE")]
+    pub mcap: Option<PathBuf>,
+
+    /// One CSV row per message applied, at exit: scan, kind, bytes, when its scan came to the
+    /// mapper, when it was shown, latency.
+    #[arg(long, value_name = "FILE")]
+    pub arrivals: Option<PathBuf>,
+
+    /// The run's figures as one line of JSON at exit: messages, latencies (p50/p95/max),
+    /// requests and how fast each was answered, transport counters, bad bytes counted.
+    #[arg(long, value_name = "FILE")]
+    pub metrics: Option<PathBuf>,
+
+    /// Requests to the vehicle, JSON Lines (a file or a FIFO; yours, not writable by group or
+    /// others): {"type":"full"}, {"type":"full","box":[x0,y0,z0,x1,y1,z1]},
+    /// {"type":"roi","box":[...]} or null, {"type":"coarse_depth","depth":12},
+    /// {"type":"resync"}, and {"type":"save"} (write -o now).
+    #[arg(long, value_name = "FILE")]
+    pub orders: Option<PathBuf>,
+
+    /// Serve the live view to Foxglove on HOST:PORT (loopback unless you say otherwise),
+    /// e.g. --foxglove 127.0.0.1:8765.
+    #[arg(long, value_name = "HOST:PORT")]
+    pub foxglove: Option<String>,
+
+    /// With --foxglove: the control token file (as tdma-run's; yours, mode 0600): clients
+    /// whose URL carries ?token= may publish requests on /octo_delta/requests; the others view.
+    #[arg(long, value_name = "FILE", requires = "foxglove")]
+    pub foxglove_token_file: Option<PathBuf>,
+
+    /// With --foxglove: also let browser pages from this Origin connect (repeatable).
+    #[arg(long, value_name = "ORIGIN", requires = "foxglove")]
+    pub foxglove_origin: Vec<String>,
+
+    /// With --foxglove-token-file on an address other than loopback: serve control over
+    /// plain ws:// anyway.
+    #[arg(long, requires = "foxglove_token_file")]
+    pub foxglove_insecure: bool,
+
+    /// With --foxglove: serve wss:// with this PEM certificate and --foxglove-tls-key.
+    #[arg(long, value_name = "FILE", requires_all = ["foxglove", "foxglove_tls_key"])]
+    pub foxglove_tls_cert: Option<PathBuf>,
+
+    /// The private key of --foxglove-tls-cert (PEM; yours, mode 0600).
+    #[arg(long, value_name = "FILE", requires = "foxglove_tls_cert")]
+    pub foxglove_tls_key: Option<PathBuf>,
+
+    /// End once a message after this scan number is applied (a survey of N scans: N - 1)
+    /// [default: run until stopped].
+    #[arg(long, value_name = "N", value_parser = value::count(0, u32::MAX as u64))]
+    pub exit_after_scan: Option<u64>,
+
+    /// The mapper's link address (1..=14); this end is 0, the operator.
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = value::count(1, 14))]
+    pub mapper_address: u64,
+
+    /// Say nothing but warnings.
+    #[arg(short, long)]
+    pub quiet: bool,
 }
 
 #[derive(Args, Debug)]
@@ -328,6 +520,13 @@ pub struct SynthArgs {
     /// Seed of the scene and the path.
     #[arg(long, default_value_t = 1, allow_hyphen_values = true)]
     pub seed: u64,
+
+    /// Write a .graph as a survey being recorded: the node count, then one scan every S
+    /// seconds, each flushed as it is written (to feed `map` live); the file is written in
+    /// place, not committed at the end.
+    #[arg(long, value_name = "S", conflicts_with = "format",
+          value_parser = value::seconds(0.0, 3600.0), allow_hyphen_values = true)]
+    pub pace: Option<f64>,
 }
 
 impl SynthArgs {

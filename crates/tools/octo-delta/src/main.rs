@@ -9,6 +9,8 @@
 mod build_run;
 mod commands;
 mod flags;
+mod map_run;
+mod view_run;
 
 use std::process::ExitCode;
 
@@ -23,6 +25,8 @@ fn main() -> ExitCode {
         Command::Dump(a) => commands::dump(&a),
         Command::Full(a) => commands::full(&a),
         Command::Synth(a) => commands::synth_cmd(&a),
+        Command::Map(a) => map_run::map(&a),
+        Command::View(a) => view_run::view(&a),
     };
     rovlink_cli::finish(TOOL, outcome)
 }
