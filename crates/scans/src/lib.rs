@@ -5,7 +5,8 @@
 //! - [`bag`]: MCAP and rosbag2 (sqlite3, MCAP storage) bags, their chunks and compression;
 //! - [`ros`]: ROS 2 messages (CDR) read and written, and rigid transforms;
 //! - [`tf`]: the TF buffer and pose tracks that give each scan its pose;
-//! - [`recording`]: a recording's clouds matched with their poses.
+//! - [`recording`]: a recording's clouds matched with their poses;
+//! - [`live`]: clouds matched with their poses as they arrive from a live topic.
 //!
 //! Parsers of untrusted bytes here never panic, on any input: they return a
 //! [`rovlink_octo::ParseError`] that carries the byte offset where the input stopped making
@@ -15,6 +16,7 @@
 
 pub mod bag;
 pub mod cloud;
+pub mod live;
 pub mod recording;
 pub mod ros;
 pub mod tf;

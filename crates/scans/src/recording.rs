@@ -90,13 +90,23 @@ pub struct Recording {
 }
 
 const TF_TYPE: &str = ros::TF_MESSAGE_SCHEMA;
-const POSE_TYPES: [&str; 3] = [
+pub(crate) const POSE_TYPES: [&str; 3] = [
     ros::POSE_STAMPED_SCHEMA,
     ros::TRANSFORM_STAMPED_SCHEMA,
     ros::ODOMETRY_SCHEMA,
 ];
 
-fn is_tf_topic(name: &str) -> Option<bool> {
+/// Whether `schema` is a type a pose topic may have (PoseStamped, TransformStamped, Odometry).
+pub fn is_pose_type(schema: &str) -> bool {
+    POSE_TYPES.contains(&schema)
+}
+
+/// The pose topic types, as messages list them.
+pub fn pose_type_names() -> String {
+    format!("{}, {} or {}", POSE_TYPES[0], POSE_TYPES[1], POSE_TYPES[2])
+}
+
+pub(crate) fn is_tf_topic(name: &str) -> Option<bool> {
     // Some(true): static.
     if name == "/tf_static" || name.ends_with("/tf_static") {
         Some(true)
@@ -387,8 +397,8 @@ enum Source {
     Track(usize),
 }
 
-/// The poses read in the first pass.
-enum Poses {
+/// The poses read in the first pass (or gathered live).
+pub(crate) enum Poses {
     /// The TF buffer.
     Tf(TfTree),
     /// A pose topic's track, and the topic.
@@ -396,7 +406,10 @@ enum Poses {
 }
 
 /// The header and transform of a PoseStamped, TransformStamped or Odometry message.
-fn decode_pose_message(schema: &str, data: &[u8]) -> Result<(Header, Transform), ParseError> {
+pub(crate) fn decode_pose_message(
+    schema: &str,
+    data: &[u8],
+) -> Result<(Header, Transform), ParseError> {
     match schema {
         ros::POSE_STAMPED_SCHEMA => ros::decode_pose_stamped(data, 0),
         ros::TRANSFORM_STAMPED_SCHEMA => {
@@ -416,6 +429,16 @@ fn reason(frame: &str, fixed: &str, why: &Unavailable) -> String {
     format!("no pose for cloud frame {frame:?} in {fixed}: {why}")
 }
 
+/// Why a cloud has no pose (yet).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct NoPose {
+    /// The same text for the same cause whatever the stamp.
+    pub reason: String,
+    /// Whether transforms still to come could pose it (a stamp after the last sample, a frame
+    /// not yet in the tree or not yet connected): a live reader waits for them.
+    pub may_come: bool,
+}
+
 /// The pose of a cloud in `frame` at `stamp_ns`, or why there is none.
 fn pose_of(
     poses: &Poses,
@@ -423,30 +446,63 @@ fn pose_of(
     frame: &str,
     stamp_ns: i64,
 ) -> Result<Pose, String> {
+    pose_at(poses, fixed, frame, stamp_ns, false).map_err(|w| w.reason)
+}
+
+/// [`pose_of`], saying whether the pose may still come. The default fixed frame (the root of
+/// the first cloud's tree) is kept at once, or with `settle` only once a cloud is posed in it
+/// (live, the tree may still be growing above the cloud's frame).
+pub(crate) fn pose_at(
+    poses: &Poses,
+    fixed: &mut Option<String>,
+    frame: &str,
+    stamp_ns: i64,
+    settle: bool,
+) -> Result<Pose, NoPose> {
+    let may_come = |why: &Unavailable| {
+        matches!(
+            why,
+            Unavailable::After { .. }
+                | Unavailable::UnknownFrame { .. }
+                | Unavailable::NotConnected { .. }
+                | Unavailable::NoSamples { .. }
+        )
+    };
+    let no = |to: &str, why: &Unavailable| NoPose {
+        reason: reason(frame, to, why),
+        may_come: may_come(why),
+    };
     let (t, to) = match poses {
         Poses::Track(track, topic) => {
             let to = format!("pose topic {topic}");
             let t = track.lookup_named(stamp_ns, || to.clone());
-            (t.map_err(|e| reason(frame, &to, &e))?, to)
+            (t.map_err(|e| no(&to, &e))?, to)
         }
         Poses::Tf(tree) => {
             // The default fixed frame: the root of the first posable cloud's tree.
-            let fixed: &str = match fixed {
-                Some(f) => f,
-                None => {
-                    let root = tree
-                        .default_fixed_frame(frame)
-                        .map_err(|e| reason(frame, "the TF tree", &e))?;
-                    fixed.insert(root.to_string())
-                }
+            let chosen: String = match fixed {
+                Some(f) => f.clone(),
+                None => tree
+                    .default_fixed_frame(frame)
+                    .map_err(|e| no("the TF tree", &e))?
+                    .to_string(),
             };
-            let to = format!("fixed frame {fixed:?}");
-            let t = tree.lookup(fixed, frame, stamp_ns);
-            (t.map_err(|e| reason(frame, &to, &e))?, to)
+            if !settle && fixed.is_none() {
+                *fixed = Some(chosen.clone());
+            }
+            let to = format!("fixed frame {chosen:?}");
+            let t = tree.lookup(&chosen, frame, stamp_ns);
+            let t = t.map_err(|e| no(&to, &e))?;
+            if fixed.is_none() {
+                *fixed = Some(chosen);
+            }
+            (t, to)
         }
     };
-    t.to_pose()
-        .ok_or_else(|| format!("no pose for cloud frame {frame:?} in {to}: not finite as f32"))
+    t.to_pose().ok_or_else(|| NoPose {
+        reason: format!("no pose for cloud frame {frame:?} in {to}: not finite as f32"),
+        may_come: false,
+    })
 }
 
 #[cfg(test)]

@@ -230,6 +230,15 @@ impl Outside {
 }
 
 impl Samples {
+    /// Drops the samples before `stamp_ns` except the last of them (a lookup at `stamp_ns` or
+    /// later still interpolates from it). The samples must be sorted ([`Samples::finish`]).
+    fn forget_before(&mut self, stamp_ns: i64) {
+        let i = self.samples.partition_point(|s| s.0 < stamp_ns);
+        if i > 1 {
+            self.samples.drain(..i - 1);
+        }
+    }
+
     /// Sorts by stamp; of samples at the same stamp the last added is kept.
     fn finish(&mut self) {
         // Stable: equal stamps stay in the order they were added.
@@ -431,6 +440,51 @@ impl TfTree {
         self.links.is_empty()
     }
 
+    /// [`TfTree::add`] then [`TfTree::finish`], for transforms arriving live: a transform
+    /// whose new link would close a cycle is refused ([`TfError::Cycle`]) and leaves the buffer
+    /// as it was, so one bad transform on a live topic does not stop the others.
+    pub fn add_live(&mut self, t: &TransformStamped, is_static: bool) -> Result<(), TfError> {
+        let child = t.child_frame_id.as_str();
+        if !self.links.contains_key(child) && !child.is_empty() {
+            let up = self.path_up(&t.header.frame_id);
+            if let Some(k) = up.iter().position(|&f| f == child) {
+                // child, its new parent, that one's parent, ..., back to child.
+                let frames = std::iter::once(child)
+                    .chain(up.get(..k).unwrap_or_default().iter().copied())
+                    .map(str::to_string)
+                    .collect();
+                return Err(TfError::Cycle { frames });
+            }
+        }
+        self.add(t, is_static)?;
+        self.finish()
+    }
+
+    /// Drops every dynamic link's samples older than `stamp_ns`, but the last one before it:
+    /// lookups at `stamp_ns` and later answer as before. A live buffer calls this to keep its
+    /// memory bounded (tf2 keeps 10 s).
+    pub fn forget_before(&mut self, stamp_ns: i64) {
+        if !self.finished {
+            let _ = self.finish();
+        }
+        for link in self.links.values_mut() {
+            if let LinkKind::Dynamic(s) = &mut link.kind {
+                s.forget_before(stamp_ns);
+            }
+        }
+    }
+
+    /// How many samples the buffer holds (static links count one).
+    pub fn sample_count(&self) -> usize {
+        self.links
+            .values()
+            .map(|l| match &l.kind {
+                LinkKind::Static(_) => 1,
+                LinkKind::Dynamic(s) => s.samples.len(),
+            })
+            .sum()
+    }
+
     /// The parent of `frame` and whether that link is static; `None` for a root or an unknown
     /// frame.
     pub fn parent_of(&self, frame: &str) -> Option<(&str, bool)> {
@@ -579,6 +633,15 @@ impl PoseTrack {
     pub fn finish(&mut self) {
         self.samples.finish();
         self.finished = true;
+    }
+
+    /// Drops the poses older than `stamp_ns` but the last one before it (see
+    /// [`TfTree::forget_before`]).
+    pub fn forget_before(&mut self, stamp_ns: i64) {
+        if !self.finished {
+            self.finish();
+        }
+        self.samples.forget_before(stamp_ns);
     }
 
     /// The distinct frame ids of the poses added, in the order first seen (more than one is

@@ -194,3 +194,30 @@ pub fn encode_point_cloud2(header: &Header, scan: &Scan, order: ByteOrder) -> Ve
     w.u8(u8::from(dense));
     w.buf
 }
+
+/// Encodes an `octomap_msgs/msg/Octomap` (ROS 2 branch): `header`, `binary`, `id` (the tree
+/// type, `OcTree` or `ColorOcTree`: RViz's display must be of that type), `resolution_m`, and
+/// `data`, the tree stream alone (the body of a `.bt` when `binary`, of a `.ot` otherwise; no
+/// file header). Octomap's `data` is `int8[]`: the same bytes.
+///
+/// # Panics
+///
+/// As [`encode_pose_stamped`].
+pub fn encode_octomap(
+    header: &Header,
+    binary: bool,
+    id: &str,
+    resolution_m: f64,
+    data: &[u8],
+    order: ByteOrder,
+) -> Vec<u8> {
+    let mut w = CdrWriter::new(order);
+    w.header(header);
+    w.u8(u8::from(binary));
+    w.string(id);
+    w.f64(resolution_m);
+    let n = u32::try_from(data.len()).expect("Octomap data: over 4 GiB");
+    w.u32(n);
+    w.buf.extend_from_slice(data);
+    w.buf
+}

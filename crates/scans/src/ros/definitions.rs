@@ -11,6 +11,8 @@ pub const TRANSFORM_STAMPED_SCHEMA: &str = "geometry_msgs/msg/TransformStamped";
 pub const TF_MESSAGE_SCHEMA: &str = "tf2_msgs/msg/TFMessage";
 /// Schema name of odometry: ROS 2's `nav_msgs/msg/Odometry`.
 pub const ODOMETRY_SCHEMA: &str = "nav_msgs/msg/Odometry";
+/// The schema name of OctoMap's map message (octomap_msgs, ROS 2 branch).
+pub const OCTOMAP_SCHEMA: &str = "octomap_msgs/msg/Octomap";
 
 /// The dependency sections every stamped message's definition ends with.
 macro_rules! header_sections {

@@ -14,7 +14,8 @@
 //!   [`encode_transform_stamped`]);
 //! - `tf2_msgs/msg/TFMessage`, what `/tf` and `/tf_static` carry ([`decode_tf_message`],
 //!   [`encode_tf_message`]);
-//! - `nav_msgs/msg/Odometry`, its `pose.pose` ([`decode_odometry`], [`encode_odometry`]).
+//! - `nav_msgs/msg/Odometry`, its `pose.pose` ([`decode_odometry`], [`encode_odometry`]);
+//! - `octomap_msgs/msg/Octomap`, written only ([`encode_octomap`]).
 //!
 //! The schema names (`*_SCHEMA`) and the `ros2msg` definition texts (`*_DEFINITION`, as rosbag2
 //! and MCAP store them) go with them, for writing bags.
@@ -56,13 +57,13 @@ pub use cdr_read::{
     decode_tf_message, decode_transform_stamped,
 };
 pub use cdr_write::{
-    ByteOrder, encode_odometry, encode_point_cloud2, encode_pose_stamped, encode_tf_message,
-    encode_transform_stamped,
+    ByteOrder, encode_octomap, encode_odometry, encode_point_cloud2, encode_pose_stamped,
+    encode_tf_message, encode_transform_stamped,
 };
 pub use definitions::{
-    ODOMETRY_DEFINITION, ODOMETRY_SCHEMA, POINT_CLOUD2_DEFINITION, POINT_CLOUD2_SCHEMA,
-    POSE_STAMPED_DEFINITION, POSE_STAMPED_SCHEMA, TF_MESSAGE_DEFINITION, TF_MESSAGE_SCHEMA,
-    TRANSFORM_STAMPED_DEFINITION, TRANSFORM_STAMPED_SCHEMA, definition,
+    OCTOMAP_SCHEMA, ODOMETRY_DEFINITION, ODOMETRY_SCHEMA, POINT_CLOUD2_DEFINITION,
+    POINT_CLOUD2_SCHEMA, POSE_STAMPED_DEFINITION, POSE_STAMPED_SCHEMA, TF_MESSAGE_DEFINITION,
+    TF_MESSAGE_SCHEMA, TRANSFORM_STAMPED_DEFINITION, TRANSFORM_STAMPED_SCHEMA, definition,
 };
 pub use transform::{Transform, TransformProblem};
 
