@@ -111,3 +111,24 @@ fn the_field_adapters_are_the_live_tools_and_only_octo_delta_has_the_bag_readers
         check(tool, &["rovlink-field", "tokio"], &[]);
     }
 }
+
+#[test]
+fn only_the_tools_on_a_ros2_graph_link_the_dds() {
+    check("octo-delta", &[], &["rovlink-ros2", "rustdds"]);
+    check(
+        "rovlink-ros2",
+        &["rovlink-scans", "rovlink-octo", "tokio"],
+        &["rustdds"],
+    );
+    for tool in [
+        "debt-encode",
+        "debt-decode",
+        "rcp-pack",
+        "rcp-dump",
+        "link-sim",
+        "modem-bench",
+        "tdma-run",
+    ] {
+        check(tool, &["rovlink-ros2", "rustdds"], &[]);
+    }
+}

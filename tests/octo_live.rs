@@ -5,17 +5,13 @@
 //! client sees the map grow; bad bytes on the link are counted, never applied. Every wait is
 //! for a sign (a line the tools print, a process ending), with a generous deadline.
 
-use std::io::BufRead;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::sync::mpsc;
-use std::time::Duration;
 
+use crate::common::watched::{DEADLINE, Watched};
 use crate::common::{Reaped, link_sim_pty};
 
 const OCTO: &str = env!("TOOL_EXE_octo-delta");
-/// The longest any sign is waited for.
-const DEADLINE: Duration = Duration::from_secs(240);
 
 fn path(dir: &Path, name: &str) -> String {
     dir.join(name).to_str().unwrap().to_string()
@@ -49,76 +45,6 @@ fn offline(dir: &Path, scans: u32) -> (PathBuf, Vec<u8>) {
         &path(dir, "offline.ot"),
     ]);
     (survey, std::fs::read(dir.join("offline.ot")).unwrap())
-}
-
-/// A running tool whose standard error is read line by line aside.
-struct Watched {
-    child: Reaped,
-    lines: mpsc::Receiver<String>,
-    said: Vec<String>,
-}
-
-impl Watched {
-    fn spawn(args: &[&str]) -> Watched {
-        let mut child = Command::new(OCTO)
-            .args(args)
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let err = child.stderr.take().unwrap();
-        let (tx, lines) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in std::io::BufReader::new(err).lines().map_while(Result::ok) {
-                if tx.send(line).is_err() {
-                    break;
-                }
-            }
-        });
-        Watched {
-            child: Reaped(child),
-            lines,
-            said: Vec::new(),
-        }
-    }
-
-    /// Waits until `n` lines said so far contain `sign`.
-    fn wait_count(&mut self, sign: &str, n: usize) {
-        while self.said.iter().filter(|l| l.contains(sign)).count() < n {
-            match self.lines.recv_timeout(DEADLINE) {
-                Ok(line) => self.said.push(line),
-                Err(_) => panic!("not {n} of {sign:?} in {DEADLINE:?}: {:#?}", self.said),
-            }
-        }
-    }
-
-    /// Waits for a line containing `sign`.
-    fn wait_for(&mut self, sign: &str) {
-        loop {
-            match self.lines.recv_timeout(DEADLINE) {
-                Ok(line) => {
-                    let hit = line.contains(sign);
-                    self.said.push(line);
-                    if hit {
-                        return;
-                    }
-                }
-                Err(_) => panic!("no {sign:?} in {DEADLINE:?}: {:#?}", self.said),
-            }
-        }
-    }
-
-    /// Waits for the process to end; its exit code and everything it said.
-    fn finish(mut self) -> (Option<i32>, String) {
-        let status = self.child.wait().unwrap();
-        self.said.extend(self.lines.iter());
-        (status.code(), self.said.join("\n"))
-    }
-
-    fn signal(&self, sig: nix::sys::signal::Signal) {
-        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
-        nix::sys::signal::kill(pid, sig).unwrap();
-    }
 }
 
 /// Starts link-sim --pty with the satellite uplink and downlink and `extra` flags.

@@ -26,6 +26,7 @@ mod octo_bags;
 mod octo_live;
 mod octo_view;
 mod octomap_color;
+mod ros2_live;
 mod serial_pty;
 mod sweep;
 mod tdma_console;

@@ -4,6 +4,7 @@
 
 pub mod ardusub;
 pub mod hostile;
+pub mod watched;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};

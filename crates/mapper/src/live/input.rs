@@ -152,6 +152,7 @@ pub fn feed(
                     let items = rec.scans(stop)?.map(|r| r.map_err(PipelineError::from));
                     (Box::new(items), needs_origin)
                 }
+                ScanSource::Live(scans) => (scans, false),
             };
         let origin = origin.filter(|_| needs_origin);
         for item in items {
@@ -173,6 +174,10 @@ pub fn feed(
                     }
                 }
             }
+        }
+        // A live input ends only when stopped.
+        if stopped(&mut report) {
+            return Ok(report);
         }
     }
     Ok(report)

@@ -6,11 +6,13 @@
 //! - [`input`]: clouds as they come (a `.graph` on a pipe or followed as it is written);
 //! - [`carrier`]: the device under the transport, one wire.md frame per segment;
 //! - [`map_state`]: the vehicle's map, its sender and a mirror of the operator's view, and the
-//!   answers to requests.
+//!   answers to requests;
+//! - [`ros2_out`]: the operator's view published on a ROS 2 graph (Octomap and voxel cloud).
 pub mod carrier;
 pub mod input;
 pub mod map_state;
 pub mod mapper;
+pub mod ros2_out;
 pub mod viewer;
 
 use std::time::Duration;

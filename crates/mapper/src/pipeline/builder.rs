@@ -397,6 +397,16 @@ pub fn build(
     let threads = cfg
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get().min(8)));
+    // A live topic is cast on one thread: with more, the last scans cast would wait for the
+    // next cloud to come before going into the map (issue 48 moves the reading off this
+    // thread to lift this).
+    let threads = match inputs
+        .iter()
+        .any(|p| super::ros2_input::topic_of(p).is_some())
+    {
+        true => 1,
+        false => threads,
+    };
     let mut sender = Sender::new(spec);
     sender.set_color_updates(cfg.color_updates);
     let header = delta::encode_header(&spec);
@@ -524,6 +534,7 @@ fn build_in<'scope, 'h: 'scope>(
                 let items = rec.scans(stop)?.map(|r| r.map_err(PipelineError::from));
                 (Box::new(items), n, needs_origin)
             }
+            ScanSource::Live(scans) => (scans, 0, false),
         };
         known += count;
         if let Some(p) = hooks.progress.as_mut() {
@@ -598,6 +609,11 @@ fn build_in<'scope, 'h: 'scope>(
         }
         // An input's scans are all in the map before the next input is opened.
         if !drain(out, &mut caster, tree_slot, report, hooks, known)? {
+            break 'inputs;
+        }
+        // A live input ends only when stopped.
+        if stop.load(Ordering::Relaxed) {
+            report.interrupted = true;
             break 'inputs;
         }
         if let Some(rec) = &recording {

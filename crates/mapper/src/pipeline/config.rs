@@ -123,6 +123,8 @@ pub struct BuildConfig {
     pub color_updates: bool,
     /// Threads casting rays (1 ..= [`THREADS_MAX`]); `None`: the machine's cores, at most 8.
     pub threads: Option<usize>,
+    /// How `ros2:TOPIC` inputs join the graph.
+    pub ros2: super::ros2_input::Ros2Input,
 }
 
 impl Default for BuildConfig {
@@ -139,6 +141,7 @@ impl Default for BuildConfig {
             no_color: false,
             color_updates: false,
             threads: None,
+            ros2: super::ros2_input::Ros2Input::default(),
         }
     }
 }

@@ -194,6 +194,8 @@ pub(crate) enum ScanSource<'a> {
     ),
     /// A bag, its poses read.
     Bag(Box<Recording>),
+    /// A live topic (`ros2:TOPIC`), read until stopped.
+    Live(Box<super::ros2_input::Ros2Scans<'a>>),
 }
 
 /// The scans of one input, read through a [`StopReader`]: a read waiting on a silent pipe
@@ -203,6 +205,16 @@ pub(crate) fn open_scans<'a>(
     cfg: &BuildConfig,
     stop: &'a AtomicBool,
 ) -> Result<ScanSource<'a>, PipelineError> {
+    if let Some(topic) = super::ros2_input::topic_of(path) {
+        let scans = super::ros2_input::Ros2Scans::open(
+            topic,
+            &cfg.ros2,
+            cfg.mcap.pose_topic.as_deref(),
+            cfg.fixed_frame.clone(),
+            stop,
+        )?;
+        return Ok(ScanSource::Live(Box::new(scans)));
+    }
     let name = path.display().to_string();
     let bad = |source| PipelineError::Input {
         name: name.clone(),

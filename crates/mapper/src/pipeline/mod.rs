@@ -15,13 +15,14 @@
 //! whose errors name the option, the range with its unit, and what was found.
 //!
 //! Its parts, each re-exported here: `config` (the checked configuration), `inputs` (input
-//! formats and reading), `builder` (the build loop and its report), `commands` (apply, dump,
+//! formats and reading), `ros2_input` (`ros2:TOPIC` inputs: a live ROS 2 topic), `builder` (the build loop and its report), `commands` (apply, dump,
 //! full, synth).
 
 mod builder;
 mod commands;
 mod config;
 pub(crate) mod inputs;
+pub mod ros2_input;
 
 pub use builder::{
     ARRIVAL_COLUMNS, ArrivalRow, BuildReport, Built, Hooks, STATS_COLUMNS, SinkError, StatsRow,
@@ -42,6 +43,9 @@ use rovlink_scans::recording::RecordingError;
 /// Why a build (or another pipeline) failed.
 #[derive(Debug, thiserror::Error)]
 pub enum PipelineError {
+    /// A live input (`ros2:TOPIC`) that cannot join or read its graph.
+    #[error("{0}")]
+    Live(String),
     /// A number out of range.
     #[error(transparent)]
     Config(#[from] ConfigError),

@@ -58,6 +58,7 @@ mod scene;
 #[cfg(test)]
 mod test_support;
 mod timing;
+pub mod voxels;
 
 use std::collections::BTreeMap;
 use std::io::Write;

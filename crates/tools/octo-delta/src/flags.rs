@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use rovlink_cli::value::{self, MAX_COUNT};
 use rovlink_link::device::DeviceSpec;
+use rovlink_mapper::pipeline::ros2_input::Ros2Input;
 use rovlink_mapper::pipeline::{
     BuildConfig, COARSE_FACTOR_MAX, COORDINATE_MAX_M, Coarse, DumpFormat, InputFormat, MAX_RANGE_M,
     RESOLUTION_MAX_M, RESOLUTION_MIN_M, THREADS_MAX,
@@ -189,6 +190,35 @@ pub struct MapConfigArgs {
     #[arg(long, value_name = "N", value_parser = value::CountParser {
         min: 1, max: THREADS_MAX as u64, unit: "threads" }, allow_hyphen_values = true)]
     pub threads: Option<u64>,
+
+    /// ros2: inputs: the DDS domain to join [default: ROS_DOMAIN_ID, else 0].
+    #[arg(long, value_name = "ID", value_parser = value::count(0, rovlink_ros2::names::MAX_DOMAIN_ID as u64))]
+    pub ros2_domain: Option<u64>,
+
+    /// ros2: inputs: the cloud topic's reliability; best-effort also hears publishers using
+    /// ROS 2's sensor-data profile, reliable loses none from reliable publishers.
+    #[arg(long, value_name = "QOS", default_value = "reliable", value_parser = ["reliable", "best-effort"])]
+    pub ros2_reliability: String,
+
+    /// ros2: inputs with --pose-topic: its type, geometry_msgs/msg/PoseStamped,
+    /// geometry_msgs/msg/TransformStamped or nav_msgs/msg/Odometry.
+    #[arg(
+        long,
+        value_name = "TYPE",
+        default_value = "geometry_msgs/msg/PoseStamped"
+    )]
+    pub ros2_pose_type: String,
+
+    /// ros2: inputs: how long a cloud waits for the transforms at its stamp before it is
+    /// skipped (one warning per reason), seconds.
+    #[arg(long, value_name = "S", default_value_t = 1.0,
+          value_parser = value::seconds(0.0, 3600.0), allow_hyphen_values = true)]
+    pub ros2_tf_wait: f64,
+}
+
+/// Where the octo-delta's ros2: inputs say their problems.
+fn ros2_warning(line: &str) {
+    eprintln!("octo-delta: warning: {line}");
 }
 
 impl MapConfigArgs {
@@ -209,6 +239,14 @@ impl MapConfigArgs {
             no_color: self.no_color,
             color_updates: self.color_updates,
             threads: self.threads.map(|t| t as usize),
+            ros2: Ros2Input {
+                domain: self.ros2_domain.map(|d| d as u16),
+                reliability: rovlink_ros2::Reliability::from_name(&self.ros2_reliability)
+                    .unwrap_or(rovlink_ros2::Reliability::Reliable),
+                pose_type: self.ros2_pose_type.clone(),
+                tf_wait_s: self.ros2_tf_wait,
+                warn: ros2_warning,
+            },
         }
     }
 }
@@ -217,7 +255,8 @@ impl MapConfigArgs {
 pub struct BuildArgs {
     /// Point clouds: OctoMap .graph, PCD, PLY, XYZ, or a ROS 2 bag: MCAP (chunks zstd, lz4 or
     /// none) or rosbag2 (the directory, its metadata.yaml or a .db3) with PointCloud2 clouds
-    /// posed by /tf + /tf_static or a pose topic; - for standard input.
+    /// posed by /tf + /tf_static or a pose topic; - for standard input; ros2:TOPIC for a live
+    /// ROS 2 PointCloud2 topic posed the same way, read until SIGINT/SIGTERM.
     #[arg(required = true, value_name = "INPUT")]
     pub inputs: Vec<PathBuf>,
 
@@ -314,7 +353,8 @@ pub struct LinkArgs {
 #[derive(Args, Debug)]
 pub struct MapArgs {
     /// Point clouds, as `build` takes them; a .graph may be a pipe (-), a FIFO, or with
-    /// --follow a file still being written.
+    /// --follow a file still being written; ros2:TOPIC is a live ROS 2 PointCloud2 topic posed
+    /// by /tf + /tf_static (or --pose-topic).
     #[arg(required = true, value_name = "INPUT")]
     pub inputs: Vec<PathBuf>,
 
@@ -448,6 +488,58 @@ pub struct ViewRunArgs {
     /// Say nothing but warnings.
     #[arg(short, long)]
     pub quiet: bool,
+
+    #[command(flatten)]
+    pub ros2: Ros2ViewArgs,
+}
+
+/// The view on a ROS 2 graph.
+#[derive(Args, Debug)]
+pub struct Ros2ViewArgs {
+    /// Publish the view on ROS 2: an octomap_msgs/msg/Octomap (binary OcTree, for RViz's
+    /// occupancy display) and a coloured sensor_msgs/msg/PointCloud2 of the occupied voxels'
+    /// centres, reliable and transient-local (keep-last 1): a viewer started late gets the
+    /// latest map. These topics move nothing: the view takes no orders from ROS 2.
+    #[arg(long)]
+    pub ros2: bool,
+
+    /// With --ros2: the DDS domain [default: ROS_DOMAIN_ID, else 0].
+    #[arg(long, value_name = "ID", requires = "ros2",
+          value_parser = value::count(0, rovlink_ros2::names::MAX_DOMAIN_ID as u64))]
+    pub ros2_domain: Option<u64>,
+
+    /// With --ros2: the binary OcTree's topic.
+    #[arg(
+        long,
+        value_name = "TOPIC",
+        requires = "ros2",
+        default_value = "/octo_delta/octomap"
+    )]
+    pub ros2_octomap_topic: String,
+
+    /// With --ros2: also publish the full map (a ColorOcTree when it has colour, every node's
+    /// probability) on this topic.
+    #[arg(long, value_name = "TOPIC", requires = "ros2")]
+    pub ros2_full_topic: Option<String>,
+
+    /// With --ros2: the voxel-centre cloud's topic.
+    #[arg(
+        long,
+        value_name = "TOPIC",
+        requires = "ros2",
+        default_value = "/octo_delta/voxels"
+    )]
+    pub ros2_voxels_topic: String,
+
+    /// With --ros2: the frame_id of the map's messages.
+    #[arg(long, value_name = "FRAME", requires = "ros2", default_value = "map")]
+    pub ros2_frame: String,
+
+    /// With --ros2: the least time between two maps published, seconds (the last one is
+    /// always published).
+    #[arg(long, value_name = "S", requires = "ros2", default_value_t = 1.0,
+          value_parser = value::seconds(0.0, 3600.0), allow_hyphen_values = true)]
+    pub ros2_period: f64,
 }
 
 #[derive(Args, Debug)]

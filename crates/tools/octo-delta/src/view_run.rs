@@ -19,6 +19,7 @@ use rovlink_field::foxglove_map::{self, LogLevel, MapView};
 use rovlink_field::mcap_log::{JsonMcapFile, Topic, log_json, pose_json, timestamp_json};
 use rovlink_maplink::Request;
 use rovlink_mapper::live::carrier::{Carried, Carrier};
+use rovlink_mapper::live::ros2_out::{MapPublisher, Ros2MapOptions};
 use rovlink_mapper::live::rto_of;
 use rovlink_mapper::live::viewer::{LogKind, ViewOutput, Viewer};
 use rovlink_mapper::view::{SCENE_UPDATE_SCHEMA, SCHEMA_NAME};
@@ -278,6 +279,23 @@ pub fn view(a: &ViewRunArgs) -> Result<u8> {
         screens.foxglove.is_some() || screens.mcap.is_some(),
     );
     viewer.want_resync(Duration::ZERO);
+    let mut ros2 = match a.ros2.ros2 {
+        false => None,
+        true => {
+            let p = MapPublisher::start(Ros2MapOptions {
+                domain: a.ros2.ros2_domain.map(|d| d as u16),
+                octomap_topic: a.ros2.ros2_octomap_topic.clone(),
+                full_topic: a.ros2.ros2_full_topic.clone(),
+                cloud_topic: a.ros2.ros2_voxels_topic.clone(),
+                frame_id: a.ros2.ros2_frame.clone(),
+                period_s: a.ros2.ros2_period,
+            })
+            .map_err(|e| UsageError(format!("--ros2: {e}")))?;
+            screens.log(t_ns(Duration::ZERO), LogKind::Info, &p.describe());
+            Some(p)
+        }
+    };
+    let mut rows_published = 0;
     screens.log(
         t_ns(Duration::ZERO),
         LogKind::Info,
@@ -299,6 +317,17 @@ pub fn view(a: &ViewRunArgs) -> Result<u8> {
         }
         for out in viewer.take_outputs() {
             screens.show(out, t_ns(now));
+        }
+        if let Some(p) = ros2.as_mut() {
+            if viewer.rows().len() != rows_published {
+                rows_published = viewer.rows().len();
+                p.changed();
+            }
+            if let Some(v) = viewer.view()
+                && let Err(e) = p.tick(v, t_ns(now) as i64, Instant::now())
+            {
+                screens.log(t_ns(now), LogKind::Warning, &format!("ROS 2: {e}"));
+            }
         }
         if let Some(f) = &screens.foxglove {
             if f.take_snapshot_wanted()
@@ -400,6 +429,12 @@ pub fn view(a: &ViewRunArgs) -> Result<u8> {
     }
     quit_reader.store(true, Ordering::Relaxed);
     let end = start.elapsed();
+    if let Some(p) = ros2.as_mut()
+        && let Some(v) = viewer.view()
+        && let Err(e) = p.flush(v, t_ns(end) as i64)
+    {
+        say!("ROS 2: {e}");
+    }
     if let Some(d) = &ot
         && !save(&viewer, d)?
     {
@@ -445,6 +480,14 @@ pub fn view(a: &ViewRunArgs) -> Result<u8> {
         "requests": viewer.requests(),
         "elapsed_s": end.as_secs_f64(),
         "closed": closed,
+        "ros2": ros2.as_ref().map(|p| {
+            let d = p.published();
+            serde_json::json!({
+                "maps": d.maps,
+                "octomap_bytes": d.octomap_bytes,
+                "voxels": d.voxels,
+            })
+        }),
     });
     if let Some(d) = metrics_dest {
         let mut out = d.open()?;

@@ -1,0 +1,295 @@
+#!/usr/bin/env python3
+"""A ROS 2 peer on Eclipse Cyclone DDS (PyPI `cyclonedds`, the real C library in the wheel),
+standing in for the vehicle's sensors and for the operator's RViz in the process tests.
+
+Subcommands (each prints one JSON line when it ends; progress lines go to stderr):
+
+  play BAG        publishes the messages of an MCAP bag (PointCloud2, TFMessage, PoseStamped,
+                  Odometry topics) live under their own topic names: /tf_static first
+                  (transient-local), then every message in log-time order, one cloud every
+                  --period seconds. Waits until every writer has --wait-readers readers first.
+  latched TOPIC   joins late and takes the last octomap_msgs/msg/Octomap (or PointCloud2 with
+                  --type cloud) of TOPIC (reliable, transient-local, keep-last 1), writes its
+                  fields to --out (JSON) and its data to --out + ".data"; with --expect-bytes
+                  N, the first message whose data has N bytes.
+
+The domain is --domain; discovery is unicast on loopback (../shared/design/facts.md, "ROS 2
+without a ROS installation"): the configuration is written next to --out or in a temporary
+directory and given as CYCLONEDDS_URI before the library starts.
+"""
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+
+CONFIG = (
+    '<CycloneDDS xmlns="https://cdds.io/config"><Domain Id="any"><General><Interfaces>'
+    '<NetworkInterface name="lo"/></Interfaces><AllowMulticast>false</AllowMulticast></General>'
+    "<Discovery><ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>32"
+    '</MaxAutoParticipantIndex><Peers><Peer address="127.0.0.1"/></Peers></Discovery><Internal>'
+    '<SocketReceiveBufferSize max="16MB"/></Internal></Domain></CycloneDDS>'
+)
+
+
+def configure():
+    d = tempfile.mkdtemp(prefix="cyclone-")
+    path = os.path.join(d, "cyclonedds.xml")
+    with open(path, "w") as f:
+        f.write(CONFIG)
+    os.environ["CYCLONEDDS_URI"] = "file://" + path
+
+
+configure()
+
+from cyclonedds.core import Qos, Policy  # noqa: E402
+from cyclonedds.domain import DomainParticipant  # noqa: E402
+from cyclonedds.idl import IdlStruct  # noqa: E402
+from cyclonedds.idl.annotations import final  # noqa: E402
+import cyclonedds.idl.types as t  # noqa: E402
+from cyclonedds.pub import DataWriter  # noqa: E402
+from cyclonedds.sub import DataReader  # noqa: E402
+from cyclonedds.topic import Topic  # noqa: E402
+
+
+def dds(pkg, name):
+    return f"{pkg}::msg::dds_::{name}_"
+
+
+@final
+@dataclass
+class Time(IdlStruct, typename=dds("builtin_interfaces", "Time")):
+    sec: t.int32
+    nanosec: t.uint32
+
+
+@final
+@dataclass
+class Header(IdlStruct, typename=dds("std_msgs", "Header")):
+    stamp: Time
+    frame_id: str
+
+
+@final
+@dataclass
+class PointField(IdlStruct, typename=dds("sensor_msgs", "PointField")):
+    name: str
+    offset: t.uint32
+    datatype: t.uint8
+    count: t.uint32
+
+
+@final
+@dataclass
+class PointCloud2(IdlStruct, typename=dds("sensor_msgs", "PointCloud2")):
+    header: Header
+    height: t.uint32
+    width: t.uint32
+    fields: t.sequence[PointField]
+    is_bigendian: bool
+    point_step: t.uint32
+    row_step: t.uint32
+    data: t.sequence[t.uint8]
+    is_dense: bool
+
+
+@final
+@dataclass
+class Vector3(IdlStruct, typename=dds("geometry_msgs", "Vector3")):
+    x: t.float64
+    y: t.float64
+    z: t.float64
+
+
+@final
+@dataclass
+class Point(IdlStruct, typename=dds("geometry_msgs", "Point")):
+    x: t.float64
+    y: t.float64
+    z: t.float64
+
+
+@final
+@dataclass
+class Quaternion(IdlStruct, typename=dds("geometry_msgs", "Quaternion")):
+    x: t.float64
+    y: t.float64
+    z: t.float64
+    w: t.float64
+
+
+@final
+@dataclass
+class Transform(IdlStruct, typename=dds("geometry_msgs", "Transform")):
+    translation: Vector3
+    rotation: Quaternion
+
+
+@final
+@dataclass
+class TransformStamped(IdlStruct, typename=dds("geometry_msgs", "TransformStamped")):
+    header: Header
+    child_frame_id: str
+    transform: Transform
+
+
+@final
+@dataclass
+class TFMessage(IdlStruct, typename=dds("tf2_msgs", "TFMessage")):
+    transforms: t.sequence[TransformStamped]
+
+
+@final
+@dataclass
+class Pose(IdlStruct, typename=dds("geometry_msgs", "Pose")):
+    position: Point
+    orientation: Quaternion
+
+
+@final
+@dataclass
+class PoseStamped(IdlStruct, typename=dds("geometry_msgs", "PoseStamped")):
+    header: Header
+    pose: Pose
+
+
+@final
+@dataclass
+class Octomap(IdlStruct, typename=dds("octomap_msgs", "Octomap")):
+    header: Header
+    binary: bool
+    id: str
+    resolution: t.float64
+    data: t.sequence[t.int8]
+
+
+TYPES = {
+    "sensor_msgs/msg/PointCloud2": PointCloud2,
+    "tf2_msgs/msg/TFMessage": TFMessage,
+    "geometry_msgs/msg/PoseStamped": PoseStamped,
+    "geometry_msgs/msg/TransformStamped": TransformStamped,
+}
+
+
+def reliable(transient=False, depth=None):
+    policies = [Policy.Reliability.Reliable(max_blocking_time=1_000_000_000)]
+    if transient:
+        policies.append(Policy.Durability.TransientLocal)
+    policies.append(Policy.History.KeepLast(depth) if depth else Policy.History.KeepAll)
+    if transient and not depth:
+        policies.append(Policy.DurabilityService(0, Policy.History.KeepAll, -1, -1, -1))
+    return Qos(*policies)
+
+
+def say(**fields):
+    print(json.dumps(fields), flush=True)
+
+
+def play(args):
+    from mcap.reader import make_reader
+
+    with open(args.bag, "rb") as f:
+        reader = make_reader(f)
+        messages = []
+        topics = {}
+        for schema, channel, message in reader.iter_messages(log_time_order=True):
+            if schema.name not in TYPES:
+                continue
+            topics[channel.topic] = schema.name
+            messages.append((channel.topic, message.data))
+    dp = DomainParticipant(args.domain)
+    writers = {}
+    for name, schema in topics.items():
+        latched = name.endswith("tf_static")
+        qos = reliable(transient=latched, depth=100 if "tf" in name else None)
+        topic = Topic(dp, "rt" + name, TYPES[schema], qos=qos)
+        writers[name] = DataWriter(dp, topic, qos=qos)
+    deadline = time.monotonic() + args.timeout
+    while any(
+        len(w.get_matched_subscriptions()) < args.wait_readers for w in writers.values()
+    ):
+        if time.monotonic() > deadline:
+            say(ok=False, why="no readers", topics=sorted(topics))
+            return 1
+        time.sleep(0.05)
+    print(f"peer: {len(writers)} topics matched", file=sys.stderr, flush=True)
+    clouds = 0
+    statics = [m for m in messages if m[0].endswith("tf_static")]
+    for name, data in statics:
+        writers[name].write(TYPES[topics[name]].deserialize(data))
+    next_cloud = time.monotonic()
+    for name, data in messages:
+        if name.endswith("tf_static"):
+            continue
+        schema = topics[name]
+        if schema == "sensor_msgs/msg/PointCloud2":
+            now = time.monotonic()
+            if next_cloud > now:
+                time.sleep(next_cloud - now)
+            next_cloud = max(now, next_cloud) + args.period
+            clouds += 1
+        writers[name].write(TYPES[schema].deserialize(data))
+    # Reliable delivery of the last samples before the participant goes.
+    time.sleep(args.linger)
+    say(ok=True, clouds=clouds, messages=len(messages))
+    return 0
+
+
+def latched(args):
+    dp = DomainParticipant(args.domain)
+    kind = Octomap if args.type == "octomap" else PointCloud2
+    qos = reliable(transient=True, depth=1)
+    topic = Topic(dp, "rt" + args.topic, kind, qos=qos)
+    reader = DataReader(dp, topic, qos=qos)
+    deadline = time.monotonic() + args.timeout
+    seen = []
+    while time.monotonic() < deadline:
+        samples = reader.take(N=16)
+        seen.extend(len(m.data) for m in samples)
+        if args.expect_bytes is not None:
+            samples = [m for m in samples if len(m.data) == args.expect_bytes]
+        if samples:
+            m = samples[-1]
+            data = bytes(x & 0xFF for x in m.data) if kind is Octomap else bytes(m.data)
+            with open(args.out + ".data", "wb") as f:
+                f.write(data)
+            fields = {"frame_id": m.header.frame_id, "bytes": len(data)}
+            if kind is Octomap:
+                fields.update(id=m.id, binary=m.binary, resolution=m.resolution)
+            else:
+                fields.update(width=m.width, height=m.height, point_step=m.point_step,
+                              fields=[f.name for f in m.fields])
+            with open(args.out, "w") as f:
+                json.dump(fields, f)
+            say(ok=True, **fields)
+            return 0
+        time.sleep(0.05)
+    say(ok=False, why="not the message expected", data_bytes_seen=seen)
+    return 1
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--domain", type=int, required=True)
+    p.add_argument("--timeout", type=float, default=120)
+    sub = p.add_subparsers(dest="cmd", required=True)
+    a = sub.add_parser("play")
+    a.add_argument("bag")
+    a.add_argument("--period", type=float, default=0.5)
+    a.add_argument("--wait-readers", type=int, default=1)
+    a.add_argument("--linger", type=float, default=2.0)
+    b = sub.add_parser("latched")
+    b.add_argument("topic")
+    b.add_argument("--type", choices=["octomap", "cloud"], default="octomap")
+    b.add_argument("--out", required=True)
+    b.add_argument("--expect-bytes", type=int,
+                   help="wait for a message whose data has this many bytes (a late joiner may "
+                        "get older samples first)")
+    args = p.parse_args()
+    return play(args) if args.cmd == "play" else latched(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
