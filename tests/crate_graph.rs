@@ -115,6 +115,7 @@ fn the_field_adapters_are_the_live_tools_and_only_octo_delta_has_the_bag_readers
 #[test]
 fn only_the_tools_on_a_ros2_graph_link_the_dds() {
     check("octo-delta", &[], &["rovlink-ros2", "rustdds"]);
+    check("tdma-run", &[], &["rovlink-ros2", "rustdds"]);
     check(
         "rovlink-ros2",
         &["rovlink-scans", "rovlink-octo", "tokio"],
@@ -127,7 +128,6 @@ fn only_the_tools_on_a_ros2_graph_link_the_dds() {
         "rcp-dump",
         "link-sim",
         "modem-bench",
-        "tdma-run",
     ] {
         check(tool, &["rovlink-ros2", "rustdds"], &[]);
     }

@@ -357,3 +357,144 @@ fn build_from_a_live_topic_ends_on_sigterm_with_the_bags_map_whole() {
     );
     assert!(std::fs::read(&applied).unwrap() == std::fs::read(&offline).unwrap());
 }
+
+const TDMA_RUN: &str = env!("TOOL_EXE_tdma-run");
+/// Further north than the kinematic model's drift takes a vehicle without orders while the
+/// tests listen (0.25 m in 8 s), and less far than the tests' Twist takes it (about 1.2 m).
+const MOVED_M: f64 = 0.6;
+
+/// The operator and the ROV in real time over `link-sim --pty`, the operator on the graph
+/// (`extra` its ROS 2 flags); the peer's `session` report with `peer` flags. Returns the report
+/// and what the operator said.
+fn session_on_the_graph(
+    domain: &str,
+    extra: &[&str],
+    peer: &[&str],
+) -> (serde_json::Value, String) {
+    let (_link, a, b) = link_sim_pty(&crate::common::TEST_S100);
+    let mut rov = Watched::spawn_exe(
+        TDMA_RUN,
+        &[
+            "--role",
+            "rov",
+            "--port",
+            &b,
+            "--duration",
+            "600",
+            "--image-size",
+            "400",
+        ],
+    );
+    rov.wait_for("ROV: answering every slot");
+    let mut args = vec![
+        "--role",
+        "operator",
+        "--port",
+        &a,
+        "--ipg",
+        "150",
+        "--duration",
+        "600",
+        "--image-size",
+        "400",
+        "--ros2",
+        "--ros2-domain",
+        domain,
+    ];
+    args.extend_from_slice(extra);
+    let mut op = Watched::spawn_exe(TDMA_RUN, &args);
+    op.wait_for("operator: IPG");
+    let out = Command::new("python3")
+        .args([PEER, "--domain", domain, "session", "--seconds", "200"])
+        .args(peer)
+        .output()
+        .expect("python3 runs the Cyclone peer");
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    op.signal(nix::sys::signal::Signal::SIGTERM);
+    let (code, said) = op.finish();
+    rov.signal(nix::sys::signal::Signal::SIGTERM);
+    let _ = rov.finish();
+    assert!(
+        out.status.success(),
+        "the Cyclone peer failed: {text} {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // A real-time end stopped by a signal keeps its outputs and ends with 0.
+    assert_eq!(code, Some(0), "{said}");
+    assert!(said.contains("stopped after"), "{said}");
+    (serde_json::from_str(text.trim()).unwrap(), said)
+}
+
+fn distance(a: &serde_json::Value, b: [f64; 3]) -> f64 {
+    (0..3)
+        .map(|k| (a[k].as_f64().unwrap() - b[k]).powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
+#[test]
+fn with_control_a_ros2_twist_moves_the_vehicle_and_a_goal_pose_is_acknowledged_and_reached() {
+    let domain = domain();
+    let (r, said) = session_on_the_graph(
+        &domain,
+        &["--ros2-control"],
+        &[
+            "--twist",
+            "0.5,0,0,0",
+            "--twist-seconds",
+            "3",
+            "--goal",
+            "1,-1,0.5",
+            "--goal-at",
+            "8",
+            "--until-goal",
+            "0.3",
+        ],
+    );
+    assert_eq!(r["ok"], true, "the goal was not reached: {r}");
+    assert!(said.contains("control on"), "{said}");
+    // Heard on the graph: poses, tf and velocities, decodable images, the status, the log.
+    for topic in ["pose", "tf", "velocity", "status"] {
+        assert!(r["counts"][topic].as_u64().unwrap() >= 5, "{topic}: {r}");
+    }
+    assert!(r["images_decoded"].as_u64().unwrap() >= 1, "{r}");
+    let logs = r["logs"].to_string();
+    assert!(logs.contains("acknowledged"), "{r}");
+    assert!(r["status"]["frames"]["sent"].as_u64().unwrap() > 0, "{r}");
+    // The Twist (surge 50 % for 3 s, held 2 s more) moved the vehicle north by more than
+    // the model's drift does in the same time (0.25 m in 8 s without orders); the goal lies
+    // back south-west of where the Twist left it.
+    let start = r["start"][0].as_f64().unwrap();
+    assert!(r["max_x"].as_f64().unwrap() > start + MOVED_M, "{r}");
+    assert!(distance(&r["last"], [1.0, -1.0, 0.5]) <= 0.3, "{r}");
+}
+
+#[test]
+fn without_control_the_graph_gives_no_order_and_it_is_said_once() {
+    let domain = domain();
+    let (r, said) = session_on_the_graph(
+        &domain,
+        &[],
+        &[
+            "--twist",
+            "0.5,0,0,0",
+            "--twist-seconds",
+            "3",
+            "--goal",
+            "2,1,0.5",
+            "--goal-at",
+            "4",
+            "--poses-after-goal",
+            "20",
+        ],
+    );
+    assert_eq!(r["ok"], true, "{r}");
+    assert_eq!(said.matches("view-only").count(), 1, "{said}");
+    // No order was sent, and the vehicle only drifted (the Twist would move it further).
+    assert!(!r["logs"].to_string().contains("order"), "{r}");
+    let start = r["start"][0].as_f64().unwrap();
+    assert!(
+        r["max_x"].as_f64().unwrap() < start + MOVED_M,
+        "the Twist was obeyed: {r}"
+    );
+}

@@ -8,6 +8,9 @@ Subcommands (each prints one JSON line when it ends; progress lines go to stderr
                   Odometry topics) live under their own topic names: /tf_static first
                   (transient-local), then every message in log-time order, one cloud every
                   --period seconds. Waits until every writer has --wait-readers readers first.
+  session         listens to a tdma-run session on the graph (pose, tf, velocity, image,
+                  status, /rosout) for --seconds, publishing a Twist (--twist) and a goal pose
+                  (--goal) on the way, and reports what it heard.
   latched TOPIC   joins late and takes the last octomap_msgs/msg/Octomap (or PointCloud2 with
                   --type cloud) of TOPIC (reliable, transient-local, keep-last 1), writes its
                   fields to --out (JSON) and its data to --out + ".data"; with --expect-bytes
@@ -165,6 +168,46 @@ class Octomap(IdlStruct, typename=dds("octomap_msgs", "Octomap")):
     data: t.sequence[t.int8]
 
 
+@final
+@dataclass
+class Twist(IdlStruct, typename=dds("geometry_msgs", "Twist")):
+    linear: Vector3
+    angular: Vector3
+
+
+@final
+@dataclass
+class TwistStamped(IdlStruct, typename=dds("geometry_msgs", "TwistStamped")):
+    header: Header
+    twist: Twist
+
+
+@final
+@dataclass
+class CompressedImage(IdlStruct, typename=dds("sensor_msgs", "CompressedImage")):
+    header: Header
+    format: str
+    data: t.sequence[t.uint8]
+
+
+@final
+@dataclass
+class String(IdlStruct, typename=dds("std_msgs", "String")):
+    data: str
+
+
+@final
+@dataclass
+class Log(IdlStruct, typename=dds("rcl_interfaces", "Log")):
+    stamp: Time
+    level: t.uint8
+    name: str
+    msg: str
+    file: str
+    function: str
+    line: t.uint32
+
+
 TYPES = {
     "sensor_msgs/msg/PointCloud2": PointCloud2,
     "tf2_msgs/msg/TFMessage": TFMessage,
@@ -270,6 +313,84 @@ def latched(args):
     return 1
 
 
+def session(args):
+    """Listens to a tdma-run session until --until-goal or --poses-after-goal is met (at most
+    --seconds); with --twist, publishes that Twist on NS/cmd_vel at 5 Hz from 1 s to
+    1 + --twist-seconds; with --goal, a goal pose at --goal-at s. Reports what it heard."""
+    import io
+    dp = DomainParticipant(args.domain)
+    ns = args.namespace
+    q = reliable(depth=10)
+    latched_q = reliable(transient=True, depth=1)
+    subs = {
+        "pose": (ns + "/pose", PoseStamped, q),
+        "tf": ("/tf", TFMessage, reliable(depth=100)),
+        "velocity": (ns + "/velocity", TwistStamped, q),
+        "image": (ns + "/image/compressed", CompressedImage, latched_q),
+        "status": (ns + "/status", String, latched_q),
+        "rosout": ("/rosout", Log, q),
+    }
+    readers = {k: DataReader(dp, Topic(dp, "rt" + n, ty, qos=qq), qos=qq) for k, (n, ty, qq) in subs.items()}
+    twist_w = DataWriter(dp, Topic(dp, "rt" + ns + "/cmd_vel", Twist, qos=q), qos=q)
+    goal_w = DataWriter(dp, Topic(dp, "rt" + ns + "/goal_pose", PoseStamped, qos=q), qos=q)
+    counts = {k: 0 for k in readers}
+    first = {}
+    poses = []
+    images_ok = 0
+    logs = []
+    status = None
+    t0 = time.monotonic()
+    next_twist = 1.0
+    goal_sent = False
+    done = False
+    poses_after_goal = 0
+    while not done:
+        now = time.monotonic() - t0
+        if now > args.seconds:
+            break
+        if args.twist and 1.0 <= now <= 1.0 + args.twist_seconds and now >= next_twist:
+            x, y, z, yaw = args.twist
+            twist_w.write(Twist(Vector3(x, y, z), Vector3(0.0, 0.0, yaw)))
+            next_twist = now + 0.2
+        if args.goal and not goal_sent and now >= args.goal_at:
+            gx, gy, gz = args.goal
+            goal_w.write(PoseStamped(Header(Time(0, 0), "ned"),
+                                     Pose(Point(gx, gy, gz), Quaternion(0.0, 0.0, 0.0, 1.0))))
+            goal_sent = True
+        for k, r in readers.items():
+            for m in r.take(N=64):
+                counts[k] += 1
+                first.setdefault(k, round(now, 3))
+                if k == "pose":
+                    p = m.pose.position
+                    poses.append([round(now, 2), p.x, p.y, p.z])
+                    if goal_sent:
+                        poses_after_goal += 1
+                        gx, gy, gz = args.goal
+                        near = ((p.x - gx) ** 2 + (p.y - gy) ** 2 + (p.z - gz) ** 2) ** 0.5
+                        if args.until_goal is not None and near <= args.until_goal:
+                            done = True
+                        if args.poses_after_goal and poses_after_goal >= args.poses_after_goal:
+                            done = True
+                elif k == "image":
+                    try:
+                        from PIL import Image
+                        Image.open(io.BytesIO(bytes(m.data))).load()
+                        images_ok += 1
+                    except Exception as e:  # noqa: BLE001  reported, not raised
+                        logs.append("image does not decode: %s" % e)
+                elif k == "rosout":
+                    logs.append(m.msg)
+                elif k == "status":
+                    status = json.loads(m.data)
+        time.sleep(0.02)
+    waited = args.until_goal is not None or args.poses_after_goal
+    say(ok=done or not waited, seconds=round(time.monotonic() - t0, 2), counts=counts, first_s=first, images_decoded=images_ok,
+        start=poses[0][1:] if poses else None, last=poses[-1][1:] if poses else None,
+        max_x=max((p[1] for p in poses), default=None), logs=logs[-40:], status=status)
+    return 0
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--domain", type=int, required=True)
@@ -287,8 +408,19 @@ def main():
     b.add_argument("--expect-bytes", type=int,
                    help="wait for a message whose data has this many bytes (a late joiner may "
                         "get older samples first)")
+    c = sub.add_parser("session")
+    c.add_argument("--namespace", default="/rov")
+    c.add_argument("--seconds", type=float, default=20)
+    c.add_argument("--twist", type=lambda v: [float(x) for x in v.split(",")])
+    c.add_argument("--twist-seconds", type=float, default=3)
+    c.add_argument("--goal", type=lambda v: [float(x) for x in v.split(",")])
+    c.add_argument("--goal-at", type=float, default=6)
+    c.add_argument("--until-goal", type=float, metavar="M",
+                   help="end once a pose within M metres of --goal comes (else at --seconds)")
+    c.add_argument("--poses-after-goal", type=int, metavar="N",
+                   help="end once N poses came after the goal was sent")
     args = p.parse_args()
-    return play(args) if args.cmd == "play" else latched(args)
+    return {"play": play, "latched": latched, "session": session}[args.cmd](args)
 
 
 if __name__ == "__main__":

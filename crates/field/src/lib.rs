@@ -5,7 +5,8 @@
 //! - [`foxglove_map`]: the live Foxglove view of octo-delta's map, behind the same gate;
 //! - [`mcap_log`] and [`net_mcap`]: a session's MCAP log, single vehicle and network;
 //! - [`mavlink`]: the ROV end driving an ArduSub autopilot over MAVLink 2;
-//! - [`console`]: the operator's orders as JSON Lines from a console or a FIFO.
+//! - [`console`]: the operator's orders as JSON Lines from a console or a FIFO;
+//! - [`ros2_session`]: the session on a ROS 2 graph (published; orders with control).
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
@@ -17,3 +18,4 @@ mod foxglove_server;
 pub mod mavlink;
 pub mod mcap_log;
 pub mod net_mcap;
+pub mod ros2_session;

@@ -33,6 +33,8 @@
 //! - `raw.rs`: CDR bytes to and from RustDDS;
 //! - `node.rs`: the participant, its readers and writers.
 
+pub mod cdr;
+pub mod msgs;
 pub mod names;
 pub mod node;
 pub mod qos;

@@ -4,74 +4,24 @@
 use super::{Header, Transform, TransformStamped};
 use rovlink_octo::Scan;
 
-/// The byte order an encoder writes (the decoders read both).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]
-pub enum ByteOrder {
-    /// Little endian (encapsulation `00 01`), what ROS 2 writes on every common machine.
-    #[default]
-    Little,
-    /// Big endian (encapsulation `00 00`).
-    Big,
-}
+pub use rovlink_ros2::cdr::ByteOrder;
+use rovlink_ros2::cdr::CdrWriter;
 
-/// Writes plain CDR in either byte order.
-struct CdrWriter {
-    buf: Vec<u8>,
-    big: bool,
-}
-
-impl CdrWriter {
-    fn new(order: ByteOrder) -> Self {
-        let big = order == ByteOrder::Big;
-        CdrWriter {
-            buf: vec![0, u8::from(!big), 0, 0],
-            big,
-        }
-    }
-
-    fn align(&mut self, n: usize) {
-        while !(self.buf.len() - 4).is_multiple_of(n) {
-            self.buf.push(0);
-        }
-    }
-
-    fn put<const N: usize>(&mut self, le: [u8; N]) {
-        self.align(N);
-        let mut a = le;
-        if self.big {
-            a.reverse();
-        }
-        self.buf.extend_from_slice(&a);
-    }
-
-    fn u8(&mut self, v: u8) {
-        self.buf.push(v);
-    }
-
-    fn u32(&mut self, v: u32) {
-        self.put(v.to_le_bytes());
-    }
-
-    fn f64(&mut self, v: f64) {
-        self.put(v.to_le_bytes());
-    }
-
-    fn string(&mut self, s: &str) {
-        let n = u32::try_from(s.len() + 1).expect("CDR string: over 4 GiB");
-        self.u32(n);
-        self.buf.extend_from_slice(s.as_bytes());
-        self.buf.push(0);
-    }
-
-    fn header(&mut self, header: &Header) {
-        let sec = i32::try_from(header.stamp_ns.div_euclid(1_000_000_000))
-            .expect("Header stamp: seconds beyond i32 (builtin_interfaces/Time)");
-        self.put(sec.to_le_bytes());
-        self.u32(header.stamp_ns.rem_euclid(1_000_000_000) as u32);
-        self.string(&header.frame_id);
-    }
-
+/// The parts the bag encoders share, written with the ROS 2 layer's CDR writer.
+trait RosParts {
+    /// A `std_msgs/Header`.
+    fn ros_header(&mut self, header: &Header);
     /// Translation then quaternion x, y, z, w.
+    fn transform(&mut self, t: &Transform);
+    /// A `geometry_msgs/TransformStamped`.
+    fn transform_stamped(&mut self, t: &TransformStamped);
+}
+
+impl RosParts for CdrWriter {
+    fn ros_header(&mut self, header: &Header) {
+        self.header(header.stamp_ns, &header.frame_id);
+    }
+
     fn transform(&mut self, t: &Transform) {
         let [qw, qx, qy, qz] = t.rotation;
         for v in t.translation_m.into_iter().chain([qx, qy, qz, qw]) {
@@ -80,7 +30,7 @@ impl CdrWriter {
     }
 
     fn transform_stamped(&mut self, t: &TransformStamped) {
-        self.header(&t.header);
+        self.ros_header(&t.header);
         self.string(&t.child_frame_id);
         self.transform(&t.transform);
     }
@@ -94,9 +44,9 @@ impl CdrWriter {
 /// If the stamp's seconds do not fit a ROS 2 `Time` (`i32`), or a string is over 4 GiB.
 pub fn encode_pose_stamped(header: &Header, pose: &Transform, order: ByteOrder) -> Vec<u8> {
     let mut w = CdrWriter::new(order);
-    w.header(header);
+    w.ros_header(header);
     w.transform(pose);
-    w.buf
+    w.into_bytes()
 }
 
 /// Encodes a `geometry_msgs/msg/TransformStamped`.
@@ -107,7 +57,7 @@ pub fn encode_pose_stamped(header: &Header, pose: &Transform, order: ByteOrder) 
 pub fn encode_transform_stamped(t: &TransformStamped, order: ByteOrder) -> Vec<u8> {
     let mut w = CdrWriter::new(order);
     w.transform_stamped(t);
-    w.buf
+    w.into_bytes()
 }
 
 /// Encodes a `tf2_msgs/msg/TFMessage` of `transforms`.
@@ -121,7 +71,7 @@ pub fn encode_tf_message(transforms: &[TransformStamped], order: ByteOrder) -> V
     for t in transforms {
         w.transform_stamped(t);
     }
-    w.buf
+    w.into_bytes()
 }
 
 /// Encodes a `nav_msgs/msg/Odometry` whose `pose.pose` is `t.transform` (of `t.child_frame_id`
@@ -132,13 +82,13 @@ pub fn encode_tf_message(transforms: &[TransformStamped], order: ByteOrder) -> V
 /// As [`encode_pose_stamped`].
 pub fn encode_odometry(t: &TransformStamped, order: ByteOrder) -> Vec<u8> {
     let mut w = CdrWriter::new(order);
-    w.header(&t.header);
+    w.ros_header(&t.header);
     w.string(&t.child_frame_id);
     w.transform(&t.transform);
     for _ in 0..36 + 6 + 36 {
         w.f64(0.0);
     }
-    w.buf
+    w.into_bytes()
 }
 
 /// Encodes `scan`'s points (and colours) as a `sensor_msgs/msg/PointCloud2` with `header`: one
@@ -160,7 +110,7 @@ pub fn encode_point_cloud2(header: &Header, scan: &Scan, order: ByteOrder) -> Ve
         .filter(|w| w.checked_mul(step).is_some())
         .expect("PointCloud2 width: over 2^32 / 16 points");
     let mut w = CdrWriter::new(order);
-    w.header(header);
+    w.ros_header(header);
     w.u32(1);
     w.u32(width);
     let names: &[&str] = if colors.is_some() {
@@ -175,24 +125,24 @@ pub fn encode_point_cloud2(header: &Header, scan: &Scan, order: ByteOrder) -> Ve
         w.u8(7); // FLOAT32
         w.u32(1);
     }
-    w.u8(u8::from(w.big));
+    w.u8(u8::from(w.is_big()));
     w.u32(step);
     w.u32(step * width);
     w.u32(step * width);
-    let big = w.big;
+    let big = w.is_big();
     let bytes4 = |v: [u8; 4]| if big { [v[3], v[2], v[1], v[0]] } else { v };
     for (i, p) in scan.points.iter().enumerate() {
         for v in p {
-            w.buf.extend_from_slice(&bytes4(v.to_le_bytes()));
+            w.raw().extend_from_slice(&bytes4(v.to_le_bytes()));
         }
         if let Some([r, g, b]) = colors.and_then(|c| c.get(i)) {
-            w.buf
+            w.raw()
                 .extend_from_slice(&bytes4(u32::from_be_bytes([0, *r, *g, *b]).to_le_bytes()));
         }
     }
     let dense = scan.points.iter().flatten().all(|v| v.is_finite());
     w.u8(u8::from(dense));
-    w.buf
+    w.into_bytes()
 }
 
 /// Encodes an `octomap_msgs/msg/Octomap` (ROS 2 branch): `header`, `binary`, `id` (the tree
@@ -212,12 +162,10 @@ pub fn encode_octomap(
     order: ByteOrder,
 ) -> Vec<u8> {
     let mut w = CdrWriter::new(order);
-    w.header(header);
+    w.ros_header(header);
     w.u8(u8::from(binary));
     w.string(id);
     w.f64(resolution_m);
-    let n = u32::try_from(data.len()).expect("Octomap data: over 4 GiB");
-    w.u32(n);
-    w.buf.extend_from_slice(data);
-    w.buf
+    w.bytes(data);
+    w.into_bytes()
 }

@@ -4,11 +4,11 @@
 /// Schema name of point clouds: ROS 2's `sensor_msgs/msg/PointCloud2`.
 pub const POINT_CLOUD2_SCHEMA: &str = "sensor_msgs/msg/PointCloud2";
 /// Schema name of stamped poses: ROS 2's `geometry_msgs/msg/PoseStamped`.
-pub const POSE_STAMPED_SCHEMA: &str = "geometry_msgs/msg/PoseStamped";
+pub const POSE_STAMPED_SCHEMA: &str = rovlink_ros2::msgs::POSE_STAMPED;
 /// Schema name of stamped transforms: ROS 2's `geometry_msgs/msg/TransformStamped`.
 pub const TRANSFORM_STAMPED_SCHEMA: &str = "geometry_msgs/msg/TransformStamped";
 /// Schema name of the `/tf` and `/tf_static` messages: ROS 2's `tf2_msgs/msg/TFMessage`.
-pub const TF_MESSAGE_SCHEMA: &str = "tf2_msgs/msg/TFMessage";
+pub const TF_MESSAGE_SCHEMA: &str = rovlink_ros2::msgs::TF_MESSAGE;
 /// Schema name of odometry: ROS 2's `nav_msgs/msg/Odometry`.
 pub const ODOMETRY_SCHEMA: &str = "nav_msgs/msg/Odometry";
 /// The schema name of OctoMap's map message (octomap_msgs, ROS 2 branch).

@@ -380,6 +380,34 @@ pub struct Args {
     )]
     pub foxglove_tls_key: Option<PathBuf>,
 
+    /// Publish the session on a ROS 2 graph (the operator end, or a simulation): the pose
+    /// (/rov/pose and /tf), goal, actual and commanded velocities, completed images
+    /// (/rov/image/compressed, PNG), a status with the link figures once a second
+    /// (/rov/status) and the session's log (/rosout). View-only: orders need --ros2-control.
+    #[arg(long, help_heading = "Field")]
+    pub ros2: bool,
+
+    /// With --ros2: the DDS domain [default: ROS_DOMAIN_ID, else 0].
+    #[arg(long, value_name = "ID", requires = "ros2", help_heading = "Field",
+          value_parser = value::count(0, rovlink_ros2::names::MAX_DOMAIN_ID as u64))]
+    pub ros2_domain: Option<u64>,
+
+    /// With --ros2: the namespace of the session's topics.
+    #[arg(
+        long,
+        value_name = "NS",
+        requires = "ros2",
+        default_value = "/rov",
+        help_heading = "Field"
+    )]
+    pub ros2_namespace: String,
+
+    /// With --ros2: also take orders from the graph: geometry_msgs/msg/Twist on NS/cmd_vel
+    /// (the joystick) and geometry_msgs/msg/PoseStamped on NS/goal_pose (a GoTo, frame ned).
+    /// Plain DDS authenticates nobody: any node on the domain can then drive the vehicle.
+    #[arg(long, requires = "ros2", help_heading = "Field")]
+    pub ros2_control: bool,
+
     /// Write a new control token for --foxglove-token-file (64 random hex characters) to FILE,
     /// mode 0600 (an existing file is never replaced), and exit, e.g.
     /// tdma-run --new-foxglove-token ~/.config/rovlink/foxglove.token

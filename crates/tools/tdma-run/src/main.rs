@@ -39,6 +39,14 @@ fn run(args: &Args) -> anyhow::Result<u8> {
         return setup::new_foxglove_token(path);
     }
     rovlink_cli::stop::install()?;
+    if args.ros2 && (args.scenario.is_some() || args.routes.is_some()) {
+        return Err(rovlink_base::UsageError(
+            "--ros2 publishes a single session (an operator end or a simulation): not with \
+             --scenario or --routes"
+                .into(),
+        )
+        .into());
+    }
     if let Some(path) = &args.scenario {
         return scenario_run::run(args, path);
     }

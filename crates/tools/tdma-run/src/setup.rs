@@ -81,6 +81,7 @@ pub(super) fn field_usage(args: &Args, role: Option<Role>) -> Result<()> {
             "the operator end",
         ),
         (operator_side, "--preview", args.preview, "the operator end"),
+        (operator_side, "--ros2", args.ros2, "the operator end"),
     ];
     for (applies, flag, given, end) in checks {
         if given && !applies {

@@ -86,6 +86,33 @@ pub fn run(args: &Args) -> Result<u8> {
         }
         None => None,
     };
+    let mut ros2 = match args.ros2 {
+        false => None,
+        true => {
+            let options = rovlink_field::ros2_session::Ros2Options {
+                domain: args.ros2_domain.map(|d| d as u16),
+                namespace: args.ros2_namespace.clone(),
+                control: args.ros2_control,
+            };
+            let (view, orders) = rovlink_field::ros2_session::start(&options)
+                .map_err(|e| rovlink_base::UsageError(format!("--ros2: {e}")))?;
+            let ns = &options.namespace;
+            if orders.control() {
+                say!(
+                    "ROS 2: the session on {ns}/* and /rosout; control on: {ns}/cmd_vel and \
+                     {ns}/goal_pose drive the vehicle, from any node on the domain (DDS \
+                     authenticates nobody)"
+                );
+                parts.orders.push(Box::new(orders));
+            } else {
+                say!(
+                    "ROS 2: the session on {ns}/* and /rosout, view-only (orders from the \
+                     graph need --ros2-control)"
+                );
+            }
+            Some(view)
+        }
+    };
     // Opened (aside) before the run: a metrics file that cannot be created fails now.
     let mut metrics_out = metrics_dest.map(|dest| dest.open()).transpose()?;
     let base_ns = if role.is_some() { wall_clock_ns() } else { 0 };
@@ -101,6 +128,9 @@ pub fn run(args: &Args) -> Result<u8> {
     observer.0.push(&mut recorder);
     observer.0.push(&mut stderr);
     if let Some(view) = live.as_mut() {
+        observer.0.push(view);
+    }
+    if let Some(view) = ros2.as_mut() {
         observer.0.push(view);
     }
     let (wall, mut done) = (std::time::Instant::now(), None);

@@ -1,0 +1,213 @@
+//! The messages a teleoperation session puts on a ROS 2 graph and takes from it, as CDR:
+//! poses, transforms, velocities, images, text and log lines out; velocities and goal poses in.
+//! (The map's and the bags' messages are `rovlink_scans::ros`'s.)
+
+use crate::cdr::{ByteOrder, CdrReader, CdrWriter};
+
+/// `geometry_msgs/msg/PoseStamped`.
+pub const POSE_STAMPED: &str = "geometry_msgs/msg/PoseStamped";
+/// `tf2_msgs/msg/TFMessage`.
+pub const TF_MESSAGE: &str = "tf2_msgs/msg/TFMessage";
+/// `geometry_msgs/msg/Twist`.
+pub const TWIST: &str = "geometry_msgs/msg/Twist";
+/// `geometry_msgs/msg/TwistStamped`.
+pub const TWIST_STAMPED: &str = "geometry_msgs/msg/TwistStamped";
+/// `sensor_msgs/msg/CompressedImage`.
+pub const COMPRESSED_IMAGE: &str = "sensor_msgs/msg/CompressedImage";
+/// `std_msgs/msg/String`.
+pub const STRING: &str = "std_msgs/msg/String";
+/// `rcl_interfaces/msg/Log`, what `/rosout` carries.
+pub const LOG: &str = "rcl_interfaces/msg/Log";
+
+/// `rcl_interfaces/msg/Log` levels.
+pub mod level {
+    /// DEBUG.
+    pub const DEBUG: u8 = 10;
+    /// INFO.
+    pub const INFO: u8 = 20;
+    /// WARN.
+    pub const WARN: u8 = 30;
+    /// ERROR.
+    pub const ERROR: u8 = 40;
+}
+
+/// A rigid transform: translation (m) and rotation as a quaternion x, y, z, w.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rigid {
+    /// Translation, m.
+    pub translation_m: [f64; 3],
+    /// Rotation x, y, z, w.
+    pub rotation_xyzw: [f64; 4],
+}
+
+fn rigid(w: &mut CdrWriter, r: &Rigid) {
+    for v in r.translation_m.into_iter().chain(r.rotation_xyzw) {
+        w.f64(v);
+    }
+}
+
+/// A `geometry_msgs/msg/PoseStamped`.
+pub fn pose_stamped(stamp_ns: i64, frame_id: &str, pose: &Rigid) -> Vec<u8> {
+    let mut w = CdrWriter::new(ByteOrder::Little);
+    w.header(stamp_ns, frame_id);
+    rigid(&mut w, pose);
+    w.into_bytes()
+}
+
+/// A `tf2_msgs/msg/TFMessage` of (parent, child, transform) links, all at `stamp_ns`.
+pub fn tf_message(stamp_ns: i64, links: &[(&str, &str, Rigid)]) -> Vec<u8> {
+    let mut w = CdrWriter::new(ByteOrder::Little);
+    w.u32(links.len() as u32);
+    for (parent, child, t) in links {
+        w.header(stamp_ns, parent);
+        w.string(child);
+        rigid(&mut w, t);
+    }
+    w.into_bytes()
+}
+
+/// A `geometry_msgs/msg/TwistStamped`: linear (m/s) and angular (rad/s) velocity.
+pub fn twist_stamped(
+    stamp_ns: i64,
+    frame_id: &str,
+    linear: [f64; 3],
+    angular: [f64; 3],
+) -> Vec<u8> {
+    let mut w = CdrWriter::new(ByteOrder::Little);
+    w.header(stamp_ns, frame_id);
+    for v in linear.into_iter().chain(angular) {
+        w.f64(v);
+    }
+    w.into_bytes()
+}
+
+/// A `geometry_msgs/msg/Twist`.
+pub fn twist(linear: [f64; 3], angular: [f64; 3]) -> Vec<u8> {
+    let mut w = CdrWriter::new(ByteOrder::Little);
+    for v in linear.into_iter().chain(angular) {
+        w.f64(v);
+    }
+    w.into_bytes()
+}
+
+/// A `sensor_msgs/msg/CompressedImage` (`format`: `png` or `jpeg`).
+pub fn compressed_image(stamp_ns: i64, frame_id: &str, format: &str, data: &[u8]) -> Vec<u8> {
+    let mut w = CdrWriter::new(ByteOrder::Little);
+    w.header(stamp_ns, frame_id);
+    w.string(format);
+    w.bytes(data);
+    w.into_bytes()
+}
+
+/// A `std_msgs/msg/String`.
+pub fn string(text: &str) -> Vec<u8> {
+    let mut w = CdrWriter::new(ByteOrder::Little);
+    w.string(text);
+    w.into_bytes()
+}
+
+/// An `rcl_interfaces/msg/Log` line from `name` at `level` ([`level`]).
+pub fn log(stamp_ns: i64, level: u8, name: &str, text: &str) -> Vec<u8> {
+    let mut w = CdrWriter::new(ByteOrder::Little);
+    w.time(stamp_ns);
+    w.u8(level);
+    w.string(name);
+    w.string(text);
+    w.string("");
+    w.string("");
+    w.u32(0);
+    w.into_bytes()
+}
+
+/// Reads a `geometry_msgs/msg/Twist`: linear and angular velocity, every number finite.
+pub fn decode_twist(message: &[u8]) -> Result<([f64; 3], [f64; 3]), String> {
+    let mut r = CdrReader::new(message, "Twist")?;
+    let mut v = [0.0; 6];
+    for (k, name) in [
+        "linear.x",
+        "linear.y",
+        "linear.z",
+        "angular.x",
+        "angular.y",
+        "angular.z",
+    ]
+    .iter()
+    .enumerate()
+    {
+        v[k] = r.f64(name)?;
+    }
+    Ok(([v[0], v[1], v[2]], [v[3], v[4], v[5]]))
+}
+
+/// Reads a `geometry_msgs/msg/PoseStamped`: stamp (ns), frame, and the pose, every number
+/// finite and the quaternion of unit length (tf2's tolerance, `|norm² - 1| <= 0.01`).
+pub fn decode_pose_stamped(message: &[u8]) -> Result<(i64, String, Rigid), String> {
+    let mut r = CdrReader::new(message, "PoseStamped")?;
+    let (stamp_ns, frame) = r.header()?;
+    let mut v = [0.0; 7];
+    for (k, name) in [
+        "pose.position.x",
+        "pose.position.y",
+        "pose.position.z",
+        "pose.orientation.x",
+        "pose.orientation.y",
+        "pose.orientation.z",
+        "pose.orientation.w",
+    ]
+    .iter()
+    .enumerate()
+    {
+        v[k] = r.f64(name)?;
+    }
+    let norm2 = v[3] * v[3] + v[4] * v[4] + v[5] * v[5] + v[6] * v[6];
+    if (norm2 - 1.0).abs() > 0.01 {
+        return Err(format!(
+            "PoseStamped: pose.orientation: expected a unit quaternion, found norm² {norm2}"
+        ));
+    }
+    Ok((
+        stamp_ns,
+        frame,
+        Rigid {
+            translation_m: [v[0], v[1], v[2]],
+            rotation_xyzw: [v[3], v[4], v[5], v[6]],
+        },
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn velocities_and_poses_read_back() {
+        let t = twist([0.5, -0.25, 0.0], [0.0, 0.0, 0.1]);
+        assert_eq!(
+            decode_twist(&t).unwrap(),
+            ([0.5, -0.25, 0.0], [0.0, 0.0, 0.1])
+        );
+        let pose = Rigid {
+            translation_m: [3.0, 1.0, 2.0],
+            rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
+        };
+        let m = pose_stamped(5, "ned", &pose);
+        assert_eq!(decode_pose_stamped(&m).unwrap(), (5, "ned".into(), pose));
+        let bad = Rigid {
+            rotation_xyzw: [0.0, 0.0, 0.0, 2.0],
+            ..pose
+        };
+        assert!(decode_pose_stamped(&pose_stamped(5, "ned", &bad)).is_err());
+        for cut in 0..t.len() {
+            assert!(decode_twist(&t[..cut]).is_err());
+        }
+    }
+
+    #[test]
+    fn a_log_line_is_laid_out_as_rcl_interfaces_log() {
+        let m = log(1_000_000_001, level::WARN, "tdma_run", "x");
+        // stamp (8), level (1), pad (3), name, msg, file, function, line.
+        assert_eq!(&m[4..12], &[1, 0, 0, 0, 1, 0, 0, 0]);
+        assert_eq!(m[12], 30);
+        assert_eq!(&m[16..20], &[9, 0, 0, 0]);
+    }
+}
