@@ -498,3 +498,88 @@ fn without_control_the_graph_gives_no_order_and_it_is_said_once() {
         "the Twist was obeyed: {r}"
     );
 }
+
+/// The first picture file that appears in `dir`.
+fn first_picture(dir: &Path) -> PathBuf {
+    let t0 = Instant::now();
+    loop {
+        let found = std::fs::read_dir(dir).ok().and_then(|entries| {
+            entries
+                .flatten()
+                .map(|e| e.path())
+                .find(|p| p.extension().is_some_and(|x| x == "png"))
+        });
+        if let Some(p) = found {
+            return p;
+        }
+        assert!(
+            t0.elapsed() < DEADLINE,
+            "no picture in {dir:?} in {DEADLINE:?}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn the_rovs_camera_can_be_a_ros2_image_topic_raw_or_compressed() {
+    for topic in ["/cam/image_raw", "/cam/image_raw/compressed"] {
+        let dir = tempfile::tempdir().unwrap();
+        let rx = dir.path().join("rx");
+        let domain = domain();
+        let mut camera = Command::new("python3")
+            .args([PEER, "--domain", &domain, "camera", "--topic", topic])
+            .args(["--seconds", "200"])
+            .stdout(Stdio::null())
+            .spawn()
+            .expect("python3 runs the Cyclone peer");
+        let (_link, a, b) = link_sim_pty(&crate::common::TEST_S100);
+        let camera_flag = format!("ros2:{topic}");
+        let mut rov = Watched::spawn_exe(
+            TDMA_RUN,
+            &[
+                "--role",
+                "rov",
+                "--port",
+                &b,
+                "--duration",
+                "600",
+                "--image-size",
+                "600",
+                "--camera",
+                &camera_flag,
+                "--ros2-domain",
+                &domain,
+            ],
+        );
+        rov.wait_for("ROV: answering every slot");
+        let mut op = Watched::spawn_exe(
+            TDMA_RUN,
+            &[
+                "--role",
+                "operator",
+                "--port",
+                &a,
+                "--ipg",
+                "150",
+                "--duration",
+                "600",
+                "--image-size",
+                "600",
+                "--images-out",
+                s(&rx),
+            ],
+        );
+        op.wait_for("operator: IPG");
+        let picture = first_picture(&rx);
+        op.signal(nix::sys::signal::Signal::SIGTERM);
+        let _ = op.finish();
+        rov.signal(nix::sys::signal::Signal::SIGTERM);
+        let _ = rov.finish();
+        let _ = camera.kill();
+        let _ = camera.wait();
+        let img = image::open(&picture).unwrap().to_luma8();
+        assert_eq!(img.dimensions(), (64, 48), "{topic}");
+        let (dark, bright) = (img.get_pixel(8, 24)[0], img.get_pixel(56, 24)[0]);
+        assert!(dark < 100 && bright > 150, "{topic}: {dark} {bright}");
+    }
+}

@@ -11,6 +11,9 @@ Subcommands (each prints one JSON line when it ends; progress lines go to stderr
   session         listens to a tdma-run session on the graph (pose, tf, velocity, image,
                   status, /rosout) for --seconds, publishing a Twist (--twist) and a goal pose
                   (--goal) on the way, and reports what it heard.
+  probe           round trips through crates/ros2/examples/ros2_echo.rs (scripts/ros2-measure.sh):
+                  discovery time and the round trip of clouds of --sizes bytes, or poses.
+  camera          publishes camera frames (raw rgb8, or PNG on a /compressed topic) at 2 Hz.
   latched TOPIC   joins late and takes the last octomap_msgs/msg/Octomap (or PointCloud2 with
                   --type cloud) of TOPIC (reliable, transient-local, keep-last 1), writes its
                   fields to --out (JSON) and its data to --out + ".data"; with --expect-bytes
@@ -208,6 +211,18 @@ class Log(IdlStruct, typename=dds("rcl_interfaces", "Log")):
     line: t.uint32
 
 
+@final
+@dataclass
+class Image(IdlStruct, typename=dds("sensor_msgs", "Image")):
+    header: Header
+    height: t.uint32
+    width: t.uint32
+    encoding: str
+    is_bigendian: t.uint8
+    step: t.uint32
+    data: t.sequence[t.uint8]
+
+
 TYPES = {
     "sensor_msgs/msg/PointCloud2": PointCloud2,
     "tf2_msgs/msg/TFMessage": TFMessage,
@@ -391,6 +406,87 @@ def session(args):
     return 0
 
 
+def probe(args):
+    """Round trips through an echo (crates/ros2/examples/ros2_echo.rs) on /probe/in ->
+    /probe/out: when both our endpoints had matched the echo's (wall clock, for the discovery
+    time of an echo started after this), then
+    --count messages of each size, one at a time; reports the round trips' median and max."""
+    import statistics
+    dp = DomainParticipant(args.domain)
+    q = reliable(depth=4)
+    kind = PointCloud2 if args.type == "cloud" else PoseStamped
+    w = DataWriter(dp, Topic(dp, "rt/probe/in", kind, qos=q), qos=q)
+    r = DataReader(dp, Topic(dp, "rt/probe/out", kind, qos=q), qos=q)
+    t0 = time.monotonic()
+    print("peer: waiting for the echo", file=sys.stderr, flush=True)
+    while not (w.get_matched_subscriptions() and r.get_matched_publications()):
+        if time.monotonic() - t0 > args.timeout:
+            say(ok=False, why="the echo was not discovered")
+            return 1
+        time.sleep(0.002)
+    matched_unix_s = time.time()
+    results = {}
+    for size in args.sizes:
+        rtts = []
+        for k in range(args.count):
+            if kind is PointCloud2:
+                msg = PointCloud2(Header(Time(k, 0), "probe"), 1, size // 16,
+                                  [PointField("x", 0, 7, 1)], False, 16, size, bytes(size), True)
+            else:
+                msg = PoseStamped(Header(Time(k, 0), "probe"),
+                                  Pose(Point(1.0, 2.0, 3.0), Quaternion(0.0, 0.0, 0.0, 1.0)))
+            t = time.monotonic()
+            w.write(msg)
+            got = None
+            while got is None and time.monotonic() - t < 60:
+                for m in r.take(N=4):
+                    if m.header.stamp.sec == k:
+                        got = time.monotonic() - t
+                if got is None:
+                    time.sleep(0.0005)
+            if got is None:
+                say(ok=False, why="message %d of %d B not echoed" % (k, size))
+                return 1
+            rtts.append(got)
+        results[str(size)] = {"rtt_median_s": statistics.median(rtts), "rtt_max_s": max(rtts)}
+    say(ok=True, matched_unix_s=matched_unix_s, results=results)
+    return 0
+
+
+def camera(args):
+    """Publishes camera frames on --topic at 2 Hz for --seconds (sensor-data QoS: best effort,
+    keep-last 1): a --width x --height picture, dark on the left half and bright on the
+    right, as rgb8 (Image) or PNG (CompressedImage, for a topic ending in /compressed)."""
+    import io
+    from PIL import Image as PilImage
+    dp = DomainParticipant(args.domain)
+    q = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(1))
+    w, h = args.width, args.height
+    rgb = bytearray()
+    for _y in range(h):
+        for x in range(w):
+            rgb += bytes([40, 40, 40]) if x < w // 2 else bytes([220, 200, 180])
+    compressed = args.topic.endswith("/compressed")
+    kind = CompressedImage if compressed else Image
+    writer = DataWriter(dp, Topic(dp, "rt" + args.topic, kind, qos=q), qos=q)
+    if compressed:
+        buf = io.BytesIO()
+        PilImage.frombytes("RGB", (w, h), bytes(rgb)).save(buf, format="PNG")
+        png = buf.getvalue()
+    t0 = time.monotonic()
+    frames = 0
+    while time.monotonic() - t0 < args.seconds:
+        stamp = Header(Time(frames, 0), "camera")
+        if compressed:
+            writer.write(CompressedImage(stamp, "png", png))
+        else:
+            writer.write(Image(stamp, h, w, "rgb8", 0, 3 * w, bytes(rgb)))
+        frames += 1
+        time.sleep(0.5)
+    say(ok=True, frames=frames)
+    return 0
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--domain", type=int, required=True)
@@ -419,8 +515,19 @@ def main():
                    help="end once a pose within M metres of --goal comes (else at --seconds)")
     c.add_argument("--poses-after-goal", type=int, metavar="N",
                    help="end once N poses came after the goal was sent")
+    d = sub.add_parser("probe")
+    d.add_argument("--type", choices=["cloud", "pose"], default="cloud")
+    d.add_argument("--sizes", type=lambda v: [int(x) for x in v.split(",")], default=[0])
+    d.add_argument("--count", type=int, default=5)
+    e = sub.add_parser("camera")
+    e.add_argument("--topic", required=True)
+    e.add_argument("--width", type=int, default=64)
+    e.add_argument("--height", type=int, default=48)
+    e.add_argument("--seconds", type=float, default=60)
     args = p.parse_args()
-    return {"play": play, "latched": latched, "session": session}[args.cmd](args)
+    commands = {"play": play, "latched": latched, "session": session, "probe": probe,
+                "camera": camera}
+    return commands[args.cmd](args)
 
 
 if __name__ == "__main__":

@@ -6,7 +6,8 @@
 //! - [`mcap_log`] and [`net_mcap`]: a session's MCAP log, single vehicle and network;
 //! - [`mavlink`]: the ROV end driving an ArduSub autopilot over MAVLink 2;
 //! - [`console`]: the operator's orders as JSON Lines from a console or a FIFO;
-//! - [`ros2_session`]: the session on a ROS 2 graph (published; orders with control).
+//! - [`ros2_session`]: the session on a ROS 2 graph (published; orders with control);
+//! - [`ros2_camera`]: the ROV's camera from a ROS 2 image topic.
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
@@ -18,4 +19,5 @@ mod foxglove_server;
 pub mod mavlink;
 pub mod mcap_log;
 pub mod net_mcap;
+pub mod ros2_camera;
 pub mod ros2_session;

@@ -294,7 +294,7 @@ impl NewestInDir {
 /// A picture from a camera's bytes, `name` naming them: a JPEG must be whole (end with its EOI
 /// marker), since the JPEG decoder makes a picture of any prefix, grey where bytes are missing
 /// (a frame still being written, a command cut short). Other formats' decoders refuse a prefix.
-fn camera_picture(name: &str, bytes: &[u8]) -> Result<debt::Image, String> {
+pub fn camera_picture(name: &str, bytes: &[u8]) -> Result<debt::Image, String> {
     let jpeg = bytes.starts_with(&[0xFF, 0xD8]);
     if jpeg && !bytes.trim_ascii_end().ends_with(&[0xFF, 0xD9]) {
         return Err(format!(

@@ -187,6 +187,27 @@ impl<'a> CdrReader<'a> {
         }
     }
 
+    /// A `uint8`, `bool` or `char`.
+    pub fn u8(&mut self, field: &str) -> Result<u8, String> {
+        self.take::<1>(field).map(|b| b[0])
+    }
+
+    /// A `uint8[]` sequence of at most `max` bytes (a count beyond what is left, or beyond
+    /// `max`, is refused before anything is copied).
+    pub fn bytes(&mut self, field: &str, max: usize) -> Result<&'a [u8], String> {
+        let n = self.u32(field)? as usize;
+        let left = self.data.len().saturating_sub(self.pos);
+        if n > left || n > max {
+            return Err(format!(
+                "{}: {field}: {n} bytes claimed, {left} left (at most {max} taken)",
+                self.what
+            ));
+        }
+        let b = self.data.get(self.pos..self.pos + n).unwrap_or_default();
+        self.pos += n;
+        Ok(b)
+    }
+
     /// A `uint32`.
     pub fn u32(&mut self, field: &str) -> Result<u32, String> {
         self.take::<4>(field).map(u32::from_le_bytes)

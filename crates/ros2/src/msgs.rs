@@ -14,6 +14,8 @@ pub const TWIST: &str = "geometry_msgs/msg/Twist";
 pub const TWIST_STAMPED: &str = "geometry_msgs/msg/TwistStamped";
 /// `sensor_msgs/msg/CompressedImage`.
 pub const COMPRESSED_IMAGE: &str = "sensor_msgs/msg/CompressedImage";
+/// `sensor_msgs/msg/Image`.
+pub const IMAGE: &str = "sensor_msgs/msg/Image";
 /// `std_msgs/msg/String`.
 pub const STRING: &str = "std_msgs/msg/String";
 /// `rcl_interfaces/msg/Log`, what `/rosout` carries.
@@ -175,6 +177,60 @@ pub fn decode_pose_stamped(message: &[u8]) -> Result<(i64, String, Rigid), Strin
     ))
 }
 
+/// A `sensor_msgs/msg/Image` as sent: its size, encoding (`rgb8`, `mono8`, ...), row step and
+/// pixel bytes.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RawImage<'a> {
+    /// Pixels across.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// The pixel encoding, as ROS names it.
+    pub encoding: String,
+    /// Bytes per row.
+    pub step: usize,
+    /// The rows.
+    pub data: &'a [u8],
+}
+
+/// Reads a `sensor_msgs/msg/Image` of at most `max_bytes` of pixels; the rows must fit the
+/// data (`step * height <= data`). Never panics.
+pub fn decode_image(message: &[u8], max_bytes: usize) -> Result<RawImage<'_>, String> {
+    let mut r = CdrReader::new(message, "Image")?;
+    r.header()?;
+    let height = r.u32("height")? as usize;
+    let width = r.u32("width")? as usize;
+    let encoding = r.string("encoding")?;
+    r.u8("is_bigendian")?;
+    let step = r.u32("step")? as usize;
+    let data = r.bytes("data", max_bytes)?;
+    if step.checked_mul(height).is_none_or(|n| n > data.len()) {
+        return Err(format!(
+            "Image: {height} rows of {step} bytes do not fit its {} bytes",
+            data.len()
+        ));
+    }
+    Ok(RawImage {
+        width,
+        height,
+        encoding,
+        step,
+        data,
+    })
+}
+
+/// Reads a `sensor_msgs/msg/CompressedImage` of at most `max_bytes`: its format and bytes.
+pub fn decode_compressed_image(
+    message: &[u8],
+    max_bytes: usize,
+) -> Result<(String, &[u8]), String> {
+    let mut r = CdrReader::new(message, "CompressedImage")?;
+    r.header()?;
+    let format = r.string("format")?;
+    let data = r.bytes("data", max_bytes)?;
+    Ok((format, data))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -199,6 +255,33 @@ mod tests {
         assert!(decode_pose_stamped(&pose_stamped(5, "ned", &bad)).is_err());
         for cut in 0..t.len() {
             assert!(decode_twist(&t[..cut]).is_err());
+        }
+    }
+
+    #[test]
+    fn images_read_back_and_lies_are_refused() {
+        let m = compressed_image(1, "camera", "png", &[1, 2, 3]);
+        assert_eq!(
+            decode_compressed_image(&m, 10).unwrap(),
+            ("png".into(), &[1u8, 2, 3][..])
+        );
+        assert!(decode_compressed_image(&m, 2).is_err());
+        let mut w = CdrWriter::new(ByteOrder::Little);
+        w.header(0, "cam");
+        w.u32(2); // height
+        w.u32(2); // width
+        w.string("mono8");
+        w.u8(0);
+        w.u32(2);
+        w.bytes(&[1, 2, 3, 4]);
+        let m = w.into_bytes();
+        let img = decode_image(&m, 100).unwrap();
+        assert_eq!(
+            (img.width, img.height, img.step, img.data),
+            (2, 2, 2, &[1u8, 2, 3, 4][..])
+        );
+        for cut in 0..m.len() {
+            assert!(decode_image(&m[..cut], 100).is_err());
         }
     }
 

@@ -30,6 +30,8 @@ Examples:
   octo-delta map survey.graph --follow --port /dev/ttyUSB1 --ot map.ot   on the vehicle, live
   octo-delta view --port /dev/ttyUSB0 --foxglove 127.0.0.1:8765 --orders requests -o view.ot
   octo-delta synth --pace 0.5 -o live.graph                a survey as it is recorded, 2 scans/s
+  octo-delta map ros2:/points --fixed-frame map --port /dev/ttyUSB1   clouds and TF from ROS 2
+  octo-delta view --port /dev/ttyUSB0 --ros2 -o view.ot    the view on ROS 2 too (RViz: Octomap)
 
 Any output may be - (standard output), one per run. SIGINT, SIGTERM or SIGHUP stop a build
 after its current scan: the stream holds every whole message so far, --bt/--ot the map so far;

@@ -30,11 +30,12 @@ Real time, one end per process (through link-sim standing in for the modems):
 Real modems: --port /dev/ttyUSB0 (transparent, e.g. WFS S100), --dialect evologics with
 --port tcp:192.168.0.209:9200, or --port udp:BIND=PEER. Start the ROV end first.
 
-In the field (docs/tdma-mavlink.md, docs/tdma-console.md, docs/tdma-foxglove.md):
+In the field (docs/tdma-mavlink.md, docs/tdma-console.md, docs/tdma-foxglove.md, docs/ros2.md):
   tdma-run --role rov --port /dev/ttyUSB0 --vehicle mavlink:udpin:127.0.0.1:14550 --camera cam/
   mkfifo -m 600 orders; tdma-run --role operator --port /dev/ttyUSB0 --orders orders --telemetry - &
   echo '{\"type\":\"goto\",\"x_cm\":300,\"y_cm\":0,\"z_cm\":50,\"heading_deg\":90}' > orders
   tdma-run --role operator --port /dev/ttyUSB0 --foxglove 127.0.0.1:8765 --images-out rx/ --preview
+  tdma-run --role operator --port /dev/ttyUSB0 --ros2 --ros2-control   on the ROS 2 graph, driven from it
 With keys (docs/threat-model.md): rcp-pack --new-key keys (copy it to the vehicle), then
   tdma-run --role rov --port $B --key-file keys --encrypt &
   tdma-run --role operator --port $A --key-file keys --encrypt
@@ -273,7 +274,10 @@ pub struct Args {
     #[arg(long, value_name = "FILE", help_heading = "Field")]
     pub mavlink_key_file: Option<PathBuf>,
 
-    /// Camera: the newest image file in DIR at each capture.
+    /// Camera: the newest image file in DIR at each capture; or ros2:TOPIC, the newest frame
+    /// of a ROS 2 image topic (sensor_msgs/msg/Image rgb8, bgr8, rgba8, bgra8 or mono8; a
+    /// topic ending in /compressed: sensor_msgs/msg/CompressedImage, JPEG or PNG), e.g.
+    /// --camera ros2:/camera/image_raw/compressed (domain: --ros2-domain).
     #[arg(long, value_name = "DIR", conflicts_with_all = ["images", "camera_cmd"],
           help_heading = "Field")]
     pub camera: Option<PathBuf>,
@@ -387,8 +391,8 @@ pub struct Args {
     #[arg(long, help_heading = "Field")]
     pub ros2: bool,
 
-    /// With --ros2: the DDS domain [default: ROS_DOMAIN_ID, else 0].
-    #[arg(long, value_name = "ID", requires = "ros2", help_heading = "Field",
+    /// With --ros2 or --camera ros2:TOPIC: the DDS domain [default: ROS_DOMAIN_ID, else 0].
+    #[arg(long, value_name = "ID", help_heading = "Field",
           value_parser = value::count(0, rovlink_ros2::names::MAX_DOMAIN_ID as u64))]
     pub ros2_domain: Option<u64>,
 

@@ -125,7 +125,16 @@ pub(super) fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
         parts.drive = Box::new(drive);
     }
     if let Some(dir) = &args.camera {
-        parts.camera = Box::new(camera::newest_in_dir(dir)?);
+        match dir.to_str().and_then(|s| s.strip_prefix("ros2:")) {
+            Some(topic) => {
+                use rovlink_field::ros2_camera::{Frames, ros2_camera};
+                let frames = Frames::of_topic(topic);
+                let cam = ros2_camera(topic, frames, args.ros2_domain.map(|d| d as u16))
+                    .map_err(|e| rovlink_base::UsageError(format!("--camera ros2:{topic}: {e}")))?;
+                parts.camera = Box::new(cam);
+            }
+            None => parts.camera = Box::new(camera::newest_in_dir(dir)?),
+        }
     }
     if let Some(command) = &args.camera_cmd {
         // In virtual time a capture waits for the command's run (the session's time stands
