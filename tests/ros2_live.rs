@@ -363,6 +363,24 @@ const TDMA_RUN: &str = env!("TOOL_EXE_tdma-run");
 /// tests listen (0.25 m in 8 s), and less far than the tests' Twist takes it (about 1.2 m).
 const MOVED_M: f64 = 0.6;
 
+/// The ROV end in real time on `port` (`extra`: its camera or vehicle flags), once it listens.
+fn rov_end(port: &str, image_size: &str, extra: &[&str]) -> Watched {
+    let mut args = vec![
+        "--role",
+        "rov",
+        "--port",
+        port,
+        "--duration",
+        "600",
+        "--image-size",
+        image_size,
+    ];
+    args.extend_from_slice(extra);
+    let mut rov = Watched::spawn_exe(TDMA_RUN, &args);
+    rov.wait_for("ROV: answering every slot");
+    rov
+}
+
 /// The operator and the ROV in real time over `link-sim --pty`, the operator on the graph
 /// (`extra` its ROS 2 flags); the peer's `session` report with `peer` flags. Returns the report
 /// and what the operator said.
@@ -372,20 +390,7 @@ fn session_on_the_graph(
     peer: &[&str],
 ) -> (serde_json::Value, String) {
     let (_link, a, b) = link_sim_pty(&crate::common::TEST_S100);
-    let mut rov = Watched::spawn_exe(
-        TDMA_RUN,
-        &[
-            "--role",
-            "rov",
-            "--port",
-            &b,
-            "--duration",
-            "600",
-            "--image-size",
-            "400",
-        ],
-    );
-    rov.wait_for("ROV: answering every slot");
+    let rov = rov_end(&b, "400", &[]);
     let mut args = vec![
         "--role",
         "operator",
@@ -534,24 +539,11 @@ fn the_rovs_camera_can_be_a_ros2_image_topic_raw_or_compressed() {
             .expect("python3 runs the Cyclone peer");
         let (_link, a, b) = link_sim_pty(&crate::common::TEST_S100);
         let camera_flag = format!("ros2:{topic}");
-        let mut rov = Watched::spawn_exe(
-            TDMA_RUN,
-            &[
-                "--role",
-                "rov",
-                "--port",
-                &b,
-                "--duration",
-                "600",
-                "--image-size",
-                "600",
-                "--camera",
-                &camera_flag,
-                "--ros2-domain",
-                &domain,
-            ],
+        let rov = rov_end(
+            &b,
+            "600",
+            &["--camera", &camera_flag, "--ros2-domain", &domain],
         );
-        rov.wait_for("ROV: answering every slot");
         let mut op = Watched::spawn_exe(
             TDMA_RUN,
             &[
@@ -582,4 +574,67 @@ fn the_rovs_camera_can_be_a_ros2_image_topic_raw_or_compressed() {
         let (dark, bright) = (img.get_pixel(8, 24)[0], img.get_pixel(56, 24)[0]);
         assert!(dark < 100 && bright > 150, "{topic}: {dark} {bright}");
     }
+}
+
+#[test]
+fn a_vehicle_on_ros2_is_armed_driven_by_the_sticks_and_sent_to_a_goal_and_its_odometry_is_the_status()
+ {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let domain = domain();
+    let script = d.join("script.csv");
+    std::fs::write(&script, "t_s,vx,vy,vz,vyaw\n0,50,0,0,0\n3,0,0,0,0\n").unwrap();
+    let waypoints = d.join("wp.csv");
+    std::fs::write(&waypoints, "t_s,x_m,y_m,z_m,heading_deg\n5,3,1,0.5,90\n").unwrap();
+    // The stand-in ends once it has held the goal for a second.
+    let vehicle = Command::new("python3")
+        .args([PEER, "--domain", &domain, "vehicle", "--seconds", "200"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("python3 runs the Cyclone peer");
+    let (_link, a, b) = link_sim_pty(&crate::common::TEST_S100);
+    let rov = rov_end(&b, "400", &["--vehicle", "ros2", "--ros2-domain", &domain]);
+    let mut op = Watched::spawn_exe_both(
+        TDMA_RUN,
+        &[
+            "--role",
+            "operator",
+            "--port",
+            &a,
+            "--ipg",
+            "150",
+            "--duration",
+            "600",
+            "--image-size",
+            "400",
+            "--script",
+            s(&script),
+            "--waypoints",
+            s(&waypoints),
+            "--telemetry",
+            "-",
+        ],
+    );
+    let out = vehicle.wait_with_output().unwrap();
+    // The operator hears the goal reached in a status: north 3, east 1, down 0.5, heading 90.
+    op.wait_for(r#""x_cm":300,"y_cm":100,"z_cm":50,"roll_deg":0,"pitch_deg":0,"yaw_deg":90"#);
+    op.signal(nix::sys::signal::Signal::SIGTERM);
+    let (_, op_said) = op.finish();
+    rov.signal(nix::sys::signal::Signal::SIGTERM);
+    let (_, rov_said) = rov.finish();
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(r["ok"], true, "{r} {rov_said} {op_said}");
+    assert_eq!(r["armed_seen"], true, "{r}");
+    // The sticks at 50 % went out as a Twist of 0.5 (full = 1).
+    let x = r["max_twist_x"].as_f64().unwrap();
+    assert!((x - 0.5).abs() < 0.02, "{r}");
+    // The GoTo north 3, east 1, down 0.5, heading east went out in ENU: east 1, north 3, up
+    // -0.5, yaw 0; the vehicle ended there.
+    assert_eq!(
+        r["goals"][0],
+        serde_json::json!([1.0, 3.0, -0.5, 0.0]),
+        "{r}"
+    );
+    assert_eq!(r["final"], serde_json::json!([1.0, 3.0, -0.5]), "{r}");
+    assert!(rov_said.contains("vehicle on ROS 2"), "{rov_said}");
 }

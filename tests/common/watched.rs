@@ -25,23 +25,41 @@ impl Watched {
         Watched::spawn_exe(OCTO, args)
     }
 
-    /// Starts the program `exe` with `args`.
+    /// Starts the program `exe` with `args`; its standard error is watched.
     pub fn spawn_exe(exe: &str, args: &[&str]) -> Watched {
+        Watched::start(exe, args, false)
+    }
+
+    /// Starts the program `exe` with `args`; its standard output and error are watched.
+    pub fn spawn_exe_both(exe: &str, args: &[&str]) -> Watched {
+        Watched::start(exe, args, true)
+    }
+
+    fn start(exe: &str, args: &[&str], stdout: bool) -> Watched {
         let mut child = Command::new(exe)
             .args(args)
-            .stdout(Stdio::null())
+            .stdout(if stdout {
+                Stdio::piped()
+            } else {
+                Stdio::null()
+            })
             .stderr(Stdio::piped())
             .spawn()
             .unwrap();
-        let err = child.stderr.take().unwrap();
         let (tx, lines) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in std::io::BufReader::new(err).lines().map_while(Result::ok) {
-                if tx.send(line).is_err() {
-                    break;
+        let follow = |tx: mpsc::Sender<String>, r: Box<dyn std::io::Read + Send>| {
+            std::thread::spawn(move || {
+                for line in std::io::BufReader::new(r).lines().map_while(Result::ok) {
+                    if tx.send(line).is_err() {
+                        break;
+                    }
                 }
-            }
-        });
+            });
+        };
+        if let Some(out) = child.stdout.take() {
+            follow(tx.clone(), Box::new(out));
+        }
+        follow(tx, Box::new(child.stderr.take().unwrap()));
         Watched {
             child: Reaped(child),
             lines,

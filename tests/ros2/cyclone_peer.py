@@ -14,6 +14,8 @@ Subcommands (each prints one JSON line when it ends; progress lines go to stderr
   probe           round trips through crates/ros2/examples/ros2_echo.rs (scripts/ros2-measure.sh):
                   discovery time and the round trip of clouds of --sizes bytes, or poses.
   camera          publishes camera frames (raw rgb8, or PNG on a /compressed topic) at 2 Hz.
+  vehicle         a stand-in vehicle whose stack speaks ROS 2 (cmd_vel, goal_pose, arm in; odom
+                  out), for tdma-run --vehicle ros2.
   latched TOPIC   joins late and takes the last octomap_msgs/msg/Octomap (or PointCloud2 with
                   --type cloud) of TOPIC (reliable, transient-local, keep-last 1), writes its
                   fields to --out (JSON) and its data to --out + ".data"; with --expect-bytes
@@ -221,6 +223,35 @@ class Image(IdlStruct, typename=dds("sensor_msgs", "Image")):
     is_bigendian: t.uint8
     step: t.uint32
     data: t.sequence[t.uint8]
+
+
+@final
+@dataclass
+class Bool(IdlStruct, typename=dds("std_msgs", "Bool")):
+    data: bool
+
+
+@final
+@dataclass
+class PoseWithCovariance(IdlStruct, typename=dds("geometry_msgs", "PoseWithCovariance")):
+    pose: Pose
+    covariance: t.array[t.float64, 36]
+
+
+@final
+@dataclass
+class TwistWithCovariance(IdlStruct, typename=dds("geometry_msgs", "TwistWithCovariance")):
+    twist: Twist
+    covariance: t.array[t.float64, 36]
+
+
+@final
+@dataclass
+class Odometry(IdlStruct, typename=dds("nav_msgs", "Odometry")):
+    header: Header
+    child_frame_id: str
+    pose: PoseWithCovariance
+    twist: TwistWithCovariance
 
 
 TYPES = {
@@ -487,6 +518,74 @@ def camera(args):
     return 0
 
 
+def vehicle(args):
+    """A stand-in for a vehicle whose stack speaks ROS 2 (REP 103: odom east-north-up, body
+    forward-left-up): armed by NS/arm, it moves at NS/cmd_vel x 0.5 m/s (and 0.5 rad/s) or
+    straight to NS/goal_pose at 0.5 m/s, and publishes NS/odom at 20 Hz. Ends once it has held
+    a goal for 1 s (or at --seconds) and reports what it was told and where it ended."""
+    import math
+    dp = DomainParticipant(args.domain)
+    ns = args.namespace
+    q = reliable(depth=10)
+    latched_q = reliable(transient=True, depth=1)
+    twist_r = DataReader(dp, Topic(dp, "rt" + ns + "/cmd_vel", Twist, qos=q), qos=q)
+    goal_r = DataReader(dp, Topic(dp, "rt" + ns + "/goal_pose", PoseStamped, qos=latched_q), qos=latched_q)
+    arm_r = DataReader(dp, Topic(dp, "rt" + ns + "/arm", Bool, qos=latched_q), qos=latched_q)
+    odom_w = DataWriter(dp, Topic(dp, "rt" + ns + "/odom", Odometry, qos=q), qos=q)
+    pos = [0.0, 0.0, 0.0]
+    yaw = math.pi / 2  # facing north
+    armed = False
+    armed_seen = False
+    twist = (0.0, 0.0, 0.0, 0.0)
+    max_twist_x = 0.0
+    goals = []
+    goal = None
+    held = 0.0
+    dt = 0.05
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < args.seconds:
+        for m in arm_r.take(N=16):
+            armed = bool(m.data)
+            armed_seen = armed_seen or armed
+        for m in twist_r.take(N=64):
+            twist = (m.linear.x, m.linear.y, m.linear.z, m.angular.z)
+            max_twist_x = max(max_twist_x, m.linear.x)
+            if any(abs(v) > 0 for v in twist):
+                goal = None
+        for m in goal_r.take(N=16):
+            p, o = m.pose.position, m.pose.orientation
+            goal = (p.x, p.y, p.z, 2 * math.atan2(o.z, o.w))
+            goals.append([round(v, 3) for v in goal])
+        vel = [0.0, 0.0, 0.0]
+        wz = 0.0
+        if armed and goal is not None:
+            d = [goal[k] - pos[k] for k in range(3)]
+            dist = math.sqrt(sum(v * v for v in d))
+            step = min(dist, 0.5 * dt)
+            if dist > 1e-9:
+                pos = [pos[k] + d[k] / dist * step for k in range(3)]
+            yaw = goal[3]
+            if dist < 0.05:
+                held += dt
+                if held >= 1.0:
+                    break
+        elif armed:
+            fx, fy, fz, fw = twist
+            c, sn = math.cos(yaw), math.sin(yaw)
+            vel = [0.5 * (fx * c - fy * sn), 0.5 * (fx * sn + fy * c), 0.5 * fz]
+            wz = 0.5 * fw
+            pos = [pos[k] + vel[k] * dt for k in range(3)]
+            yaw += wz * dt
+        odom_w.write(Odometry(
+            Header(Time(int(time.time()), 0), "odom"), "base_link",
+            PoseWithCovariance(Pose(Point(*pos), Quaternion(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))), [0.0] * 36),
+            TwistWithCovariance(Twist(Vector3(0.5 * twist[0] if armed else 0.0, 0.0, 0.0), Vector3(0.0, 0.0, wz)), [0.0] * 36)))
+        time.sleep(dt)
+    say(ok=held >= 1.0, armed_seen=armed_seen, max_twist_x=max_twist_x, goals=goals,
+        final=[round(v, 3) for v in pos], yaw=round(yaw, 3))
+    return 0
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--domain", type=int, required=True)
@@ -524,9 +623,12 @@ def main():
     e.add_argument("--width", type=int, default=64)
     e.add_argument("--height", type=int, default=48)
     e.add_argument("--seconds", type=float, default=60)
+    f = sub.add_parser("vehicle")
+    f.add_argument("--namespace", default="/rov")
+    f.add_argument("--seconds", type=float, default=120)
     args = p.parse_args()
     commands = {"play": play, "latched": latched, "session": session, "probe": probe,
-                "camera": camera}
+                "camera": camera, "vehicle": vehicle}
     return commands[args.cmd](args)
 
 

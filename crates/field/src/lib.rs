@@ -7,7 +7,8 @@
 //! - [`mavlink`]: the ROV end driving an ArduSub autopilot over MAVLink 2;
 //! - [`console`]: the operator's orders as JSON Lines from a console or a FIFO;
 //! - [`ros2_session`]: the session on a ROS 2 graph (published; orders with control);
-//! - [`ros2_camera`]: the ROV's camera from a ROS 2 image topic.
+//! - [`ros2_camera`]: the ROV's camera from a ROS 2 image topic;
+//! - [`ros2_vehicle`]: the ROV end driving a vehicle whose stack speaks ROS 2.
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
@@ -21,3 +22,4 @@ pub mod mcap_log;
 pub mod net_mcap;
 pub mod ros2_camera;
 pub mod ros2_session;
+pub mod ros2_vehicle;

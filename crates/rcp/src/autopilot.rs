@@ -64,6 +64,24 @@ pub struct DriveState {
 }
 
 impl DriveState {
+    /// A vehicle not heard yet: at the origin, heading north, still, disarmed, in manual,
+    /// unresponsive, without a position, for `why`.
+    pub fn unheard(why: Why) -> DriveState {
+        DriveState {
+            position_m: [0.0; 3],
+            heading_deg: 0.0,
+            roll_deg: 0.0,
+            pitch_deg: 0.0,
+            velocity: [0.0; 4],
+            commanded_velocity: [0.0; 4],
+            armed: false,
+            nav: Nav::Manual,
+            responsive: false,
+            position_known: false,
+            why,
+        }
+    }
+
     /// Distance to a point, m.
     pub fn distance_to(&self, point_m: [f64; 3]) -> f64 {
         rovlink_base::geometry::distance_m(self.position_m, point_m)

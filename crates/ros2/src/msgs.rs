@@ -18,6 +18,10 @@ pub const COMPRESSED_IMAGE: &str = "sensor_msgs/msg/CompressedImage";
 pub const IMAGE: &str = "sensor_msgs/msg/Image";
 /// `std_msgs/msg/String`.
 pub const STRING: &str = "std_msgs/msg/String";
+/// `nav_msgs/msg/Odometry`.
+pub const ODOMETRY: &str = "nav_msgs/msg/Odometry";
+/// `std_msgs/msg/Bool`.
+pub const BOOL: &str = "std_msgs/msg/Bool";
 /// `rcl_interfaces/msg/Log`, what `/rosout` carries.
 pub const LOG: &str = "rcl_interfaces/msg/Log";
 
@@ -106,6 +110,94 @@ pub fn string(text: &str) -> Vec<u8> {
     let mut w = CdrWriter::new(ByteOrder::Little);
     w.string(text);
     w.into_bytes()
+}
+
+/// A `std_msgs/msg/Bool`.
+pub fn boolean(value: bool) -> Vec<u8> {
+    let mut w = CdrWriter::new(ByteOrder::Little);
+    w.u8(u8::from(value));
+    w.into_bytes()
+}
+
+/// A `nav_msgs/msg/Odometry`: the pose of `child_frame_id` in the header's frame and its
+/// velocity in `child_frame_id` (linear, angular); covariances zero.
+pub fn odometry(
+    stamp_ns: i64,
+    frame_id: &str,
+    child_frame_id: &str,
+    pose: &Rigid,
+    linear: [f64; 3],
+    angular: [f64; 3],
+) -> Vec<u8> {
+    let mut w = CdrWriter::new(ByteOrder::Little);
+    w.header(stamp_ns, frame_id);
+    w.string(child_frame_id);
+    rigid(&mut w, pose);
+    for _ in 0..36 {
+        w.f64(0.0);
+    }
+    for v in linear.into_iter().chain(angular) {
+        w.f64(v);
+    }
+    for _ in 0..36 {
+        w.f64(0.0);
+    }
+    w.into_bytes()
+}
+
+/// What a `nav_msgs/msg/Odometry` says.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Odometry {
+    /// Stamp, ns.
+    pub stamp_ns: i64,
+    /// The frame the pose is in.
+    pub frame_id: String,
+    /// The frame the velocity is in.
+    pub child_frame_id: String,
+    /// The pose.
+    pub pose: Rigid,
+    /// Linear velocity, m/s, in `child_frame_id`.
+    pub linear: [f64; 3],
+    /// Angular velocity, rad/s, in `child_frame_id`.
+    pub angular: [f64; 3],
+}
+
+/// Reads a `nav_msgs/msg/Odometry`; every number finite, the quaternion of unit length.
+pub fn decode_odometry(message: &[u8]) -> Result<Odometry, String> {
+    let mut r = CdrReader::new(message, "Odometry")?;
+    let (stamp_ns, frame_id) = r.header()?;
+    let child_frame_id = r.string("child_frame_id")?;
+    let mut p = [0.0; 7];
+    for v in &mut p {
+        *v = r.f64("pose.pose")?;
+    }
+    for _ in 0..36 {
+        r.f64("pose.covariance")?;
+    }
+    let mut t = [0.0; 6];
+    for v in &mut t {
+        *v = r.f64("twist.twist")?;
+    }
+    for _ in 0..36 {
+        r.f64("twist.covariance")?;
+    }
+    let norm2 = p[3] * p[3] + p[4] * p[4] + p[5] * p[5] + p[6] * p[6];
+    if (norm2 - 1.0).abs() > 0.01 {
+        return Err(format!(
+            "Odometry: pose.pose.orientation: expected a unit quaternion, found norm² {norm2}"
+        ));
+    }
+    Ok(Odometry {
+        stamp_ns,
+        frame_id,
+        child_frame_id,
+        pose: Rigid {
+            translation_m: [p[0], p[1], p[2]],
+            rotation_xyzw: [p[3], p[4], p[5], p[6]],
+        },
+        linear: [t[0], t[1], t[2]],
+        angular: [t[3], t[4], t[5]],
+    })
 }
 
 /// An `rcl_interfaces/msg/Log` line from `name` at `level` ([`level`]).
@@ -282,6 +374,34 @@ mod tests {
         );
         for cut in 0..m.len() {
             assert!(decode_image(&m[..cut], 100).is_err());
+        }
+    }
+
+    #[test]
+    fn odometry_reads_back() {
+        let pose = Rigid {
+            translation_m: [1.0, 2.0, -3.0],
+            rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
+        };
+        let m = odometry(
+            7,
+            "odom",
+            "base_link",
+            &pose,
+            [0.5, 0.0, 0.0],
+            [0.0, 0.0, 0.1],
+        );
+        let o = decode_odometry(&m).unwrap();
+        assert_eq!(
+            (o.pose, o.linear, o.angular[2]),
+            (pose, [0.5, 0.0, 0.0], 0.1)
+        );
+        assert_eq!(
+            (o.frame_id.as_str(), o.child_frame_id.as_str()),
+            ("odom", "base_link")
+        );
+        for cut in 0..m.len() {
+            assert!(decode_odometry(&m[..cut]).is_err());
         }
     }
 

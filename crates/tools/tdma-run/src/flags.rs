@@ -254,13 +254,15 @@ pub struct Args {
     #[arg(long, value_name = "FILE")]
     pub mcap: Option<PathBuf>,
 
-    /// What moves the vehicle: `sim` (the built-in model) or `mavlink:ENDPOINT`, an ArduSub
+    /// What moves the vehicle: `sim` (the built-in model), `ros2` (a vehicle whose own stack
+    /// speaks ROS 2: Twist and goal pose out, Odometry in; real time, --role rov) or
+    /// `mavlink:ENDPOINT`, an ArduSub
     /// autopilot (real time, --role rov) at a device (see Devices below): udpin:127.0.0.1:14550
     /// (listen; the first autopilot heard, its address and system id, is the only one listened
     /// to and answered), udpout:HOST:PORT, tcp:HOST:PORT, tcpin:HOST:PORT or
     /// serial:/dev/ttyACM0:115200. Aliases, as before: udp:HOST:PORT = udpin:HOST:PORT (here
     /// as for --port, udp: with = is BIND=PEER), tcpout:HOST:PORT = tcp:HOST:PORT.
-    #[arg(long, value_name = "sim|mavlink:ENDPOINT", default_value = "sim",
+    #[arg(long, value_name = "sim|ros2|mavlink:ENDPOINT", default_value = "sim",
           value_parser = vehicle, help_heading = "Field")]
     pub vehicle: Vehicle,
 
@@ -391,16 +393,17 @@ pub struct Args {
     #[arg(long, help_heading = "Field")]
     pub ros2: bool,
 
-    /// With --ros2 or --camera ros2:TOPIC: the DDS domain [default: ROS_DOMAIN_ID, else 0].
+    /// With --ros2, --camera ros2:TOPIC or --vehicle ros2: the DDS domain [default:
+    /// ROS_DOMAIN_ID, else 0].
     #[arg(long, value_name = "ID", help_heading = "Field",
           value_parser = value::count(0, rovlink_ros2::names::MAX_DOMAIN_ID as u64))]
     pub ros2_domain: Option<u64>,
 
-    /// With --ros2: the namespace of the session's topics.
+    /// With --ros2 or --vehicle ros2: the namespace of the session's or the vehicle's topics
+    /// (the vehicle's: NS/cmd_vel, NS/goal_pose and NS/arm out, NS/odom in).
     #[arg(
         long,
         value_name = "NS",
-        requires = "ros2",
         default_value = "/rov",
         help_heading = "Field"
     )]
@@ -432,17 +435,20 @@ pub enum Vehicle {
     Sim,
     /// An autopilot over MAVLink at this endpoint.
     Mavlink(String),
+    /// A vehicle whose own stack speaks ROS 2 (docs/ros2.md).
+    Ros2,
 }
 
 fn vehicle(text: &str) -> Result<Vehicle, String> {
     match text.split_once(':') {
         _ if text == "sim" => Ok(Vehicle::Sim),
+        _ if text == "ros2" => Ok(Vehicle::Ros2),
         Some(("mavlink", endpoint)) if !endpoint.is_empty() => {
             rovlink_field::mavlink::parse_endpoint(endpoint).map_err(|e| e.to_string())?;
             Ok(Vehicle::Mavlink(endpoint.to_string()))
         }
         _ => Err(format!(
-            "expected sim or mavlink:ENDPOINT (e.g. mavlink:udpin:127.0.0.1:14550), found {text:?}"
+            "expected sim, ros2 or mavlink:ENDPOINT (e.g. mavlink:udpin:127.0.0.1:14550), found {text:?}"
         )),
     }
 }

@@ -53,6 +53,13 @@ pub(super) fn field_usage(args: &Args, role: Option<Role>) -> Result<()> {
     use rovlink_base::UsageError;
     let rov_side = role != Some(Role::Operator);
     let operator_side = role != Some(Role::Rov);
+    if args.vehicle == Vehicle::Ros2 && role != Some(Role::Rov) {
+        return Err(UsageError(
+            "--vehicle ros2 drives a vehicle on a ROS 2 graph: it needs --role rov (real time)"
+                .into(),
+        )
+        .into());
+    }
     if matches!(args.vehicle, Vehicle::Mavlink(_)) && role != Some(Role::Rov) {
         return Err(UsageError(
             "--vehicle mavlink:... drives a real autopilot: it needs --role rov (real time)".into(),
@@ -94,6 +101,19 @@ pub(super) fn field_usage(args: &Args, role: Option<Role>) -> Result<()> {
 /// What the ends run beyond the config: order sources, the vehicle, the camera.
 pub(super) fn parts(args: &Args, config: &SessionConfig) -> Result<Parts> {
     let mut parts = Parts::from_config(config);
+    if args.vehicle == Vehicle::Ros2 {
+        let drive = rovlink_field::ros2_vehicle::ros2_drive(
+            &args.ros2_namespace,
+            args.ros2_domain.map(|d| d as u16),
+        )
+        .map_err(|e| rovlink_base::UsageError(format!("--vehicle ros2: {e}")))?;
+        say!(
+            "vehicle on ROS 2: {ns}/cmd_vel, {ns}/goal_pose and {ns}/arm out, {ns}/odom in \
+             (DDS authenticates nobody: keep the vehicle's domain to the vehicle)",
+            ns = args.ros2_namespace.trim_end_matches('/')
+        );
+        parts.drive = Box::new(drive);
+    }
     if let Vehicle::Mavlink(endpoint) = &args.vehicle {
         use rovlink_field::mavlink::{MavlinkOptions, SigningKey, connect};
         let key = (args.mavlink_key_file.as_deref())
