@@ -12,9 +12,11 @@ use crate::common::hostile::{Run, assert_contract, run_in};
 use crate::common::testdata;
 
 /// Value names that are not numbers (paths, names, choices).
-const NOT_NUMERIC: [&str; 16] = [
+const NOT_NUMERIC: [&str; 18] = [
     "FILE",
     "DEV",
+    "NS",
+    "TYPE",
     "NAME",
     "ADDR:PORT",
     "SHAPE",

@@ -612,7 +612,7 @@ fn field_flags_on_the_wrong_end_or_malformed_are_one_line_and_exit_2() {
         (&["--vehicle", "bogus"], "--vehicle"),
         (
             &["--vehicle", "mavlink:"],
-            "expected sim or mavlink:ENDPOINT",
+            "expected sim, ros2 or mavlink:ENDPOINT",
         ),
         (
             &["--vehicle", "mavlink:udpin:127.0.0.1:14550"],

@@ -16,6 +16,7 @@ Subcommands (each prints one JSON line when it ends; progress lines go to stderr
   camera          publishes camera frames (raw rgb8, or PNG on a /compressed topic) at 2 Hz.
   vehicle         a stand-in vehicle whose stack speaks ROS 2 (cmd_vel, goal_pose, arm in; odom
                   out), for tdma-run --vehicle ros2.
+  flood           hostile: many topics, a cmd_vel flood (NaN with --nan), a huge cloud.
   latched TOPIC   joins late and takes the last octomap_msgs/msg/Octomap (or PointCloud2 with
                   --type cloud) of TOPIC (reliable, transient-local, keep-last 1), writes its
                   fields to --out (JSON) and its data to --out + ".data"; with --expect-bytes
@@ -586,6 +587,34 @@ def vehicle(args):
     return 0
 
 
+def flood(args):
+    """Hostile: --topics extra topics advertised on the domain (each a writer), then Twists on
+    NS/cmd_vel as fast as they go for --seconds (with --nan, every other one NaN), and, with
+    --cloud-mb, one PointCloud2 of that many MB on --cloud-topic. Reports what was sent."""
+    dp = DomainParticipant(args.domain)
+    q = reliable(depth=10)
+    extra = [DataWriter(dp, Topic(dp, "rt/hostile/t%d" % k, String, qos=q), qos=q)
+             for k in range(args.topics)]
+    for k, w in enumerate(extra):
+        w.write(String("x%d" % k))
+    sent = 0
+    if args.cloud_mb:
+        cw = DataWriter(dp, Topic(dp, "rt" + args.cloud_topic, PointCloud2, qos=q), qos=q)
+        size = int(args.cloud_mb * 1e6) // 16 * 16
+        cw.write(PointCloud2(Header(Time(0, 0), "base_link"), 1, size // 16,
+                             [PointField("x", 0, 7, 1), PointField("y", 4, 7, 1),
+                              PointField("z", 8, 7, 1)], False, 16, size, bytes(size), True))
+    tw = DataWriter(dp, Topic(dp, "rt" + args.namespace + "/cmd_vel", Twist, qos=q), qos=q)
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < args.seconds:
+        x = float("nan") if args.nan and sent % 2 else 0.2
+        tw.write(Twist(Vector3(x, 0.0, 0.0), Vector3(0.0, 0.0, 0.0)))
+        sent += 1
+    time.sleep(1.0)
+    say(ok=True, twists=sent, topics=args.topics, cloud_mb=args.cloud_mb)
+    return 0
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--domain", type=int, required=True)
@@ -626,9 +655,16 @@ def main():
     f = sub.add_parser("vehicle")
     f.add_argument("--namespace", default="/rov")
     f.add_argument("--seconds", type=float, default=120)
+    g = sub.add_parser("flood")
+    g.add_argument("--namespace", default="/rov")
+    g.add_argument("--seconds", type=float, default=10)
+    g.add_argument("--topics", type=int, default=0)
+    g.add_argument("--nan", action="store_true")
+    g.add_argument("--cloud-mb", type=float, default=0)
+    g.add_argument("--cloud-topic", default="/points")
     args = p.parse_args()
     commands = {"play": play, "latched": latched, "session": session, "probe": probe,
-                "camera": camera, "vehicle": vehicle}
+                "camera": camera, "vehicle": vehicle, "flood": flood}
     return commands[args.cmd](args)
 
 

@@ -251,14 +251,9 @@ impl Endpoint for Udp {
                 }
                 // Not the peer's: dropped (and counted); wait for the rest of the time.
                 Ok(None) => {}
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock
-                    ) =>
-                {
-                    return Ok(None);
-                }
+                // A signal interrupts a receive with a timeout whatever SA_RESTART says: the
+                // caller looks at its stop flag.
+                Err(e) if rovlink_base::io::nothing_yet(&e) => return Ok(None),
                 Err(e) => return Err(closed(&self.name, "receive failed", e)),
             }
         }
