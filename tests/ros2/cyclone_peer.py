@@ -604,6 +604,10 @@ def flood(args):
         cw.write(PointCloud2(Header(Time(0, 0), "base_link"), 1, size // 16,
                              [PointField("x", 0, 7, 1), PointField("y", 4, 7, 1),
                               PointField("z", 8, 7, 1)], False, 16, size, bytes(size), True))
+        try:  # every fragment acknowledged before the participant goes
+            cw.wait_for_acks(120 * 10**9)
+        except Exception:  # noqa: BLE001  an older binding: the reader's own wait covers it
+            time.sleep(10)
     tw = DataWriter(dp, Topic(dp, "rt" + args.namespace + "/cmd_vel", Twist, qos=q), qos=q)
     t0 = time.monotonic()
     while time.monotonic() - t0 < args.seconds:
