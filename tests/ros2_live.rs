@@ -99,14 +99,25 @@ fn peer_result(peer: std::process::Child) -> serde_json::Value {
     serde_json::from_str(text.trim()).unwrap()
 }
 
-/// A late Cyclone subscriber to `topic`: the fields and the data of the first message it gets
-/// whose data has `bytes` bytes.
+/// A late Cyclone subscriber to `topic` (an Octomap, or with `cloud` a PointCloud2): the fields
+/// and the data of the first message it gets whose data has `bytes` bytes.
 fn latched(
     dir: &Path,
     domain: &str,
     topic: &str,
     name: &str,
     bytes: usize,
+) -> (serde_json::Value, Vec<u8>) {
+    latched_of(dir, domain, topic, name, bytes, "octomap")
+}
+
+fn latched_of(
+    dir: &Path,
+    domain: &str,
+    topic: &str,
+    name: &str,
+    bytes: usize,
+    kind: &str,
 ) -> (serde_json::Value, Vec<u8>) {
     let out = dir.join(name);
     let bytes = bytes.to_string();
@@ -120,6 +131,8 @@ fn latched(
             "120",
             "latched",
             topic,
+            "--type",
+            kind,
             "--out",
             s(&out),
             "--expect-bytes",
@@ -251,6 +264,18 @@ fn a_live_survey_maps_over_the_satellite_link_and_a_late_rviz_gets_the_view() {
     let (full, full_data) = latched(d, &domain, full_topic, "full.json", body(&want).len());
     let bin_topic = "/octo_delta/octomap";
     let (bin, bin_data) = latched(d, &domain, bin_topic, "bin.json", body(&want_bt).len());
+    // The voxels as points (what Foxglove draws): one per occupied leaf, x y z rgb.
+    let mut occupied = 0;
+    want_tree.for_each_leaf(|_, _, v| occupied += usize::from(v.log_odds >= 0.0));
+    let voxels = "/octo_delta/voxels";
+    let (cloud, _) = latched_of(d, &domain, voxels, "voxels.json", occupied * 16, "cloud");
+    assert_eq!(cloud["width"], occupied, "{cloud}");
+    assert_eq!(
+        cloud["fields"],
+        serde_json::json!(["x", "y", "z", "rgb"]),
+        "{cloud}"
+    );
+    assert_eq!(cloud["frame_id"], "map", "{cloud}");
     mapper.signal(nix::sys::signal::Signal::SIGTERM);
     let (code, said) = mapper.finish();
     assert_eq!(code, Some(143), "{said}");
