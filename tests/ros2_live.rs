@@ -406,6 +406,25 @@ fn rov_end(port: &str, image_size: &str, extra: &[&str]) -> Watched {
     rov
 }
 
+/// The operator end in real time on `port` (`extra`: its other flags), its standard output
+/// and error watched.
+fn operator_end(port: &str, image_size: &str, extra: &[&str]) -> Watched {
+    let mut args = vec![
+        "--role",
+        "operator",
+        "--port",
+        port,
+        "--ipg",
+        "150",
+        "--duration",
+        "600",
+        "--image-size",
+        image_size,
+    ];
+    args.extend_from_slice(extra);
+    Watched::spawn_exe_both(TDMA_RUN, &args)
+}
+
 /// The operator and the ROV in real time over `link-sim --pty`, the operator on the graph
 /// (`extra` its ROS 2 flags); the peer's `session` report with `peer` flags. Returns the report
 /// and what the operator said.
@@ -416,23 +435,9 @@ fn session_on_the_graph(
 ) -> (serde_json::Value, String) {
     let (_link, a, b) = link_sim_pty(&crate::common::TEST_S100);
     let rov = rov_end(&b, "400", &[]);
-    let mut args = vec![
-        "--role",
-        "operator",
-        "--port",
-        &a,
-        "--ipg",
-        "150",
-        "--duration",
-        "600",
-        "--image-size",
-        "400",
-        "--ros2",
-        "--ros2-domain",
-        domain,
-    ];
+    let mut args = vec!["--ros2", "--ros2-domain", domain];
     args.extend_from_slice(extra);
-    let mut op = Watched::spawn_exe(TDMA_RUN, &args);
+    let mut op = operator_end(&a, "400", &args);
     op.wait_for("operator: IPG");
     let out = Command::new("python3")
         .args([PEER, "--domain", domain, "session", "--seconds", "200"])
@@ -569,23 +574,7 @@ fn the_rovs_camera_can_be_a_ros2_image_topic_raw_or_compressed() {
             "600",
             &["--camera", &camera_flag, "--ros2-domain", &domain],
         );
-        let mut op = Watched::spawn_exe(
-            TDMA_RUN,
-            &[
-                "--role",
-                "operator",
-                "--port",
-                &a,
-                "--ipg",
-                "150",
-                "--duration",
-                "600",
-                "--image-size",
-                "600",
-                "--images-out",
-                s(&rx),
-            ],
-        );
+        let mut op = operator_end(&a, "600", &["--images-out", s(&rx)]);
         op.wait_for("operator: IPG");
         let picture = first_picture(&rx);
         op.signal(nix::sys::signal::Signal::SIGTERM);
@@ -619,19 +608,10 @@ fn a_vehicle_on_ros2_is_armed_driven_by_the_sticks_and_sent_to_a_goal_and_its_od
         .expect("python3 runs the Cyclone peer");
     let (_link, a, b) = link_sim_pty(&crate::common::TEST_S100);
     let rov = rov_end(&b, "400", &["--vehicle", "ros2", "--ros2-domain", &domain]);
-    let mut op = Watched::spawn_exe_both(
-        TDMA_RUN,
+    let mut op = operator_end(
+        &a,
+        "400",
         &[
-            "--role",
-            "operator",
-            "--port",
-            &a,
-            "--ipg",
-            "150",
-            "--duration",
-            "600",
-            "--image-size",
-            "400",
             "--script",
             s(&script),
             "--waypoints",

@@ -735,21 +735,20 @@ fn tf_json(
     position_m: [f64; 3],
     heading_deg: f64,
 ) -> serde_json::Value {
-    let half = heading_deg.to_radians() / 2.0;
+    let [qx, qy, qz, qw] = heading(heading_deg);
     json!({"transforms": [
         {"timestamp": timestamp, "parent_frame_id": WORLD_FRAME, "child_frame_id": NED_FRAME,
          "translation": {"x": 0.0, "y": 0.0, "z": 0.0},
          "rotation": {"x": 1.0, "y": 0.0, "z": 0.0, "w": 0.0}},
         {"timestamp": timestamp, "parent_frame_id": NED_FRAME, "child_frame_id": body,
          "translation": {"x": position_m[0], "y": position_m[1], "z": position_m[2]},
-         "rotation": {"x": 0.0, "y": 0.0, "z": half.sin(), "w": half.cos()}},
+         "rotation": {"x": qx, "y": qy, "z": qz, "w": qw}},
     ]})
 }
 
 /// A heading as a rotation about the down axis (x, y, z, w).
-fn heading(heading_deg: f64) -> [f64; 4] {
-    let half = heading_deg.to_radians() / 2.0;
-    [0.0, 0.0, half.sin(), half.cos()]
+pub(crate) fn heading(heading_deg: f64) -> [f64; 4] {
+    rovlink_ros2::msgs::yaw_quaternion(heading_deg.to_radians())
 }
 
 /// A `foxglove.Timestamp` of `ns` nanoseconds.

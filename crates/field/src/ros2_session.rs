@@ -83,6 +83,8 @@ struct Writers {
 /// The session's publisher, an [`Observer`].
 pub struct Ros2View {
     _node: Node,
+    /// `/tf_static`'s writer, written once: it keeps world -> ned latched for late readers.
+    _tf_static: Writer,
     w: Writers,
     view: View,
     last_pose: Option<Instant>,
@@ -98,7 +100,28 @@ pub struct Ros2Orders {
     goal: Option<Reader>,
     twist_at: Option<Instant>,
     warnings: Vec<String>,
+    said: SaidOnce,
+}
+
+/// Lines said once each, at most `max` distinct ones (the rest not said again).
+pub(crate) struct SaidOnce {
     said: BTreeSet<String>,
+    max: usize,
+}
+
+impl SaidOnce {
+    /// Nothing said yet; at most `max` distinct lines.
+    pub(crate) fn new(max: usize) -> SaidOnce {
+        SaidOnce {
+            said: BTreeSet::new(),
+            max,
+        }
+    }
+
+    /// True the first time `line` comes, while fewer than `max` have.
+    pub(crate) fn first(&mut self, line: &str) -> bool {
+        self.said.len() < self.max && self.said.insert(line.to_string())
+    }
 }
 
 /// Joins the graph: the publisher and the order source. Errors name what DDS refused.
@@ -107,13 +130,16 @@ pub fn start(options: &Ros2Options) -> Result<(Ros2View, Ros2Orders), Ros2Error>
     let mut node = Node::join(domain)?;
     let ns = options.namespace.trim_end_matches('/');
     let topic = |name: &str| format!("{ns}/{name}");
-    let sensor = Qos::DEFAULT.with_reliability(rovlink_ros2::Reliability::Reliable);
     let w = Writers {
-        pose: node.advertise(&topic("pose"), msgs::POSE_STAMPED, sensor)?,
+        pose: node.advertise(&topic("pose"), msgs::POSE_STAMPED, Qos::DEFAULT)?,
         tf: node.advertise("/tf", msgs::TF_MESSAGE, Qos::TF)?,
         goal: node.advertise(&topic("goal"), msgs::POSE_STAMPED, Qos::LATCHED)?,
-        velocity: node.advertise(&topic("velocity"), msgs::TWIST_STAMPED, sensor)?,
-        commanded: node.advertise(&topic("cmd_vel_commanded"), msgs::TWIST_STAMPED, sensor)?,
+        velocity: node.advertise(&topic("velocity"), msgs::TWIST_STAMPED, Qos::DEFAULT)?,
+        commanded: node.advertise(
+            &topic("cmd_vel_commanded"),
+            msgs::TWIST_STAMPED,
+            Qos::DEFAULT,
+        )?,
         image: node.advertise(
             &topic("image/compressed"),
             msgs::COMPRESSED_IMAGE,
@@ -152,11 +178,10 @@ pub fn start(options: &Ros2Options) -> Result<(Ros2View, Ros2Orders), Ros2Error>
     };
     let mut view = View::new(Clock::Wall);
     view.want(|t| matches!(t, Topic::Events | Topic::Log));
-    // The static link's writer lives as long as the node: kept with it.
-    std::mem::forget(statics);
     Ok((
         Ros2View {
             _node: node,
+            _tf_static: statics,
             w,
             view,
             last_pose: None,
@@ -170,7 +195,7 @@ pub fn start(options: &Ros2Options) -> Result<(Ros2View, Ros2Orders), Ros2Error>
             goal,
             twist_at: None,
             warnings: Vec::new(),
-            said: BTreeSet::new(),
+            said: SaidOnce::new(32),
         },
     ))
 }
@@ -178,11 +203,6 @@ pub fn start(options: &Ros2Options) -> Result<(Ros2View, Ros2Orders), Ros2Error>
 /// Metres as whole centimetres (out of wire.md's range stays out of range: refused there).
 fn cm(m: f64) -> i64 {
     (m * 100.0).round().clamp(-1e9, 1e9) as i64
-}
-
-fn yaw_quaternion(heading_deg: f64) -> [f64; 4] {
-    let half = heading_deg.to_radians() / 2.0;
-    [0.0, 0.0, half.sin(), half.cos()]
 }
 
 impl Ros2View {
@@ -195,7 +215,8 @@ impl Ros2View {
         }
     }
 
-    /// What went wrong publishing (each problem once).
+    /// What went wrong publishing (each problem once, at most 16): the caller says them at
+    /// the end of the run.
     pub fn problems(&self) -> &[String] {
         &self.problems
     }
@@ -282,7 +303,7 @@ impl Observer for Ros2View {
             let body = crate::mcap_log::BODY_FRAME;
             let at = Rigid {
                 translation_m: pose.position_m,
-                rotation_xyzw: yaw_quaternion(pose.heading_deg),
+                rotation_xyzw: crate::mcap_log::heading(pose.heading_deg),
             };
             self.write(|w| &w.pose, &msgs::pose_stamped(ns, ned, &at));
             self.write(|w| &w.tf, &msgs::tf_message(ns, &[(ned, body, at)]));
@@ -321,7 +342,7 @@ impl Observer for Ros2View {
 
 impl Ros2Orders {
     fn warn(&mut self, line: String) {
-        if self.said.len() < 32 && self.said.insert(line.clone()) {
+        if self.said.first(&line) {
             self.warnings.push(line);
         }
     }
@@ -386,9 +407,7 @@ impl OrderSource for Ros2Orders {
                         if frame == crate::mcap_log::NED_FRAME || frame.is_empty() =>
                     {
                         let [x, y, z] = pose.translation_m;
-                        let [qx, qy, qz, qw] = pose.rotation_xyzw;
-                        let yaw =
-                            (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
+                        let yaw = pose.yaw_rad();
                         let order = serde_json::json!({
                             "type": "goto",
                             "x_cm": cm(x), "y_cm": cm(y), "z_cm": cm(z),

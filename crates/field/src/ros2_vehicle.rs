@@ -45,7 +45,7 @@ pub struct Ros2Drive {
     last_goal: Option<[f64; 4]>,
     last_arm: Option<bool>,
     events: Vec<DriveEvent>,
-    refused: Vec<String>,
+    refused: crate::ros2_session::SaidOnce,
 }
 
 /// Joins `domain` and advertises and subscribes under `namespace`.
@@ -71,7 +71,7 @@ pub fn ros2_drive(namespace: &str, domain: Option<u16>) -> Result<Ros2Drive, Ros
         last_goal: None,
         last_arm: None,
         events: Vec::new(),
-        refused: Vec::new(),
+        refused: crate::ros2_session::SaidOnce::new(16),
     })
 }
 
@@ -87,8 +87,7 @@ fn yaw_of_heading(heading_deg: f64) -> f64 {
 
 impl Ros2Drive {
     fn note_refused(&mut self, line: String) {
-        if self.refused.len() < 16 && !self.refused.contains(&line) {
-            self.refused.push(line.clone());
+        if self.refused.first(&line) {
             self.events.push(DriveEvent::Note(line));
         }
     }
@@ -112,8 +111,7 @@ impl Ros2Drive {
             match msgs::decode_odometry(&m.message) {
                 Ok(o) => {
                     let [e, n, u] = o.pose.translation_m;
-                    let [qx, qy, qz, qw] = o.pose.rotation_xyzw;
-                    let yaw = (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
+                    let yaw = o.pose.yaw_rad();
                     self.state.position_m = [n, e, -u];
                     self.state.heading_deg = heading_of_yaw(yaw);
                     self.state.velocity = [
@@ -187,10 +185,9 @@ impl Drive for Ros2Drive {
                 if self.last_goal != Some(target) && self.state.position_known {
                     self.last_goal = Some(target);
                     self.write(|d| &d.cmd_vel, &msgs::twist([0.0; 3], [0.0; 3]));
-                    let half = yaw_of_heading(heading_deg) / 2.0;
                     let pose = Rigid {
                         translation_m: [y, x, -z],
-                        rotation_xyzw: [0.0, 0.0, half.sin(), half.cos()],
+                        rotation_xyzw: msgs::yaw_quaternion(yaw_of_heading(heading_deg)),
                     };
                     let stamp = crate::mcap_log::wall_clock_ns() as i64;
                     let frame = self.odom_frame.clone();

@@ -46,6 +46,20 @@ pub struct Rigid {
     pub rotation_xyzw: [f64; 4],
 }
 
+impl Rigid {
+    /// The rotation's angle about z, radians (yaw, from the x axis towards y).
+    pub fn yaw_rad(&self) -> f64 {
+        let [qx, qy, qz, qw] = self.rotation_xyzw;
+        (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz))
+    }
+}
+
+/// The rotation by `yaw_rad` about z, as a quaternion x, y, z, w.
+pub fn yaw_quaternion(yaw_rad: f64) -> [f64; 4] {
+    let half = yaw_rad / 2.0;
+    [0.0, 0.0, half.sin(), half.cos()]
+}
+
 fn rigid(w: &mut CdrWriter, r: &Rigid) {
     for v in r.translation_m.into_iter().chain(r.rotation_xyzw) {
         w.f64(v);
@@ -374,6 +388,17 @@ mod tests {
         );
         for cut in 0..m.len() {
             assert!(decode_image(&m[..cut], 100).is_err());
+        }
+    }
+
+    #[test]
+    fn a_yaw_reads_back_from_its_quaternion() {
+        for yaw in [0.0, 0.5, -2.0, 3.0] {
+            let r = Rigid {
+                translation_m: [0.0; 3],
+                rotation_xyzw: yaw_quaternion(yaw),
+            };
+            assert!((r.yaw_rad() - yaw).abs() < 1e-12, "{yaw}");
         }
     }
 

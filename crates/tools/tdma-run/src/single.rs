@@ -174,6 +174,9 @@ pub fn run(args: &Args) -> Result<u8> {
         }
     };
     drop(observer);
+    for problem in ros2.iter().flat_map(|view| view.problems()) {
+        say!("{problem}");
+    }
     if let Some(name) = stop::signal_name() {
         metrics.interrupted = Some(name.to_string());
     }
