@@ -435,6 +435,18 @@ fn signalled_while_reading_a_silent_pipe(
     args: &[&str],
     bytes: &[u8],
 ) -> (ExitStatus, String) {
+    signalled_once_a_silent_pipe_is_read(dir, fifo, args, bytes, &|pid| blocked_reading_a_pipe(pid))
+}
+
+/// [`signalled_while_reading_a_silent_pipe`], the signal sent once all the bytes are written
+/// and `ready(pid)` holds.
+fn signalled_once_a_silent_pipe_is_read(
+    dir: &Path,
+    fifo: &str,
+    args: &[&str],
+    bytes: &[u8],
+    ready: &dyn Fn(u32) -> bool,
+) -> (ExitStatus, String) {
     let fifo = dir.join(fifo);
     let _ = std::fs::remove_file(&fifo);
     nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).expect("mkfifo");
@@ -461,7 +473,7 @@ fn signalled_while_reading_a_silent_pipe(
         writer
     });
     let pid = child.id();
-    let waiting = || writing.is_finished() && blocked_reading_a_pipe(pid);
+    let waiting = || writing.is_finished() && ready(pid);
     signal_once(&mut child, Signal::SIGTERM, &waiting, LIMIT);
     let status = crate::common::wait_for_exit(&mut child, LIMIT);
     drop(writing.join().unwrap());
@@ -604,6 +616,67 @@ fn a_signal_stops_a_build_reading_a_silent_pipe() {
         ok(
             &octo(dir.path(), &["full", "out.ot", "-o", "full.odl"]),
             "the stopped map reads",
+        );
+    }
+}
+
+/// Issue 48, defect 4: with 2 threads or more, whole scans received from a quiet pipe waited
+/// for the next scan before going into the map (10 scans: 1 thread wrote 10 messages, 2 threads
+/// 2, 3 or 4 none). Every thread count now writes each scan's message and stats row as soon as
+/// the scan is whole: the test waits for the tenth row (no timer), then stops the build.
+#[test]
+fn every_thread_count_builds_each_scan_of_a_quiet_pipe_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let scans: Vec<Scan> = (0..12)
+        .map(|k| Scan {
+            points: (0..200)
+                .map(|i| {
+                    [
+                        1.0 + (i % 20) as f32 * 0.1,
+                        (i / 20) as f32 * 0.1,
+                        k as f32 * 0.3,
+                    ]
+                })
+                .collect(),
+            colors: None,
+            pose: Pose::IDENTITY,
+        })
+        .collect();
+    let graph = rovlink_octo::graph::write(&scans);
+    // The node count and the first ten nodes: u32 points, 28 bytes a point, a 68-byte pose,
+    // a u32 id.
+    let ten = 4 + 10 * (4 + 200 * 28 + 28 + 36 + 4);
+    for threads in ["1", "2", "3", "4"] {
+        let d = dir.path().join(format!("t{threads}"));
+        std::fs::create_dir(&d).unwrap();
+        let args = [
+            "build",
+            "scans.graph",
+            "--threads",
+            threads,
+            "-q",
+            "-o",
+            "out.odl",
+            "--stats",
+            "out.csv",
+            "--ot",
+            "out.ot",
+        ];
+        let stats = d.join("out.csv");
+        // The header and ten rows, while the pipe is still open and quiet.
+        let (status, err) =
+            signalled_once_a_silent_pipe_is_read(&d, "scans.graph", &args, &graph[..ten], &|_| {
+                lines_in(&stats) >= 11
+            });
+        assert_eq!(status.code(), Some(143), "{threads} threads: {err}");
+        assert!(err.contains("after 10 scans"), "{threads} threads: {err}");
+        let dump = octo(&d, &["dump", "out.odl", "--format", "csv"]);
+        ok(&dump, "dump of the stopped stream");
+        let messages = String::from_utf8(dump.stdout).unwrap().lines().count() - 1;
+        assert_eq!(messages, 10, "{threads} threads: messages in the stream");
+        ok(
+            &octo(&d, &["full", "out.ot", "-o", "full.odl"]),
+            "the map reads",
         );
     }
 }

@@ -1,22 +1,16 @@
-//! The mapper's clouds as they come: each input read in turn, its scans handed over one by one
-//! as soon as each is whole. A `.graph` is streamed (node by node) from a pipe, a FIFO, or,
-//! with `follow`, a file still being written, read as `tail -f` reads one (at its end, it waits
-//! for more); any other input is read as `build` reads it.
+//! The mapper's clouds as they come: each input read in turn
+//! ([`crate::pipeline::read_inputs`]), its scans handed over one by one as soon as each is
+//! whole. A `.graph` is streamed (node by node) from a pipe, a FIFO, or, with `follow`, a file
+//! still being written, read as `tail -f` reads one (at its end, it waits for more); any other
+//! input is read as `build` reads it.
 
-use std::fs::File;
-use std::io::{self, Read};
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
 
-use crate::pipeline::inputs::{InputFormat, ScanSource, open_scans, with_origin};
-use crate::pipeline::{BuildConfig, PipelineError};
-use rovlink_base::io::{IoError, StopReader};
-use rovlink_octo::{Scan, graph};
-use rovlink_scans::recording::Item;
+use crate::pipeline::{BuildConfig, PipelineError, Reading, read_inputs};
+use rovlink_octo::Scan;
 
-/// How often a followed file is looked at again once its end is reached.
-pub const FOLLOW_POLL: Duration = Duration::from_millis(50);
+pub use crate::pipeline::FOLLOW_POLL;
 
 /// What reading the inputs came to.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -29,39 +23,6 @@ pub struct FeedReport {
     pub interrupted: bool,
 }
 
-/// A file read as `tail -f` reads it: at its end, wait for more until `stop` is set.
-struct Follow<'a> {
-    file: File,
-    stop: &'a AtomicBool,
-}
-
-impl Read for Follow<'_> {
-    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
-        loop {
-            match self.file.read(buf) {
-                Ok(0) if !buf.is_empty() => {
-                    if self.stop.load(Ordering::Relaxed) {
-                        return Err(io::Error::other("stopped"));
-                    }
-                    std::thread::sleep(FOLLOW_POLL);
-                }
-                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                other => return other,
-            }
-        }
-    }
-}
-
-/// Whether `path` is a `.graph` stream: standard input or a FIFO of that format, or a file
-/// followed.
-fn graph_stream(path: &Path, cfg: &BuildConfig, follow: bool) -> bool {
-    let format = cfg.format.or_else(|| InputFormat::from_path(path));
-    if format != Some(InputFormat::Graph) {
-        return false;
-    }
-    follow || rovlink_base::io::is_std(Some(path)) || !path.is_file()
-}
-
 /// Reads `inputs` in turn and hands each scan to `send` (false: stop reading); a bad input is
 /// an error naming it, after the scans before it were handed over.
 pub fn feed(
@@ -72,122 +33,32 @@ pub fn feed(
     send: &mut dyn FnMut(Scan) -> bool,
 ) -> Result<FeedReport, PipelineError> {
     let mut report = FeedReport::default();
-    let origin = cfg.origin_m.map(|o| o.map(|c| c as f32));
-    for path in inputs {
-        if stop.load(Ordering::Relaxed) {
-            report.interrupted = true;
-            break;
+    let mut take = |r: Reading| match r {
+        Reading::Scan(scan) => {
+            report.scans += 1;
+            send(scan)
         }
-        let name = path.display().to_string();
-        let bad = |source| PipelineError::Input {
-            name: name.clone(),
-            source,
-        };
-        let stopped = |report: &mut FeedReport| {
-            report.interrupted = stop.load(Ordering::Relaxed);
-            report.interrupted
-        };
-        if graph_stream(path, cfg, follow) {
-            let reader: Box<dyn Read + '_> = if follow && !rovlink_base::io::is_std(Some(path)) {
-                // As tail -F: a file not there yet is waited for.
-                let file = loop {
-                    match File::open(path) {
-                        Err(e) if e.kind() == io::ErrorKind::NotFound => {
-                            if stop.load(Ordering::Relaxed) {
-                                report.interrupted = true;
-                                return Ok(report);
-                            }
-                            std::thread::sleep(FOLLOW_POLL);
-                        }
-                        opened => {
-                            break opened.map_err(|source| IoError::Open {
-                                path: path.clone(),
-                                source,
-                            })?;
-                        }
-                    }
-                };
-                Box::new(Follow { file, stop })
-            } else {
-                Box::new(StopReader::open(Some(path), stop))
-            };
-            let stream = match graph::ScanStream::new(reader, u64::MAX) {
-                Err(_) if stopped(&mut report) => break,
-                s => s.map_err(bad)?,
-            };
-            let n = stream.node_count() as usize;
-            for scan in stream.take(n) {
-                let scan = match scan {
-                    Err(_) if stopped(&mut report) => return Ok(report),
-                    s => s.map_err(bad)?,
-                };
-                report.scans += 1;
-                if !send(scan) {
-                    report.interrupted = true;
-                    return Ok(report);
-                }
+        Reading::Skipped(reason) => {
+            match report.skipped.iter_mut().find(|(r, _)| *r == reason) {
+                Some((_, n)) => *n += 1,
+                None => report.skipped.push((reason, 1)),
             }
-            continue;
+            true
         }
-        let source = match open_scans(path, cfg, stop) {
-            Err(_) if stopped(&mut report) => break,
-            s => s?,
-        };
-        let mut recording = None;
-        let (items, needs_origin): (Box<dyn Iterator<Item = Result<Item, PipelineError>>>, bool) =
-            match source {
-                ScanSource::Scans(scans, _, format) => {
-                    let name = name.clone();
-                    let items = scans.map(move |r| {
-                        r.map(Item::Scan).map_err(|source| PipelineError::Input {
-                            name: name.clone(),
-                            source,
-                        })
-                    });
-                    (Box::new(items), !format.has_poses())
-                }
-                ScanSource::Bag(rec) => {
-                    let rec = recording.insert(rec);
-                    let needs_origin = !rec.has_poses();
-                    let items = rec.scans(stop)?.map(|r| r.map_err(PipelineError::from));
-                    (Box::new(items), needs_origin)
-                }
-                ScanSource::Live(scans) => (scans, false),
-            };
-        let origin = origin.filter(|_| needs_origin);
-        for item in items {
-            match item {
-                Err(_) if stopped(&mut report) => return Ok(report),
-                Err(e) => return Err(e),
-                Ok(Item::Skipped(reason)) => {
-                    let reason = format!("{name}: {reason}");
-                    match report.skipped.iter_mut().find(|(r, _)| *r == reason) {
-                        Some((_, n)) => *n += 1,
-                        None => report.skipped.push((reason, 1)),
-                    }
-                }
-                Ok(Item::Scan(scan)) => {
-                    report.scans += 1;
-                    if !send(with_origin(scan, origin)) {
-                        report.interrupted = true;
-                        return Ok(report);
-                    }
-                }
-            }
-        }
-        // A live input ends only when stopped.
-        if stopped(&mut report) {
-            return Ok(report);
-        }
-    }
+        Reading::Opened { .. } | Reading::Notes(_) => true,
+    };
+    let interrupted = read_inputs(inputs, cfg, follow, stop, &mut take)?;
+    report.interrupted = interrupted;
     Ok(report)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rovlink_octo::Pose;
+    use rovlink_octo::{Pose, graph};
     use std::io::Write;
+    use std::sync::atomic::Ordering;
+    use std::time::Duration;
 
     fn scans(n: usize) -> Vec<Scan> {
         (0..n)

@@ -8,11 +8,11 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, mpsc};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
-use super::inputs::{ScanSource, open_scans, with_origin};
+use super::reading::{Reading, read_inputs};
 use super::{BuildConfig, PipelineError};
 use rovlink_base::io::IoError;
 use rovlink_octo::Scan;
@@ -20,7 +20,6 @@ use rovlink_octo::cast::{PreparedScan, ScanCaster};
 use rovlink_octo::delta::{self, Sender, ViewSpec};
 use rovlink_octo::tree::OcTree;
 use rovlink_octo::{files, transfer};
-use rovlink_scans::recording::{Item, Recording, RecordingError};
 
 /// One row of `--stats`: a scan's message and what sending the whole map would have cost.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -217,12 +216,12 @@ impl Emitter<'_> {
     }
 
     /// Applies a cast scan to `tree` (`None`: the stop flag ended its casting, and the build),
-    /// writes its message and reports it; `started` is when the caller began waiting for it.
+    /// writes its message and reports it; casting it took `cast_s`.
     fn emit(
         &mut self,
         tree: &mut OcTree,
         prepared: Option<PreparedScan>,
-        started: Instant,
+        cast_s: f64,
         report: &mut BuildReport,
         hooks: &mut Hooks<'_>,
         known: u64,
@@ -231,10 +230,11 @@ impl Emitter<'_> {
             report.interrupted = true;
             return Ok(false);
         };
+        let started = Instant::now();
         let up = tree.apply_scan(&prepared);
         let d = self.sender.delta(tree, &up.changes);
         let msg = delta::encode_delta(&self.spec, report.scans, &d);
-        let dt = started.elapsed().as_secs_f64();
+        let dt = cast_s + started.elapsed().as_secs_f64();
         report.insert_s += dt;
         self.write(&msg)?;
         report.points += up.points;
@@ -273,57 +273,77 @@ impl Emitter<'_> {
     }
 }
 
-/// Scans queued or being cast per casting thread, at most (see [`CastThreads::window`]).
+/// Scans read and not yet in the map per casting thread, at most: a few per thread, so that a
+/// thread done with a quick scan finds another queued while the map waits for a slow one.
 const SCANS_AHEAD_PER_THREAD: usize = 4;
 
-/// The threads that cast the next scans while the caller applies the last one: scans in, each
-/// taken by the first thread free, cast scans out in the order they went in.
+/// How often the build's loop looks at the stop flag while it waits for the reading or the
+/// casting threads.
+const STOP_POLL: Duration = Duration::from_millis(20);
+
+/// What the build's loop waits for: something read, a scan cast, or the reading's end.
+enum Event {
+    /// From the reading thread, in the order read.
+    Read(Reading),
+    /// A scan cast (by its number; `None`: the stop flag ended its casting, or its thread
+    /// failed), and how long casting it took, s.
+    Cast(usize, Option<PreparedScan>, f64),
+    /// The reading ended: stopped (true) or done (false), or an input failed.
+    Ended(Result<bool, PipelineError>),
+}
+
+/// The threads that cast the next scans while the build's loop applies the last one: scans in,
+/// each taken by the first thread free, each cast scan sent back to the loop as an
+/// [`Event::Cast`] as soon as it is done.
 struct CastThreads {
     /// The scans to cast, numbered.
     scans: mpsc::Sender<(usize, Scan)>,
-    /// The scans cast, numbered, in the order they were done.
-    cast: mpsc::Receiver<(usize, Option<PreparedScan>)>,
     /// Scans cast before an earlier one, by number.
-    early: BTreeMap<usize, Option<PreparedScan>>,
-    /// Scans in flight (sent, not yet applied) beyond which the oldest is applied before the
-    /// next is sent: a few per thread, so that a thread done with a quick scan finds another
-    /// queued while the main thread waits for a slow one.
-    window: usize,
+    early: BTreeMap<usize, (Option<PreparedScan>, f64)>,
     /// Scans sent so far.
     sent: usize,
-    /// Cast scans received so far.
-    received: usize,
+    /// Cast scans applied (or dropped) so far: the number of the next one to apply.
+    applied: usize,
 }
 
 impl CastThreads {
     /// `n` casting threads in `scope`, each with a copy of `caster` (casting a scan on one
-    /// thread), stopping inside a scan when `stop` is set.
+    /// thread), stopping inside a scan when `stop` is set, each cast scan sent to `events`.
     fn spawn<'scope>(
         n: usize,
         caster: &ScanCaster,
         max_range_m: Option<f64>,
         stop: &'scope AtomicBool,
+        events: &mpsc::Sender<Event>,
         scope: &'scope std::thread::Scope<'scope, '_>,
     ) -> Self {
         let (scans, scans_in) = mpsc::channel::<(usize, Scan)>();
-        let (cast_out, cast) = mpsc::channel();
         let scans_in = Arc::new(Mutex::new(scans_in));
         for _ in 0..n.max(1) {
             let mut c = caster.clone();
             c.set_threads(1);
-            let (scans_in, cast_out) = (Arc::clone(&scans_in), cast_out.clone());
+            let (scans_in, events) = (Arc::clone(&scans_in), events.clone());
             scope.spawn(move || {
                 loop {
-                    // Another thread panicking while it waited leaves the lock poisoned: the
+                    // Another thread failing while it waited leaves the lock poisoned: the
                     // queue is still whole.
                     let next = match scans_in.lock() {
                         Ok(q) => q.recv(),
                         Err(poisoned) => poisoned.into_inner().recv(),
                     };
                     let Ok((i, scan)) = next else { break };
-                    if cast_out
-                        .send((i, c.prepare(&scan, max_range_m, stop)))
+                    let t0 = Instant::now();
+                    // A failure inside casting (a bug: casting does not panic on any input)
+                    // loses this scan only; the loop then ends the build as stopped.
+                    let cast = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                        c.prepare(&scan, max_range_m, stop)
+                    }));
+                    let failed = cast.is_err();
+                    let cast_s = t0.elapsed().as_secs_f64();
+                    if events
+                        .send(Event::Cast(i, cast.ok().flatten(), cast_s))
                         .is_err()
+                        || failed
                     {
                         break;
                     }
@@ -332,43 +352,29 @@ impl CastThreads {
         }
         CastThreads {
             scans,
-            cast,
             early: BTreeMap::new(),
-            window: n.max(1) * SCANS_AHEAD_PER_THREAD,
             sent: 0,
-            received: 0,
+            applied: 0,
         }
     }
 
-    /// Scans sent and not yet received.
+    /// Scans sent and not yet applied.
     fn in_flight(&self) -> usize {
-        self.sent - self.received
+        self.sent - self.applied
     }
 
-    /// Sends the next scan to be cast; false if the threads are gone (they panicked).
+    /// Sends the next scan to be cast; false if the threads are gone.
     fn send(&mut self, scan: Scan) -> bool {
         let ok = self.scans.send((self.sent, scan)).is_ok();
         self.sent += ok as usize;
         ok
     }
 
-    /// The next scan cast, in the order sent (`None`: stopped inside it, or the threads are
-    /// gone).
-    fn recv(&mut self) -> Option<PreparedScan> {
-        let want = self.received;
-        self.received += 1;
-        if let Some(p) = self.early.remove(&want) {
-            return p;
-        }
-        loop {
-            match self.cast.recv() {
-                Ok((i, p)) if i == want => return p,
-                Ok((i, p)) => {
-                    self.early.insert(i, p);
-                }
-                Err(_) => return None,
-            }
-        }
+    /// The next scan to apply, in the order sent, if it is cast.
+    fn next_ready(&mut self) -> Option<(Option<PreparedScan>, f64)> {
+        let next = self.early.remove(&self.applied)?;
+        self.applied += 1;
+        Some(next)
     }
 }
 
@@ -377,14 +383,18 @@ impl CastThreads {
 /// scan as soon as it is made. The map keeps colours when the first scan has them, unless
 /// [`BuildConfig::no_color`].
 ///
-/// With more than one thread ([`BuildConfig::threads`]), the next scans are cast on that many
-/// threads, a scan each, while the previous scan goes into the map: the map and the stream are
-/// the same as with one thread, byte for byte.
+/// The inputs are read on a thread of their own ([`super::read_inputs`]), a few scans ahead of
+/// the map, so that reading, decompressing and decoding overlap the map's work. With more than
+/// one thread ([`BuildConfig::threads`]), the next scans are cast on that many threads, a scan
+/// each, while the previous scan goes into the map: the map and the stream are the same as with
+/// one thread, byte for byte, and each scan goes into the map and the stream as soon as it is
+/// read and cast, whatever comes after it (a live input may be quiet for a long time).
 ///
 /// When `hooks.stop` is set the build ends before the next scan (or inside a scan, before it
 /// changes the map): the stream then holds whole messages for every scan in the map, and
-/// [`BuildReport::interrupted`] says so. An input that does not parse fails the build, as does
-/// a write error; the caller should then drop its outputs.
+/// [`BuildReport::interrupted`] says so. An input that does not parse fails the build (after
+/// the scans before it went into the map and the stream), as does a write error; the caller
+/// should then drop its outputs.
 pub fn build(
     cfg: &BuildConfig,
     inputs: &[PathBuf],
@@ -397,16 +407,6 @@ pub fn build(
     let threads = cfg
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get().min(8)));
-    // A live topic is cast on one thread: with more, the last scans cast would wait for the
-    // next cloud to come before going into the map (issue 48 moves the reading off this
-    // thread to lift this).
-    let threads = match inputs
-        .iter()
-        .any(|p| super::ros2_input::topic_of(p).is_some())
-    {
-        true => 1,
-        false => threads,
-    };
     let mut sender = Sender::new(spec);
     sender.set_color_updates(cfg.color_updates);
     let header = delta::encode_header(&spec);
@@ -425,227 +425,206 @@ pub fn build(
         ..BuildReport::default()
     };
     let mut tree: Option<OcTree> = None;
+    // The reading ends when the build's loop does, whyever it does.
+    let quit = AtomicBool::new(false);
+    let quit = &quit;
     std::thread::scope(|scope| {
-        build_in(
+        let (events_tx, events) = mpsc::channel::<Event>();
+        // A token per scan read ahead of the map, given back as each goes in.
+        let ahead = threads.max(1) * SCANS_AHEAD_PER_THREAD;
+        let (tokens_back, tokens) = mpsc::sync_channel::<()>(ahead);
+        for _ in 0..ahead {
+            let _ = tokens_back.try_send(());
+        }
+        let tx = events_tx.clone();
+        scope.spawn(move || {
+            let mut send = |r: Reading| {
+                if matches!(r, Reading::Scan(_)) && tokens.recv().is_err() {
+                    return false;
+                }
+                tx.send(Event::Read(r)).is_ok()
+            };
+            let ended = read_inputs(inputs, cfg, false, quit, &mut send);
+            let _ = tx.send(Event::Ended(ended));
+        });
+        let mut run = Run {
             cfg,
-            inputs,
             threads,
-            &mut out,
-            &mut tree,
-            &mut report,
-            hooks,
-            scope,
-        )
+            out: &mut out,
+            tree: &mut tree,
+            report: &mut report,
+            caster: None,
+            known: 0,
+            tokens_back,
+        };
+        let stop = hooks.stop;
+        let outcome = run.serve(&events, &events_tx, stop, hooks, scope);
+        quit.store(true, Ordering::Relaxed);
+        outcome
     })?;
     report.elapsed_s = started.elapsed().as_secs_f64();
     let tree = tree.unwrap_or_else(|| OcTree::new(cfg.resolution_m));
     Ok(Built { tree, report })
 }
 
-/// The scans cast and not yet in the map, in order, each applied; false if the build stopped
-/// (the rest dropped).
-fn drain(
-    out: &mut Emitter<'_>,
-    caster: &mut Option<CastThreads>,
-    tree: &mut Option<OcTree>,
-    report: &mut BuildReport,
-    hooks: &mut Hooks<'_>,
+/// The build's loop and what it keeps: scans read go to the casting threads (or are cast
+/// here, with one thread), cast scans go into the map in the order read.
+struct Run<'r, 'w> {
+    cfg: &'r BuildConfig,
+    threads: usize,
+    out: &'r mut Emitter<'w>,
+    tree: &'r mut Option<OcTree>,
+    report: &'r mut BuildReport,
+    caster: Option<CastThreads>,
+    /// Scans the inputs opened so far say they have.
     known: u64,
-) -> Result<bool, PipelineError> {
-    let (Some(c), Some(tree)) = (caster.as_mut(), tree.as_mut()) else {
-        return Ok(true);
-    };
-    while c.in_flight() > 0 {
-        if !apply_next(out, c, tree, report, hooks, known)? {
+    /// Gives the reading a token back for each scan that went into the map.
+    tokens_back: mpsc::SyncSender<()>,
+}
+
+impl Run<'_, '_> {
+    /// Takes events until the reading ended and every scan read is in the map, the stop flag
+    /// is set, or something fails.
+    fn serve<'scope>(
+        &mut self,
+        events: &mpsc::Receiver<Event>,
+        events_tx: &mpsc::Sender<Event>,
+        stop: &'scope AtomicBool,
+        hooks: &mut Hooks<'_>,
+        scope: &'scope std::thread::Scope<'scope, '_>,
+    ) -> Result<(), PipelineError> {
+        let mut ended: Option<Result<bool, PipelineError>> = None;
+        loop {
+            if stop.load(Ordering::Relaxed) {
+                self.report.interrupted = true;
+                return Ok(());
+            }
+            let in_flight = self.caster.as_ref().map_or(0, CastThreads::in_flight);
+            if in_flight == 0
+                && let Some(end) = ended.take()
+            {
+                // A live input ends only when stopped.
+                self.report.interrupted |= end? || stop.load(Ordering::Relaxed);
+                return Ok(());
+            }
+            let event = match events.recv_timeout(STOP_POLL) {
+                Ok(event) => event,
+                Err(mpsc::RecvTimeoutError::Timeout) => continue,
+                Err(mpsc::RecvTimeoutError::Disconnected) => {
+                    self.report.interrupted = true;
+                    return Ok(());
+                }
+            };
+            let go_on = match event {
+                Event::Ended(end) => {
+                    ended = Some(end);
+                    true
+                }
+                Event::Read(Reading::Opened { scans }) => {
+                    self.known += scans;
+                    if let Some(p) = hooks.progress.as_mut() {
+                        p(self.report.scans as u64, self.known);
+                    }
+                    true
+                }
+                Event::Read(Reading::Skipped(reason)) => {
+                    let skipped = &mut self.report.skipped;
+                    match skipped.iter_mut().find(|(r, _)| *r == reason) {
+                        Some((_, n)) => *n += 1,
+                        None => skipped.push((reason, 1)),
+                    }
+                    true
+                }
+                Event::Read(Reading::Notes(notes)) => {
+                    self.report.notes.extend(notes);
+                    true
+                }
+                Event::Read(Reading::Scan(scan)) => {
+                    self.take(scan, events_tx, stop, hooks, scope)?
+                }
+                Event::Cast(i, prepared, cast_s) => {
+                    let Some(c) = self.caster.as_mut() else {
+                        continue;
+                    };
+                    c.early.insert(i, (prepared, cast_s));
+                    self.apply_ready(hooks)?
+                }
+            };
+            if !go_on {
+                return Ok(());
+            }
+        }
+    }
+
+    /// A scan read: cast here and put into the map (one thread), or sent to the casting
+    /// threads; false if the build stopped.
+    fn take<'scope>(
+        &mut self,
+        scan: Scan,
+        events_tx: &mpsc::Sender<Event>,
+        stop: &'scope AtomicBool,
+        hooks: &mut Hooks<'_>,
+        scope: &'scope std::thread::Scope<'scope, '_>,
+    ) -> Result<bool, PipelineError> {
+        let cfg = self.cfg;
+        let tree = self.tree.get_or_insert_with(|| {
+            // Its own caster casts only on one thread: more threads cast scans apart.
+            let mut t = OcTree::new(cfg.resolution_m);
+            if scan.colors.is_some() && !cfg.no_color {
+                t.enable_color();
+            }
+            t
+        });
+        if self.threads <= 1 {
+            let t0 = Instant::now();
+            let prepared = tree.caster_mut().prepare(&scan, cfg.max_range_m, stop);
+            let cast_s = t0.elapsed().as_secs_f64();
+            let done = self
+                .out
+                .emit(tree, prepared, cast_s, self.report, hooks, self.known)?;
+            let _ = self.tokens_back.try_send(());
+            return Ok(done);
+        }
+        let c = match &mut self.caster {
+            Some(c) => c,
+            None => self.caster.insert(CastThreads::spawn(
+                self.threads,
+                &tree.caster(),
+                cfg.max_range_m,
+                stop,
+                events_tx,
+                scope,
+            )),
+        };
+        if !c.send(scan) {
+            // The casting threads are gone: the scan is lost, the build stops.
+            self.report.interrupted = true;
             return Ok(false);
         }
+        Ok(true)
     }
-    Ok(true)
-}
 
-/// The next scan cast into the map, its message written; false if the build stopped (the
-/// stop flag was set, before or while it was cast).
-fn apply_next(
-    out: &mut Emitter<'_>,
-    c: &mut CastThreads,
-    tree: &mut OcTree,
-    report: &mut BuildReport,
-    hooks: &mut Hooks<'_>,
-    known: u64,
-) -> Result<bool, PipelineError> {
-    if hooks.stop.load(Ordering::Relaxed) {
-        report.interrupted = true;
-        return Ok(false);
-    }
-    let t0 = Instant::now();
-    let prepared = c.recv();
-    out.emit(tree, prepared, t0, report, hooks, known)
-}
-
-/// [`build`]'s loop over the inputs and their scans; the casting threads, if any, in `scope`.
-#[allow(clippy::too_many_arguments)]
-fn build_in<'scope, 'h: 'scope>(
-    cfg: &BuildConfig,
-    inputs: &[PathBuf],
-    threads: usize,
-    out: &mut Emitter<'_>,
-    tree_slot: &mut Option<OcTree>,
-    report: &mut BuildReport,
-    hooks: &mut Hooks<'h>,
-    scope: &'scope std::thread::Scope<'scope, '_>,
-) -> Result<(), PipelineError> {
-    let origin = cfg.origin_m.map(|o| o.map(|c| c as f32));
-    let max_range_m = cfg.max_range_m;
-    let mut known = 0u64;
-    let mut caster: Option<CastThreads> = None;
-    'inputs: for path in inputs {
-        if hooks.stop.load(Ordering::Relaxed) {
-            report.interrupted = true;
-            break;
-        }
-        // A read that gave up because the flag was set is a stop, not a bad input.
-        let stop = hooks.stop;
-        let name = path.display().to_string();
-        let source = match open_scans(path, cfg, stop) {
-            Err(_) if stop.load(Ordering::Relaxed) => {
-                report.interrupted = true;
-                break;
-            }
-            opened => opened?,
+    /// Every cast scan next in order goes into the map, its message written; false if the
+    /// build stopped.
+    fn apply_ready(&mut self, hooks: &mut Hooks<'_>) -> Result<bool, PipelineError> {
+        let (Some(c), Some(tree)) = (self.caster.as_mut(), self.tree.as_mut()) else {
+            return Ok(true);
         };
-        // A bag's clouds borrow it: it lives here, beside the loop over them.
-        let mut recording: Option<Box<Recording>> = None;
-        type Items<'s> = Box<dyn Iterator<Item = Result<Item, PipelineError>> + 's>;
-        let (items, count, needs_origin): (Items<'_>, u64, bool) = match source {
-            ScanSource::Scans(scans, n, format) => {
-                let name = name.clone();
-                let items = scans.map(move |r| {
-                    r.map(Item::Scan).map_err(|source| PipelineError::Input {
-                        name: name.clone(),
-                        source,
-                    })
-                });
-                (Box::new(items), n as u64, !format.has_poses())
+        while let Some((prepared, cast_s)) = c.next_ready() {
+            if hooks.stop.load(Ordering::Relaxed) {
+                self.report.interrupted = true;
+                return Ok(false);
             }
-            ScanSource::Bag(rec) => {
-                let rec = recording.insert(rec);
-                let n = rec.cloud_count().unwrap_or(0);
-                let needs_origin = !rec.has_poses();
-                let items = rec.scans(stop)?.map(|r| r.map_err(PipelineError::from));
-                (Box::new(items), n, needs_origin)
-            }
-            ScanSource::Live(scans) => (scans, 0, false),
-        };
-        known += count;
-        if let Some(p) = hooks.progress.as_mut() {
-            p(report.scans as u64, known);
-        }
-        let origin = origin.filter(|_| needs_origin);
-        let (mut posed, mut skipped, mut first_reason) = (0u64, 0u64, None);
-        for item in items {
-            if stop.load(Ordering::Relaxed) {
-                report.interrupted = true;
-                break 'inputs;
-            }
-            let scan = match item {
-                Err(_) if stop.load(Ordering::Relaxed) => {
-                    report.interrupted = true;
-                    break 'inputs;
-                }
-                Ok(Item::Skipped(reason)) => {
-                    let reason = format!("{name}: {reason}");
-                    skipped += 1;
-                    match report.skipped.iter_mut().find(|(r, _)| *r == reason) {
-                        Some((_, n)) => *n += 1,
-                        None => report.skipped.push((reason.clone(), 1)),
-                    }
-                    first_reason.get_or_insert(reason);
-                    continue;
-                }
-                Ok(Item::Scan(scan)) => scan,
-                Err(e) => {
-                    // The scans before the bad one go into the map and the stream first.
-                    drain(out, &mut caster, tree_slot, report, hooks, known)?;
-                    return Err(e);
-                }
-            };
-            posed += 1;
-            let scan = with_origin(scan, origin);
-            let tree = tree_slot.get_or_insert_with(|| {
-                // Its own caster casts only on one thread: more threads cast scans apart.
-                let mut t = OcTree::new(cfg.resolution_m);
-                if scan.colors.is_some() && !cfg.no_color {
-                    t.enable_color();
-                }
-                t
-            });
-            if threads > 1 && caster.is_none() {
-                caster = Some(CastThreads::spawn(
-                    threads,
-                    &tree.caster(),
-                    max_range_m,
-                    stop,
-                    scope,
-                ));
-            }
-            let Some(c) = caster.as_mut() else {
-                let t0 = Instant::now();
-                let prepared = tree.caster_mut().prepare(&scan, max_range_m, stop);
-                if !out.emit(tree, prepared, t0, report, hooks, known)? {
-                    break 'inputs;
-                }
-                continue;
-            };
-            if !c.send(scan) {
-                // A casting thread is gone (it panicked): the scan is lost, the build stops.
-                report.interrupted = true;
-                break 'inputs;
-            }
-            // Scans being cast on every thread, and a few queued, while the oldest goes into
-            // the map.
-            if c.in_flight() > c.window && !apply_next(out, c, tree, report, hooks, known)? {
-                break 'inputs;
-            }
-        }
-        // An input's scans are all in the map before the next input is opened.
-        if !drain(out, &mut caster, tree_slot, report, hooks, known)? {
-            break 'inputs;
-        }
-        // A live input ends only when stopped.
-        if stop.load(Ordering::Relaxed) {
-            report.interrupted = true;
-            break 'inputs;
-        }
-        if let Some(rec) = &recording {
-            // A bag that says it has clouds but gives none (its metadata.yaml lists a topic its
-            // .db3 lacks) is not an empty survey.
-            if posed == 0
-                && skipped == 0
-                && let Some(n) = rec.cloud_count().filter(|&n| n > 0)
+            if !self
+                .out
+                .emit(tree, prepared, cast_s, self.report, hooks, self.known)?
             {
-                return Err(PipelineError::Recording(RecordingError::Unusable {
-                    file: name,
-                    message: format!(
-                        "cloud topic {:?}: expected {n} messages (as the bag says), found none",
-                        rec.cloud_topic()
-                    ),
-                }));
+                return Ok(false);
             }
-            if posed == 0
-                && let Some(reason) = first_reason
-            {
-                return Err(PipelineError::NoPosedCloud {
-                    name,
-                    skipped,
-                    reason,
-                });
-            }
-            report
-                .notes
-                .extend(rec.notes.iter().map(|n| format!("{name}: {n}")));
+            let _ = self.tokens_back.try_send(());
         }
+        Ok(true)
     }
-    Ok(())
 }
 
 /// One row of `--arrivals`: when a scan's message reached the operator over the link.

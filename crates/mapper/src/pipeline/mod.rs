@@ -15,13 +15,15 @@
 //! whose errors name the option, the range with its unit, and what was found.
 //!
 //! Its parts, each re-exported here: `config` (the checked configuration), `inputs` (input
-//! formats and reading), `ros2_input` (`ros2:TOPIC` inputs: a live ROS 2 topic), `builder` (the build loop and its report), `commands` (apply, dump,
+//! formats and reading), `ros2_input` (`ros2:TOPIC` inputs: a live ROS 2 topic), `reading` (the inputs read in
+//! turn, scan by scan, on a thread of their own), `builder` (the build loop and its report), `commands` (apply, dump,
 //! full, synth).
 
 mod builder;
 mod commands;
 mod config;
 pub(crate) mod inputs;
+mod reading;
 pub mod ros2_input;
 
 pub use builder::{
@@ -35,6 +37,7 @@ pub use config::{
     shown, view_spec,
 };
 pub use inputs::{InputFormat, MAX_INPUT_BYTES, input_files, read_input, read_limited};
+pub use reading::{FOLLOW_POLL, Reading, read_inputs};
 
 use rovlink_base::io::IoError;
 use rovlink_octo::ParseError;
