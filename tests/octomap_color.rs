@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use crate::common::{assert_kld_zero, octomap_tool, run};
-use rovlink_octo::synth::{SurveyParams, survey};
+use rovlink_octo::synth::{SurveyParams, reference_dump, survey};
 
 const OCTO: &str = env!("TOOL_EXE_octo-delta");
 
@@ -49,22 +49,11 @@ fn dump_scans(seed: u64, scans: usize) -> Vec<u8> {
         scans,
         ..SurveyParams::default()
     });
-    let mut out = b"RVCS".to_vec();
-    out.extend((survey.len() as u32).to_le_bytes());
-    for scan in &survey {
-        let p = &scan.pose;
-        for v in p.translation_m.iter().chain(&p.rotation) {
-            out.extend(v.to_le_bytes());
-        }
-        out.extend((scan.points.len() as u32).to_le_bytes());
-        for v in scan.points.iter().flatten() {
-            out.extend(v.to_le_bytes());
-        }
-        let colors = scan.colors.as_ref().expect("synth scans are coloured");
-        assert_eq!(colors.len(), scan.points.len());
-        out.extend(colors.iter().flatten());
-    }
-    out
+    assert!(
+        survey.iter().all(|s| s.colors.is_some()),
+        "synth scans are coloured"
+    );
+    reference_dump(&survey)
 }
 
 /// One `.ot` node: its path from the root (child indices), log-odds bits, colour, child mask.

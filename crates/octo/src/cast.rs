@@ -17,8 +17,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::Scan;
 use super::cellset::CellSet;
+use super::firstray::FirstRay;
 use super::hashorder::KeySet;
-use super::lanes::{BoxBits, OVERSHOOT_CELLS, walk_lanes};
+use super::lanes::{BoxBits, LaneSink, OVERSHOOT_CELLS, walk_lanes};
 use super::math::{
     ColorSlot, FAN_BATCH, Fan, Grid, Key, NO_COLOR, RaySink, RayStart, RayWalk, color_slot,
     end_at_range, morton, norm_f32, slot_order, world_points,
@@ -141,6 +142,9 @@ pub struct ScanCaster {
     window: (Key, Key),
     /// Each casting thread's free and hit cells, when the scan's box is small enough.
     boxes: Vec<(BoxBits, BoxBits)>,
+    /// A coloured scan's cells and the first ray that crossed each, when the scan's box is
+    /// small enough.
+    first_ray: FirstRay,
 }
 
 impl std::fmt::Debug for ScanCaster {
@@ -170,6 +174,7 @@ impl ScanCaster {
             free_keys: KeySet::new(),
             window: ([0; 3], [0; 3]),
             boxes: Vec::new(),
+            first_ray: FirstRay::default(),
         }
     }
 
@@ -205,7 +210,13 @@ impl ScanCaster {
             None
         };
         let mut p = if self.colored {
-            self.prepare_octomap_order(&pts, origin, colors, max_range_m, stop)?
+            match self.prepare_octomap_lanes(&pts, origin, colors, max_range_m, stop) {
+                Lanes::Done(p) => p,
+                Lanes::Stopped => return None,
+                Lanes::Unfit => {
+                    self.prepare_octomap_order(&pts, origin, colors, max_range_m, stop)?
+                }
+            }
         } else {
             self.prepare_sorted(&pts, origin, max_range_m, stop)?
         };
@@ -471,11 +482,11 @@ impl ScanCaster {
     /// On a processor with AVX-512 or AVX2 the same code runs compiled for it (the lanes'
     /// arithmetic in wider registers): the same operations on the same `f64`s, hence the same
     /// cells (the compiler fuses no multiply-add unless told to).
-    fn cast_lanes(
+    fn cast_lanes<F: LaneSink, H: RayEnds>(
         &self,
         share: LaneShare<'_>,
-        free: &mut BoxBits,
-        hits: &mut BoxBits,
+        free: &mut F,
+        hits: &mut H,
     ) -> Option<(usize, usize)> {
         #[cfg(target_arch = "x86_64")]
         if has_avx512() {
@@ -495,11 +506,11 @@ impl ScanCaster {
 
     /// [`ScanCaster::cast_lanes`]'s work, inlined into each of its compilations.
     #[inline(always)]
-    fn cast_lanes_body(
+    fn cast_lanes_body<F: LaneSink, H: RayEnds>(
         &self,
         share: LaneShare<'_>,
-        free: &mut BoxBits,
-        hits: &mut BoxBits,
+        free: &mut F,
+        hits: &mut H,
     ) -> Option<(usize, usize)> {
         let LaneShare {
             pts,
@@ -603,6 +614,14 @@ impl ScanCaster {
         beyond += b;
         p.points_skipped = skipped;
         p.points_beyond_range = beyond;
+        self.octomap_ups(&mut p, free, occ);
+        Some(p)
+    }
+
+    /// A coloured scan's updates in OctoMap's order from its free `KeySet` and its end cells
+    /// in point order (with colours): the free cells less the occupied ones, then the occupied
+    /// `KeySet`; the free set is kept for the next scan.
+    fn octomap_ups(&mut self, p: &mut PreparedScan, free: KeySet, mut occ: Vec<(u64, ColorSlot)>) {
         let mut occupied = KeySet::new();
         occupied.set_window(self.window.0, self.window.1);
         for &(code, _) in &occ {
@@ -619,9 +638,65 @@ impl ScanCaster {
         }));
         self.free_keys = free;
         brightest_per_voxel(&mut occ);
+        p.octomap_order = true;
         p.ups = ups;
         p.hits = occ;
-        Some(p)
+    }
+
+    /// A coloured scan as [`ScanCaster::prepare_octomap_order`] casts it, its rays walked with
+    /// [`walk_lanes`] on one thread and each cell's first ray kept in a [`FirstRay`] table of
+    /// the scan's key box; [`Lanes::Unfit`] when the box is too large or at the key range's
+    /// edge, or a ray left it (the caller then casts the scan the general way).
+    fn prepare_octomap_lanes(
+        &mut self,
+        pts: &[[f32; 3]],
+        origin: [f32; 3],
+        colors: Option<&[[u8; 3]]>,
+        max_range_m: Option<f64>,
+        stop: &AtomicBool,
+    ) -> Lanes {
+        let (low, high) = self.window;
+        let pad = OVERSHOOT_CELLS;
+        if low.iter().any(|&k| k < pad) || high.iter().any(|&k| k > u16::MAX - pad) {
+            return Lanes::Unfit;
+        }
+        let mut table = std::mem::take(&mut self.first_ray);
+        if !table.reset(low.map(|k| k - pad), high.map(|k| k + pad)) {
+            self.first_ray = table;
+            return Lanes::Unfit;
+        }
+        let mut ends = ColorEnds {
+            colors,
+            occ: Vec::with_capacity(pts.len()),
+        };
+        let share = LaneShare {
+            pts,
+            part: (0, 1),
+            origin,
+            max_range_m,
+            stop,
+        };
+        let cast = self.cast_lanes(share, &mut table, &mut ends);
+        table.finish();
+        let result = match cast {
+            None => Lanes::Stopped,
+            Some(_) if table.missed() => Lanes::Unfit,
+            Some((skipped, beyond)) => {
+                let mut free = std::mem::take(&mut self.free_keys);
+                free.set_window(self.window.0, self.window.1);
+                // No ray when the sensor is outside the key range: no cell either.
+                table.insert_into(self.grid.key_of(origin).unwrap_or([0; 3]), &mut free);
+                let mut p = PreparedScan {
+                    points_skipped: skipped,
+                    points_beyond_range: beyond,
+                    ..PreparedScan::default()
+                };
+                self.octomap_ups(&mut p, free, ends.occ);
+                Lanes::Done(p)
+            }
+        };
+        self.first_ray = table;
+        result
     }
 }
 
@@ -634,11 +709,11 @@ macro_rules! compiled_for {
                 #[doc = concat!("[`ScanCaster::cast_lanes`] compiled for ", $features, ".")]
                 #[cfg(target_arch = "x86_64")]
                 #[target_feature(enable = $features)]
-                fn $name(
+                fn $name<F: LaneSink, H: RayEnds>(
                     &self,
                     share: LaneShare<'_>,
-                    free: &mut BoxBits,
-                    hits: &mut BoxBits,
+                    free: &mut F,
+                    hits: &mut H,
                 ) -> Option<(usize, usize)> {
                     self.cast_lanes_body(share, free, hits)
                 }
@@ -648,6 +723,36 @@ macro_rules! compiled_for {
 }
 
 compiled_for!(cast_lanes_avx2: "avx2", cast_lanes_avx512: "avx512f,avx512vl,avx512bw,avx512dq");
+
+/// Where a share's rays tell the cells their points end in (a hit).
+trait RayEnds {
+    /// Point `point` of the scan ends in cell `k`.
+    fn hit(&mut self, point: usize, k: Key);
+}
+
+/// A plain scan's hit cells: a set.
+impl RayEnds for BoxBits {
+    #[inline(always)]
+    fn hit(&mut self, _point: usize, k: Key) {
+        self.insert(k);
+    }
+}
+
+/// A coloured scan's hit cells, in point order, each with its point's colour.
+struct ColorEnds<'a> {
+    /// The scan's colours, by point.
+    colors: Option<&'a [[u8; 3]]>,
+    /// (Morton code, colour) of each hit.
+    occ: Vec<(u64, ColorSlot)>,
+}
+
+impl RayEnds for ColorEnds<'_> {
+    #[inline(always)]
+    fn hit(&mut self, point: usize, k: Key) {
+        let color = color_slot(self.colors.and_then(|c| c.get(point)).copied());
+        self.occ.push((morton(k), color));
+    }
+}
 
 /// One thread's share of a plain scan's rays, cast with the lanes
 /// ([`ScanCaster::cast_lanes`]): runs of [`SHARE_POINTS`] points dealt to the shares in turn,
@@ -670,7 +775,7 @@ struct LaneShare<'a> {
 /// a time by [`Fan::starts`]; a ray that is not plain goes the one-ray way
 /// ([`ScanCaster::ray_end`], [`Grid::ray_start_keyed`]). Each hit's cell goes into `hits` as its
 /// ray is set up.
-struct ShareRays<'a> {
+struct ShareRays<'a, H: RayEnds> {
     caster: &'a ScanCaster,
     /// The rays' shared set-up (`None`: the origin is outside the key range).
     fan: Option<Fan>,
@@ -682,7 +787,7 @@ struct ShareRays<'a> {
     next: usize,
     /// Shares the scan is cut into.
     shares: usize,
-    hits: &'a mut BoxBits,
+    hits: &'a mut H,
     /// The batch's walks, and which are plain (bit per walk).
     batch: [RayWalk; FAN_BATCH],
     plain: u64,
@@ -697,7 +802,7 @@ struct ShareRays<'a> {
     stopped: bool,
 }
 
-impl ShareRays<'_> {
+impl<H: RayEnds> ShareRays<'_, H> {
     /// Sets up the next batch of the share's points; false when there is none (or the stop
     /// flag is set, checked at the start of every [`SHARE_POINTS`]).
     #[inline(always)]
@@ -727,7 +832,7 @@ impl ShareRays<'_> {
     }
 }
 
-impl Iterator for ShareRays<'_> {
+impl<H: RayEnds> Iterator for ShareRays<'_, H> {
     type Item = RayWalk;
 
     #[inline(always)]
@@ -740,7 +845,7 @@ impl Iterator for ShareRays<'_> {
             self.pos += 1;
             if self.plain >> i & 1 == 1 {
                 let w = self.batch[i];
-                self.hits.insert(w.end);
+                self.hits.hit(self.base + i, w.end);
                 return Some(w);
             }
             let p = self.pts[self.base + i];
@@ -749,7 +854,7 @@ impl Iterator for ShareRays<'_> {
                 continue;
             };
             if let Some(k) = ray.hit_cell(&mut self.skipped, &mut self.beyond) {
-                self.hits.insert(k);
+                self.hits.hit(self.base + i, k);
             }
             let start = self.caster.grid.ray_start_keyed(
                 self.fan.map(|f| f.origin_key()),
@@ -872,13 +977,11 @@ mod tests {
     use super::*;
     use crate::synth::{SurveyParams, survey};
 
-    /// A plain scan cast with the lanes (on one and on three threads) gives the updates of the
-    /// general cast, with a maximum range or not, with points that are not finite; a scan with
-    /// a point outside the key range goes the general way.
-    #[test]
-    fn lanes_cast_the_scan_the_general_way_casts_it() {
+    /// `n` (at least 3) scans of the synthetic survey, two points of the second not finite,
+    /// and a copy of the third with a point outside the key range (the scan at `n`).
+    fn odd_scans(n: usize) -> Vec<Scan> {
         let params = SurveyParams {
-            scans: 3,
+            scans: n,
             ..SurveyParams::default()
         };
         let mut scans = survey(&params);
@@ -887,6 +990,60 @@ mod tests {
         let mut outside = scans[2].clone();
         outside.points[5] = [1e6, 0.0, 1.0];
         scans.push(outside);
+        scans
+    }
+
+    /// A coloured scan cast with the lanes and a first-ray table gives the updates of the
+    /// general cast (every cell inserted into the `KeySet`), in the same order, with a maximum
+    /// range or not, with points that are not finite, with few rays; a scan with a point
+    /// outside the key range goes the general way.
+    #[test]
+    fn coloured_lanes_give_octomaps_order_as_the_keyset_of_every_cell_does() {
+        let mut scans = odd_scans(4);
+        // A few rays only: the table grows bucket by bucket, ray by ray.
+        let mut few = scans[3].clone();
+        few.points.truncate(40);
+        few.colors.as_mut().expect("coloured").truncate(40);
+        scans.push(few);
+        let stop = AtomicBool::new(false);
+        for (n, scan) in scans.iter().enumerate() {
+            for range in [None, Some(2.5)] {
+                let mut c = ScanCaster::new(0.1, true, 1);
+                let (pts, origin) = world_points(scan);
+                c.window = key_box(&c.grid, origin, &pts);
+                let colors = scan.colors.as_deref();
+                let want = c
+                    .prepare_octomap_order(&pts, origin, colors, range, &stop)
+                    .expect("not stopped");
+                let got = match c.prepare_octomap_lanes(&pts, origin, colors, range, &stop) {
+                    Lanes::Done(p) => p,
+                    Lanes::Stopped => panic!("stopped"),
+                    Lanes::Unfit => {
+                        // The point far away makes the box too large: the general way.
+                        assert_eq!(n, 4, "scan {n} unfit");
+                        continue;
+                    }
+                };
+                assert!(
+                    c.first_ray.len() > 30,
+                    "scan {n}: {} cells",
+                    c.first_ray.len()
+                );
+                assert!(got.octomap_order && want.octomap_order);
+                assert_eq!(got.ups, want.ups, "scan {n}, range {range:?}");
+                assert_eq!(got.hits, want.hits);
+                assert_eq!(got.points_skipped, want.points_skipped);
+                assert_eq!(got.points_beyond_range, want.points_beyond_range);
+            }
+        }
+    }
+
+    /// A plain scan cast with the lanes (on one and on three threads) gives the updates of the
+    /// general cast, with a maximum range or not, with points that are not finite; a scan with
+    /// a point outside the key range goes the general way.
+    #[test]
+    fn lanes_cast_the_scan_the_general_way_casts_it() {
+        let scans = odd_scans(3);
         let stop = AtomicBool::new(false);
         for scan in &scans {
             for range in [None, Some(2.5)] {

@@ -520,14 +520,23 @@ impl KeySet {
     /// Inserts the range: first the policy's look at its whole length, then key by key.
     pub fn end_range(&mut self) {
         let pending = std::mem::take(&mut self.pending);
-        if let Some(count) = self.need_rehash(pending.len() as u64) {
-            self.rehash(count);
-        }
-        for &k in &pending {
-            self.insert(k);
-        }
+        let mut keys = pending.iter().copied();
+        self.insert_range(pending.len() as u64, || keys.next());
         self.pending = pending;
         self.pending.clear();
+    }
+
+    /// A range insert of `len` keys, repeats and keys already in the set included, whose other
+    /// keys `keys` gives in their order in the range: the policy's look at the whole length,
+    /// then key by key (what [`KeySet::end_range`] does, for a caller that knows the range's
+    /// new keys without the range).
+    pub fn insert_range(&mut self, len: u64, mut keys: impl FnMut() -> Option<Key>) {
+        if let Some(count) = self.need_rehash(len) {
+            self.rehash(count);
+        }
+        while let Some(k) = keys() {
+            self.insert(k);
+        }
     }
 
     /// The keys in iteration order.

@@ -39,15 +39,55 @@ const LOCAL: [u8; 64] = {
     t
 };
 
+/// How a key box's cells are numbered ([`BoxBits`]' bits, [`super::firstray::FirstRay`]'s
+/// slots): a word of 64 per 4 x 4 x 4 cells, numbered in Morton order inside it; a power of
+/// two of words along each axis, x fastest, so that a cell's number is found with shifts.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct BoxLayout {
+    /// Lowest key of the box on each axis, a multiple of 4.
+    pub(crate) low: [u16; 3],
+    /// Log2 of the words along each axis.
+    pub(crate) shift: [u32; 3],
+}
+
+impl BoxLayout {
+    /// The layout of the cells from `low` to `high` (inclusive, each axis) and its number of
+    /// words; `None` if the box is empty or too large (more than [`BOX_WORDS_MAX`] words).
+    pub(crate) fn fit(low: Key, high: Key) -> Option<(BoxLayout, usize)> {
+        let lo = low.map(|k| k & !3);
+        let shift = [0, 1, 2].map(|i| {
+            let words = (high[i].saturating_sub(lo[i]) as u32 >> 2) + 1;
+            words.next_power_of_two().trailing_zeros()
+        });
+        let words = 1u64 << shift.iter().sum::<u32>();
+        if high.iter().zip(&low).any(|(h, l)| h < l) || words > BOX_WORDS_MAX {
+            return None;
+        }
+        Some((BoxLayout { low: lo, shift }, words as usize))
+    }
+
+    /// Cell `k`'s number (its word times 64 plus its bit); `None` outside the box.
+    #[inline(always)]
+    pub(crate) fn cell(&self, k: Key) -> Option<usize> {
+        let x = k[0].wrapping_sub(self.low[0]) as usize;
+        let y = k[1].wrapping_sub(self.low[1]) as usize;
+        let z = k[2].wrapping_sub(self.low[2]) as usize;
+        let [sx, sy, sz] = self.shift;
+        if (x >> (sx + 2)) | (y >> (sy + 2)) | (z >> (sz + 2)) != 0 {
+            return None;
+        }
+        let word = (x >> 2) | (y >> 2) << sx | (z >> 2) << (sx + sy);
+        Some(word << 6 | LOCAL[(x & 3) | (y & 3) << 2 | (z & 3) << 4] as usize)
+    }
+}
+
 /// A set of the cells of one key box, a bit each: a word (64 bits) per 4 x 4 x 4 cells, its
 /// bits in Morton order; a power of two of words along each axis, so that a cell's word is
 /// found with shifts.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct BoxBits {
-    /// Lowest key of the box on each axis, a multiple of 4.
-    low: [u16; 3],
-    /// Log2 of the words along each axis.
-    shift: [u32; 3],
+    /// Where each cell's bit is.
+    layout: BoxLayout,
     /// The words, x fastest.
     words: Vec<u64>,
     /// Whether a key outside the box was inserted (and dropped).
@@ -66,29 +106,21 @@ impl BoxBits {
     /// Empties the set and makes it cover the cells from `low` to `high`; false (and the set
     /// unusable) if the box is too large.
     pub(crate) fn reset(&mut self, low: Key, high: Key) -> bool {
-        let lo = low.map(|k| k & !3);
-        let shift = [0, 1, 2].map(|i| {
-            let words = (high[i].saturating_sub(lo[i]) as u32 >> 2) + 1;
-            words.next_power_of_two().trailing_zeros()
-        });
-        let words = 1u64 << shift.iter().sum::<u32>();
         self.words.clear();
         self.missed = false;
-        if high.iter().zip(&low).any(|(h, l)| h < l) || words > BOX_WORDS_MAX {
-            self.shift = [0; 3];
+        let Some((layout, words)) = BoxLayout::fit(low, high) else {
+            self.layout = BoxLayout::default();
             return false;
-        }
-        self.low = lo;
-        self.shift = shift;
-        self.words.resize(words as usize, 0);
+        };
+        self.layout = layout;
+        self.words.resize(words, 0);
         true
     }
 
     /// Whether the set covers cell `k`.
     #[cfg(test)]
     pub(crate) fn covers(&self, k: Key) -> bool {
-        !self.words.is_empty()
-            && (0..3).all(|i| (k[i].wrapping_sub(self.low[i]) as u32) >> (self.shift[i] + 2) == 0)
+        !self.words.is_empty() && self.layout.cell(k).is_some()
     }
 
     /// Whether a key outside the box was inserted since the last reset (the set is then
@@ -100,20 +132,13 @@ impl BoxBits {
     /// Adds cell `k`; a key outside the box is dropped, and [`BoxBits::missed`] says so.
     #[inline(always)]
     pub(crate) fn insert(&mut self, k: Key) {
-        let x = k[0].wrapping_sub(self.low[0]) as usize;
-        let y = k[1].wrapping_sub(self.low[1]) as usize;
-        let z = k[2].wrapping_sub(self.low[2]) as usize;
-        let [sx, sy, sz] = self.shift;
-        if (x >> (sx + 2)) | (y >> (sy + 2)) | (z >> (sz + 2)) != 0 {
-            self.missed = true;
-            return;
-        }
-        let word = (x >> 2) | (y >> 2) << sx | (z >> 2) << (sx + sy);
-        let bit = LOCAL[(x & 3) | (y & 3) << 2 | (z & 3) << 4];
-        if let Some(w) = self.words.get_mut(word) {
-            *w |= 1 << bit;
-        } else {
-            self.missed = true;
+        let word = self
+            .layout
+            .cell(k)
+            .and_then(|c| Some((self.words.get_mut(c >> 6)?, c & 63)));
+        match word {
+            Some((w, bit)) => *w |= 1 << bit,
+            None => self.missed = true,
         }
     }
 
@@ -127,8 +152,8 @@ impl BoxBits {
     /// The words holding a cell of `self` or `also` (a set over the same box), as (Morton
     /// code of the word's first cell, word index), in Morton order.
     fn words_in_order(&self, also: Option<&BoxBits>) -> Vec<(u64, usize)> {
-        let [sx, sy, _] = self.shift;
-        let low = self.low.map(|k| k >> 2);
+        let [sx, sy, _] = self.layout.shift;
+        let low = self.layout.low.map(|k| k >> 2);
         let mut order: Vec<(u64, usize)> = Vec::new();
         for (i, &w) in self.words.iter().enumerate() {
             let other = also.and_then(|o| o.words.get(i)).copied().unwrap_or(0);
@@ -162,6 +187,17 @@ impl BoxBits {
 
 /// Where [`walk_lanes`] puts the cells it walks.
 pub(crate) trait LaneSink {
+    /// The next walk (in the order the walks come) starts in lane `lane`: the cells that
+    /// [`LaneSink::insert`] gets until the next call to this or [`LaneSink::resume`] are its
+    /// first, and the lane's cells in [`LaneSink::insert_lanes`] are its.
+    #[inline(always)]
+    fn begin(&mut self, _lane: usize) {}
+
+    /// The cells [`LaneSink::insert`] gets from now are those of the walk in lane `lane`
+    /// (finishing the walks one by one).
+    #[inline(always)]
+    fn resume(&mut self, _lane: usize) {}
+
     /// Adds one cell.
     fn insert(&mut self, k: Key);
 
@@ -190,8 +226,8 @@ impl LaneSink for BoxBits {
     /// [`BoxBits::missed`].
     #[inline(always)]
     fn insert_lanes(&mut self, kx: &[u16; LANES], ky: &[u16; LANES], kz: &[u16; LANES], keep: u32) {
-        let [sx, sy, sz] = self.shift;
-        let [lx, ly, lz] = self.low;
+        let [sx, sy, sz] = self.layout.shift;
+        let [lx, ly, lz] = self.layout.low;
         let mut word = [0u32; LANES];
         let mut bits = [0u64; LANES];
         let mut outside = 0u32;
@@ -340,13 +376,15 @@ fn mask64(b: bool) -> u64 {
 
 /// Walks every ray of `walks` (each started at its first cell, which it puts in `out` first),
 /// [`LANES`] at a time, putting each cell a ray crosses into `out`: the same cells as walking
-/// each with [`RayWalk::step`], interleaved.
+/// each with [`RayWalk::step`], interleaved; each walk's cells in its own order, and which walk
+/// a cell is of told by [`LaneSink::begin`] and [`LaneSink::resume`].
 #[inline(always)]
 pub(crate) fn walk_lanes(walks: &mut impl Iterator<Item = RayWalk>, out: &mut impl LaneSink) {
     let mut lanes = Lanes::new();
     let mut live = 0u32;
     for l in 0..LANES {
         let Some(w) = walks.next() else { break };
+        out.begin(l);
         out.insert(w.key);
         lanes.load(l, &w);
         live |= 1 << l;
@@ -361,6 +399,7 @@ pub(crate) fn walk_lanes(walks: &mut impl Iterator<Item = RayWalk>, out: &mut im
             e &= e - 1;
             match walks.next() {
                 Some(w) => {
+                    out.begin(l);
                     out.insert(w.key);
                     lanes.load(l, &w);
                 }
@@ -371,6 +410,7 @@ pub(crate) fn walk_lanes(walks: &mut impl Iterator<Item = RayWalk>, out: &mut im
     // Out of rays: the walks still going finish one by one.
     for l in 0..LANES {
         if live & (1 << l) != 0 {
+            out.resume(l);
             let mut w = lanes.walk(l);
             while let Some(k) = w.step() {
                 out.insert(k);

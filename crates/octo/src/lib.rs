@@ -30,6 +30,7 @@ pub mod cellset;
 pub mod checks;
 pub mod delta;
 pub mod files;
+mod firstray;
 pub mod graph;
 pub mod hashorder;
 mod lanes;

@@ -1131,6 +1131,36 @@ fn cameras(cfg: &Config, scene: &Scene) -> Vec<Camera> {
     cams
 }
 
+/// `scans` in the input format of the C++ `ColorOcTree` reference (`tests/octomap/color_tree.cpp`,
+/// the coloured build's anchor in `scripts/octo-bench.sh`), little-endian: `RVCS`, u32 scan
+/// count, then per scan seven `f32` (tx ty tz qw qx qy qz: the sensor pose), u32 point count n,
+/// n x 3 `f32` (x y z in the sensor frame), n x 3 `u8` (r g b; white for a scan without
+/// colours).
+pub fn reference_dump(scans: &[Scan]) -> Vec<u8> {
+    let mut out = b"RVCS".to_vec();
+    out.extend((scans.len() as u32).to_le_bytes());
+    for scan in scans {
+        let p = &scan.pose;
+        for v in p.translation_m.iter().chain(&p.rotation) {
+            out.extend(v.to_le_bytes());
+        }
+        out.extend((scan.points.len() as u32).to_le_bytes());
+        for v in scan.points.iter().flatten() {
+            out.extend(v.to_le_bytes());
+        }
+        let white = [255u8; 3];
+        for i in 0..scan.points.len() {
+            let c = scan
+                .colors
+                .as_ref()
+                .and_then(|c| c.get(i))
+                .unwrap_or(&white);
+            out.extend(c);
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
