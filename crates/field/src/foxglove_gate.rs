@@ -10,8 +10,10 @@
 //! gate listens on the address the user gave, keeps the SDK on a loopback port of its own, and
 //! for each connection:
 //!
-//! 1. reads the client's HTTP upgrade request (at most [`MAX_REQUEST_BYTES`], within
-//!    [`REQUEST_TIMEOUT`]);
+//! 1. reads the client's HTTP upgrade request (at most [`MAX_REQUEST_BYTES`]), which must be
+//!    whole (its TLS handshake included) within [`REQUEST_TIMEOUT`] of the accept however
+//!    slowly it comes: a deadline for the whole request, not a limit per read, kept by the
+//!    gate's [`Clock`]; past it the connection is closed and reported ([`Reports::take`]);
 //! 2. refuses with 403 a request whose `Origin` header is not allowed ([`origin_allowed`]: what
 //!    Foxglove Studio and pages on this machine send, and [`Policy::origins`]) and one whose URL
 //!    carries a `token` that is not the [`Policy::token`]; a request without `Origin` (a program,
@@ -30,17 +32,21 @@
 //!    know the secret: it gets no message and its publishing is refused;
 //! 6. then copies bytes both ways until either side closes.
 //!
-//! At most [`MAX_CONNECTIONS`] connections are carried at once; one more is closed at once.
+//! At most [`MAX_CONNECTIONS`] connections are carried at once, and at most
+//! [`MAX_CONNECTIONS_PER_PEER`] from one peer ([`peer_key`]: an IPv4 address, an IPv6 /64),
+//! in handshake or open; one more is closed at once and reported. A peer trickling requests
+//! therefore holds at most its share of the slots, each for at most [`REQUEST_TIMEOUT`].
 //! Contract: nothing a client sends panics or blocks the session: every connection has its
 //! own threads, and a request that is too long, too slow or not HTTP is closed.
 
+use crate::foxglove_server::lock;
 use rovlink_base::secret::{constant_time_eq, read_secret_file};
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::io::{self, Read, Write};
-use std::net::{IpAddr, Shutdown, SocketAddr, TcpListener, TcpStream};
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::net::{IpAddr, Ipv6Addr, Shutdown, SocketAddr, TcpListener, TcpStream};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// The subprotocol name stock viewers offer.
 pub const LEGACY_SUBPROTOCOL: &str = "foxglove.websocket.v1";
@@ -48,10 +54,19 @@ pub const LEGACY_SUBPROTOCOL: &str = "foxglove.websocket.v1";
 pub const SDK_SUBPROTOCOLS: [&str; 2] = ["foxglove.sdk.v1", "foxglove.sdk.v1.1"];
 /// The longest upgrade request read.
 pub const MAX_REQUEST_BYTES: usize = 16 * 1024;
-/// How long a client has to send its whole upgrade request.
+/// How long a client has, from the accept, to send its whole upgrade request (its TLS
+/// handshake included), however slowly it sends it.
 pub const REQUEST_TIMEOUT: Duration = Duration::from_secs(5);
 /// Connections carried at once.
 pub const MAX_CONNECTIONS: usize = 256;
+/// Connections carried at once from one peer ([`peer_key`]), in handshake or open. A viewer
+/// holds one (Foxglove opens one per data source; a reload opens the next while the last
+/// closes), so 8 leaves room for a few viewers on one machine, or behind one NAT or SSH tunnel
+/// (whose viewers all share its address), while one address holds at most 8 of the
+/// [`MAX_CONNECTIONS`] slots: a peer trickling requests, or keeping finished handshakes open
+/// and idle, cannot keep the others out. Open connections count too, or a peer that finished
+/// its handshakes could hold every slot.
+pub const MAX_CONNECTIONS_PER_PEER: usize = 8;
 /// Peers remembered as reported (the rest are counted).
 const MAX_REPORTED_PEERS: usize = 1024;
 /// The `Origin`s a browser sends that are allowed without [`Policy::origins`]: Foxglove's web
@@ -245,11 +260,134 @@ pub fn tls_config(cert_pem: &[u8], key_pem: &[u8]) -> Result<Arc<rustls::ServerC
         .map_err(|e| format!("certificate and key: {e}"))
 }
 
+/// The time the gate keeps the handshake deadline by: the host's ([`HostClock`]), or one a
+/// test moves.
+pub trait Clock: Send + Sync {
+    /// The time now.
+    fn now(&self) -> Instant;
+    /// How long a read or a write may wait for the peer, in real time, when `left` remains to
+    /// the deadline: `left` on the host's clock; none (until the peer sends or goes) on a clock
+    /// a test moves, whose deadline passes only when the test moves it past.
+    fn wait(&self, left: Duration) -> Option<Duration>;
+}
+
+/// The host's monotonic clock.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct HostClock;
+
+impl Clock for HostClock {
+    fn now(&self) -> Instant {
+        Instant::now()
+    }
+
+    fn wait(&self, left: Duration) -> Option<Duration> {
+        Some(left)
+    }
+}
+
+/// The peer a connection from `ip` counts against ([`MAX_CONNECTIONS_PER_PEER`]): an IPv4
+/// address (an IPv4-mapped IPv6 one as IPv4), or an IPv6 address's /64 (one host commonly
+/// has a whole /64 to pick addresses from).
+pub fn peer_key(ip: IpAddr) -> IpAddr {
+    match ip.to_canonical() {
+        IpAddr::V6(v6) => {
+            let s = v6.segments();
+            IpAddr::V6(Ipv6Addr::new(s[0], s[1], s[2], s[3], 0, 0, 0, 0))
+        }
+        v4 => v4,
+    }
+}
+
+/// Why a connection was closed at once, at its accept.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Full {
+    /// [`MAX_CONNECTIONS`] are carried.
+    All,
+    /// [`MAX_CONNECTIONS_PER_PEER`] are carried from its peer.
+    Peer,
+}
+
+impl Full {
+    /// The reason's key and the report's words.
+    fn said(self) -> (&'static str, String) {
+        match self {
+            Full::All => (
+                "full",
+                format!("refused: all {MAX_CONNECTIONS} connections are in use"),
+            ),
+            Full::Peer => (
+                "per-peer",
+                format!(
+                    "refused: {MAX_CONNECTIONS_PER_PEER} connections from this address are \
+                     carried already (in handshake or open)"
+                ),
+            ),
+        }
+    }
+}
+
+/// The connections carried, in all and per peer ([`peer_key`]).
+#[derive(Default)]
+struct Slots(Mutex<Taken>);
+
+/// How many connections are carried, in all and per peer (peers with none are not kept).
+#[derive(Default)]
+struct Taken {
+    total: usize,
+    by_peer: HashMap<IpAddr, usize>,
+}
+
+impl Slots {
+    /// A slot for a connection from `ip`, given back when dropped; `Err` if it must be closed.
+    fn take(self: &Arc<Slots>, ip: IpAddr) -> Result<Slot, Full> {
+        let key = peer_key(ip);
+        let mut taken = lock(&self.0);
+        let mine = taken.by_peer.get(&key).copied().unwrap_or(0);
+        if mine >= MAX_CONNECTIONS_PER_PEER {
+            return Err(Full::Peer);
+        }
+        if taken.total >= MAX_CONNECTIONS {
+            return Err(Full::All);
+        }
+        taken.total += 1;
+        taken.by_peer.insert(key, mine + 1);
+        Ok(Slot {
+            slots: self.clone(),
+            key,
+        })
+    }
+
+    /// Connections carried now.
+    fn carried(&self) -> usize {
+        lock(&self.0).total
+    }
+}
+
+/// One carried connection's place in [`Slots`].
+struct Slot {
+    slots: Arc<Slots>,
+    key: IpAddr,
+}
+
+impl Drop for Slot {
+    fn drop(&mut self) {
+        let mut taken = lock(&self.slots.0);
+        taken.total = taken.total.saturating_sub(1);
+        if let Some(mine) = taken.by_peer.get_mut(&self.key) {
+            *mine = mine.saturating_sub(1);
+            if *mine == 0 {
+                taken.by_peer.remove(&self.key);
+            }
+        }
+    }
+}
+
 /// The gate: its listening thread, stopped when dropped.
 pub struct Gate {
     addr: SocketAddr,
     stop: Arc<AtomicBool>,
     refusals: Arc<Mutex<Refusals>>,
+    slots: Arc<Slots>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
@@ -294,6 +432,18 @@ struct Shared {
     policy: Policy,
     secret: Arc<str>,
     refusals: Arc<Mutex<Refusals>>,
+    slots: Arc<Slots>,
+    clock: Arc<dyn Clock>,
+}
+
+impl Shared {
+    /// Notes that a connection from `peer` was refused or closed for `reason` (a short key),
+    /// said as `line` if new for the peer and reason.
+    fn refused(&self, peer: IpAddr, reason: &'static str, line: String) {
+        lock(&self.refusals).note(peer, reason, || {
+            format!("foxglove: handshake from {peer}: {line}")
+        });
+    }
 }
 
 impl Gate {
@@ -306,16 +456,30 @@ impl Gate {
         policy: Policy,
         secret: Arc<str>,
     ) -> io::Result<Gate> {
+        Gate::start_with_clock(addr, inner_port, policy, secret, Arc::new(HostClock))
+    }
+
+    /// [`Gate::start`], keeping the handshake deadline by `clock`.
+    pub fn start_with_clock(
+        addr: &str,
+        inner_port: u16,
+        policy: Policy,
+        secret: Arc<str>,
+        clock: Arc<dyn Clock>,
+    ) -> io::Result<Gate> {
         let listener = TcpListener::bind(addr)?;
         listener.set_nonblocking(true)?;
         let local = listener.local_addr()?;
         let stop = Arc::new(AtomicBool::new(false));
         let refusals = Arc::new(Mutex::new(Refusals::default()));
+        let slots = Arc::new(Slots::default());
         let shared = Arc::new(Shared {
             inner: SocketAddr::from(([127, 0, 0, 1], inner_port)),
             policy,
             secret,
             refusals: refusals.clone(),
+            slots: slots.clone(),
+            clock,
         });
         let thread = {
             let stop = stop.clone();
@@ -327,8 +491,14 @@ impl Gate {
             addr: local,
             stop,
             refusals,
+            slots,
             thread: Some(thread),
         })
+    }
+
+    /// Connections carried now, in handshake or open.
+    pub fn connections(&self) -> usize {
+        self.slots.carried()
     }
 
     /// The port it listens on.
@@ -355,7 +525,7 @@ impl Reports {
     /// The refused handshakes not yet reported, one line each (once per peer address and
     /// reason).
     pub fn take(&self) -> Vec<String> {
-        let mut r = self.0.lock().unwrap_or_else(|p| p.into_inner());
+        let mut r = lock(&self.0);
         let mut lines = std::mem::take(&mut r.new);
         crate::foxglove_server::say_count(&mut lines, &mut r.unreported, |n| {
             format!("foxglove: {n} more handshakes refused from other peers")
@@ -374,28 +544,31 @@ impl Drop for Gate {
 }
 
 fn accept_loop(listener: &TcpListener, shared: &Arc<Shared>, stop: &AtomicBool) {
-    let open = Arc::new(AtomicUsize::new(0));
     while !stop.load(Ordering::SeqCst) {
         match listener.accept() {
             Ok((client, peer)) => {
-                if open.load(Ordering::SeqCst) >= MAX_CONNECTIONS {
-                    drop(client);
-                    continue;
-                }
-                open.fetch_add(1, Ordering::SeqCst);
-                let still_open = open.clone();
+                // The deadline runs from here, whatever comes after.
+                let accepted = shared.clock.now();
+                let slot = match shared.slots.take(peer.ip()) {
+                    Ok(slot) => slot,
+                    Err(full) => {
+                        // Noted before the close, which the peer sees.
+                        let (reason, line) = full.said();
+                        shared.refused(peer.ip(), reason, line);
+                        drop(client);
+                        continue;
+                    }
+                };
                 let shared = shared.clone();
-                let spawned = std::thread::Builder::new()
+                // If the thread cannot be made, the closure (the connection and its slot) is
+                // dropped with it.
+                let _ = std::thread::Builder::new()
                     .name("foxglove-conn".into())
                     .stack_size(128 * 1024)
                     .spawn(move || {
-                        let _ = carry(client, peer, &shared);
-                        still_open.fetch_sub(1, Ordering::SeqCst);
+                        let _ = carry(client, peer, accepted + REQUEST_TIMEOUT, &shared);
+                        drop(slot);
                     });
-                if spawned.is_err() {
-                    // The thread (and the connection it owned) is gone.
-                    open.fetch_sub(1, Ordering::SeqCst);
-                }
             }
             Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
                 std::thread::sleep(Duration::from_millis(20));
@@ -563,17 +736,122 @@ fn forbid(mut client: ClientSide, why: &str) -> io::Result<()> {
     client.close()
 }
 
+/// A stream whose reads and writes can be bounded in real time.
+trait Bounded: Read + Write {
+    /// Reads and writes wait at most `wait` (none: as long as it takes).
+    fn bound(&self, wait: Option<Duration>) -> io::Result<()>;
+}
+
+impl Bounded for TcpStream {
+    fn bound(&self, wait: Option<Duration>) -> io::Result<()> {
+        self.set_read_timeout(wait)?;
+        self.set_write_timeout(wait)
+    }
+}
+
+/// The client's socket under a deadline: until it is lifted ([`Deadlined::lift`]), every read
+/// and write waits at most until `until` on `clock`, and fails with `TimedOut` once it has
+/// passed, however little the peer sends at a time.
+struct Deadlined<S> {
+    stream: S,
+    until: Option<Instant>,
+    clock: Arc<dyn Clock>,
+}
+
+impl<S: Bounded> Deadlined<S> {
+    fn new(stream: S, until: Instant, clock: Arc<dyn Clock>) -> Deadlined<S> {
+        Deadlined {
+            stream,
+            until: Some(until),
+            clock,
+        }
+    }
+
+    /// Bounds the next read or write by the time left; `Err` once there is none.
+    fn arm(&self) -> io::Result<()> {
+        let Some(until) = self.until else {
+            return Ok(());
+        };
+        let left = until.saturating_duration_since(self.clock.now());
+        if left.is_zero() {
+            return Err(too_slow());
+        }
+        self.stream.bound(self.clock.wait(left))
+    }
+
+    /// What a read or write gave: a wait that ended at the deadline is `TimedOut`.
+    fn within<T>(&self, done: io::Result<T>) -> io::Result<T> {
+        match done {
+            Err(e)
+                if self.until.is_some()
+                    && matches!(
+                        e.kind(),
+                        io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                    ) =>
+            {
+                Err(too_slow())
+            }
+            other => other,
+        }
+    }
+
+    /// No deadline any more (the request is whole): each read and write waits at most `wait`
+    /// (none: as long as it takes).
+    fn lift(&mut self, wait: Option<Duration>) -> io::Result<()> {
+        self.until = None;
+        self.stream.bound(wait)
+    }
+}
+
+/// The error of a request not whole by its deadline.
+fn too_slow() -> io::Error {
+    io::Error::new(
+        io::ErrorKind::TimedOut,
+        "the upgrade request was not whole by its deadline",
+    )
+}
+
+impl<S: Bounded> Read for Deadlined<S> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        self.arm()?;
+        let done = self.stream.read(buf);
+        self.within(done)
+    }
+}
+
+impl<S: Bounded> Write for Deadlined<S> {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        self.arm()?;
+        let done = self.stream.write(buf);
+        self.within(done)
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        self.stream.flush()
+    }
+}
+
+/// The client's socket, under the handshake's deadline until it is lifted.
+type ClientSocket = Deadlined<TcpStream>;
+
 /// The client's side of a connection: plain, or TLS terminated here.
 enum ClientSide {
-    Plain(TcpStream),
-    Tls(Box<rustls::StreamOwned<rustls::ServerConnection, TcpStream>>),
+    Plain(ClientSocket),
+    Tls(Box<rustls::StreamOwned<rustls::ServerConnection, ClientSocket>>),
 }
 
 impl ClientSide {
+    fn socket(&mut self) -> &mut ClientSocket {
+        match self {
+            ClientSide::Plain(socket) => socket,
+            ClientSide::Tls(tls) => &mut tls.sock,
+        }
+    }
+
     fn tcp(&self) -> &TcpStream {
         match self {
-            ClientSide::Plain(tcp) => tcp,
-            ClientSide::Tls(tls) => &tls.sock,
+            ClientSide::Plain(socket) => &socket.stream,
+            ClientSide::Tls(tls) => &tls.sock.stream,
         }
     }
 
@@ -589,7 +867,8 @@ impl ClientSide {
     /// Copies bytes both ways between this and `server` until either side closes.
     fn pump(self, mut server: TcpStream) -> io::Result<()> {
         match self {
-            ClientSide::Plain(mut client) => {
+            ClientSide::Plain(client) => {
+                let mut client = client.stream;
                 // Client to server on a thread of its own; server to client here.
                 let (mut from_client, mut to_server) = (client.try_clone()?, server.try_clone()?);
                 let upstream = std::thread::Builder::new()
@@ -606,6 +885,7 @@ impl ClientSide {
             }
             ClientSide::Tls(tls) => {
                 let rustls::StreamOwned { conn, sock } = *tls;
+                let sock = sock.stream;
                 let tls = Arc::new(Mutex::new((conn, sock.try_clone()?)));
                 let (mut from_client, mut to_server) = (sock.try_clone()?, server.try_clone()?);
                 let up = tls.clone();
@@ -759,26 +1039,38 @@ fn admit(head: &str, policy: &Policy) -> Result<Access, (&'static str, String, &
     }
 }
 
-fn carry(tcp: TcpStream, peer: SocketAddr, shared: &Shared) -> io::Result<()> {
+/// Carries the connection of `tcp`, from `peer`, whose upgrade request must be whole by
+/// `deadline`.
+fn carry(tcp: TcpStream, peer: SocketAddr, deadline: Instant, shared: &Shared) -> io::Result<()> {
     tcp.set_nonblocking(false)?;
-    tcp.set_read_timeout(Some(REQUEST_TIMEOUT))?;
-    tcp.set_write_timeout(Some(REQUEST_TIMEOUT))?;
+    let socket = Deadlined::new(tcp, deadline, shared.clock.clone());
     let mut client = match &shared.policy.tls {
-        None => ClientSide::Plain(tcp),
+        None => ClientSide::Plain(socket),
         Some(config) => {
             let conn = rustls::ServerConnection::new(config.clone())
                 .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e))?;
-            ClientSide::Tls(Box::new(rustls::StreamOwned::new(conn, tcp)))
+            ClientSide::Tls(Box::new(rustls::StreamOwned::new(conn, socket)))
         }
     };
-    let (head, rest) = read_head(&mut client)?;
-    let text = String::from_utf8_lossy(&head).into_owned();
-    let report = |reason, line: String| {
-        let mut r = shared.refusals.lock().unwrap_or_else(|p| p.into_inner());
-        r.note(peer.ip(), reason, || {
-            format!("foxglove: handshake from {}: {line}", peer.ip())
-        });
+    let report = |reason, line: String| shared.refused(peer.ip(), reason, line);
+    let (head, rest) = match read_head(&mut client) {
+        Ok(read) => read,
+        Err(e) => {
+            if e.kind() == io::ErrorKind::TimedOut {
+                report(
+                    "deadline",
+                    format!(
+                        "closed: its upgrade request was not whole within {} s of connecting",
+                        REQUEST_TIMEOUT.as_secs()
+                    ),
+                );
+            }
+            return Err(e);
+        }
     };
+    // The request is whole: what the gate writes back waits on its own bound.
+    client.socket().lift(Some(REQUEST_TIMEOUT))?;
+    let text = String::from_utf8_lossy(&head).into_owned();
     let access = match admit(&text, &shared.policy) {
         Ok(access) => access,
         Err((reason, line, answer)) => {
@@ -802,6 +1094,7 @@ fn carry(tcp: TcpStream, peer: SocketAddr, shared: &Shared) -> io::Result<()> {
             rewritten(&text, None)
         }
     };
+    // The SDK's side is this machine's own server: its answer has a wait of its own.
     let mut server = TcpStream::connect_timeout(&shared.inner, REQUEST_TIMEOUT)?;
     server.set_nodelay(true)?;
     client.tcp().set_nodelay(true)?;
@@ -821,8 +1114,7 @@ fn carry(tcp: TcpStream, peer: SocketAddr, shared: &Shared) -> io::Result<()> {
     client.write_all(&answer)?;
     client.write_all(&after)?;
     client.flush()?;
-    client.tcp().set_read_timeout(None)?;
-    client.tcp().set_write_timeout(None)?;
+    client.socket().lift(None)?;
     server.set_read_timeout(None)?;
     client.pump(server)
 }
@@ -1061,6 +1353,291 @@ mod tests {
             marker_topic(&secret, Access::View)
         );
         assert_eq!(client_text_frame("hi")[1], 0x80 | 2);
+    }
+
+    /// A clock the test moves; reads wait for the peer as long as it takes.
+    struct TestClock(Mutex<Instant>);
+
+    impl TestClock {
+        fn new() -> Arc<TestClock> {
+            Arc::new(TestClock(Mutex::new(Instant::now())))
+        }
+
+        fn advance(&self, by: Duration) {
+            *lock(&self.0) += by;
+        }
+    }
+
+    impl Clock for TestClock {
+        fn now(&self) -> Instant {
+            *lock(&self.0)
+        }
+
+        fn wait(&self, _left: Duration) -> Option<Duration> {
+            None
+        }
+    }
+
+    /// A peer that sends `bytes` one at a time, `every` apart on `clock`.
+    struct Trickle {
+        bytes: Vec<u8>,
+        sent: usize,
+        every: Duration,
+        clock: Arc<TestClock>,
+    }
+
+    impl Read for Trickle {
+        fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+            let Some(&byte) = self.bytes.get(self.sent) else {
+                return Ok(0);
+            };
+            self.clock.advance(self.every);
+            buf[0] = byte;
+            self.sent += 1;
+            Ok(1)
+        }
+    }
+
+    impl Write for Trickle {
+        fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+            Ok(buf.len())
+        }
+
+        fn flush(&mut self) -> io::Result<()> {
+            Ok(())
+        }
+    }
+
+    impl Bounded for Trickle {
+        fn bound(&self, _wait: Option<Duration>) -> io::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// The request head read from a peer sending `REQUEST` a byte every `every`, and how
+    /// many bytes were read.
+    fn trickled(every: Duration) -> (io::Result<Vec<u8>>, usize) {
+        let clock = TestClock::new();
+        let deadline = clock.now() + REQUEST_TIMEOUT;
+        let mut peer = Deadlined::new(
+            Trickle {
+                bytes: REQUEST.as_bytes().to_vec(),
+                sent: 0,
+                every,
+                clock: clock.clone(),
+            },
+            deadline,
+            clock,
+        );
+        let head = read_head(&mut peer).map(|(head, _)| head);
+        (head, peer.stream.sent)
+    }
+
+    #[test]
+    fn a_request_must_be_whole_by_its_deadline_however_it_trickles() {
+        // A byte a second: each read is quick, but the request is cut at 5 s, 5 bytes in.
+        let (read, sent) = trickled(Duration::from_secs(1));
+        assert_eq!(read.unwrap_err().kind(), io::ErrorKind::TimedOut);
+        assert_eq!(sent, 5);
+        // The same request sent in less than the deadline is read whole.
+        let every = REQUEST_TIMEOUT / (REQUEST.len() as u32 + 1);
+        let (read, sent) = trickled(every);
+        assert_eq!(read.unwrap(), REQUEST.as_bytes());
+        assert_eq!(sent, REQUEST.len());
+        // Lifted, the deadline is gone.
+        let clock = TestClock::new();
+        let mut socket = Deadlined::new(
+            Trickle {
+                bytes: b"late".to_vec(),
+                sent: 0,
+                every: Duration::ZERO,
+                clock: clock.clone(),
+            },
+            clock.now(),
+            clock.clone(),
+        );
+        assert_eq!(
+            socket.write(b"x").unwrap_err().kind(),
+            io::ErrorKind::TimedOut
+        );
+        socket.lift(None).unwrap();
+        assert_eq!(socket.write(b"x").unwrap(), 1);
+        assert_eq!(socket.read(&mut [0; 4]).unwrap(), 1);
+    }
+
+    #[test]
+    fn one_peer_holds_at_most_its_share_of_the_slots() {
+        let slots = Arc::new(Slots::default());
+        let ip = |text: &str| text.parse::<IpAddr>().unwrap();
+        let mut mine: Vec<Slot> = (0..MAX_CONNECTIONS_PER_PEER)
+            .map(|_| slots.take(ip("10.0.0.5")).unwrap())
+            .collect();
+        assert_eq!(slots.take(ip("10.0.0.5")).err(), Some(Full::Peer));
+        // The same peer written as IPv4-mapped IPv6.
+        assert_eq!(slots.take(ip("::ffff:10.0.0.5")).err(), Some(Full::Peer));
+        let other = slots.take(ip("10.0.0.6")).unwrap();
+        assert_eq!(slots.carried(), MAX_CONNECTIONS_PER_PEER + 1);
+        // One closed: the peer may connect once more.
+        mine.pop();
+        let again = slots.take(ip("10.0.0.5")).unwrap();
+        assert_eq!(slots.take(ip("10.0.0.5")).err(), Some(Full::Peer));
+        drop((other, again));
+        assert_eq!(slots.carried(), MAX_CONNECTIONS_PER_PEER - 1);
+        // An IPv6 host's whole /64 is one peer; the next /64 is another.
+        let v6: Vec<Slot> = (0..MAX_CONNECTIONS_PER_PEER)
+            .map(|k| {
+                slots
+                    .take(ip(&format!("2001:db8:0:1::{:x}", k + 1)))
+                    .unwrap()
+            })
+            .collect();
+        assert_eq!(
+            slots.take(ip("2001:db8:0:1:ffff::9")).err(),
+            Some(Full::Peer)
+        );
+        assert!(slots.take(ip("2001:db8:0:2::1")).is_ok());
+        drop((v6, mine));
+        assert_eq!(slots.carried(), 0);
+        // The total stays: many peers fill it, and one more from anywhere is refused.
+        let many: Vec<Slot> = (0..MAX_CONNECTIONS)
+            .map_while(|k| {
+                slots
+                    .take(IpAddr::from([10, 1, (k / 250) as u8, (k % 250) as u8]))
+                    .ok()
+            })
+            .collect();
+        assert_eq!(slots.carried(), MAX_CONNECTIONS);
+        assert_eq!(slots.take(ip("192.0.2.1")).err(), Some(Full::All));
+        drop(many);
+        assert_eq!(slots.carried(), 0);
+        assert!(
+            lock(&slots.0).by_peer.is_empty(),
+            "peers with none are not kept"
+        );
+    }
+
+    /// Waits until `sign` holds (failing after a minute: it never came).
+    fn wait_for(what: &str, sign: impl Fn() -> bool) {
+        let start = Instant::now();
+        while !sign() {
+            assert!(
+                start.elapsed() < Duration::from_secs(60),
+                "no sign of {what}"
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    /// A gate on a loopback port keeping time by `clock`, in front of a listener standing for
+    /// the SDK's server.
+    fn test_gate(clock: &Arc<TestClock>) -> (Gate, TcpListener) {
+        let sdk = TcpListener::bind("127.0.0.1:0").unwrap();
+        let gate = Gate::start_with_clock(
+            "127.0.0.1:0",
+            sdk.local_addr().unwrap().port(),
+            Policy::default(),
+            "secret".into(),
+            clock.clone(),
+        )
+        .unwrap();
+        (gate, sdk)
+    }
+
+    /// Reads `stream` to its end: true if it ended (closed or reset), as the gate closes it.
+    fn ends(stream: &mut TcpStream) -> bool {
+        // A bound on a test that went wrong, not a wait for the gate.
+        stream
+            .set_read_timeout(Some(Duration::from_secs(60)))
+            .unwrap();
+        let mut buf = [0u8; 256];
+        loop {
+            match stream.read(&mut buf) {
+                Ok(0) => return true,
+                Ok(_) => {}
+                Err(e) if e.kind() == io::ErrorKind::ConnectionReset => return true,
+                Err(_) => return false,
+            }
+        }
+    }
+
+    #[test]
+    fn the_gate_closes_a_request_not_whole_at_its_deadline_and_says_so() {
+        let clock = TestClock::new();
+        let (gate, sdk) = test_gate(&clock);
+        let port = gate.port();
+        // Whole within the deadline, however slowly: passed on to the SDK.
+        let mut on_time = TcpStream::connect(("127.0.0.1", port)).unwrap();
+        wait_for("the accept", || gate.connections() == 1);
+        let (first, last) = REQUEST.split_at(20);
+        on_time.write_all(first.as_bytes()).unwrap();
+        clock.advance(REQUEST_TIMEOUT - Duration::from_millis(1));
+        on_time.write_all(last.as_bytes()).unwrap();
+        let (mut passed, _) = sdk.accept().unwrap();
+        let (head, _) = read_head(&mut passed).unwrap();
+        assert_eq!(
+            head,
+            rewritten(REQUEST, Some(SDK_SUBPROTOCOLS[0])).as_bytes()
+        );
+        drop((passed, on_time));
+        wait_for("the connection's end", || gate.connections() == 0);
+        // Not whole at the deadline: closed at the peer's next byte, never passed on.
+        let mut late = TcpStream::connect(("127.0.0.1", port)).unwrap();
+        wait_for("the accept", || gate.connections() == 1);
+        late.write_all(first.as_bytes()).unwrap();
+        clock.advance(REQUEST_TIMEOUT);
+        late.write_all(b"X").unwrap();
+        assert!(ends(&mut late), "closed");
+        let said = gate.reports().take();
+        assert_eq!(
+            said,
+            [
+                "foxglove: handshake from 127.0.0.1: closed: its upgrade request was not whole \
+              within 5 s of connecting"
+            ]
+        );
+        sdk.set_nonblocking(true).unwrap();
+        assert_eq!(
+            sdk.accept().unwrap_err().kind(),
+            io::ErrorKind::WouldBlock,
+            "nothing passed on"
+        );
+        wait_for("the connection's end", || gate.connections() == 0);
+    }
+
+    #[test]
+    fn the_gate_closes_one_connection_too_many_from_a_peer_at_once() {
+        let clock = TestClock::new();
+        let (gate, _sdk) = test_gate(&clock);
+        let port = gate.port();
+        let connect = || TcpStream::connect(("127.0.0.1", port)).unwrap();
+        // Held in handshake: the test's clock never reaches their deadline.
+        let mut held: Vec<TcpStream> = (0..MAX_CONNECTIONS_PER_PEER).map(|_| connect()).collect();
+        wait_for("the accepts", || {
+            gate.connections() == MAX_CONNECTIONS_PER_PEER
+        });
+        let mut refused = connect();
+        assert!(ends(&mut refused), "closed at once");
+        assert_eq!(gate.connections(), MAX_CONNECTIONS_PER_PEER);
+        let said = gate.reports().take();
+        assert_eq!(
+            said,
+            [format!(
+                "foxglove: handshake from 127.0.0.1: refused: {MAX_CONNECTIONS_PER_PEER} \
+                 connections from this address are carried already (in handshake or open)"
+            )]
+        );
+        // Said once per peer and reason.
+        assert!(ends(&mut connect()));
+        assert!(gate.reports().take().is_empty());
+        // One of them gone: the peer may connect again.
+        held.pop();
+        wait_for("the connection's end", || {
+            gate.connections() == MAX_CONNECTIONS_PER_PEER - 1
+        });
+        held.push(connect());
+        wait_for("the accept", || {
+            gate.connections() == MAX_CONNECTIONS_PER_PEER
+        });
     }
 
     #[test]
