@@ -844,3 +844,43 @@ fn an_operator_driven_from_foxglove_over_link_sim() {
         "the ROV's goal is the client's GoTo: {track:.500}"
     );
 }
+
+#[test]
+fn a_late_subscriber_gets_the_start_line_then_the_latest() {
+    let (mut view, _orders) = start(Role::Operator);
+    view.session_started("operator: IPG 150.0 ms on /dev/test, 60 s");
+    // A quiet session: the start line is all there is.
+    let dir = tempfile::tempdir().unwrap();
+    let quiet = dir.path().join("quiet.json");
+    let args = ["--topics", "/session/log", "--seconds", "2"];
+    let seen = finish(
+        client(&view, &quiet, &args),
+        &quiet,
+        Duration::from_secs(15),
+    );
+    assert_eq!(count(&seen, "/session/log"), 1, "{seen}");
+    let line = &seen["first"]["/session/log"];
+    assert_eq!(
+        line["message"], "operator: IPG 150.0 ms on /dev/test, 60 s",
+        "{seen}"
+    );
+    assert_eq!(line["level"], 2, "INFO");
+    assert_eq!(line["name"], "tdma-run");
+    // Something happened since: the start line first, then the latest.
+    view.event(1, Role::Operator, 3.0, &Event::OrderAcknowledged(4));
+    let later = dir.path().join("later.json");
+    let seen = finish(
+        client(&view, &later, &args),
+        &later,
+        Duration::from_secs(15),
+    );
+    assert_eq!(count(&seen, "/session/log"), 2, "{seen}");
+    assert_eq!(
+        seen["first"]["/session/log"]["message"], "operator: IPG 150.0 ms on /dev/test, 60 s",
+        "{seen}"
+    );
+    assert_eq!(
+        seen["last"]["/session/log"]["message"], "order 4 acknowledged",
+        "{seen}"
+    );
+}

@@ -5,7 +5,8 @@
 //! operator whose ROV stands still (its joystick script is all zeros): both are accepted, get
 //! the pose within 2 s of subscribing (a still vehicle's pose is republished, and a new
 //! subscriber gets the latest at once), messages on every channel the session feeds, and
-//! publish a GoTo that the ROV acknowledges.
+//! publish a GoTo that the ROV acknowledges. A client that comes once the session has started
+//! gets the session's start line first on `/session/log`.
 
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -66,12 +67,9 @@ fn session(dir: &Path, operator_s: u32) -> Session {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    // The server is up once the operator says who may control it.
-    let said = crate::common::said_until(
-        &mut operator,
-        "Foxglove: control for",
-        Duration::from_secs(20),
-    );
+    // The server is up, and the session started (its start line kept for late viewers), once
+    // the operator says what runs.
+    let said = crate::common::said_until(&mut operator, "operator: IPG", Duration::from_secs(20));
     Session {
         link,
         rov,
@@ -231,6 +229,13 @@ fn without_the_token_a_client_views_but_cannot_move_the_vehicle() {
         .status()
         .unwrap();
     assert!(python.success());
+    // It came after the session started: the start line was the first it had of the log.
+    let seen: Value = serde_json::from_slice(&std::fs::read(&twists).unwrap()).unwrap();
+    let start_line = seen["first"]["/session/log"]["message"].to_string();
+    assert!(
+        start_line.starts_with("\"operator: IPG 150.0 ms on "),
+        "{seen:.500}"
+    );
     // A page of another site, with the token even: refused at the handshake.
     let foreign = stock_client_refused(&[
         "--url",

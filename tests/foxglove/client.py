@@ -8,6 +8,7 @@ It subscribes to the topics asked for, counts the messages received on each for 
 writes --out as JSON:
 
     {"/rov/pose": 12, "/camera/image": 1,            messages received per topic
+     "first": {"/rov/pose": {...}},                   the first message of each, decoded
      "last": {"/rov/pose": {...}},                    the last message of each, decoded
      "log_time_ns": {"/rov/pose": 1700000000000},     the last message's log time
      "server": {...serverInfo...}, "advertised": [...topics...],
@@ -20,7 +21,7 @@ publishes each JSON order once. --garbage sends junk first: binary junk, an empt
 text that is not JSON, unknown operations, a message on a channel never advertised, channels
 the server must refuse, bad JSON and bad orders on /orders, a NaN Twist, a huge message, and
 connections that are cut mid-handshake or that offer no known subprotocol. --cafile trusts
-that certificate for a wss:// URL.
+that certificate for a wss:// URL. --source connects from that local address.
 """
 
 import argparse
@@ -95,13 +96,19 @@ def garbage(ws, url):
     ws.send(json.dumps({"op": "unsubscribe", "subscriptionIds": [4242]}))
 
 
-def open_connection(url, within_s, context=None):
-    """Connects, trying again while the server is not listening yet (a process starting)."""
+def open_connection(url, within_s, context=None, source=None):
+    """Connects (from the address `source`, if given), trying again while the server is not
+    listening yet (a process starting)."""
     give_up = time.monotonic() + within_s
     while True:
         try:
+            sock = None
+            if source:
+                parsed = urlparse(url)
+                sock = socket.create_connection((parsed.hostname, parsed.port), timeout=5,
+                                                source_address=(source, 0))
             return connect(url, subprotocols=[SUBPROTOCOL], max_size=None, open_timeout=5,
-                           close_timeout=1, ssl=context)
+                           close_timeout=1, ssl=context, sock=sock)
         except (ConnectionRefusedError, ConnectionResetError):
             if time.monotonic() >= give_up:
                 raise
@@ -123,13 +130,16 @@ def main():
     ap.add_argument("--connect-within", type=float, default=0.0, metavar="S",
                     help="retry a refused connection for this long")
     ap.add_argument("--cafile", help="a certificate to trust for wss://")
+    ap.add_argument("--source", metavar="ADDRESS",
+                    help="connect from this local address (e.g. 127.0.0.2, another loopback "
+                         "address than the tests' other connections)")
     ap.add_argument("--garbage", action="store_true")
     ap.add_argument("--stall", action="store_true",
                     help="once subscribed, stop reading until the time is up (a stuck client)")
     args = ap.parse_args()
 
     wanted = [t for t in args.topics.split(",") if t]
-    counts, last, log_time_ns, schemas = {}, {}, {}, {}
+    counts, first, last, log_time_ns, schemas = {}, {}, {}, {}, {}
     channels = {}  # server channel id -> channel
     subscriptions = {}  # subscription id -> topic
     statuses, advertised = [], []
@@ -144,7 +154,7 @@ def main():
     deadline = time.monotonic() + args.seconds
     try:
         context = ssl.create_default_context(cafile=args.cafile) if args.cafile else None
-        with open_connection(args.url, args.connect_within, context) as ws:
+        with open_connection(args.url, args.connect_within, context, args.source) as ws:
             while True:
                 now = time.monotonic()
                 if now >= deadline:
@@ -206,12 +216,13 @@ def main():
                         last[topic] = json.loads(raw[13:])
                     except ValueError:
                         last[topic] = None
+                    first.setdefault(topic, last[topic])
     except ConnectionClosed:
         # The server went away (it was stopped): what was seen so far is the answer.
         closed_by_server = True
 
     result = dict(counts)
-    result.update({"last": last, "log_time_ns": log_time_ns, "server": server,
+    result.update({"first": first, "last": last, "log_time_ns": log_time_ns, "server": server,
                    "advertised": advertised, "schemas": schemas, "statuses": statuses,
                    "published": published, "closed_by_server": closed_by_server})
     with open(args.out, "w") as f:

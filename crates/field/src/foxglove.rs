@@ -2,7 +2,9 @@
 //! WebSocket server (the official `foxglove` SDK, behind [`crate::foxglove_gate`] so that
 //! viewers offering `foxglove.websocket.v1` are served as well as `foxglove.sdk.v1`) bound only
 //! to the address it is given. A new subscriber gets the latest message of each [`KEPT`]
-//! channel at once, and a still vehicle's pose is republished every [`POSE_EVERY`].
+//! channel at once (on `/session/log`, the session's start line first:
+//! [`LiveView::session_started`]), and a still vehicle's pose is republished every
+//! [`POSE_EVERY`].
 //!
 //! [`start`] returns two halves:
 //! - [`LiveView`], an [`Observer`]: the channels of the MCAP log ([`Topic`]: pose,
@@ -289,11 +291,13 @@ enum Orders {
     NotHere,
 }
 
-/// The view's channels, the latest message of each [`KEPT`] one, and the clients that
-/// receive them.
+/// The view's channels, the latest message of each [`KEPT`] one, the session's start line on
+/// each `/session/log`, and the clients that receive them.
 struct Latest {
     channels: Vec<Option<Arc<RawChannel>>>,
     messages: Mutex<Vec<Option<ViewMessage>>>,
+    /// The start line of each `/session/log` ([`LiveView::session_started`]), by channel.
+    start_lines: Mutex<Vec<Option<ViewMessage>>>,
     /// The clients the gate marked (see the module doc).
     viewers: Viewers,
 }
@@ -318,15 +322,28 @@ impl Latest {
         }
     }
 
-    /// Sends the latest message of `channel` (if it has one) to `client` alone.
+    /// Keeps `message`, published on channel `index`, as the session's start line there.
+    fn keep_start(&self, index: usize, message: &ViewMessage) {
+        if let Some(slot) = lock(&self.start_lines).get_mut(index) {
+            *slot = Some(message.clone());
+        }
+    }
+
+    /// Sends `channel`'s start line (if it has one), then its latest message (if it has one
+    /// and it is not the start line) to `client` alone.
     fn send_to(&self, client: &Client, channel: &ChannelView) {
         let Some(index) =
             (self.channels.iter()).position(|c| c.as_ref().is_some_and(|c| c.id() == channel.id()))
         else {
             return;
         };
-        let message = lock(&self.messages).get(index).cloned().flatten();
-        if let (Some(message), Some(channel)) = (message, self.channel(index)) {
+        let Some(channel) = self.channel(index) else {
+            return;
+        };
+        let start = lock(&self.start_lines).get(index).cloned().flatten();
+        let latest = lock(&self.messages).get(index).cloned().flatten();
+        let latest = latest.filter(|m| start.as_ref() != Some(m));
+        for message in start.iter().chain(latest.iter()) {
             let json = message.json.as_bytes();
             crate::foxglove_server::send(channel, json, message.log_time_ns, client.sink_id());
         }
@@ -589,6 +606,7 @@ fn serve(
     }
     let latest = Arc::new(Latest {
         messages: Mutex::new(vec![None; channels.len()]),
+        start_lines: Mutex::new(vec![None; channels.len()]),
         channels,
         viewers: Viewers::new(setup.secret.clone()),
     });
@@ -699,6 +717,36 @@ impl LiveView {
         self.server.shut_down();
     }
 
+    /// Says on every vehicle's `/session/log` that the session starts, as `text` (what runs,
+    /// where, for how long; an INFO line). The line is kept: every client that subscribes to
+    /// the channel later gets it at once, before the channel's latest line.
+    pub fn session_started(&mut self, text: &str) {
+        let messages = self.every_lane(|view| view.started(0.0, text));
+        for (index, message) in messages {
+            self.latest.keep_start(index, &message);
+        }
+    }
+
+    /// Publishes on each lane what `build` makes of its view; what was published, with its
+    /// channel's index.
+    fn every_lane(
+        &mut self,
+        build: impl Fn(&View) -> Vec<ViewMessage>,
+    ) -> Vec<(usize, ViewMessage)> {
+        let mut published = Vec::new();
+        for lane in 0..self.lanes.len() {
+            self.follow_subscriptions(lane);
+            let Some(l) = self.lanes.get(lane) else {
+                continue;
+            };
+            let messages = build(&l.view);
+            self.publish_all(lane, &messages);
+            let base = lane * Topic::ALL.len();
+            published.extend(messages.into_iter().map(|m| (base + m.topic.index(), m)));
+        }
+        published
+    }
+
     fn lane_frame(&mut self, lane: usize, e: &FrameEvent<'_>) {
         self.follow_subscriptions(lane);
         let Some(l) = self.lanes.get(lane) else {
@@ -791,14 +839,7 @@ impl Observer for LiveView {
     /// A warning (a source whose frames are refused, a bad order line) goes on every
     /// vehicle's `/session/log`.
     fn warning(&mut self, t_s: f64, text: &str) {
-        for lane in 0..self.lanes.len() {
-            self.follow_subscriptions(lane);
-            let Some(l) = self.lanes.get(lane) else {
-                continue;
-            };
-            let messages = l.view.warning(t_s, text);
-            self.publish_all(lane, &messages);
-        }
+        self.every_lane(|view| view.warning(t_s, text));
     }
 }
 

@@ -518,7 +518,15 @@ impl View {
     /// A warning for the user (a refused frame's source, an order source's bad line): a
     /// WARNING line on `/session/log`.
     pub fn warning(&self, t_s: f64, text: &str) -> Vec<ViewMessage> {
-        self.log(Topic::Events, t_s, WARNING, "tdma-run", text)
+        self.log(Topic::Events, t_s, WARNING, TOOL, text)
+            .into_iter()
+            .collect()
+    }
+
+    /// The session's start line (what runs, where, for how long): an INFO line on
+    /// `/session/log`.
+    pub fn started(&self, t_s: f64, text: &str) -> Vec<ViewMessage> {
+        self.log(Topic::Events, t_s, INFO, TOOL, text)
             .into_iter()
             .collect()
     }

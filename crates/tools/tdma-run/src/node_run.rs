@@ -98,7 +98,11 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
         },
         bar,
     )?;
-    say!("{}", start_line(&network, role, &ports, config.duration_s));
+    let started = start_line(&network, role, &ports, config.duration_s);
+    if let Some(view) = live.as_mut() {
+        view.session_started(&started);
+    }
+    say!("{started} (Ctrl-C stops and keeps the outputs)");
     let (mut metrics, ended) = {
         let mut both = Both(&mut recorder);
         let mut observer = Tee(vec![&mut both]);
@@ -186,7 +190,7 @@ fn session_config(args: &Args, network: &Network, role: Role) -> Result<SessionC
     Ok(config)
 }
 
-/// What the node says as it starts.
+/// What the node says as it starts (and keeps on its live view's /session/log).
 fn start_line(network: &Network, role: Role, ports: &[&str], duration_s: f64) -> String {
     let slots: Vec<String> = network
         .scenario
@@ -199,8 +203,7 @@ fn start_line(network: &Network, role: Role, ports: &[&str], duration_s: f64) ->
         Role::Rov => format!("ROV {}", network.address),
     };
     format!(
-        "{who}: cycle {:.1} ms (slots: {}) on {}, {duration_s:.0} s (Ctrl-C stops and keeps \
-         the outputs)",
+        "{who}: cycle {:.1} ms (slots: {}) on {}, {duration_s:.0} s",
         network.cycle_s() * 1e3,
         slots.join(", "),
         ports.join(" and ")

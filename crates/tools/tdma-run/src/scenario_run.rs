@@ -66,16 +66,17 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
         .iter()
         .map(|s| format!("{} {:.1} ms", s.address, s.length_s * 1e3))
         .collect();
-    say!(
+    let started = format!(
         "{} vehicles, cycle {:.1} ms (slots: {})",
         cycle.len(),
         scenario.cycle_s() * 1e3,
         slots.join(", ")
     );
+    say!("{started}");
     // A live view of every vehicle (`/vehicle/N/...`), as the MCAP log has them.
     let mut live = match &args.foxglove {
         Some(addr) => {
-            let view = rovlink_field::foxglove::start_network(
+            let mut view = rovlink_field::foxglove::start_network(
                 addr,
                 &scenario.vehicles(),
                 &crate::setup::foxglove_policy(args)?,
@@ -87,6 +88,7 @@ pub fn run(args: &Args, path: &Path) -> Result<u8> {
                 crate::setup::host_of(addr),
                 view.port()
             );
+            view.session_started(&started);
             Some(view)
         }
         None => None,

@@ -113,6 +113,31 @@ pub fn run(args: &Args) -> Result<u8> {
             Some(view)
         }
     };
+    let model_name = match model.name.as_str() {
+        "" => "a model file",
+        name => name,
+    };
+    // What runs, said on stderr and kept on the live view's /session/log for late viewers.
+    let started = match (role, &args.port) {
+        (Some(Role::Operator), Some(device)) => format!(
+            "operator: IPG {:.1} ms on {device}, {:.0} s",
+            ipg_s * 1e3,
+            args.duration_s()
+        ),
+        (Some(Role::Rov), Some(device)) => format!(
+            "ROV: answering every slot on {device}, {:.0} s",
+            args.duration_s()
+        ),
+        _ => format!(
+            "simulation: both ends, {:.0} s over {model_name} (seed {}), IPG {:.1} ms",
+            args.duration_s(),
+            args.seed(),
+            ipg_s * 1e3
+        ),
+    };
+    if let Some(view) = live.as_mut() {
+        view.session_started(&started);
+    }
     // Opened (aside) before the run: a metrics file that cannot be created fails now.
     let mut metrics_out = metrics_dest.map(|dest| dest.open()).transpose()?;
     let base_ns = if role.is_some() { wall_clock_ns() } else { 0 };
@@ -137,14 +162,7 @@ pub fn run(args: &Args) -> Result<u8> {
     let (mut metrics, code) = match (role, &args.port) {
         (Some(role), Some(device)) => {
             let mut endpoint = args.port_args.open(device)?;
-            let what = match role {
-                Role::Operator => format!("operator: IPG {:.1} ms", ipg_s * 1e3),
-                Role::Rov => "ROV: answering every slot".into(),
-            };
-            say!(
-                "{what} on {device}, {:.0} s (Ctrl-C stops and keeps the outputs)",
-                args.duration_s()
-            );
+            say!("{started} (Ctrl-C stops and keeps the outputs)");
             let (metrics, ended) = realtime::run(
                 role,
                 &config,
@@ -159,10 +177,6 @@ pub fn run(args: &Args) -> Result<u8> {
         _ => {
             let metrics =
                 session::run_with(&config, parts, &mut observer, stop::flag(), args.pace)?;
-            let model_name = match model.name.as_str() {
-                "" => "a model file",
-                name => name,
-            };
             done = Some(format!(
                 "{:.0} s over {model_name} (seed {}), IPG {:.1} ms, {:.3} s of wall time",
                 metrics.duration_s,
