@@ -884,3 +884,103 @@ fn a_late_subscriber_gets_the_start_line_then_the_latest() {
         "{seen}"
     );
 }
+
+#[test]
+fn trickling_connections_from_one_address_keep_no_viewer_out() {
+    use rovlink_field::foxglove_gate::{MAX_CONNECTIONS, MAX_CONNECTIONS_PER_PEER};
+    use std::io::{Read, Write};
+    let (view, _orders) = start(Role::Operator);
+    let port = view.port();
+    // More connections from 127.0.0.1 than the gate carries in all, each trickling an upgrade
+    // request that is never whole: before the deadline was for the whole request, each byte
+    // within 5 s of the last kept every slot taken for as long as the bytes came.
+    let mut tricklers: Vec<Option<std::net::TcpStream>> = (0..=MAX_CONNECTIONS)
+        .map(|_| {
+            let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
+            let _ = s.write_all(b"GET / HTTP/1.1\r\nHost: x\r\nX-Slow: ");
+            s.set_nonblocking(true).unwrap();
+            Some(s)
+        })
+        .collect();
+    // The sign that the gate has reached a limit: it refused one.
+    let mut said = Vec::new();
+    let started = Instant::now();
+    while !said.iter().any(|l: &String| l.contains(": refused: ")) {
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "no refusal: {said:?}"
+        );
+        said.extend(view.take_refusals());
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    // A viewer from another address is served while they trickle (without the per-peer limit
+    // it would be closed at once: every slot would be taken).
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("viewer.json");
+    let viewer = client_at(
+        &format!("ws://127.0.0.1:{port}/?token={TOKEN}"),
+        &out,
+        &["--source", "127.0.0.2", "--seconds", "1"],
+    );
+    let seen = finish(viewer, &out, Duration::from_secs(15));
+    assert_eq!(seen["server"]["name"], "tdma-run operator", "{seen}");
+    // The tricklers go on, a byte at a time, until the gate has closed every one: those it
+    // held are closed at the deadline of their whole request, however the bytes come.
+    let started = Instant::now();
+    while tricklers.iter().any(Option::is_some) {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "{} connections still open",
+            tricklers.iter().flatten().count()
+        );
+        for slot in tricklers.iter_mut() {
+            let Some(s) = slot else { continue };
+            let closed = match s.read(&mut [0u8; 64]) {
+                Ok(_) => true,
+                Err(e) => e.kind() != std::io::ErrorKind::WouldBlock,
+            };
+            if closed || s.write_all(b"a").is_err() {
+                *slot = None;
+            }
+        }
+        said.extend(view.take_refusals());
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    said.extend(view.take_refusals());
+    eprintln!("{said:#?}");
+    assert!(
+        said.iter().any(|l| l.contains(&format!(
+            "refused: {MAX_CONNECTIONS_PER_PEER} connections from this address"
+        ))),
+        "{said:?}"
+    );
+    assert!(
+        said.iter()
+            .any(|l| l.contains("its upgrade request was not whole within 5 s")),
+        "{said:?}"
+    );
+    assert!(said.iter().all(|l| !l.contains("all 256")), "{said:?}");
+}
+
+#[test]
+fn the_help_says_the_gates_limits() {
+    use rovlink_field::foxglove_gate::{
+        MAX_CONNECTIONS, MAX_CONNECTIONS_PER_PEER, REQUEST_TIMEOUT,
+    };
+    let limits = format!(
+        "The port carries at most {MAX_CONNECTIONS} connections, {MAX_CONNECTIONS_PER_PEER} \
+         from one address (in handshake or open), each upgrade request whole within {} s of \
+         connecting",
+        REQUEST_TIMEOUT.as_secs()
+    );
+    for (tool, args) in [
+        (env!("TOOL_EXE_tdma-run"), &["--help"][..]),
+        (env!("TOOL_EXE_octo-delta"), &["view", "--help"][..]),
+    ] {
+        let help = Command::new(tool).args(args).output().unwrap();
+        assert!(help.status.success(), "{tool} {args:?}");
+        let text = String::from_utf8_lossy(&help.stdout);
+        let text: Vec<&str> = text.split_whitespace().collect();
+        assert!(text.join(" ").contains(&limits), "{tool} {args:?}");
+    }
+}

@@ -452,7 +452,9 @@ pub struct ViewRunArgs {
     pub orders: Option<PathBuf>,
 
     /// Serve the live view to Foxglove on HOST:PORT (loopback unless you say otherwise),
-    /// e.g. --foxglove 127.0.0.1:8765.
+    /// e.g. --foxglove 127.0.0.1:8765. The port carries at most 256 connections, 8 from one
+    /// address (in handshake or open), each upgrade request whole within 5 s of connecting;
+    /// one more, or one slower, is closed and said once per address.
     #[arg(long, value_name = "HOST:PORT")]
     pub foxglove: Option<String>,
 

@@ -315,7 +315,9 @@ pub struct Args {
     /// --foxglove 127.0.0.1:8765: the --mcap channels live, and on a single session's operator
     /// end client channels /orders (JSON orders) and Twist (Teleop panel) for clients holding
     /// the token of --foxglove-token-file (view-only without it). With --scenario or --routes,
-    /// every vehicle under /vehicle/N/ (view only).
+    /// every vehicle under /vehicle/N/ (view only). The port carries at most 256 connections,
+    /// 8 from one address (in handshake or open), each upgrade request whole within 5 s of
+    /// connecting; one more, or one slower, is closed and said once per address.
     #[arg(long, value_name = "HOST:PORT", help_heading = "Field")]
     pub foxglove: Option<String>,
 
