@@ -475,6 +475,50 @@ fn status_version_1_packs_dumps_and_reads_back() {
     );
 }
 
+/// Issue 48: the CSV has status version 1's columns, so the docs' vector (no position, WHY
+/// no_position) and the same frame with a position and WHY none give different rows; a frame
+/// of ST = 0 leaves both cells empty.
+#[test]
+fn dump_csv_has_the_status_version_1_columns() {
+    let known = STATUS_V1
+        .replace(r#""position_known":false"#, r#""position_known":true"#)
+        .replace(r#""why":"no_position""#, r#""why":"none""#);
+    let st0 = known.replace(r#""st":1"#, r#""st":0"#);
+    let lines = format!("{STATUS_V1}\n{known}\n{st0}\n");
+    let frames = run(PACK, &[], lines.as_bytes());
+    assert_eq!(frames.code, 0, "{}", frames.stderr);
+    let csv = run(DUMP, &["-q", "-f", "csv"], &frames.stdout);
+    assert_eq!(csv.code, 0, "{}", csv.stderr);
+    let text = csv.stdout_text();
+    let rows: Vec<Vec<&str>> = text.lines().map(|l| l.split(',').collect()).collect();
+    let header = &rows[0];
+    let at = |name: &str| header.iter().position(|c| *c == name).unwrap();
+    assert_eq!(
+        (at("position_known"), at("why")),
+        (at("yaw_deg") + 1, at("yaw_deg") + 2),
+        "after yaw_deg, as in the JSON form: {text}"
+    );
+    assert_ne!(rows[1], rows[2], "{text}");
+    let cells = |i: usize| {
+        (
+            rows[i][at("st")],
+            rows[i][at("position_known")],
+            rows[i][at("why")],
+        )
+    };
+    assert_eq!(cells(1), ("1", "false", "no_position"), "{text}");
+    assert_eq!(cells(2), ("1", "true", "none"), "{text}");
+    assert_eq!(cells(3), ("0", "", ""), "{text}");
+    // Every field of the JSON form is a column, as --help says.
+    let json = run(DUMP, &["-q", "-f", "ndjson"], &frames.stdout);
+    for line in json.stdout_text().lines() {
+        let object: serde_json::Value = serde_json::from_str(line).unwrap();
+        for key in object.as_object().unwrap().keys() {
+            assert!(header.contains(&key.as_str()), "no column {key}: {text}");
+        }
+    }
+}
+
 /// RFC 4493's key, the AES-128 key of the secured-frame test vectors.
 const KEY_128: &str = "2b7e151628aed2a6abf7158809cf4f3c";
 

@@ -508,9 +508,11 @@ pub fn to_line(repr: &MessageRepr) -> String {
     Value::Object(map).to_string()
 }
 
-/// The columns of the CSV form: every field of every message type, flattened (an order's
-/// `type` becomes the `order` column), plus `offset`, `t_s` and `error` that dumps add.
-pub const CSV_COLUMNS: [&str; 48] = [
+/// The columns of the CSV form: every field of every message type in wire.md's order, flattened
+/// (an order's `type` becomes the `order` column; status version 1's `position_known` and `why`
+/// follow `yaw_deg`, as in the JSON form), plus `offset`, `t_s` and `error` that dumps add. A
+/// field the frame does not carry is an empty cell.
+pub const CSV_COLUMNS: [&str; 50] = [
     "offset",
     "t_s",
     "type",
@@ -534,6 +536,8 @@ pub const CSV_COLUMNS: [&str; 48] = [
     "roll_deg",
     "pitch_deg",
     "yaw_deg",
+    "position_known",
+    "why",
     "trunk",
     "status_raw",
     "oid",
@@ -687,6 +691,48 @@ mod tests {
             err("[1]"),
             "field (line): expected a JSON object, found [1]"
         );
+    }
+
+    /// docs/wire-extensions.md's status version 1 vector (ST = 1: no position, WHY
+    /// no_position).
+    const STATUS_V1: &str = r#"{"type":"rov","src":1,"dst":0,"ft":true,"lt":false,"st":1,"isn":1,"ci":false,"itsn":0,"rd":true,"eoid":1,"loc":false,"hh":true,"arm":true,"nav":"guided","x_cm":0,"y_cm":0,"z_cm":0,"roll_deg":359,"pitch_deg":1,"yaw_deg":180,"position_known":false,"why":"no_position","trunk":"00010203"}"#;
+
+    #[test]
+    fn every_field_is_a_csv_column() {
+        let known = STATUS_V1
+            .replace(r#""position_known":false"#, r#""position_known":true"#)
+            .replace(r#""why":"no_position""#, r#""why":"none""#);
+        let lines = VECTORS.map(|(line, _)| line.to_string());
+        for line in lines.iter().chain([&STATUS_V1.to_string(), &known]) {
+            let mut map = Map::new();
+            write_fields(&parse_line(line).unwrap(), &mut map);
+            let row = csv_record(&map);
+            for (key, value) in &map {
+                let values: Vec<(&str, &Value)> = match value {
+                    Value::Object(order) => order
+                        .iter()
+                        .map(|(k, v)| (if k == "type" { "order" } else { k.as_str() }, v))
+                        .collect(),
+                    _ => vec![(key.as_str(), value)],
+                };
+                for (column, value) in values {
+                    let at = CSV_COLUMNS.iter().position(|c| *c == column);
+                    let at = at.unwrap_or_else(|| panic!("{line}: no column {column}"));
+                    assert!(!row[at].is_empty() || value == "", "{line}: {column} empty");
+                }
+            }
+        }
+        let row = |line: &str| {
+            let mut map = Map::new();
+            write_fields(&parse_line(line).unwrap(), &mut map);
+            let row = csv_record(&map);
+            let at = |c: &str| CSV_COLUMNS.iter().position(|k| *k == c).unwrap();
+            (row[at("position_known")].clone(), row[at("why")].clone())
+        };
+        assert_eq!(row(STATUS_V1), ("false".into(), "no_position".into()));
+        assert_eq!(row(&known), ("true".into(), "none".into()));
+        // ST = 0 carries neither: empty cells.
+        assert_eq!(row(VECTORS[0].0), (String::new(), String::new()));
     }
 
     #[test]

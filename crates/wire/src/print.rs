@@ -26,7 +26,7 @@ use super::{DeframeEvent, DeframeStats, Deframer, Message, MessageRepr, json};
 use rovlink_base::io::{IoError, StopReader};
 
 /// The columns of a CSV of frames, in order ([`Record::csv_fields`]).
-pub const CSV_COLUMNS: [&str; 48] = json::CSV_COLUMNS;
+pub const CSV_COLUMNS: [&str; 50] = json::CSV_COLUMNS;
 
 /// The columns of a CSV of frames with their security ([`Record::csv_fields_secured`]).
 pub fn csv_columns_secured() -> Vec<&'static str> {
