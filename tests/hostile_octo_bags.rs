@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 use crate::common::hostile::{
     Run, SignalWhen, Stdin, assert_contract, run_in, signal_when, temp_files,
 };
+use crate::common::tree;
 use nix::sys::signal::Signal;
 use rovlink_octo::{Pose, Scan};
 use rovlink_scans::ros::{
@@ -219,25 +220,12 @@ fn rosbag2(dir: &Path, topics: bool) -> PathBuf {
     bag
 }
 
-fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
-    let mut files: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| {
-            let p = e.unwrap().path();
-            let bytes = std::fs::read(&p).unwrap();
-            (p, bytes)
-        })
-        .collect();
-    files.sort();
-    files
-}
-
 #[test]
 fn outputs_onto_a_bag_directorys_own_files_are_refused_and_the_bag_kept() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let bag = rosbag2(d, true);
-    let before = snapshot(&bag);
+    let before = tree(&bag);
     let db3 = bag.join("bag_0.db3");
     let yaml = bag.join("metadata.yaml");
     let out = d.join("out.odl");
@@ -260,7 +248,7 @@ fn outputs_onto_a_bag_directorys_own_files_are_refused_and_the_bag_kept() {
         let r = octo(d, &args);
         refused(d, &r, "refusing to overwrite an input", &what);
         assert!(!out.exists(), "{what}: left {}", out.display());
-        assert_eq!(snapshot(&bag), before, "{what}: the bag changed");
+        assert_eq!(tree(&bag), before, "{what}: the bag changed");
     }
     // A new file inside the bag directory is fine, and so is writing it again.
     let inside = bag.join("map.odl");

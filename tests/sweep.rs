@@ -11,6 +11,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use crate::common::hostile::{Run, assert_contract, run_in};
+use crate::common::tree;
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use serde_json::Value;
@@ -22,6 +23,10 @@ const RCP_DUMP: &str = env!("TOOL_EXE_rcp-dump");
 const DEBT_ENCODE: &str = env!("TOOL_EXE_debt-encode");
 const OCTO_DELTA: &str = env!("TOOL_EXE_octo-delta");
 const LIMIT: Duration = Duration::from_secs(120);
+
+/// Two short simulated sessions: one swept flag (--ber), one seed.
+const TWO_RUNS_GRID: &str =
+    r#"{"tool":"tdma-run","args":{"--sim":[null],"--duration":[10],"--ber":[0,0.0007]}}"#;
 
 /// The issue's grid: 2 BERs x 2 IPGs x 5 seeds of a 120 s simulated session.
 const TABLE4_GRID: &str = r#"{"tool":"tdma-run","args":{"--sim":[null],"--duration":[120],"--ber":[0,0.0007],"--ipg":[640,800]},"seeds":5}"#;
@@ -562,11 +567,7 @@ fn only_the_toolkits_tools_run_unless_allow_any_tool() {
 fn an_existing_out_that_no_sweep_wrote_is_refused_unless_force() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    std::fs::write(
-        d.join("grid.json"),
-        r#"{"tool":"tdma-run","args":{"--sim":[null],"--duration":[10],"--ber":[0,0.0007]}}"#,
-    )
-    .unwrap();
+    std::fs::write(d.join("grid.json"), TWO_RUNS_GRID).unwrap();
     let mine = d.join("mine");
     std::fs::create_dir_all(mine.join("plots")).unwrap();
     let theirs = [
@@ -632,6 +633,78 @@ fn an_existing_out_that_no_sweep_wrote_is_refused_unless_force() {
     let run = sweep(d, &["grid.json", "--out", "empty"]);
     assert_contract(&run, &[0], "an empty --out");
     assert_eq!(completed(&d.join("empty")).len(), 2);
+}
+
+/// Issue 48: GNU parallel wrote its joblog through a symbolic link `OUT/joblog` (a file
+/// outside OUT overwritten), and the sweep wrote into linked `plots/` and `runs/`. A sweep
+/// makes no link, so one under any name it writes or removes is refused, with --force or
+/// without, naming it, before anything is written; nothing outside OUT changes.
+#[test]
+fn a_symbolic_link_where_the_sweep_writes_is_refused_even_with_force() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("grid.json"), TWO_RUNS_GRID).unwrap();
+    let outside = d.join("outside");
+    for folder in ["plots", "runs", "run"] {
+        std::fs::create_dir_all(outside.join(folder)).unwrap();
+        std::fs::write(outside.join(folder).join("kept"), "precious\n").unwrap();
+    }
+    for file in ["joblog", "results.csv", "ber.png"] {
+        std::fs::write(outside.join(file), "precious\n").unwrap();
+    }
+    let before = tree(&outside);
+    let refused = |out: &str, link: &str, args: &[&str]| {
+        let mut all = vec!["grid.json", "--out", out];
+        all.extend_from_slice(args);
+        let run = sweep(d, &all);
+        let line = assert_one_line_refusal(&run, &format!("{link} {args:?}"));
+        assert!(
+            line.contains(&format!("{out}/{link}: a symbolic link")),
+            "names the link: {line}"
+        );
+        assert_eq!(tree(&outside), before, "{link} {args:?}: written through");
+    };
+    // In a folder of someone else's (with --force) and in a sweep's folder.
+    for name in ["joblog", "plots", "runs", "results.csv"] {
+        let mine = d.join("mine");
+        std::fs::create_dir(&mine).unwrap();
+        std::fs::write(mine.join("notes.txt"), "mine\n").unwrap();
+        std::os::unix::fs::symlink(outside.join(name), mine.join(name)).unwrap();
+        for args in [&["--force"][..], &[]] {
+            refused("mine", name, args);
+            assert_eq!(
+                names(&mine),
+                ["notes.txt", name].map(String::from).into(),
+                "{name} {args:?}: something written"
+            );
+        }
+        std::fs::remove_file(mine.join("notes.txt")).unwrap();
+        std::fs::write(mine.join("sweep.json"), "{}\n").unwrap();
+        refused("mine", name, &[]);
+        std::fs::remove_dir_all(&mine).unwrap();
+    }
+    // A run's folder, or a plot, that is a link.
+    let done = d.join("done");
+    let first = sweep(d, &["grid.json", "--out", "done"]);
+    assert_contract(&first, &[0], "a sweep's folder");
+    let id = completed(&done).into_iter().next().unwrap();
+    let run = done.join("runs").join(&id);
+    std::fs::remove_dir_all(&run).unwrap();
+    std::os::unix::fs::symlink(outside.join("run"), &run).unwrap();
+    for args in [&["--force"][..], &[], &["--gather-only"]] {
+        refused("done", &format!("runs/{id}"), args);
+    }
+    std::fs::remove_file(&run).unwrap();
+    std::fs::create_dir_all(done.join("plots")).unwrap();
+    let _ = std::fs::remove_file(done.join("plots/ber.png"));
+    std::os::unix::fs::symlink(outside.join("ber.png"), done.join("plots/ber.png")).unwrap();
+    refused("done", "plots/ber.png", &["--force"]);
+    std::fs::remove_file(done.join("plots/ber.png")).unwrap();
+    // Without the links, the same folder resumes: the removed run runs again.
+    let again = sweep(d, &["grid.json", "--out", "done"]);
+    assert_contract(&again, &[0], "resumed");
+    assert_eq!(completed(&done).len(), 2);
+    assert_eq!(tree(&outside), before);
 }
 
 #[test]

@@ -229,6 +229,24 @@ impl Drop for Reaped {
     }
 }
 
+/// Every file below `dir` (links not followed) and its bytes.
+pub fn tree(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut files = Vec::new();
+    let mut folders = vec![dir.to_path_buf()];
+    while let Some(folder) = folders.pop() {
+        for entry in std::fs::read_dir(&folder).unwrap() {
+            let path = entry.unwrap().path();
+            if std::fs::symlink_metadata(&path).unwrap().is_dir() {
+                folders.push(path);
+            } else {
+                files.push((path.clone(), std::fs::read(&path).unwrap_or_default()));
+            }
+        }
+    }
+    files.sort();
+    files
+}
+
 /// A free port on 127.0.0.1 (bound and released: another process could take it first, which
 /// fails a test loudly rather than passing it wrongly).
 pub fn free_port() -> u16 {
