@@ -499,6 +499,39 @@ fn bad_grids_and_flags_are_one_line_exit_2_and_run_nothing() {
     }
 }
 
+/// Issue 48: a key given twice is refused, naming it, where JSON would keep the last
+/// (`"--duration":[5],"--duration":[6]` ran 6 alone); nothing is written.
+#[test]
+fn a_key_given_twice_in_a_grid_is_refused_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for (grid, key) in [
+        (
+            r#"{"tool":"tdma-run","args":{"--sim":[null],"--duration":[5],"--duration":[6]}}"#,
+            "\"--duration\"",
+        ),
+        (r#"{"tool":"tdma-run","seeds":2,"seeds":3}"#, "\"seeds\""),
+        (
+            r#"{"tool":"tdma-run","args":{"--sim":[null]},"args":{"--duration":[5]}}"#,
+            "\"args\"",
+        ),
+    ] {
+        std::fs::write(d.join("g.json"), grid).unwrap();
+        for extra in [&[][..], &["--list"], &["--gather-only"]] {
+            let mut args = vec!["g.json", "--out", "out"];
+            args.extend_from_slice(extra);
+            let run = sweep(d, &args);
+            let line = assert_one_line_refusal(&run, grid);
+            assert!(
+                line.contains(&format!("g.json: duplicate key {key}")),
+                "{grid}: {line}"
+            );
+            assert!(run.stdout.is_empty(), "{grid} {extra:?}: it listed runs");
+            assert!(!d.join("out").exists(), "{grid} {extra:?}: out written");
+        }
+    }
+}
+
 /// The toolkit's tools, as the sweep names them when it refuses another program.
 const TOOLS: [&str; 8] = [
     "debt-encode",
