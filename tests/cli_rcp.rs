@@ -519,6 +519,52 @@ fn dump_csv_has_the_status_version_1_columns() {
     }
 }
 
+/// Issue 48: a field the message's form does not have is refused, naming it and its line
+/// (misspelt status version 1 fields packed a plain ST = 0 frame, exit 0); what rcp-dump adds
+/// is still read, so a dump packs back.
+#[test]
+fn an_unknown_field_is_refused_naming_it_and_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let target = dir.path().join("out.bin");
+    let typo = STATUS_V1.replace(r#""st":1"#, r#""st":0"#).replace(
+        r#""position_known":false,"why":"no_position""#,
+        r#""wyh":"no_position","positon_known":false"#,
+    );
+    let order = String::from_utf8(vectors_jsonl()).unwrap().replacen(
+        r#""vyaw":-127"#,
+        r#""vyaw":-127,"vroll":3"#,
+        1,
+    );
+    for (input, line, field) in [
+        (format!("{STATUS_V1}\n{typo}\n"), 2, "wyh"),
+        (order, 2, "order.vroll"),
+    ] {
+        let out = run(PACK, &["-o", target.to_str().unwrap()], input.as_bytes());
+        assert_eq!(out.code, 2, "{}", out.stderr);
+        assert_eq!(out.stderr.lines().count(), 1, "{}", out.stderr);
+        assert!(
+            out.stderr.starts_with(&format!(
+                "rcp-pack: <stdin>:{line}: field {field}: unknown, expected one of type, "
+            )),
+            "{}",
+            out.stderr
+        );
+        assert!(!target.exists(), "{field}: an output file was written");
+        let skipped = run(PACK, &["--keep-going"], input.as_bytes());
+        assert_eq!(skipped.code, 2);
+        assert!(
+            skipped.stderr.contains("(line skipped)"),
+            "{}",
+            skipped.stderr
+        );
+    }
+    // A dump of a ST = 1 frame packs back too (the other dumps: the round trips above).
+    let frame = run(PACK, &[], format!("{STATUS_V1}\n").as_bytes()).stdout;
+    let dumped = run(DUMP, &["-f", "ndjson", "-q"], &frame).stdout;
+    let again = run(PACK, &[], &dumped);
+    assert_eq!((again.code, again.stdout), (0, frame), "{}", again.stderr);
+}
+
 /// RFC 4493's key, the AES-128 key of the secured-frame test vectors.
 const KEY_128: &str = "2b7e151628aed2a6abf7158809cf4f3c";
 

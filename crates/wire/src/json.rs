@@ -8,8 +8,10 @@
 //! - an order of a reserved type: `"order":{"type":"unknown","ot":7,"body":"<18 hex digits>"}`;
 //! - `{"type":"raw","src":1,"dst":0,"payload":"<hex>"}`: any payload, as it is.
 //!
-//! Fields the reader does not know (such as the `offset` and `error` that `rcp-dump` adds) are
-//! ignored. Every field the type needs is required.
+//! Every field the type needs is required, and a field the message's form does not have is
+//! refused ([`JsonError::Unknown`]: a misspelt `"wyh"` is not silently a frame without it), but
+//! for what `rcp-dump` adds ([`DUMP_FIELDS`]: `offset`, `t_s`, `error` and the security fields),
+//! which is read and ignored, so that a dump packs back.
 //!
 //! Secured frames (docs/wire-extensions.md): `rcp-dump --key-file` adds `secured`,
 //! `encrypted`, `ctr` (the verified counter) or `ctr_low` (the low bits carried) and `verdict`;
@@ -53,10 +55,33 @@ pub enum JsonError {
         /// The value found, as JSON (shortened).
         found: String,
     },
+    /// A field the message's form does not have (a misspelling, or another message's field).
+    #[error("field {field}: unknown, expected one of {expected}")]
+    Unknown {
+        /// The field's path (`order.vxx`).
+        field: String,
+        /// The fields the message has, comma-separated.
+        expected: String,
+    },
     /// The message as a whole breaks a rule of the wire format.
     #[error("{0}")]
     Wire(#[from] Error),
 }
+
+/// The fields `rcp-dump` adds to a message's own: the stream `offset`, the `t_s` of a capture,
+/// the `error` of a payload that is not a valid message, and what `--key-file` found
+/// (`secured`, `encrypted`, `ctr` or `ctr_low`, `verdict`). [`parse_object`] takes them and
+/// ignores them (`ctr` is read by [`parse_line_with_counter`]).
+pub const DUMP_FIELDS: [&str; 8] = [
+    "offset",
+    "t_s",
+    "error",
+    "secured",
+    "encrypted",
+    "ctr",
+    "ctr_low",
+    "verdict",
+];
 
 /// Shortened JSON text of a value, for error messages.
 pub fn show(value: &Value) -> String {
@@ -210,7 +235,8 @@ pub fn counter_field(map: &Map<String, Value>) -> Result<Option<u64>, JsonError>
     }
 }
 
-/// Reads a JSON object into a frame value, checked with [`MessageRepr::validate`].
+/// Reads a JSON object into a frame value, checked with [`MessageRepr::validate`]; a field the
+/// message's form does not have is refused ([`JsonError::Unknown`]), but for [`DUMP_FIELDS`].
 pub fn parse_object(map: &Map<String, Value>) -> Result<MessageRepr, JsonError> {
     let f = Fields { map, prefix: "" };
     let kind = f.str("type")?;
@@ -223,8 +249,64 @@ pub fn parse_object(map: &Map<String, Value>) -> Result<MessageRepr, JsonError> 
         _ => return Err(f.bad("type", "rov, operator or raw", f.get("type")?)),
     };
     let repr = MessageRepr { src, dst, message };
+    only_its_fields(map, &repr)?;
     repr.validate()?;
     Ok(repr)
+}
+
+/// Refuses a field of `map`, or of its `order`, that `repr`'s form as [`write_fields`] writes
+/// it does not have, but for [`DUMP_FIELDS`] and what a form reads only at its default (a ST = 0
+/// status's `position_known` and `why`, a reserved status's empty `trunk`).
+fn only_its_fields(map: &Map<String, Value>, repr: &MessageRepr) -> Result<(), JsonError> {
+    let mut form = Map::new();
+    write_fields(repr, &mut form);
+    let defaults: &[&str] = match &repr.message {
+        Message::Rov(rov::Repr {
+            status: Status::Basic(BasicStatus {
+                extension: None, ..
+            }),
+            ..
+        }) => &["position_known", "why"],
+        Message::Rov(rov::Repr {
+            status: Status::Unknown { .. },
+            ..
+        }) => &["trunk"],
+        _ => &[],
+    };
+    let known = form
+        .keys()
+        .map(String::as_str)
+        .chain(defaults.iter().copied());
+    only_keys(map, known.collect(), &DUMP_FIELDS, "")?;
+    match (map.get("order"), form.get("order")) {
+        (Some(Value::Object(given)), Some(Value::Object(order))) => only_keys(
+            given,
+            order.keys().map(String::as_str).collect(),
+            &[],
+            "order.",
+        ),
+        _ => Ok(()),
+    }
+}
+
+/// Refuses the first key of `given` that is neither `known` (listed in the error) nor
+/// `ignored`; `at` prefixes its path.
+fn only_keys(
+    given: &Map<String, Value>,
+    known: Vec<&str>,
+    ignored: &[&str],
+    at: &str,
+) -> Result<(), JsonError> {
+    match given
+        .keys()
+        .find(|k| !known.contains(&k.as_str()) && !ignored.contains(&k.as_str()))
+    {
+        Some(key) => Err(JsonError::Unknown {
+            field: format!("{at}{key}"),
+            expected: known.join(", "),
+        }),
+        None => Ok(()),
+    }
 }
 
 fn parse_rov(f: &Fields<'_>) -> Result<rov::Repr, JsonError> {
@@ -691,6 +773,64 @@ mod tests {
             err("[1]"),
             "field (line): expected a JSON object, found [1]"
         );
+    }
+
+    #[test]
+    fn a_field_the_form_does_not_have_is_refused_naming_it() {
+        let err = |line: &str| parse_line(line).unwrap_err().to_string();
+        let base = VECTORS[0].0;
+        // Issue 48: misspelt status version 1 fields packed a plain ST = 0 frame.
+        let typo = base.replace(
+            r#""trunk""#,
+            r#""wyh":"no_position","positon_known":false,"trunk""#,
+        );
+        assert_eq!(
+            err(&typo),
+            "field wyh: unknown, expected one of type, src, dst, ft, lt, st, isn, ci, itsn, rd, \
+             eoid, loc, hh, arm, nav, x_cm, y_cm, z_cm, roll_deg, pitch_deg, yaw_deg, trunk, \
+             position_known, why"
+        );
+        assert_eq!(
+            err(&VECTORS[2]
+                .0
+                .replace(r#""heading_deg":359"#, r#""heading_deg":359,"heading":1"#)),
+            "field order.heading: unknown, expected one of type, x_cm, y_cm, z_cm, heading_deg"
+        );
+        assert!(
+            err(&VECTORS[1]
+                .0
+                .replace(r#""rit":5"#, r#""rit":5,"trunk":"00""#))
+            .starts_with("field trunk: unknown, expected one of type, src, dst, oid, "),
+        );
+        let reserved = r#"{"type":"rov","src":1,"dst":0,"ft":false,"lt":false,"st":5,"isn":0,"ci":false,"itsn":0,"status_raw":"0102","rd":true}"#;
+        assert_eq!(
+            err(reserved),
+            "field rd: unknown, expected one of type, src, dst, ft, lt, st, isn, ci, itsn, \
+             status_raw, trunk"
+        );
+        assert!(
+            err(r#"{"type":"raw","src":1,"dst":0,"payload":"00","order":{}}"#)
+                .starts_with("field order: unknown"),
+        );
+        // What rcp-dump adds is read and ignored, and so are ST = 0's fields at their defaults.
+        let dumped = r#"{"offset":5,"t_s":1.5,"secured":true,"encrypted":false,"ctr":7,"ctr_low":7,"verdict":"ok","error":"x","#;
+        for (line, _) in VECTORS {
+            let with = line.replacen('{', dumped, 1);
+            assert_eq!(
+                parse_line(&with).unwrap(),
+                parse_line(line).unwrap(),
+                "{with}"
+            );
+        }
+        let defaults = base.replace(
+            r#""trunk""#,
+            r#""position_known":true,"why":"none","trunk""#,
+        );
+        assert_eq!(parse_line(&defaults).unwrap(), parse_line(base).unwrap());
+        // An order alone (the console's, `--orders`) still takes other fields, such as t_s.
+        let order = r#"{"t_s":2,"type":"hold_heading","heading_deg":270,"enable":true}"#;
+        let order: Map<String, Value> = serde_json::from_str(order).unwrap();
+        assert!(parse_order(&order).is_ok());
     }
 
     /// docs/wire-extensions.md's status version 1 vector (ST = 1: no position, WHY

@@ -58,7 +58,8 @@ pub struct Lines<R: BufRead> {
 }
 
 impl<R: BufRead> Lines<R> {
-    /// The lines of `reader`; a `ctr` field is ignored like any field the form does not have.
+    /// The lines of `reader`; a `ctr` field is ignored, as the other fields `rcp-dump` adds
+    /// are ([`json::DUMP_FIELDS`]).
     pub fn new(reader: R) -> Lines<R> {
         Lines {
             reader,

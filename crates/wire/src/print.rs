@@ -601,6 +601,7 @@ mod tests {
             "{:?}",
             sink.notices
         );
+        assert!(json::parse_object(&raw.object()).is_ok(), "{raw:?}");
         let summary = printer.summary();
         assert_eq!((summary.stats.frames, summary.invalid_messages), (2, 1));
         assert!(!printer.clean());
@@ -674,6 +675,10 @@ mod tests {
             ["true", "true", "7", "", "ok"]
         );
         assert_eq!(printer.failed_verification(), 1);
+        // rcp-pack reads each record back: what a dump adds is known to it.
+        for record in &sink.records {
+            assert!(json::parse_object(&record.object()).is_ok(), "{record:?}");
+        }
         assert_eq!(sink.notices[0], "s: offset 16: frame 0->2 refused: bad_tag");
         let summary = serde_json::to_value(printer.summary()).unwrap();
         assert_eq!(
@@ -706,6 +711,7 @@ mod tests {
         assert_eq!(end, CaptureEnd::Closed("end of file".into()));
         assert_eq!(sink.records.len(), 1);
         assert!(sink.records[0].t_s.is_some());
+        assert!(json::parse_object(&sink.records[0].object()).is_ok());
         let set = AtomicBool::new(true);
         let end = capture(&mut &good[..], &mut printer, &mut sink, &set, None).unwrap();
         assert_eq!(end, CaptureEnd::Stopped);

@@ -31,9 +31,10 @@ Exit codes: 0 ok, 2 bad usage, a bad input line or key file, or a frame with no 
 /// Pack remote-control-protocol messages into link frames.
 ///
 /// Reads JSON Lines, one message per line in the form of wire.md (the form `rcp-dump --format
-/// ndjson` writes; extra fields such as "offset" are ignored), and writes one link frame per
-/// line. A bad line stops the run with an error naming the line, the field, and what was
-/// expected; nothing after it is written, and an output file is not created at all.
+/// ndjson` writes; the fields it adds, such as "offset", are read and ignored), and writes one
+/// link frame per line. A bad line stops the run with an error naming the line, the field, and
+/// what was expected; nothing after it is written, and an output file is not created at all. A
+/// field the message does not have (a misspelling such as "wyh") is a bad line, not ignored.
 #[derive(Parser, Debug)]
 #[command(version, after_help = EXAMPLES)]
 pub struct Args {
