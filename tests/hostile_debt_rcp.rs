@@ -430,7 +430,9 @@ fn a_live_capture_ends_0_on_sigterm_and_1_when_the_port_closes() {
     drop(master);
     let status = crate::common::wait_for_exit(&mut child, LIMIT);
     assert_eq!(status.code(), Some(1));
-    for bad in ["tcp:127.0.0.1:1", "udp:nonsense", "udp:127.0.0.1:0=x"] {
+    let closed = crate::common::ClosedPort::hold();
+    let refused = format!("tcp:127.0.0.1:{}", closed.port);
+    for bad in [refused.as_str(), "udp:nonsense", "udp:127.0.0.1:0=x"] {
         s.check(DUMP, &["--port", bad], b"", &[2]);
     }
 }

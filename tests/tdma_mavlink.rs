@@ -754,8 +754,11 @@ fn tdma_run_drives_the_standin_through_link_sim_with_live_orders() {
 
 #[test]
 fn an_unreachable_autopilot_is_exit_2_with_one_line() {
+    // A port held closed for the test, not one assumed closed (port 1 once had a listener).
+    let closed = crate::common::ClosedPort::hold();
+    let tcp = format!("mavlink:tcpout:127.0.0.1:{}", closed.port);
     for endpoint in [
-        "mavlink:tcpout:127.0.0.1:1",
+        tcp.as_str(),
         "mavlink:serial:/dev/nonexistent:115200",
         "mavlink:udpout:127.0.0.1:notaport",
     ] {

@@ -247,6 +247,33 @@ pub fn tree(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
     files
 }
 
+/// A TCP port on 127.0.0.1 that refuses every connection while this value lives: a socket is
+/// bound to it and never listens, so no other program can listen there (a test that took port 1
+/// to be closed failed while another program had it), and the kernel never picks it as the
+/// local port of an outgoing connection either.
+pub struct ClosedPort {
+    _held: socket2::Socket,
+    /// The port.
+    pub port: u16,
+}
+
+impl ClosedPort {
+    /// A port the kernel chose, held closed.
+    pub fn hold() -> ClosedPort {
+        use socket2::{Domain, Socket, Type};
+        let held = Socket::new(Domain::IPV4, Type::STREAM, None).expect("a TCP socket");
+        let any = std::net::SocketAddr::from(([127, 0, 0, 1], 0));
+        held.bind(&any.into()).expect("bind 127.0.0.1:0");
+        let port = held
+            .local_addr()
+            .ok()
+            .and_then(|a| a.as_socket())
+            .expect("the bound address")
+            .port();
+        ClosedPort { _held: held, port }
+    }
+}
+
 /// A free port on 127.0.0.1 (bound and released: another process could take it first, which
 /// fails a test loudly rather than passing it wrongly).
 pub fn free_port() -> u16 {
