@@ -532,6 +532,23 @@ fn a_key_given_twice_in_a_grid_is_refused_naming_it() {
     }
 }
 
+/// A flag holding '/' named its plot's path: `"--x/../../y"` would have written a plot outside
+/// OUT. Refused before anything is written.
+#[test]
+fn a_flag_holding_a_slash_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let grid = r#"{"tool":"tdma-run","args":{"--sim":[null],"--x/../../y":[1,2]}}"#;
+    std::fs::write(d.join("g.json"), grid).unwrap();
+    let run = sweep(d, &["g.json", "--out", "out"]);
+    let line = assert_one_line_refusal(&run, grid);
+    assert!(
+        line.contains("'--x/../../y': a flag may not hold '/'"),
+        "{line}"
+    );
+    assert!(!d.join("out").exists(), "out written");
+}
+
 /// The toolkit's tools, as the sweep names them when it refuses another program.
 const TOOLS: [&str; 8] = [
     "debt-encode",
