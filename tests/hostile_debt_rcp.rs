@@ -531,6 +531,62 @@ fn issue_14_defects_stay_fixed() {
     );
 }
 
+/// Issue 48, defect 1: with its header trunk lost, debt-decode searched layouts for minutes
+/// (131,070 random bytes with `--trunk-size 1 --erase 0,...,79`: 105 s; 64,000 x `0`: 98.7 s).
+/// The search's work is bounded now (counted in rovlink-debt's unit tests); here each run only
+/// has to end, within the harness's limit, with its answer: no timing is asserted.
+#[test]
+fn issue_48_a_lost_header_is_searched_for_in_bounded_work() {
+    let s = Scratch::new();
+    std::fs::write(s.path("noise.bin"), garbage(131_070, 48)).unwrap();
+    let first_80 = (0..80).map(|i| i.to_string()).collect::<Vec<_>>().join(",");
+    let zeros = vec!["0"; 64_000].join(",");
+    for erase in [&first_80, &zeros] {
+        let args = [
+            "noise.bin",
+            "--trunk-size",
+            "1",
+            "--erase",
+            erase,
+            "-o",
+            "n.png",
+        ];
+        let run = s.check(DECODE, &args, b"", &[2]);
+        assert!(
+            run.stderr
+                .contains("noise.bin: trunk 0 (the header) was lost"),
+            "{}",
+            run.stderr
+        );
+        assert!(!s.path("n.png").exists());
+    }
+    // A stream with parity, its header trunk named 64,000 times: the whole stream's picture.
+    let encode = [
+        "in.png",
+        "-b",
+        "3000",
+        "--fec",
+        "50",
+        "--trunk-size",
+        "16",
+        "-o",
+        "p.debt",
+    ];
+    s.check(ENCODE, &encode, b"", &[0]);
+    s.check(DECODE, &["p.debt", "-o", "whole.png"], b"", &[0]);
+    let erased = [
+        "p.debt",
+        "--trunk-size",
+        "16",
+        "--erase",
+        &zeros,
+        "-o",
+        "back.png",
+    ];
+    s.check(DECODE, &erased, b"", &[0]);
+    assert_eq!(s.bytes("back.png"), s.bytes("whole.png"));
+}
+
 #[test]
 fn rcp_dump_reads_tcp_and_udp_ports() {
     use std::io::Read;

@@ -47,9 +47,11 @@ pub struct Args {
     #[arg(long, value_name = "T", requires = "erase", value_parser = value::bytes(1, 255))]
     pub trunk_size: Option<u64>,
 
-    /// Decode as if these trunks (0-based ITSN) were lost in transit. A stream with parity
-    /// (debt-encode --fec) first recovers them, the header's too, when a block lost no more
-    /// trunks than it has parity. Otherwise a plain stream is one embedded segment: everything
+    /// Decode as if these trunks (0-based ITSN) were lost in transit: at most 100000 numbers,
+    /// a repeated trunk counting once and one past the stream's end ignored. A stream with
+    /// parity (debt-encode --fec) first recovers them, the header's too (a search of at most 50
+    /// layouts, the header's trunks alone rebuilt in each), when a block lost no more trunks
+    /// than it has parity. Otherwise a plain stream is one embedded segment: everything
     /// from the first lost trunk on is unusable, so this decodes the prefix before it. A
     /// segmented stream (debt-encode --segments) loses only the segments those trunks
     /// carried, from the lost trunk on. Without trunk 0 (the header) and parity that brings
