@@ -6,8 +6,10 @@
 # is the .graph's (the .bt byte for byte against graph2tree's, and compare_octrees' KLD between
 # the .ot files).
 #
-# Bars (issue 15): a zstd bag costs at most 1.3x the .graph build; its peak memory is at most the
-# .graph build's (map + one scan) plus one decompressed chunk plus one cloud message.
+# Bars: a zstd bag costs at most 1.1x the .graph build (issue 48; issue 15's was 1.3x): the bag
+# is read, decompressed and decoded on its own thread while the map works; its peak memory is at
+# most the .graph build's (map + the scans read ahead) plus one decompressed chunk plus one cloud
+# message.
 #
 # Usage: scripts/octo-bag-bench.sh [GRAPH] [RUNS]
 #   GRAPH: a scan graph (default: octo-delta's synthetic survey, 80 scans, ~1M points)

@@ -5,8 +5,10 @@
 #            simulated week, and peak memory, against the previous release of our own tdma-run
 #            (scripts/tdma-speed.sh --against);
 #   octree   octo-delta build of a 40-scan survey at 0.1 m, 1 and 2 threads, plain and coloured,
-#            against OctoMap's graph2tree, with the maps compared byte for byte
-#            (scripts/octo-bench.sh);
+#            against OctoMap's graph2tree, with the maps compared byte for byte; the same scans
+#            as a zstd MCAP bag against the .graph (bar: <= 1.1x), and the coloured build against
+#            OctoMap's own ColorOcTree fed the same clouds (bars: >= 10x on 2 threads, >= 5x on
+#            1), its .ot compared byte for byte (scripts/octo-bench.sh);
 #   debt     debt-encode / debt-decode against OpenJPEG on the bench picture
 #            (scripts/debt-bench.sh, quiet-gated);
 #   pty      link-sim --pty's real-time lateness at the far program (scripts/pty-latency.py; the
@@ -19,8 +21,9 @@
 # 32's work) in a temporary worktree, once: it is kept under target/speed-baseline/<commit>/.
 #
 # Usage: scripts/speed.sh [--runs N] [--baseline REV] [--only session|octree|debt|pty]...
-# Needs: graph2tree and compare_octrees (apt-get install octomap-tools), OpenJPEG's tools
-# (installed by scripts/codec-env.sh when missing), python3 with numpy and Pillow.
+# Needs: graph2tree and compare_octrees (apt-get install octomap-tools), g++ and liboctomap-dev
+# (the ColorOcTree anchor), OpenJPEG's tools (installed by scripts/codec-env.sh when missing),
+# python3 with numpy, Pillow, mcap and rosbags (scripts/test installs them all).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 runs=5
