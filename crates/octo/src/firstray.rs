@@ -136,11 +136,11 @@ impl FirstRay {
             self.missed = true;
             return;
         };
-        if *f == 0 {
-            *f = walk + 1;
+        let walk = walk.saturating_add(1);
+        let old = *f;
+        *f = if old == 0 || walk < old { walk } else { old };
+        if old == 0 {
             self.seen.push((slot as u32, k));
-        } else if walk < *f - 1 {
-            *f = walk + 1;
         }
     }
 
@@ -193,16 +193,29 @@ impl LaneSink for FirstRay {
         self.add(self.lane_walk[self.current], k);
     }
 
+    /// The lanes' cell numbers computed side by side, then each cell's first walk lowered to
+    /// its lane's walk with a select (a cell seen for the first time, rare, is also listed).
     #[inline(always)]
     fn insert_lanes(&mut self, kx: &[u16; LANES], ky: &[u16; LANES], kz: &[u16; LANES], keep: u32) {
         for l in 0..LANES {
             self.lane_cells[l] += keep >> l & 1;
         }
-        let mut keep = keep;
-        while keep != 0 {
-            let l = keep.trailing_zeros() as usize;
-            keep &= keep - 1;
-            self.add(self.lane_walk[l], [kx[l], ky[l], kz[l]]);
+        let (cells, taken, outside) = self.layout.lane_cells(kx, ky, kz, keep);
+        self.missed |= outside;
+        for l in 0..LANES {
+            if taken >> l & 1 == 0 {
+                continue;
+            }
+            let walk = self.lane_walk[l].saturating_add(1);
+            let Some(f) = self.first.get_mut(cells[l] as usize) else {
+                self.missed = true;
+                continue;
+            };
+            let old = *f;
+            *f = if old == 0 || walk < old { walk } else { old };
+            if old == 0 {
+                self.seen.push((cells[l], [kx[l], ky[l], kz[l]]));
+            }
         }
     }
 }

@@ -66,6 +66,38 @@ impl BoxLayout {
         Some((BoxLayout { low: lo, shift }, words as usize))
     }
 
+    /// The numbers of the cells of the lanes whose bit is set in `keep` (lane `l`'s cell being
+    /// `[kx[l], ky[l], kz[l]]`), side by side without a branch; the lanes whose cell is in the
+    /// box, as bits, and whether a kept lane's cell is outside it. A lane not taken has number 0.
+    #[inline(always)]
+    pub(crate) fn lane_cells(
+        &self,
+        kx: &[u16; LANES],
+        ky: &[u16; LANES],
+        kz: &[u16; LANES],
+        keep: u32,
+    ) -> ([u32; LANES], u32, bool) {
+        let [sx, sy, sz] = self.shift;
+        let [lx, ly, lz] = self.low;
+        let mut cells = [0u32; LANES];
+        let (mut taken, mut outside) = (0u32, 0u32);
+        for l in 0..LANES {
+            let x = kx[l].wrapping_sub(lx) as u32;
+            let y = ky[l].wrapping_sub(ly) as u32;
+            let z = kz[l].wrapping_sub(lz) as u32;
+            let kept = keep >> l & 1;
+            let out = ((x >> (sx + 2)) | (y >> (sy + 2)) | (z >> (sz + 2)) != 0) as u32;
+            let take = kept & !out;
+            let local =
+                (x & 1) | (y & 1) << 1 | (z & 1) << 2 | (x & 2) << 2 | (y & 2) << 3 | (z & 2) << 4;
+            let word = (x >> 2) | (y >> 2) << sx | (z >> 2) << (sx + sy);
+            cells[l] = (word << 6 | local) & take.wrapping_neg();
+            taken |= take << l;
+            outside |= kept & out;
+        }
+        (cells, taken, outside != 0)
+    }
+
     /// Cell `k`'s number (its word times 64 plus its bit); `None` outside the box.
     #[inline(always)]
     pub(crate) fn cell(&self, k: Key) -> Option<usize> {
