@@ -398,6 +398,17 @@ impl ScanCaster {
         Some(p)
     }
 
+    /// The scan's key box padded by the cells a walk may overshoot its end by
+    /// ([`OVERSHOOT_CELLS`]), the lanes' tables' box; `None` at the key range's edge.
+    fn padded_window(&self) -> Option<(Key, Key)> {
+        let (low, high) = self.window;
+        let pad = OVERSHOOT_CELLS;
+        if low.iter().any(|&k| k < pad) || high.iter().any(|&k| k > u16::MAX - pad) {
+            return None;
+        }
+        Some((low.map(|k| k - pad), high.map(|k| k + pad)))
+    }
+
     /// A plain scan cast with [`walk_lanes`] into bit tables of its key box, on up to `threads`
     /// threads; [`Lanes::Unfit`] when the box is too large or at the key range's edge, or a ray
     /// left it (the caller then casts the scan the general way).
@@ -408,12 +419,9 @@ impl ScanCaster {
         max_range_m: Option<f64>,
         stop: &AtomicBool,
     ) -> Lanes {
-        let (low, high) = self.window;
-        let pad = OVERSHOOT_CELLS;
-        if low.iter().any(|&k| k < pad) || high.iter().any(|&k| k > u16::MAX - pad) {
+        let Some((low, high)) = self.padded_window() else {
             return Lanes::Unfit;
-        }
-        let (low, high) = (low.map(|k| k - pad), high.map(|k| k + pad));
+        };
         let threads = self
             .threads
             .min(pts.len() / POINTS_PER_THREAD_MIN)
@@ -555,10 +563,7 @@ impl ScanCaster {
         max_range_m: Option<f64>,
         stop: &AtomicBool,
     ) -> Option<PreparedScan> {
-        let mut p = PreparedScan {
-            octomap_order: true,
-            ..PreparedScan::default()
-        };
+        let mut p = PreparedScan::default();
         let mut free = std::mem::take(&mut self.free_keys);
         free.set_window(self.window.0, self.window.1);
         let mut occ: Vec<(u64, ColorSlot)> = Vec::with_capacity(pts.len());
@@ -655,13 +660,11 @@ impl ScanCaster {
         max_range_m: Option<f64>,
         stop: &AtomicBool,
     ) -> Lanes {
-        let (low, high) = self.window;
-        let pad = OVERSHOOT_CELLS;
-        if low.iter().any(|&k| k < pad) || high.iter().any(|&k| k > u16::MAX - pad) {
+        let Some((low, high)) = self.padded_window() else {
             return Lanes::Unfit;
-        }
+        };
         let mut table = std::mem::take(&mut self.first_ray);
-        if !table.reset(low.map(|k| k - pad), high.map(|k| k + pad)) {
+        if !table.reset(low, high) {
             self.first_ray = table;
             return Lanes::Unfit;
         }
