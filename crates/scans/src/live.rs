@@ -247,24 +247,11 @@ impl LivePoser {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ros::{ByteOrder, Header, Transform, TransformStamped};
+    use crate::recording::tests::tf as transform;
+    use crate::ros::{ByteOrder, Header, TransformStamped};
     use rovlink_octo::Scan;
 
     const S: i64 = 1_000_000_000;
-
-    fn link(stamp_ns: i64, parent: &str, child: &str, x: f64) -> TransformStamped {
-        TransformStamped {
-            header: Header {
-                stamp_ns,
-                frame_id: parent.into(),
-            },
-            child_frame_id: child.into(),
-            transform: Transform {
-                translation_m: [x, 0.0, 0.0],
-                rotation: [1.0, 0.0, 0.0, 0.0],
-            },
-        }
-    }
 
     fn tf(links: &[TransformStamped]) -> Vec<u8> {
         ros::encode_tf_message(links, ByteOrder::Little)
@@ -296,13 +283,19 @@ mod tests {
     #[test]
     fn a_cloud_waits_for_the_transform_at_its_stamp_then_is_posed_by_interpolation() {
         let mut p = LivePoser::new(LiveOptions::default());
-        assert!(p.tf(&tf(&[link(0, "map", "odom", 0.0)]), true).is_empty());
-        assert!(p.tf(&tf(&[link(S, "odom", "base", 1.0)]), false).is_empty());
+        assert!(
+            p.tf(&tf(&[transform(0, "map", "odom", 0.0, 0.0)]), true)
+                .is_empty()
+        );
+        assert!(
+            p.tf(&tf(&[transform(S, "odom", "base", 1.0, 0.0)]), false)
+                .is_empty()
+        );
         assert_eq!(p.cloud(&cloud(2 * S, "base"), 0).unwrap(), None);
         // Its stamp is after the last sample: it waits.
         assert!(p.ready(10).is_empty());
         assert_eq!(p.pending(), 1);
-        p.tf(&tf(&[link(3 * S, "odom", "base", 3.0)]), false);
+        p.tf(&tf(&[transform(3 * S, "odom", "base", 3.0, 0.0)]), false);
         let out = p.ready(20);
         let posed = scans(&out);
         assert_eq!(posed.len(), 1, "{out:?}");
@@ -317,7 +310,7 @@ mod tests {
             wait_ns: 100,
             ..LiveOptions::default()
         });
-        p.tf(&tf(&[link(S, "odom", "base", 1.0)]), false);
+        p.tf(&tf(&[transform(S, "odom", "base", 1.0, 0.0)]), false);
         p.cloud(&cloud(2 * S, "base"), 0).unwrap();
         p.cloud(&cloud(2 * S, "base"), 1).unwrap();
         assert!(p.ready(50).is_empty());
@@ -337,19 +330,25 @@ mod tests {
     fn a_cycle_or_a_nan_arriving_live_is_refused_and_the_rest_goes_on() {
         let mut p = LivePoser::new(LiveOptions::default());
         p.tf(
-            &tf(&[link(0, "map", "odom", 0.0), link(0, "odom", "base", 0.0)]),
+            &tf(&[
+                transform(0, "map", "odom", 0.0, 0.0),
+                transform(0, "odom", "base", 0.0, 0.0),
+            ]),
             true,
         );
-        let problems = p.tf(&tf(&[link(0, "base", "map", 0.0)]), true);
+        let problems = p.tf(&tf(&[transform(0, "base", "map", 0.0, 0.0)]), true);
         assert_eq!(problems.len(), 1, "{problems:?}");
         assert!(problems[0].contains("cycle"), "{problems:?}");
-        let mut nan = link(S, "base", "sensor", 0.0);
+        let mut nan = transform(S, "base", "sensor", 0.0, 0.0);
         nan.transform.translation_m[1] = f64::NAN;
         // A message with a number that is not finite is refused whole (its decoder names the
         // field); the next one is taken.
-        let problems = p.tf(&tf(&[nan, link(S, "base", "sonar", 0.0)]), false);
+        let problems = p.tf(&tf(&[nan, transform(S, "base", "sonar", 0.0, 0.0)]), false);
         assert_eq!(problems.len(), 1, "{problems:?}");
-        assert!(p.tf(&tf(&[link(S, "base", "sonar", 0.5)]), true).is_empty());
+        assert!(
+            p.tf(&tf(&[transform(S, "base", "sonar", 0.5, 0.0)]), true)
+                .is_empty()
+        );
         p.cloud(&cloud(S, "sonar"), 0).unwrap();
         let out = p.ready(0);
         assert_eq!(scans(&out)[0].pose.translation_m, [0.5, 0.0, 0.0]);
@@ -364,9 +363,12 @@ mod tests {
             max_pending: 4,
             ..LiveOptions::default()
         });
-        p.tf(&tf(&[link(0, "map", "odom", 0.0)]), true);
+        p.tf(&tf(&[transform(0, "map", "odom", 0.0, 0.0)]), true);
         for k in 0..5_000 {
-            p.tf(&tf(&[link(k * S / 10, "odom", "base", 0.0)]), false);
+            p.tf(
+                &tf(&[transform(k * S / 10, "odom", "base", 0.0, 0.0)]),
+                false,
+            );
         }
         let Some(Poses::Tf(tree)) = &p.poses else {
             panic!("a TF source")
@@ -394,7 +396,7 @@ mod tests {
             ..LiveOptions::default()
         });
         let pose = |ns, x| {
-            let t = link(ns, "map", "", x);
+            let t = transform(ns, "map", "", x, 0.0);
             ros::encode_pose_stamped(&t.header, &t.transform, ByteOrder::Little)
         };
         assert_eq!(p.pose(&pose(0, 0.0)), None);

@@ -506,7 +506,7 @@ pub(crate) fn pose_at(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use std::collections::BTreeMap;
     use std::io::Cursor;
 
@@ -515,7 +515,14 @@ mod tests {
 
     const S: i64 = 1_000_000_000;
 
-    fn tf(stamp_ns: i64, parent: &str, child: &str, x: f64, yaw_rad: f64) -> TransformStamped {
+    /// A transform from `parent` to `child` at `stamp_ns`: `x` m along x, `yaw_rad` about z.
+    pub(crate) fn tf(
+        stamp_ns: i64,
+        parent: &str,
+        child: &str,
+        x: f64,
+        yaw_rad: f64,
+    ) -> TransformStamped {
         TransformStamped {
             header: Header {
                 stamp_ns,
