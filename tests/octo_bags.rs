@@ -281,3 +281,77 @@ fn a_database_that_is_not_a_bag_and_a_cut_chunk_are_refused() {
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
     assert_refused(dir.path(), &cut, "cut.mcap");
 }
+
+#[test]
+fn a_bag_one_pass_cannot_pose_is_built_again_in_two_passes() {
+    // map -> odom (3 m along x) logged after the first cloud: a build to files reads the bag in
+    // one pass, finds at its end that the first cloud was posed in odom, says so once and
+    // builds again; a build to standard output reads every transform first. Same map, same
+    // stream.
+    let dir = tempfile::tempdir().unwrap();
+    let bag = write_bag(dir.path(), "mcap-zstd", &["--late-root", "3"]);
+    let files = |name: &str| {
+        let (odl, bt) = (
+            dir.path().join(format!("{name}.odl")),
+            dir.path().join(format!("{name}.bt")),
+        );
+        (odl, bt)
+    };
+    let (odl1, bt1) = files("one");
+    let out = run(
+        OCTO,
+        &[
+            "build",
+            s(&bag),
+            "--res",
+            RES,
+            "-o",
+            s(&odl1),
+            "--bt",
+            s(&bt1),
+        ],
+        b"",
+    );
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    let again: Vec<&str> = out
+        .stderr
+        .lines()
+        .filter(|l| l.contains("building again with every transform read first"))
+        .collect();
+    assert_eq!(again.len(), 1, "{}", out.stderr);
+    assert!(
+        again[0].contains("bag-mcap-zstd.mcap") && again[0].contains("\"sensor\""),
+        "{}",
+        again[0]
+    );
+    let (_, bt2) = files("two");
+    let out = run(
+        OCTO,
+        &[
+            "build",
+            s(&bag),
+            "--res",
+            RES,
+            "-q",
+            "-o",
+            "-",
+            "--bt",
+            s(&bt2),
+        ],
+        b"",
+    );
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    assert!(out.stderr.is_empty(), "{}", out.stderr);
+    assert_eq!(
+        std::fs::read(&odl1).unwrap(),
+        out.stdout,
+        "the streams differ"
+    );
+    assert_eq!(
+        std::fs::read(&bt1).unwrap(),
+        std::fs::read(&bt2).unwrap(),
+        "the maps differ"
+    );
+    // The root's 3 m are in both: not graph2tree's map of the survey.
+    assert_ne!(std::fs::read(&bt1).unwrap(), survey().reference_bt);
+}

@@ -2,7 +2,7 @@
 //! of arbitrary bytes (so the decompressing path sees more than bad magic).
 //!
 //! Checks: opening and iterating every message never panics; each message's topic is a valid
-//! index into the topics.
+//! index into the topics; reading the bag's scans (two passes, and one pass) never panics.
 
 #![no_main]
 
@@ -10,6 +10,7 @@ use std::sync::atomic::AtomicBool;
 
 use libfuzzer_sys::fuzz_target;
 use rovlink_scans::bag::Bag;
+use rovlink_scans::recording::{Recording, RecordingOptions};
 
 const MAGIC: &[u8] = b"\x89MCAP0\r\n";
 
@@ -38,12 +39,24 @@ fn framed(compression: &str, size: u64, data: &[u8]) -> Vec<u8> {
 }
 
 fn read_all(bytes: Vec<u8>) {
+    let stop = AtomicBool::new(false);
+    for one_pass in [false, true] {
+        let options = RecordingOptions {
+            origin_given: true,
+            one_pass,
+            ..RecordingOptions::default()
+        };
+        if let Ok(mut rec) = Recording::from_mcap_bytes("fuzz", bytes.clone(), &options, &stop)
+            && let Ok(scans) = rec.scans(&stop)
+        {
+            scans.for_each(drop);
+        }
+    }
     let Ok(mut bag) = Bag::from_mcap_bytes("fuzz", bytes) else {
         return;
     };
     let n = bag.topics().len();
     let all: Vec<usize> = (0..n).collect();
-    let stop = AtomicBool::new(false);
     if let Ok(messages) = bag.messages(&all, &stop) {
         for m in messages.flatten() {
             assert!(m.topic < n, "topic index {} of {n}", m.topic);

@@ -25,6 +25,8 @@ With --tf-fault the TF is malformed: `cycle` (also sensor -> map), `two-parents`
 under odom), `nan` (a NaN rotation in the first /tf sample).
 
 With --late one more cloud is written whose stamp lies after every pose (it must be skipped).
+With --late-root X (tf only) map -> odom is X m along x and is logged just after the first
+cloud: a reader that poses clouds as it goes would have built in odom (the root it saw then).
 Prints one JSON line: the kind, the clouds written, the path.
 """
 import argparse
@@ -129,12 +131,18 @@ def pose(t, q):
 IDENTITY = ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))
 
 
-def messages(scans, pose_kind, color, organised, late, fault=None):
+def messages(scans, pose_kind, color, organised, late, fault=None, late_root=None):
     """(topic, type, log_time_ns, message) in log-time order."""
     out = []
     if pose_kind == "tf":
-        statics = [tf_stamped(STAMP0_NS, "map", "odom", *IDENTITY),
-                   tf_stamped(STAMP0_NS, "base_link", "sensor", *IDENTITY)]
+        statics = [tf_stamped(STAMP0_NS, "base_link", "sensor", *IDENTITY)]
+        root = tf_stamped(STAMP0_NS, "map", "odom", *IDENTITY)
+        if late_root is None:
+            statics.insert(0, root)
+        else:
+            root = tf_stamped(STAMP0_NS, "map", "odom", (late_root, 0.0, 0.0), IDENTITY[1])
+            out.append(("/tf_static", "tf2_msgs/msg/TFMessage", STAMP0_NS + 2_000_000,
+                        T["tf2_msgs/msg/TFMessage"](transforms=[root])))
         if fault == "cycle":
             statics.append(tf_stamped(STAMP0_NS, "sensor", "map", *IDENTITY))
         if fault == "two-parents":
@@ -215,9 +223,10 @@ def main():
     p.add_argument("--organised", action="store_true")
     p.add_argument("--late", action="store_true")
     p.add_argument("--tf-fault", choices=["cycle", "two-parents", "nan"])
+    p.add_argument("--late-root", type=float)
     p.add_argument("--out", required=True)
     a = p.parse_args()
-    msgs, clouds = messages(read_graph(a.graph), a.pose, a.color, a.organised, a.late, a.tf_fault)
+    msgs, clouds = messages(read_graph(a.graph), a.pose, a.color, a.organised, a.late, a.tf_fault, a.late_root)
     from mcap.writer import CompressionType
     from rosbags.rosbag2 import StoragePlugin
     # MCAP files in the writer's default 1 MiB chunks, as recorders make them.

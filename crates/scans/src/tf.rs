@@ -200,6 +200,8 @@ pub enum Unavailable {
 #[derive(Debug, Clone, Default, PartialEq)]
 struct Samples {
     samples: Vec<(i64, Transform)>,
+    /// How many of `samples` [`Samples::finish`] left sorted (the rest added since).
+    sorted: usize,
 }
 
 /// Where a stamp falls outside the samples.
@@ -236,11 +238,23 @@ impl Samples {
         let i = self.samples.partition_point(|s| s.0 < stamp_ns);
         if i > 1 {
             self.samples.drain(..i - 1);
+            self.sorted = self.sorted.saturating_sub(i - 1);
         }
     }
 
-    /// Sorts by stamp; of samples at the same stamp the last added is kept.
+    /// Sorts by stamp; of samples at the same stamp the last added is kept. Samples added in
+    /// stamp order since the last call (every publisher's own) cost only their number, so a
+    /// buffer finished after every message (one pass over a bag) stays linear.
     fn finish(&mut self) {
+        let last_sorted = self.sorted.saturating_sub(1);
+        if self
+            .samples
+            .get(last_sorted..)
+            .is_some_and(|tail| tail.windows(2).all(|w| w[0].0 < w[1].0))
+        {
+            self.sorted = self.samples.len();
+            return;
+        }
         // Stable: equal stamps stay in the order they were added.
         self.samples.sort_by_key(|s| s.0);
         let mut kept: Vec<(i64, Transform)> = Vec::with_capacity(self.samples.len());
@@ -251,6 +265,7 @@ impl Samples {
             }
         }
         self.samples = kept;
+        self.sorted = self.samples.len();
     }
 
     fn span(&self) -> Option<(i64, i64)> {
@@ -371,6 +386,7 @@ impl TfTree {
                 } else {
                     LinkKind::Dynamic(Samples {
                         samples: vec![sample],
+                        sorted: 0,
                     })
                 };
                 self.links.insert(

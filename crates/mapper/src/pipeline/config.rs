@@ -125,6 +125,10 @@ pub struct BuildConfig {
     pub threads: Option<usize>,
     /// How `ros2:TOPIC` inputs join the graph.
     pub ros2: super::ros2_input::Ros2Input,
+    /// Read bags in one pass ([`rovlink_scans::recording::one_pass`]): only for a caller that
+    /// starts again without it on [`super::PipelineError::is_one_pass`] (a build whose outputs
+    /// are not committed yet), never for a live mapper.
+    pub one_pass_bags: bool,
 }
 
 impl Default for BuildConfig {
@@ -142,6 +146,7 @@ impl Default for BuildConfig {
             color_updates: false,
             threads: None,
             ros2: super::ros2_input::Ros2Input::default(),
+            one_pass_bags: false,
         }
     }
 }

@@ -234,6 +234,7 @@ pub(crate) fn open_scans<'a>(
         pose_topic: cfg.mcap.pose_topic.clone(),
         fixed_frame: cfg.fixed_frame.clone(),
         origin_given: cfg.origin_m.is_some(),
+        one_pass: cfg.one_pass_bags,
     };
     let is_dir = meta.as_ref().is_some_and(|m| m.is_dir());
     let format = cfg

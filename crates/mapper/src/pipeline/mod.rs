@@ -97,3 +97,14 @@ pub enum PipelineError {
     #[error(transparent)]
     Sink(SinkError),
 }
+
+impl PipelineError {
+    /// Whether a bag read in one pass ([`BuildConfig::one_pass_bags`]) has to be read again in
+    /// two: what was built from it is not the map two passes give.
+    pub fn is_one_pass(&self) -> bool {
+        matches!(
+            self,
+            PipelineError::Recording(RecordingError::OnePass { .. })
+        )
+    }
+}

@@ -368,6 +368,11 @@ impl CloudBuilder {
         }
     }
 
+    /// How many points are kept so far.
+    pub(crate) fn len(&self) -> usize {
+        self.points.len()
+    }
+
     /// The scan of the points kept, with `pose`.
     pub fn finish(self, pose: Pose) -> Scan {
         Scan {

@@ -342,6 +342,15 @@ enum Colour {
     Channels([usize; 3]),
 }
 
+/// The little-endian `f32` at `offset` of `point`; `offset + 4 <= point.len()` is checked by the
+/// caller (a field within `point_step`), and a NaN (a dropped point) stands in otherwise.
+fn le_f32_at(point: &[u8], offset: usize) -> f32 {
+    point
+        .get(offset..offset + 4)
+        .and_then(|b| <[u8; 4]>::try_from(b).ok())
+        .map_or(f32::NAN, f32::from_le_bytes)
+}
+
 /// Decodes a `sensor_msgs/msg/PointCloud2` (CDR) at file offset `offset`: its header, its
 /// points (from fields `x`, `y`, `z` of any numeric datatype; points with a coordinate not
 /// finite as `f32` dropped and counted), colours from an `rgb` field (packed `0x00RRGGBB`,
@@ -469,7 +478,27 @@ pub fn decode_point_cloud2(
             "PointCloud2 data: a point lies outside the data (internal size check failed)",
         )
     };
-    if points > 0 {
+    if points > 0 && !big && xyz.iter().all(|&(_, s)| s == Scalar::F32) {
+        // The layout every lidar driver writes: read each row's points in place, the bounds
+        // checked once above (row_step and data length) and by `usable` (a field within
+        // point_step), not again for every coordinate.
+        for r in 0..height {
+            let row = data
+                .get(r * row_step..r * row_step + width * point_step)
+                .ok_or_else(short)?;
+            for point in row.chunks_exact(point_step) {
+                let p = xyz.map(|(o, _)| le_f32_at(point, o));
+                let rgb = match &colour {
+                    None => [0; 3],
+                    Some(Colour::Packed(o, s)) => s
+                        .read_bits32(point.get(*o..).unwrap_or_default(), big)
+                        .map_or([0; 3], unpack_rgb),
+                    Some(Colour::Channels(o)) => o.map(|o| point.get(o).copied().unwrap_or(0)),
+                };
+                builder.push(p, rgb);
+            }
+        }
+    } else if points > 0 {
         for r in 0..height {
             for k in 0..width {
                 let base = r * row_step + k * point_step;

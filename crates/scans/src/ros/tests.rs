@@ -516,3 +516,54 @@ fn cloud_errors_carry_offsets() {
         e.message
     );
 }
+
+#[test]
+fn little_endian_float_clouds_read_in_place_as_every_other_layout() {
+    // The little-endian FLOAT32 fast path against the general reader (big endian), with NaN
+    // and infinite points dropped, colours kept, and rows padded past width x point_step.
+    let points = [
+        [1.0f32, -2.0, 3.5],
+        [f32::NAN, 0.0, 0.0],
+        [4.0, 5.0, f32::INFINITY],
+        [-0.0, 1e-30, 7.25],
+    ];
+    let colors = [[1u8, 2, 3], [4, 5, 6], [7, 8, 9], [10, 11, 12]];
+    let h = header(9, "sensor");
+    for colored in [false, true] {
+        let s = scan(&points, colored.then_some(&colors[..]));
+        let kept = [0, 3];
+        let expect = Scan {
+            points: kept.iter().map(|&i| points[i]).collect(),
+            colors: colored.then(|| kept.iter().map(|&i| colors[i]).collect()),
+            pose: Pose::IDENTITY,
+        };
+        for order in [ByteOrder::Little, ByteOrder::Big] {
+            let bytes = encode_point_cloud2(&h, &s, order);
+            let got = decode_point_cloud2(&bytes, 0).unwrap().1;
+            assert_eq!(
+                got.finish(Pose::IDENTITY),
+                expect,
+                "{order:?} colored {colored}"
+            );
+        }
+        // Two rows of one point each, 2 x point_step apart: points 0 and 2 of the data.
+        let mut le = encode_point_cloud2(&h, &s, ByteOrder::Little);
+        let step = if colored { 16 } else { 12 };
+        let tail = le.len() - 1 - step * points.len();
+        assert_eq!(le[tail - 12..tail - 8], (step as u32).to_le_bytes());
+        le[tail - 8..tail - 4].copy_from_slice(&(2 * step as u32).to_le_bytes());
+        // height and width follow the header ("sensor\0" padded to offset 24).
+        le[24..28].copy_from_slice(&2u32.to_le_bytes());
+        le[28..32].copy_from_slice(&1u32.to_le_bytes());
+        let got = decode_point_cloud2(&le, 0)
+            .unwrap()
+            .1
+            .finish(Pose::IDENTITY);
+        assert_eq!(got.points, vec![points[0]], "colored {colored}");
+        assert_eq!(got.colors, colored.then(|| vec![colors[0]]));
+        // A row_step one byte short of two rows' data is refused, not read past.
+        le[tail - 8..tail - 4].copy_from_slice(&(3 * step as u32).to_le_bytes());
+        le[24..28].copy_from_slice(&3u32.to_le_bytes());
+        assert!(decode_point_cloud2(&le, 0).is_err());
+    }
+}

@@ -19,7 +19,7 @@ use crate::flags::{self, BuildArgs};
 
 /// Runs `build`; the process's exit code.
 pub fn build(a: &BuildArgs) -> Result<u8> {
-    let cfg = a.config();
+    let mut cfg = a.config();
     cfg.validate()?;
     let link = a.link.as_deref().map(transfer::model_by_name).transpose();
     let link = link.map_err(|e| UsageError(format!("--link: {e}")))?;
@@ -35,46 +35,68 @@ pub fn build(a: &BuildArgs) -> Result<u8> {
     let arrivals = outs.claim_opt("--arrivals", a.arrivals.as_deref(), Kind::Text)?;
     let metrics_dest = outs.claim_opt("--metrics", a.metrics.as_deref(), Kind::Text)?;
     let mut metrics_out = metrics_dest.map(|d| d.open()).transpose()?;
+    // A bag is read in one pass when nothing is written before the build's end (every output
+    // a file, committed only then): one whose clouds one pass cannot pose as two passes do is
+    // built again, in two.
+    cfg.one_pass_bags = !stream.is_stdout() && !stats.as_ref().is_some_and(|d| d.is_stdout());
     stop::install()?;
-    let mut out = stream.open()?;
-    let mut rows = stats.map(|d| RowWriter::new(d, RowFormat::Csv, &pipeline::STATS_COLUMNS));
-    let bar = progress::bar(a.quiet, 0, flags::PROGRESS);
-    let outcome = (|| -> Result<pipeline::Built> {
-        let mut sink = |r: &StatsRow| -> Result<(), SinkError> {
-            Ok(rows.as_mut().map_or(Ok(()), |w| w.row(r))?)
-        };
-        let mut show = progress::follow(&bar);
-        let mut hooks = Hooks {
-            stop: stop::flag(),
-            stats: a.stats.is_some().then_some(&mut sink as _),
-            progress: Some(&mut show),
-        };
-        let built = pipeline::build(&cfg, &a.inputs, &mut out, &stream.name(), &mut hooks)?;
+    let (built, rows) = loop {
+        let mut out = stream.open()?;
+        let mut rows = stats
+            .clone()
+            .map(|d| RowWriter::new(d, RowFormat::Csv, &pipeline::STATS_COLUMNS));
+        let bar = progress::bar(a.quiet, 0, flags::PROGRESS);
+        let outcome = (|| -> Result<pipeline::Built> {
+            let mut sink = |r: &StatsRow| -> Result<(), SinkError> {
+                Ok(rows.as_mut().map_or(Ok(()), |w| w.row(r))?)
+            };
+            let mut show = progress::follow(&bar);
+            let mut hooks = Hooks {
+                stop: stop::flag(),
+                stats: a.stats.is_some().then_some(&mut sink as _),
+                progress: Some(&mut show),
+            };
+            let built = pipeline::build(&cfg, &a.inputs, &mut out, &stream.name(), &mut hooks)?;
+            bar.finish_and_clear();
+            // Every output holds what was done, also when a signal stopped the build. The two
+            // map files are serialised and committed (written, synced, renamed) side by side;
+            // the stream is committed once both are in place, so a failed map leaves no stream.
+            std::thread::scope(|s| -> Result<()> {
+                let tree = &built.tree;
+                let ot_job = ot
+                    .as_ref()
+                    .map(|d| s.spawn(move || d.write_whole(&files::write_ot(tree))));
+                let bt_done = bt.as_ref().map(|d| d.write_whole(&files::write_bt(tree)));
+                let ot_done =
+                    ot_job.map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
+                bt_done.transpose()?;
+                ot_done.transpose()?;
+                Ok(())
+            })?;
+            out.finish()?;
+            Ok(built)
+        })();
         bar.finish_and_clear();
-        // Every output holds what was done, also when a signal stopped the build. The two
-        // map files are serialised and committed (written, synced, renamed) side by side; the
-        // stream is committed once both are in place, so a failed map leaves no stream.
-        std::thread::scope(|s| -> Result<()> {
-            let tree = &built.tree;
-            let ot_job = ot
-                .as_ref()
-                .map(|d| s.spawn(move || d.write_whole(&files::write_ot(tree))));
-            let bt_done = bt.as_ref().map(|d| d.write_whole(&files::write_bt(tree)));
-            let ot_done = ot_job.map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
-            bt_done.transpose()?;
-            ot_done.transpose()?;
-            Ok(())
-        })?;
-        out.finish()?;
-        Ok(built)
-    })();
-    // A failed run (bad input found late, a full disk) leaves no stats file either.
-    if outcome.is_err()
-        && let Some(rows) = rows.take()
-    {
-        rows.discard();
-    }
-    let built = outcome?;
+        // A failed run (bad input found late, a full disk) leaves no stats file either.
+        if outcome.is_err()
+            && let Some(rows) = rows.take()
+        {
+            rows.discard();
+        }
+        match outcome {
+            Err(e)
+                if cfg.one_pass_bags
+                    && e.downcast_ref::<pipeline::PipelineError>()
+                        .is_some_and(pipeline::PipelineError::is_one_pass) =>
+            {
+                if !a.quiet {
+                    say!("{e}; building again with every transform read first");
+                }
+                cfg.one_pass_bags = false;
+            }
+            outcome => break (outcome?, rows),
+        }
+    };
     rows.map(RowWriter::finish).transpose()?;
     // Clouds left out of the map are said even with --quiet: the map lacks them.
     let messages = built.messages(a.quiet, stop::note().as_deref());

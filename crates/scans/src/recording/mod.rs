@@ -17,7 +17,11 @@
 //!    - else the first `PoseStamped` topic, as a pose topic;
 //!    - else none: an error, unless `--origin` says where the sensor was.
 //! 3. **Two passes**: the poses first (they are small), then the clouds one at a time, so memory
-//!    holds the poses, one decompressed chunk and one cloud, never the bag.
+//!    holds the poses, one decompressed chunk and one cloud, never the bag. Or, with
+//!    [`RecordingOptions::one_pass`], **one pass** ([`one_pass`]): clouds and poses read
+//!    together, each cloud handed out once the transforms read so far settle its pose, and
+//!    everything handed out checked at the end against what two passes give
+//!    ([`RecordingError::OnePass`] when it differs: the caller reads the bag again in two).
 //!
 //! A cloud whose pose cannot be had (its frame not connected to the fixed frame, its stamp
 //! outside what the transforms cover) is skipped and counted; the build reports one warning per
@@ -36,6 +40,9 @@ use crate::ros::{self, Header, Transform};
 use crate::tf::{PoseTrack, TfTree, Unavailable};
 use rovlink_octo::{ParseError, Pose, Scan};
 
+pub mod one_pass;
+use one_pass::{OnePass, PoseTopics};
+
 /// Which topics and frames [`Recording`] reads.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct RecordingOptions {
@@ -49,6 +56,9 @@ pub struct RecordingOptions {
     /// Whether the caller gives the sensor origin itself (`--origin`): a bag without any pose
     /// source is then read with the identity pose (and the caller's origin).
     pub origin_given: bool,
+    /// Read clouds and poses in one pass ([`one_pass`]); only for a caller that can start
+    /// again in two passes on [`RecordingError::OnePass`] (nothing it made is kept yet).
+    pub one_pass: bool,
 }
 
 /// Why a recording cannot be read: the file (one of a rosbag2 directory's files), where, what.
@@ -65,6 +75,15 @@ pub enum RecordingError {
         file: String,
         /// What is missing, and what the bag has.
         message: String,
+    },
+    /// One pass ([`RecordingOptions::one_pass`]) could not pose the clouds as two passes do:
+    /// read the bag again in two.
+    #[error("{file}: one pass over the bag cannot pose its clouds: {why}")]
+    OnePass {
+        /// The bag (its path as given).
+        file: String,
+        /// Which cloud, and what changed its pose (or how many clouds waited).
+        why: String,
     },
 }
 
@@ -84,6 +103,8 @@ pub struct Recording {
     name: String,
     cloud_topic: usize,
     poses: Option<Poses>,
+    /// One pass: the pose topics still to read, beside the clouds.
+    one_pass: Option<PoseTopics>,
     fixed_frame: Option<String>,
     /// What a user should know (pose source used, colour fields not understood).
     pub notes: Vec<String>,
@@ -187,6 +208,7 @@ impl Recording {
             name,
             cloud_topic: 0,
             poses: None,
+            one_pass: None,
             fixed_frame: options.fixed_frame.clone(),
             notes: Vec::new(),
         };
@@ -263,11 +285,48 @@ impl Recording {
                     rec.topic_list()
                 )));
             }
+            Some(source) if options.one_pass => rec.defer_poses(source)?,
             Some(source) => {
                 rec.poses = Some(rec.read_poses(&source, stop)?);
             }
         }
         Ok(rec)
+    }
+
+    /// One pass: the pose topics checked, their poses left to be read beside the clouds.
+    fn defer_poses(&mut self, source: Source) -> Result<(), RecordingError> {
+        let (poses, topics) = match source {
+            Source::Tf(topics) => {
+                for &(i, _) in &topics {
+                    self.check_cdr(i, "TF")?;
+                }
+                let names = self.tf_names(&topics);
+                self.notes.push(format!("poses from TF ({names})"));
+                (Poses::Tf(TfTree::new()), PoseTopics::Tf(topics, names))
+            }
+            Source::Track(i) => {
+                self.check_cdr(i, "pose")?;
+                let topic = self.bag.topics()[i].clone();
+                self.notes
+                    .push(format!("poses from {} ({})", topic.name, topic.schema));
+                (
+                    Poses::Track(PoseTrack::new(), topic.name),
+                    PoseTopics::Track(i, topic.schema),
+                )
+            }
+        };
+        self.poses = Some(poses);
+        self.one_pass = Some(topics);
+        Ok(())
+    }
+
+    /// The TF topics' names, for messages.
+    fn tf_names(&self, topics: &[(usize, bool)]) -> String {
+        let names: Vec<&str> = topics
+            .iter()
+            .map(|&(i, _)| self.bag.topics()[i].name.as_str())
+            .collect();
+        names.join(", ")
     }
 
     /// The first pass: every pose message of the source.
@@ -292,29 +351,13 @@ impl Recording {
                 }
                 tree.finish()
                     .map_err(|e| BagError::new(Location::file(&last.file), e.to_string()))?;
-                let names: Vec<&str> = topics
-                    .iter()
-                    .map(|&(i, _)| self.bag.topics()[i].name.as_str())
-                    .collect();
+                let names = self.tf_names(topics);
                 if let Some(fixed) = &self.fixed_frame
                     && !tree.frames().any(|f| f == fixed)
                 {
-                    let mut frames: Vec<&str> = tree.frames().collect();
-                    frames.sort_unstable();
-                    frames.truncate(12);
-                    return Err(self.unusable(format!(
-                        "--fixed-frame {fixed:?}: expected a frame of the TF tree ({}), found \
-                         frames {}",
-                        names.join(", "),
-                        if frames.is_empty() {
-                            "none".to_string()
-                        } else {
-                            frames.join(", ")
-                        }
-                    )));
+                    return Err(self.unusable(unknown_fixed_frame(fixed, &tree, &names)));
                 }
-                self.notes
-                    .push(format!("poses from TF ({})", names.join(", ")));
+                self.notes.push(format!("poses from TF ({names})"));
                 Ok(Poses::Tf(tree))
             }
             Source::Track(i) => {
@@ -357,18 +400,43 @@ impl Recording {
         self.bag.topics()[self.cloud_topic].messages
     }
 
-    /// The second pass: every cloud, posed (or skipped, with the reason), in log-time order.
-    /// Ends early (without an error) once `stop` is set.
+    /// The second pass (or the one pass): every cloud, posed (or skipped, with the reason), in
+    /// log-time order. Ends early (without an error) once `stop` is set.
     pub fn scans<'a>(
         &'a mut self,
         stop: &'a AtomicBool,
-    ) -> Result<impl Iterator<Item = Result<Item, RecordingError>> + 'a, RecordingError> {
-        let cloud = self.cloud_topic;
-        let poses = &self.poses;
-        let fixed = &mut self.fixed_frame;
-        let notes = &mut self.notes;
-        let messages = self.bag.messages(&[cloud], stop)?;
-        Ok(messages.map(move |m| {
+    ) -> Result<Box<dyn Iterator<Item = Result<Item, RecordingError>> + 'a>, RecordingError> {
+        let Recording {
+            bag,
+            name,
+            cloud_topic,
+            poses,
+            one_pass,
+            fixed_frame: fixed,
+            notes,
+        } = self;
+        let cloud = *cloud_topic;
+        let poses: &Option<Poses> = match (one_pass.as_ref(), poses) {
+            (Some(topics), Some(poses)) => {
+                let mut read = topics.indices();
+                read.push(cloud);
+                return Ok(Box::new(OnePass {
+                    messages: bag.messages(&read, stop)?,
+                    cloud,
+                    topics,
+                    poses,
+                    fixed_given: fixed.clone(),
+                    fixed,
+                    notes,
+                    name,
+                    stop,
+                    state: Default::default(),
+                }));
+            }
+            (_, poses) => poses,
+        };
+        let messages = bag.messages(&[cloud], stop)?;
+        Ok(Box::new(messages.map(move |m| {
             let m = m?;
             let (header, builder, note) =
                 ros::decode_point_cloud2(&m.data, 0).map_err(|e| m.error(e))?;
@@ -385,7 +453,7 @@ impl Recording {
                 },
             };
             Ok(Item::Scan(builder.finish(pose)))
-        }))
+        })))
     }
 }
 
@@ -417,6 +485,21 @@ pub(crate) fn decode_pose_message(
         }
         _ => ros::decode_odometry(data, 0).map(|t| (t.header, t.transform)),
     }
+}
+
+/// The message for a `--fixed-frame` the TF tree (of the topics `names`) lacks.
+fn unknown_fixed_frame(fixed: &str, tree: &TfTree, names: &str) -> String {
+    let mut frames: Vec<&str> = tree.frames().collect();
+    frames.sort_unstable();
+    frames.truncate(12);
+    format!(
+        "--fixed-frame {fixed:?}: expected a frame of the TF tree ({names}), found frames {}",
+        if frames.is_empty() {
+            "none".to_string()
+        } else {
+            frames.join(", ")
+        }
+    )
 }
 
 /// Why a cloud was skipped, the same text for the same cause whatever the stamp.
@@ -581,11 +664,49 @@ pub(crate) mod tests {
         ros::encode_tf_message(transforms, ByteOrder::Little)
     }
 
-    fn read(bytes: Vec<u8>, options: &RecordingOptions) -> Result<Vec<Item>, RecordingError> {
+    /// The items of `bytes` read with `options` as they are (one or two passes), and the notes.
+    fn read_as(
+        bytes: Vec<u8>,
+        options: &RecordingOptions,
+    ) -> Result<(Vec<Item>, Vec<String>), RecordingError> {
         let stop = AtomicBool::new(false);
         let mut rec = Recording::from_mcap_bytes("t.mcap", bytes, options, &stop)?;
         let items = rec.scans(&stop)?.collect::<Result<Vec<_>, _>>()?;
-        Ok(items)
+        Ok((items, rec.notes))
+    }
+
+    /// Two passes and one pass over `bytes`: the same items (or the same error) and notes, or
+    /// one pass refusing with [`RecordingError::OnePass`]; the two passes' items.
+    fn read_both(
+        bytes: Vec<u8>,
+        options: &RecordingOptions,
+    ) -> (Result<Vec<Item>, RecordingError>, Option<RecordingError>) {
+        let two = read_as(bytes.clone(), options);
+        let one_pass = RecordingOptions {
+            one_pass: true,
+            ..options.clone()
+        };
+        let one = read_as(bytes, &one_pass);
+        let refused = match (&two, one) {
+            (_, Err(e @ RecordingError::OnePass { .. })) => Some(e),
+            (Ok(two), Ok(one)) => {
+                assert_eq!(two, &one, "one pass against two");
+                None
+            }
+            (Err(two), Err(one)) => {
+                assert_eq!(two.to_string(), one.to_string(), "one pass against two");
+                None
+            }
+            (two, one) => panic!("two passes {two:?}, one pass {one:?}"),
+        };
+        (two.map(|t| t.0), refused)
+    }
+
+    /// [`read_both`], one pass not refusing: the items.
+    fn read(bytes: Vec<u8>, options: &RecordingOptions) -> Result<Vec<Item>, RecordingError> {
+        let (two, refused) = read_both(bytes, options);
+        assert!(refused.is_none(), "one pass refused: {refused:?}");
+        two
     }
 
     fn pose(item: &Item) -> Pose {
@@ -712,5 +833,225 @@ pub(crate) mod tests {
             .to_string();
         assert!(e.starts_with("t.mcap: offset "), "{e}");
         assert!(e.contains("TFMessage"), "{e}");
+    }
+
+    fn refusal(bytes: Vec<u8>, options: &RecordingOptions) -> (Vec<Item>, String) {
+        let (two, refused) = read_both(bytes, options);
+        let why = refused.expect("one pass should refuse").to_string();
+        assert!(
+            why.starts_with("t.mcap: one pass over the bag cannot pose"),
+            "{why}"
+        );
+        (two.unwrap(), why)
+    }
+
+    #[test]
+    fn one_pass_refuses_a_sample_read_after_a_cloud_it_poses() {
+        // map -> lidar at 0 and 2 s, a cloud at 1 s (halfway), then a sample at 1 s itself:
+        // two passes pose the cloud at it, one pass had interpolated.
+        let bytes = mcap(&[
+            (
+                "/tf",
+                TF_TYPE,
+                0,
+                tf_msg(&[tf(0, "map", "lidar", 0.0, 0.0)]),
+            ),
+            (
+                "/tf",
+                TF_TYPE,
+                1,
+                tf_msg(&[tf(2 * S, "map", "lidar", 2.0, 0.0)]),
+            ),
+            ("/points", ros::POINT_CLOUD2_SCHEMA, 2, cloud(S, "lidar")),
+            (
+                "/points",
+                ros::POINT_CLOUD2_SCHEMA,
+                3,
+                cloud(2 * S, "lidar"),
+            ),
+            (
+                "/tf",
+                TF_TYPE,
+                4,
+                tf_msg(&[tf(S, "map", "lidar", 5.0, 0.0)]),
+            ),
+        ]);
+        let (two, why) = refusal(bytes, &RecordingOptions::default());
+        assert_eq!(pose(&two[0]).translation_m, [5.0, 0.0, 0.0]);
+        assert!(
+            why.contains("stamped 1000000000 ns in frame \"lidar\""),
+            "{why}"
+        );
+        assert!(
+            why.contains("at [1.0, 0.0, 0.0]") && why.contains("at [5.0, 0.0, 0.0]"),
+            "{why}"
+        );
+    }
+
+    #[test]
+    fn one_pass_refuses_a_parent_frame_that_comes_after_the_first_cloud() {
+        // Two passes build in "map", the root of the whole tree; one pass had chosen "odom".
+        let mut messages = vec![
+            (
+                "/tf_static",
+                TF_TYPE,
+                0,
+                tf_msg(&[tf(0, "odom", "lidar", 1.0, 0.0)]),
+            ),
+            ("/points", ros::POINT_CLOUD2_SCHEMA, 1, cloud(S, "lidar")),
+            (
+                "/tf_static",
+                TF_TYPE,
+                2,
+                tf_msg(&[tf(0, "map", "odom", 10.0, 0.0)]),
+            ),
+        ];
+        let bytes = mcap(&messages);
+        messages.push(("/points", ros::POINT_CLOUD2_SCHEMA, 3, cloud(S, "lidar")));
+        let (two, _) = refusal(mcap(&messages), &RecordingOptions::default());
+        assert_eq!(pose(&two[0]).translation_m, [11.0, 0.0, 0.0]);
+        // With the fixed frame named, one pass poses the cloud as two passes do.
+        let odom = RecordingOptions {
+            fixed_frame: Some("odom".into()),
+            ..RecordingOptions::default()
+        };
+        assert_eq!(
+            pose(&read(bytes, &odom).unwrap()[0]).translation_m,
+            [1.0, 0.0, 0.0]
+        );
+    }
+
+    #[test]
+    fn one_pass_holds_clouds_until_their_transforms_and_refuses_too_many_waiting() {
+        // Every cloud logged before the transform after its stamp: each waits for the next
+        // message, and all come out posed, in order.
+        let mut messages = vec![(
+            "/tf",
+            TF_TYPE,
+            0,
+            tf_msg(&[tf(0, "map", "lidar", 0.0, 0.0)]),
+        )];
+        for k in 1..=40i64 {
+            messages.push((
+                "/points",
+                ros::POINT_CLOUD2_SCHEMA,
+                2 * k,
+                cloud(k * S, "lidar"),
+            ));
+            let x = k as f64;
+            let sample = tf_msg(&[tf(k * S, "map", "lidar", x, 0.0)]);
+            messages.push(("/tf", TF_TYPE, 2 * k + 1, sample));
+        }
+        let items = read(mcap(&messages), &RecordingOptions::default()).unwrap();
+        let xs: Vec<f32> = items.iter().map(|i| pose(i).translation_m[0]).collect();
+        assert_eq!(xs, (1..=40).map(|k| k as f32).collect::<Vec<_>>());
+        // The transforms all at the end: more clouds wait than one pass holds.
+        let (clouds, transforms): (Vec<_>, Vec<_>) =
+            messages.into_iter().partition(|m| m.0 == "/points");
+        let messages: Vec<_> = clouds.into_iter().chain(transforms).collect();
+        let (two, why) = refusal(mcap(&messages), &RecordingOptions::default());
+        assert_eq!(two.len(), 40);
+        assert!(why.contains("33 clouds"), "{why}");
+        // A few clouds waiting for a fixed frame that never comes: the two passes' error.
+        let bytes = mcap(&[
+            ("/points", ros::POINT_CLOUD2_SCHEMA, 0, cloud(S, "lidar")),
+            (
+                "/tf_static",
+                TF_TYPE,
+                1,
+                tf_msg(&[tf(0, "odom", "lidar", 1.0, 0.0)]),
+            ),
+        ]);
+        let nowhere = RecordingOptions {
+            fixed_frame: Some("nowhere".into()),
+            ..RecordingOptions::default()
+        };
+        let e = read(bytes, &nowhere).unwrap_err().to_string();
+        assert!(e.starts_with("t.mcap: --fixed-frame \"nowhere\""), "{e}");
+    }
+
+    #[test]
+    fn one_pass_over_a_pose_topic_is_two_passes() {
+        let pose_msg = |t: i64, x: f64| {
+            let h = Header {
+                stamp_ns: t,
+                frame_id: "map".into(),
+            };
+            let p = Transform {
+                translation_m: [x, 0.0, 0.0],
+                rotation: [1.0, 0.0, 0.0, 0.0],
+            };
+            ros::encode_pose_stamped(&h, &p, ByteOrder::Little)
+        };
+        let bytes = mcap(&[
+            ("/pose", ros::POSE_STAMPED_SCHEMA, 0, pose_msg(0, 0.0)),
+            ("/points", ros::POINT_CLOUD2_SCHEMA, 1, cloud(S, "lidar")),
+            ("/pose", ros::POSE_STAMPED_SCHEMA, 2, pose_msg(2 * S, 4.0)),
+            (
+                "/points",
+                ros::POINT_CLOUD2_SCHEMA,
+                3,
+                cloud(3 * S, "lidar"),
+            ),
+            ("/points", ros::POINT_CLOUD2_SCHEMA, 4, cloud(-S, "lidar")),
+        ]);
+        let items = read(bytes, &RecordingOptions::default()).unwrap();
+        assert_eq!(pose(&items[0]).translation_m, [2.0, 0.0, 0.0]);
+        assert!(
+            matches!(&items[1], Item::Skipped(r) if r.contains("after")),
+            "{items:?}"
+        );
+        assert!(
+            matches!(&items[2], Item::Skipped(r) if r.contains("before")),
+            "{items:?}"
+        );
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+
+        /// Transforms and clouds in any order: one pass gives two passes' items or refuses;
+        /// it never refuses when each link's samples come in stamp order and the static
+        /// transform comes first.
+        #[test]
+        fn one_pass_is_two_passes_or_refuses(
+            samples in proptest::collection::vec((0i64..20, -5.0f64..5.0), 1..12),
+            clouds in proptest::collection::vec((0i64..22, 0usize..40), 0..12),
+            in_order in proptest::bool::ANY,
+        ) {
+            let mut samples = samples;
+            if in_order {
+                samples.sort_by_key(|s| s.0);
+                samples.dedup_by_key(|s| s.0);
+            }
+            // (place in the bag, message)
+            let mut messages: Vec<(usize, &str, &str, Vec<u8>)> = vec![(
+                0,
+                "/tf_static",
+                TF_TYPE,
+                tf_msg(&[tf(0, "base", "lidar", 0.5, 0.0)]),
+            )];
+            for (k, &(t, x)) in samples.iter().enumerate() {
+                let m = tf_msg(&[tf(t * S / 4, "map", "base", x, 0.25 * x)]);
+                messages.push((4 * k + 1, "/tf", TF_TYPE, m));
+            }
+            for &(t, place) in &clouds {
+                let m = cloud(t * S / 4, "lidar");
+                messages.push((place + 2, "/points", ros::POINT_CLOUD2_SCHEMA, m));
+            }
+            messages.sort_by_key(|m| m.0);
+            let bytes = mcap(
+                &messages
+                    .into_iter()
+                    .enumerate()
+                    .map(|(i, (_, topic, schema, data))| (topic, schema, i as i64, data))
+                    .collect::<Vec<_>>(),
+            );
+            let (two, refused) = read_both(bytes, &RecordingOptions::default());
+            if in_order {
+                proptest::prop_assert!(refused.is_none(), "{:?}", refused);
+            }
+            let _ = two;
+        }
     }
 }
