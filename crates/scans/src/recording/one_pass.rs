@@ -16,9 +16,11 @@
 //! again in the whole tree with two passes' choice of fixed frame. Any difference, or more than
 //! [`MAX_HELD_CLOUDS`] clouds (or [`MAX_HELD_POINTS`] points) waiting at once, is
 //! [`RecordingError::OnePass`]: the caller reads the bag again in two passes (a build's outputs
-//! are not committed before its end). Nothing here panics on any input.
+//! are not committed before its end). A pass stopped before the bag's end (SIGTERM) keeps the
+//! clouds handed out as the transforms read by then posed them: the check needs the whole bag.
+//! Nothing here panics on any input.
 
-use std::collections::VecDeque;
+use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::{Item, Poses, RecordingError, decode_pose_message, pose_at};
@@ -34,7 +36,8 @@ pub const MAX_HELD_POINTS: usize = 8 << 20;
 
 /// A cloud handed out: where and when it was, and its pose (or why it had none).
 struct Given {
-    frame: String,
+    /// Its frame, an index into [`State::frames`] (a bag has few).
+    frame: usize,
     stamp_ns: i64,
     outcome: Result<Pose, String>,
 }
@@ -81,6 +84,9 @@ pub(super) struct State {
     held: VecDeque<(Header, CloudBuilder)>,
     held_points: usize,
     given: Vec<Given>,
+    /// The clouds' frames, each once, and their indices.
+    frames: Vec<String>,
+    frame_index: HashMap<String, usize>,
     out: VecDeque<Item>,
     ended: bool,
     /// The last pose message, for errors found when the tree is finished.
@@ -188,8 +194,18 @@ impl OnePass<'_> {
             Ok(pose) => Item::Scan(builder.finish(*pose)),
             Err(reason) => Item::Skipped(reason.clone()),
         });
+        let s = &mut self.state;
+        let frame = match s.frame_index.get(&header.frame_id) {
+            Some(&i) => i,
+            None => {
+                s.frame_index
+                    .insert(header.frame_id.clone(), s.frames.len());
+                s.frames.push(header.frame_id);
+                s.frames.len() - 1
+            }
+        };
         self.state.given.push(Given {
-            frame: header.frame_id,
+            frame,
             stamp_ns: header.stamp_ns,
             outcome,
         });
@@ -214,7 +230,8 @@ impl OnePass<'_> {
         }
         let mut fixed = self.fixed_given.clone();
         for g in &self.state.given {
-            let again = pose_at(self.poses, &mut fixed, &g.frame, g.stamp_ns, false);
+            let frame = self.state.frames.get(g.frame).map_or("", String::as_str);
+            let again = pose_at(self.poses, &mut fixed, frame, g.stamp_ns, false);
             let again = again.map_err(|w| w.reason);
             if again != g.outcome {
                 let said = |o: &Result<Pose, String>| match o {
@@ -226,7 +243,7 @@ impl OnePass<'_> {
                      it, {} by all of them (transforms out of stamp order, a static transform \
                      sent again, or a parent frame that comes later)",
                     g.stamp_ns,
-                    g.frame,
+                    frame,
                     said(&g.outcome),
                     said(&again)
                 )));
