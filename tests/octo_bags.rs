@@ -354,4 +354,18 @@ fn a_bag_one_pass_cannot_pose_is_built_again_in_two_passes() {
     );
     // The root's 3 m are in both: not graph2tree's map of the survey.
     assert_ne!(std::fs::read(&bt1).unwrap(), survey().reference_bt);
+    // On standard input the bag cannot be read again: two passes from the start, to files too.
+    let (odl3, bt3) = files("stdin");
+    let out = run(
+        OCTO,
+        &["build", "-", "--res", RES, "-o", s(&odl3), "--bt", s(&bt3)],
+        &std::fs::read(&bag).unwrap(),
+    );
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    assert!(!out.stderr.contains("building again"), "{}", out.stderr);
+    assert_eq!(
+        std::fs::read(&bt3).unwrap(),
+        std::fs::read(&bt2).unwrap(),
+        "the maps differ"
+    );
 }

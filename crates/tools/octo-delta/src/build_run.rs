@@ -36,9 +36,15 @@ pub fn build(a: &BuildArgs) -> Result<u8> {
     let metrics_dest = outs.claim_opt("--metrics", a.metrics.as_deref(), Kind::Text)?;
     let mut metrics_out = metrics_dest.map(|d| d.open()).transpose()?;
     // A bag is read in one pass when nothing is written before the build's end (every output
-    // a file, committed only then): one whose clouds one pass cannot pose as two passes do is
-    // built again, in two.
-    cfg.one_pass_bags = !stream.is_stdout() && !stats.as_ref().is_some_and(|d| d.is_stdout());
+    // a file, committed only then) and every input can be read again (a file or a rosbag2
+    // directory: not standard input, a FIFO or a live topic): one whose clouds one pass cannot
+    // pose as two passes do is built again, in two.
+    let rereadable = a.inputs.iter().all(|p| {
+        !rovlink_base::io::is_std(Some(p))
+            && std::fs::metadata(p).is_ok_and(|m| m.is_file() || m.is_dir())
+    });
+    cfg.one_pass_bags =
+        rereadable && !stream.is_stdout() && !stats.as_ref().is_some_and(|d| d.is_stdout());
     stop::install()?;
     let (built, rows) = loop {
         let mut out = stream.open()?;

@@ -261,8 +261,8 @@ pub struct BuildArgs {
     /// Point clouds: OctoMap .graph, PCD, PLY, XYZ, or a ROS 2 bag: MCAP (chunks zstd, lz4 or
     /// none) or rosbag2 (the directory, its metadata.yaml or a .db3) with PointCloud2 clouds
     /// posed by /tf + /tf_static or a pose topic; - for standard input; ros2:TOPIC for a live
-    /// ROS 2 PointCloud2 topic posed the same way, read until SIGINT/SIGTERM. When every output
-    /// is a file, a bag is read in one pass (clouds posed as their transforms come, at most 32
+    /// ROS 2 PointCloud2 topic posed the same way, read until SIGINT/SIGTERM. When every input
+    /// and output is a file, a bag is read in one pass (clouds posed as their transforms come, at most 32
     /// clouds or 8 Mi points waiting) and checked at its end; one whose transforms come out of
     /// stamp order or too late is built again, every transform read first (said once).
     #[arg(required = true, value_name = "INPUT")]
