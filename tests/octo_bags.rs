@@ -290,82 +290,52 @@ fn a_bag_one_pass_cannot_pose_is_built_again_in_two_passes() {
     // stream.
     let dir = tempfile::tempdir().unwrap();
     let bag = write_bag(dir.path(), "mcap-zstd", &["--late-root", "3"]);
-    let files = |name: &str| {
-        let (odl, bt) = (
-            dir.path().join(format!("{name}.odl")),
-            dir.path().join(format!("{name}.bt")),
+    let bt = |name: &str| dir.path().join(format!("{name}.bt"));
+    let build_to = |input: &str, output: &str, bt: &Path, stdin: &[u8]| {
+        let out = run(
+            OCTO,
+            &["build", input, "--res", RES, "-o", output, "--bt", s(bt)],
+            stdin,
         );
-        (odl, bt)
+        assert_eq!(out.code, 0, "{output}: {}", out.stderr);
+        let again = out
+            .stderr
+            .lines()
+            .filter(|l| l.contains("building again with every transform read first"))
+            .map(str::to_string)
+            .collect::<Vec<_>>();
+        (out, again, std::fs::read(bt).unwrap())
     };
-    let (odl1, bt1) = files("one");
-    let out = run(
-        OCTO,
-        &[
-            "build",
-            s(&bag),
-            "--res",
-            RES,
-            "-o",
-            s(&odl1),
-            "--bt",
-            s(&bt1),
-        ],
-        b"",
-    );
-    assert_eq!(out.code, 0, "{}", out.stderr);
-    let again: Vec<&str> = out
-        .stderr
-        .lines()
-        .filter(|l| l.contains("building again with every transform read first"))
-        .collect();
-    assert_eq!(again.len(), 1, "{}", out.stderr);
+    let odl = dir.path().join("one.odl");
+    let (_, again, one) = build_to(s(&bag), s(&odl), &bt("one"), b"");
+    assert_eq!(again.len(), 1, "{again:?}");
     assert!(
         again[0].contains("bag-mcap-zstd.mcap") && again[0].contains("\"sensor\""),
         "{}",
         again[0]
     );
-    let (_, bt2) = files("two");
-    let out = run(
-        OCTO,
-        &[
-            "build",
-            s(&bag),
-            "--res",
-            RES,
-            "-q",
-            "-o",
-            "-",
-            "--bt",
-            s(&bt2),
-        ],
-        b"",
-    );
-    assert_eq!(out.code, 0, "{}", out.stderr);
-    assert!(out.stderr.is_empty(), "{}", out.stderr);
+    let (out, again, two) = build_to(s(&bag), "-", &bt("two"), b"");
+    assert!(again.is_empty(), "{again:?}");
     assert_eq!(
-        std::fs::read(&odl1).unwrap(),
+        std::fs::read(&odl).unwrap(),
         out.stdout,
         "the streams differ"
     );
-    assert_eq!(
-        std::fs::read(&bt1).unwrap(),
-        std::fs::read(&bt2).unwrap(),
-        "the maps differ"
-    );
+    assert_eq!(one, two, "the maps differ");
     // The root's 3 m are in both: not graph2tree's map of the survey.
-    assert_ne!(std::fs::read(&bt1).unwrap(), survey().reference_bt);
-    // On standard input the bag cannot be read again: two passes from the start, to files too.
-    let (odl3, bt3) = files("stdin");
-    let out = run(
-        OCTO,
-        &["build", "-", "--res", RES, "-o", s(&odl3), "--bt", s(&bt3)],
-        &std::fs::read(&bag).unwrap(),
-    );
-    assert_eq!(out.code, 0, "{}", out.stderr);
-    assert!(!out.stderr.contains("building again"), "{}", out.stderr);
+    assert_ne!(one, survey().reference_bt);
+    // A stream written as it goes (a pipe behind /dev/stdout): two passes from the start, the
+    // stream once.
+    let (out, again, _) = build_to(s(&bag), "/dev/stdout", &bt("dev"), b"");
+    assert!(again.is_empty(), "{again:?}");
     assert_eq!(
-        std::fs::read(&bt3).unwrap(),
-        std::fs::read(&bt2).unwrap(),
-        "the maps differ"
+        std::fs::read(&odl).unwrap(),
+        out.stdout,
+        "the streams differ"
     );
+    // On standard input the bag cannot be read again: two passes from the start, to files too.
+    let stdin = std::fs::read(&bag).unwrap();
+    let (_, again, from_stdin) = build_to("-", s(&dir.path().join("in.odl")), &bt("in"), &stdin);
+    assert!(again.is_empty(), "{again:?}");
+    assert_eq!(from_stdin, two, "the maps differ");
 }

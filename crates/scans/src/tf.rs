@@ -244,8 +244,9 @@ impl Samples {
 
     /// Sorts by stamp; of samples at the same stamp the last added is kept. Samples added in
     /// stamp order since the last call (every publisher's own) cost only their number, so a
-    /// buffer finished after every message (one pass over a bag) stays linear.
-    fn finish(&mut self) {
+    /// buffer finished after every message (one pass over a bag) stays linear; true when the
+    /// samples had to be sorted whole (one came out of order, or at a stamp already there).
+    fn finish(&mut self) -> bool {
         let last_sorted = self.sorted.saturating_sub(1);
         if self
             .samples
@@ -253,7 +254,7 @@ impl Samples {
             .is_some_and(|tail| tail.windows(2).all(|w| w[0].0 < w[1].0))
         {
             self.sorted = self.samples.len();
-            return;
+            return false;
         }
         // Stable: equal stamps stay in the order they were added.
         self.samples.sort_by_key(|s| s.0);
@@ -266,6 +267,7 @@ impl Samples {
         }
         self.samples = kept;
         self.sorted = self.samples.len();
+        true
     }
 
     fn span(&self) -> Option<(i64, i64)> {
@@ -323,6 +325,8 @@ pub struct TfTree {
     frames: BTreeSet<String>,
     /// No transform added since the last `finish`.
     finished: bool,
+    /// Whether a `finish` had to sort a link's samples whole (see [`TfTree::resorted`]).
+    resorted: bool,
 }
 
 impl TfTree {
@@ -410,7 +414,7 @@ impl TfTree {
     pub fn finish(&mut self) -> Result<(), TfError> {
         for link in self.links.values_mut() {
             if let LinkKind::Dynamic(s) = &mut link.kind {
-                s.finish();
+                self.resorted |= s.finish();
             }
         }
         // Walk up from every frame; a frame met twice on one walk closes a cycle. Frames known
@@ -444,6 +448,13 @@ impl TfTree {
         }
         self.finished = true;
         Ok(())
+    }
+
+    /// Whether a [`TfTree::finish`] had to sort a link's samples whole: one came out of stamp
+    /// order, or at a stamp the link already had. Finishing after every message (one pass over
+    /// a bag) is then no longer linear, and a pose looked up before may have changed.
+    pub(crate) fn resorted(&self) -> bool {
+        self.resorted
     }
 
     /// Every frame a transform named, in name order.
@@ -617,6 +628,8 @@ pub struct PoseTrack {
     /// The distinct `header.frame_id`s, in the order first seen.
     frame_ids: Vec<String>,
     finished: bool,
+    /// Whether a `finish` had to sort the poses whole (see [`TfTree::resorted`]).
+    resorted: bool,
 }
 
 impl PoseTrack {
@@ -647,8 +660,13 @@ impl PoseTrack {
 
     /// Sorts the poses by stamp; of two at the same stamp, the one added last is kept.
     pub fn finish(&mut self) {
-        self.samples.finish();
+        self.resorted |= self.samples.finish();
         self.finished = true;
+    }
+
+    /// Whether a [`PoseTrack::finish`] had to sort the poses whole (see [`TfTree::resorted`]).
+    pub(crate) fn resorted(&self) -> bool {
+        self.resorted
     }
 
     /// Drops the poses older than `stamp_ns` but the last one before it (see

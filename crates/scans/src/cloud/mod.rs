@@ -368,9 +368,10 @@ impl CloudBuilder {
         }
     }
 
-    /// How many points are kept so far.
-    pub(crate) fn len(&self) -> usize {
-        self.points.len()
+    /// How many points the builder has room for (a cloud's width x height, dropped points
+    /// included): what it holds in memory.
+    pub(crate) fn reserved(&self) -> usize {
+        self.points.capacity()
     }
 
     /// The scan of the points kept, with `pose`.

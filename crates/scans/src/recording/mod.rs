@@ -1054,4 +1054,105 @@ pub(crate) mod tests {
             let _ = two;
         }
     }
+
+    #[test]
+    fn one_pass_errors_are_two_passes_or_a_refusal() {
+        // Found in review: errors that one pass met in another order than two passes, which
+        // read every transform first. One pass now refuses them (two passes then report
+        // theirs), or reports the same error.
+        let mut bad_cloud = cloud(S, "lidar");
+        bad_cloud.truncate(bad_cloud.len() - 3);
+        let mut bad_tf = tf_msg(&[tf(0, "map", "lidar", 0.0, 0.0)]);
+        bad_tf.truncate(bad_tf.len() - 3);
+        let good = tf_msg(&[tf(0, "map", "lidar", 0.0, 0.0)]);
+        let cycle = tf_msg(&[
+            tf(0, "map", "lidar", 0.0, 0.0),
+            tf(0, "x", "y", 0.0, 0.0),
+            tf(0, "y", "x", 0.0, 0.0),
+        ]);
+        let nowhere = RecordingOptions {
+            fixed_frame: Some("nowhere".into()),
+            ..RecordingOptions::default()
+        };
+        let cases = [
+            // A bad cloud before a bad transform: two passes report the transform.
+            (
+                vec![
+                    ("/tf", TF_TYPE, 0, good.clone()),
+                    ("/points", ros::POINT_CLOUD2_SCHEMA, 1, bad_cloud.clone()),
+                    ("/tf", TF_TYPE, 2, bad_tf.clone()),
+                ],
+                RecordingOptions::default(),
+                "TFMessage",
+            ),
+            // A fixed frame not in the tree and a bad cloud: two passes report the frame.
+            (
+                vec![
+                    ("/tf_static", TF_TYPE, 0, good.clone()),
+                    ("/points", ros::POINT_CLOUD2_SCHEMA, 1, bad_cloud.clone()),
+                ],
+                nowhere,
+                "--fixed-frame",
+            ),
+            // A cycle, then a frame given a second parent: two passes report the parent.
+            (
+                vec![
+                    ("/tf_static", TF_TYPE, 0, cycle.clone()),
+                    ("/points", ros::POINT_CLOUD2_SCHEMA, 1, cloud(S, "lidar")),
+                    (
+                        "/tf_static",
+                        TF_TYPE,
+                        2,
+                        tf_msg(&[tf(0, "other", "lidar", 0.0, 0.0)]),
+                    ),
+                ],
+                RecordingOptions::default(),
+                "two",
+            ),
+            // A cycle named by the whole tree's frames.
+            (
+                vec![
+                    ("/tf_static", TF_TYPE, 0, cycle),
+                    ("/points", ros::POINT_CLOUD2_SCHEMA, 1, cloud(S, "lidar")),
+                    (
+                        "/tf_static",
+                        TF_TYPE,
+                        2,
+                        tf_msg(&[tf(0, "y", "a0", 0.0, 0.0)]),
+                    ),
+                ],
+                RecordingOptions::default(),
+                "cycle",
+            ),
+        ];
+        for (messages, options, needle) in cases {
+            let (two, _) = read_both(mcap(&messages), &options);
+            let e = two.unwrap_err().to_string();
+            assert!(e.contains(needle), "{e}");
+        }
+    }
+
+    #[test]
+    fn one_pass_refuses_samples_out_of_stamp_order_at_once() {
+        // Sorting a link whole at every cloud would be quadratic: the first sort refuses.
+        let bytes = mcap(&[
+            (
+                "/tf",
+                TF_TYPE,
+                0,
+                tf_msg(&[tf(2 * S, "map", "lidar", 2.0, 0.0)]),
+            ),
+            (
+                "/tf",
+                TF_TYPE,
+                1,
+                tf_msg(&[tf(0, "map", "lidar", 0.0, 0.0)]),
+            ),
+            ("/points", ros::POINT_CLOUD2_SCHEMA, 2, cloud(S, "lidar")),
+            ("/points", ros::POINT_CLOUD2_SCHEMA, 3, cloud(S, "lidar")),
+        ]);
+        let (two, why) = refusal(bytes, &RecordingOptions::default());
+        assert_eq!(pose(&two[0]).translation_m, [1.0, 0.0, 0.0]);
+        assert!(why.contains("out of stamp order"), "{why}");
+    }
 }

@@ -16,7 +16,10 @@
 //! again in the whole tree with two passes' choice of fixed frame. Any difference, or more than
 //! [`MAX_HELD_CLOUDS`] clouds (or [`MAX_HELD_POINTS`] points) waiting at once, is
 //! [`RecordingError::OnePass`]: the caller reads the bag again in two passes (a build's outputs
-//! are not committed before its end). A pass stopped before the bag's end (SIGTERM) keeps the
+//! are not committed before its end). So is any error two passes might report otherwise or
+//! later (a cloud or a chunk that does not decode, a TF cycle before the bag's end): two passes
+//! then give their own error. A malformed transform is the same error either way, the first in
+//! the bag's order. A pass stopped before the bag's end (SIGTERM) keeps the
 //! clouds handed out as the transforms read by then posed them: the check needs the whole bag.
 //! Nothing here panics on any input.
 
@@ -31,7 +34,8 @@ use rovlink_octo::Pose;
 
 /// The most clouds one pass holds back waiting for transforms.
 pub const MAX_HELD_CLOUDS: usize = 32;
-/// The most points in the clouds held back (8 Mi points: 96 MiB).
+/// The most points the clouds held back have room for (8 Mi points: 96 MiB, 120 MiB with
+/// colours; an organised cloud's dropped points count too).
 pub const MAX_HELD_POINTS: usize = 8 << 20;
 
 /// A cloud handed out: where and when it was, and its pose (or why it had none).
@@ -101,33 +105,55 @@ impl OnePass<'_> {
         }
     }
 
-    /// Sorts what was added since the last lookup; a cycle in the TF is an error.
-    fn finish_poses(&mut self) -> Result<(), RecordingError> {
+    /// An error two passes might report differently, or not first (they read every transform
+    /// before any cloud): a refusal, so that the caller's two passes report theirs.
+    fn refuse_error(&self, e: impl std::fmt::Display) -> RecordingError {
+        self.redo(format!(
+            "it met an error two passes may report otherwise ({e})"
+        ))
+    }
+
+    /// Sorts what was added since the last lookup. A cycle in the TF is an error at the end of
+    /// the bag (where two passes find it, every transform added); before, a refusal.
+    fn finish_poses(&mut self, at_end: bool) -> Result<(), RecordingError> {
         if !std::mem::take(&mut self.state.dirty) {
             return Ok(());
         }
-        match self.poses {
-            Poses::Tf(tree) => tree.finish().map_err(|e| {
-                let file = self.state.last.as_ref().map_or(self.name, |l| &l.file);
-                BagError::new(Location::file(file), e.to_string()).into()
-            }),
+        let resorted = match self.poses {
+            Poses::Tf(tree) => match tree.finish() {
+                Ok(()) => tree.resorted(),
+                Err(e) if !at_end => return Err(self.refuse_error(e)),
+                Err(e) => {
+                    let file = self.state.last.as_ref().map_or(self.name, |l| &l.file);
+                    return Err(BagError::new(Location::file(file), e.to_string()).into());
+                }
+            },
             Poses::Track(track, _) => {
                 track.finish();
-                Ok(())
+                track.resorted()
             }
+        };
+        // Sorting a link whole at every cloud would make one pass quadratic; two passes sort
+        // once.
+        if resorted && !at_end {
+            return Err(self.redo(
+                "a transform came out of stamp order, or again at a stamp its link already had"
+                    .into(),
+            ));
         }
+        Ok(())
     }
 
     fn message(&mut self, m: Message) -> Result<(), RecordingError> {
         if m.topic == self.cloud {
-            let (header, builder, note) =
-                ros::decode_point_cloud2(&m.data, 0).map_err(|e| m.error(e))?;
+            let decoded = ros::decode_point_cloud2(&m.data, 0).map_err(|e| m.error(e));
+            let (header, builder, note) = decoded.map_err(|e| self.refuse_error(e))?;
             if let Some(note) = note
                 && !self.notes.contains(&note)
             {
                 self.notes.push(note);
             }
-            self.state.held_points += builder.len();
+            self.state.held_points += builder.reserved();
             self.state.held.push_back((header, builder));
             self.release()?;
             let s = &self.state;
@@ -167,7 +193,7 @@ impl OnePass<'_> {
 
     /// Hands out the clouds at the front whose pose the transforms read so far settle.
     fn release(&mut self) -> Result<(), RecordingError> {
-        self.finish_poses()?;
+        self.finish_poses(false)?;
         while let Some((header, _)) = self.state.held.front() {
             let outcome = pose_at(
                 self.poses,
@@ -189,7 +215,7 @@ impl OnePass<'_> {
         let Some((header, builder)) = self.state.held.pop_front() else {
             return;
         };
-        self.state.held_points -= builder.len();
+        self.state.held_points -= builder.reserved();
         self.state.out.push_back(match &outcome {
             Ok(pose) => Item::Scan(builder.finish(*pose)),
             Err(reason) => Item::Skipped(reason.clone()),
@@ -218,7 +244,7 @@ impl OnePass<'_> {
         if self.stop.load(Ordering::Relaxed) {
             return Ok(());
         }
-        self.finish_poses()?;
+        self.finish_poses(true)?;
         if let (Poses::Tf(tree), PoseTopics::Tf(_, names)) = (&*self.poses, self.topics)
             && let Some(fixed) = &self.fixed_given
             && !tree.frames().any(|f| f == fixed)
@@ -277,7 +303,7 @@ impl Iterator for OnePass<'_> {
             }
             let step = match self.messages.next() {
                 Some(Ok(m)) => self.message(m),
-                Some(Err(e)) => Err(e.into()),
+                Some(Err(e)) => Err(self.refuse_error(e)),
                 None => self.end(),
             };
             if let Err(e) = step {

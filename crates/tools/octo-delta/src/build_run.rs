@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use rovlink_base::io::EXIT_OK;
-use rovlink_base::output::{Kind, Outputs};
+use rovlink_base::output::{Dest, Kind, Outputs};
 use rovlink_cli::metrics;
 use rovlink_cli::rows::{RowFormat, RowWriter};
 use rovlink_cli::say;
@@ -43,8 +43,13 @@ pub fn build(a: &BuildArgs) -> Result<u8> {
         !rovlink_base::io::is_std(Some(p))
             && std::fs::metadata(p).is_ok_and(|m| m.is_file() || m.is_dir())
     });
-    cfg.one_pass_bags =
-        rereadable && !stream.is_stdout() && !stats.as_ref().is_some_and(|d| d.is_stdout());
+    // Written as the build goes, an output must be a regular file (or none yet), committed by a
+    // rename at the end: not standard output, a FIFO or a device such as /dev/stdout.
+    let at_end = |d: &Dest| {
+        d.path()
+            .is_some_and(|p| std::fs::metadata(p).map_or(true, |m| m.is_file()))
+    };
+    cfg.one_pass_bags = rereadable && at_end(&stream) && stats.as_ref().is_none_or(at_end);
     stop::install()?;
     let (built, rows) = loop {
         let mut out = stream.open()?;
