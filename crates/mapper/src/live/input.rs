@@ -7,7 +7,7 @@
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
-use crate::pipeline::{BuildConfig, PipelineError, Reading, read_inputs};
+use crate::pipeline::{BuildConfig, PipelineError, Reading, count_skipped, read_inputs};
 use rovlink_octo::Scan;
 
 pub use crate::pipeline::FOLLOW_POLL;
@@ -39,10 +39,7 @@ pub fn feed(
             send(scan)
         }
         Reading::Skipped(reason) => {
-            match report.skipped.iter_mut().find(|(r, _)| *r == reason) {
-                Some((_, n)) => *n += 1,
-                None => report.skipped.push((reason, 1)),
-            }
+            count_skipped(&mut report.skipped, reason);
             true
         }
         Reading::Opened { .. } | Reading::Notes(_) => true,

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
-use super::reading::{Reading, read_inputs};
+use super::reading::{Reading, count_skipped, read_inputs};
 use super::{BuildConfig, PipelineError};
 use rovlink_base::io::IoError;
 use rovlink_octo::Scan;
@@ -528,11 +528,7 @@ impl Run<'_, '_> {
                     true
                 }
                 Event::Read(Reading::Skipped(reason)) => {
-                    let skipped = &mut self.report.skipped;
-                    match skipped.iter_mut().find(|(r, _)| *r == reason) {
-                        Some((_, n)) => *n += 1,
-                        None => skipped.push((reason, 1)),
-                    }
+                    count_skipped(&mut self.report.skipped, reason);
                     true
                 }
                 Event::Read(Reading::Notes(notes)) => {

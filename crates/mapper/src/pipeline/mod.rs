@@ -37,7 +37,7 @@ pub use config::{
     shown, view_spec,
 };
 pub use inputs::{InputFormat, MAX_INPUT_BYTES, input_files, read_input, read_limited};
-pub use reading::{FOLLOW_POLL, Reading, read_inputs};
+pub use reading::{FOLLOW_POLL, Reading, count_skipped, read_inputs};
 
 use rovlink_base::io::IoError;
 use rovlink_octo::ParseError;

@@ -39,6 +39,15 @@ pub enum Reading {
     Notes(Vec<String>),
 }
 
+/// Counts one more cloud skipped for `reason` in `skipped` ((reason, count), in the order the
+/// reasons first came).
+pub fn count_skipped(skipped: &mut Vec<(String, u64)>, reason: String) {
+    match skipped.iter_mut().find(|(r, _)| *r == reason) {
+        Some((_, n)) => *n += 1,
+        None => skipped.push((reason, 1)),
+    }
+}
+
 /// A file read as `tail -f` reads it: at its end, wait for more until `stop` is set.
 struct Follow<'a> {
     file: File,
