@@ -341,12 +341,7 @@ impl Recording {
                 let mut last = Location::file(&self.name);
                 for m in self.bag.messages(&indices, stop)? {
                     let m = m?;
-                    let is_static = topics.iter().any(|&(i, s)| i == m.topic && s);
-                    let transforms = ros::decode_tf_message(&m.data, 0).map_err(|e| m.error(e))?;
-                    for t in &transforms {
-                        tree.add(t, is_static)
-                            .map_err(|e| BagError::new(m.at.clone(), e.to_string()))?;
-                    }
+                    add_tf_message(&mut tree, topics, &m)?;
                     last = m.at;
                 }
                 tree.finish()
@@ -366,12 +361,7 @@ impl Recording {
                 let topic = self.bag.topics()[i].clone();
                 let mut track = PoseTrack::new();
                 for m in self.bag.messages(&[i], stop)? {
-                    let m = m?;
-                    let (header, t) =
-                        decode_pose_message(&topic.schema, &m.data).map_err(|e| m.error(e))?;
-                    track
-                        .add(&header, &t)
-                        .map_err(|e| BagError::new(m.at.clone(), e.to_string()))?;
+                    add_pose_message(&mut track, &topic.schema, &m?)?;
                 }
                 track.finish();
                 self.notes
@@ -471,6 +461,30 @@ pub(crate) enum Poses {
     Tf(TfTree),
     /// A pose topic's track, and the topic.
     Track(PoseTrack, String),
+}
+
+/// Adds the transforms of TF message `m` to `tree`, static if its topic is among `topics`
+/// (topic, static); an error names the message's place.
+fn add_tf_message(
+    tree: &mut TfTree,
+    topics: &[(usize, bool)],
+    m: &bag::Message,
+) -> Result<(), BagError> {
+    let is_static = topics.iter().any(|&(i, s)| i == m.topic && s);
+    let transforms = ros::decode_tf_message(&m.data, 0).map_err(|e| m.error(e))?;
+    for t in &transforms {
+        tree.add(t, is_static)
+            .map_err(|e| BagError::new(m.at.clone(), e.to_string()))?;
+    }
+    Ok(())
+}
+
+/// Adds the pose of message `m` (of type `schema`) to `track`; an error names its place.
+fn add_pose_message(track: &mut PoseTrack, schema: &str, m: &bag::Message) -> Result<(), BagError> {
+    let (header, t) = decode_pose_message(schema, &m.data).map_err(|e| m.error(e))?;
+    track
+        .add(&header, &t)
+        .map_err(|e| BagError::new(m.at.clone(), e.to_string()))
 }
 
 /// The header and transform of a PoseStamped, TransformStamped or Odometry message.

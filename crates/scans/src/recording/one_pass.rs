@@ -26,7 +26,7 @@
 use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use super::{Item, Poses, RecordingError, decode_pose_message, pose_at};
+use super::{Item, Poses, RecordingError, add_pose_message, add_tf_message, pose_at, pose_of};
 use crate::bag::{BagError, Location, Message};
 use crate::cloud::CloudBuilder;
 use crate::ros::{self, Header};
@@ -171,20 +171,15 @@ impl OnePass<'_> {
             }
             return Ok(());
         }
-        let at = |e: String| BagError::new(m.at.clone(), e);
         match (&mut *self.poses, self.topics) {
-            (Poses::Tf(tree), PoseTopics::Tf(topics, _)) => {
-                let is_static = topics.iter().any(|&(i, s)| i == m.topic && s);
-                let transforms = ros::decode_tf_message(&m.data, 0).map_err(|e| m.error(e))?;
-                for t in &transforms {
-                    tree.add(t, is_static).map_err(|e| at(e.to_string()))?;
-                }
-            }
+            (Poses::Tf(tree), PoseTopics::Tf(topics, _)) => add_tf_message(tree, topics, &m)?,
             (Poses::Track(track, _), PoseTopics::Track(_, schema)) => {
-                let (header, t) = decode_pose_message(schema, &m.data).map_err(|e| m.error(e))?;
-                track.add(&header, &t).map_err(|e| at(e.to_string()))?;
+                add_pose_message(track, schema, &m)?
             }
-            _ => return Err(at("pose source and topics disagree (internal error)".into()).into()),
+            _ => {
+                let internal = "pose source and topics disagree (internal error)";
+                return Err(BagError::new(m.at, internal).into());
+            }
         }
         self.state.dirty = true;
         self.state.last = Some(m.at);
@@ -257,8 +252,7 @@ impl OnePass<'_> {
         let mut fixed = self.fixed_given.clone();
         for g in &self.state.given {
             let frame = self.state.frames.get(g.frame).map_or("", String::as_str);
-            let again = pose_at(self.poses, &mut fixed, frame, g.stamp_ns, false);
-            let again = again.map_err(|w| w.reason);
+            let again = pose_of(self.poses, &mut fixed, frame, g.stamp_ns);
             if again != g.outcome {
                 let said = |o: &Result<Pose, String>| match o {
                     Ok(p) => format!("at {:?}", p.translation_m),
@@ -276,14 +270,8 @@ impl OnePass<'_> {
             }
         }
         while let Some((header, _)) = self.state.held.front() {
-            let outcome = pose_at(
-                self.poses,
-                &mut fixed,
-                &header.frame_id,
-                header.stamp_ns,
-                false,
-            );
-            self.hand_out(outcome.map_err(|w| w.reason));
+            let outcome = pose_of(self.poses, &mut fixed, &header.frame_id, header.stamp_ns);
+            self.hand_out(outcome);
         }
         *self.fixed = fixed;
         Ok(())
