@@ -136,12 +136,7 @@ impl FirstRay {
             self.missed = true;
             return;
         };
-        let walk = walk.saturating_add(1);
-        let old = *f;
-        *f = if old == 0 || walk < old { walk } else { old };
-        if old == 0 {
-            self.seen.push((slot as u32, k));
-        }
+        lower_first(f, walk, &mut self.seen, slot as u32, k);
     }
 
     /// Inserts the cells crossed into `set` (emptied first) as OctoMap's range inserts of
@@ -169,6 +164,19 @@ impl FirstRay {
                 next.next_if(|e| e.0 >> 32 == walk as u64).map(|e| e.1)
             });
         }
+    }
+}
+
+/// Walk `walk` crossed cell `k` (number `slot`), whose table entry is `first`: the entry takes
+/// the smaller walk (stored plus one, 0 for none), and a cell crossed for the first time is
+/// listed in `seen`.
+#[inline(always)]
+fn lower_first(first: &mut u32, walk: u32, seen: &mut Vec<(u32, Key)>, slot: u32, k: Key) {
+    let walk = walk.saturating_add(1);
+    let old = *first;
+    *first = if old == 0 || walk < old { walk } else { old };
+    if old == 0 {
+        seen.push((slot, k));
     }
 }
 
@@ -206,16 +214,12 @@ impl LaneSink for FirstRay {
             if taken >> l & 1 == 0 {
                 continue;
             }
-            let walk = self.lane_walk[l].saturating_add(1);
             let Some(f) = self.first.get_mut(cells[l] as usize) else {
                 self.missed = true;
                 continue;
             };
-            let old = *f;
-            *f = if old == 0 || walk < old { walk } else { old };
-            if old == 0 {
-                self.seen.push((cells[l], [kx[l], ky[l], kz[l]]));
-            }
+            let k = [kx[l], ky[l], kz[l]];
+            lower_first(f, self.lane_walk[l], &mut self.seen, cells[l], k);
         }
     }
 }
