@@ -16,7 +16,7 @@
 //! Allocation is bounded by the input: every node read consumes at least one byte.
 
 use super::ParseError;
-use super::tree::{NodeRef, OcTree, TREE_DEPTH};
+use super::tree::{NodeRef, OcTree, TREE_DEPTH, WHITE};
 
 /// First line of a `.ot` file.
 pub const OT_HEADER: &str = "# Octomap OcTree file";
@@ -101,38 +101,31 @@ pub fn ot_size(tree: &OcTree) -> usize {
         + tree.num_nodes() * per_node
 }
 
-fn write_ot_node(tree: &OcTree, r: NodeRef, out: &mut Vec<u8>) {
+/// Writes node `r` and its subtree in pre-order; returns the colour the node is written with
+/// (a coloured tree's), which its parent's mean takes.
+///
+/// An inner node's colour is the mean of its children's set colours (OctoMap's
+/// `getAverageChildColor`, applied from the leaves up), white when none is set. It is known only
+/// once the children are written, so its three bytes are written as white and filled in then:
+/// each node is visited once, where computing each inner node's mean afresh visited every node
+/// once per ancestor.
+fn write_ot_node(tree: &OcTree, r: NodeRef, out: &mut Vec<u8>) -> [u8; 3] {
     let v = tree.node(r);
     out.extend_from_slice(&v.log_odds.to_le_bytes());
+    let color_at = out.len();
+    let own = v.color.unwrap_or(WHITE);
     if tree.is_colored() {
-        let c = if v.has_children() {
-            average_child_color(tree, r)
-        } else {
-            v.color.unwrap_or([255, 255, 255])
-        };
-        out.extend_from_slice(&c);
+        out.extend_from_slice(&own);
     }
     out.push(v.child_mask());
-    for i in 0..8 {
-        if let Some(c) = tree.child(r, i) {
-            write_ot_node(tree, c, out);
-        }
+    if !v.has_children() {
+        return own;
     }
-}
-
-/// An inner node's colour: the average of its children's set colours (OctoMap's
-/// `getAverageChildColor`, applied recursively), white when none is set.
-fn average_child_color(tree: &OcTree, r: NodeRef) -> [u8; 3] {
     let (mut sum, mut n) = ([0u32; 3], 0u32);
     for i in 0..8 {
         if let Some(c) = tree.child(r, i) {
-            let v = tree.node(c);
-            let col = if v.has_children() {
-                Some(average_child_color(tree, c))
-            } else {
-                v.color
-            };
-            if let Some(col) = col.filter(|c| *c != [255, 255, 255]) {
+            let col = write_ot_node(tree, c, out);
+            if col != WHITE {
                 for k in 0..3 {
                     sum[k] += col[k] as u32;
                 }
@@ -140,14 +133,14 @@ fn average_child_color(tree: &OcTree, r: NodeRef) -> [u8; 3] {
             }
         }
     }
-    match (
-        sum[0].checked_div(n),
-        sum[1].checked_div(n),
-        sum[2].checked_div(n),
-    ) {
-        (Some(r), Some(g), Some(b)) => [r as u8, g as u8, b as u8],
-        _ => [255, 255, 255],
+    let mean = match n {
+        0 => WHITE,
+        _ => sum.map(|s| (s / n) as u8),
+    };
+    if tree.is_colored() {
+        out[color_at..color_at + 3].copy_from_slice(&mean);
     }
+    mean
 }
 
 /// The `.bt` file of a tree, as `graph2tree` writes it: a maximum-likelihood copy, pruned twice
