@@ -109,6 +109,9 @@ pub struct PreparedScan {
     pub(crate) hits: Vec<(u64, ColorSlot)>,
     /// Whether `ups` is in OctoMap's order (a coloured tree's) rather than Morton order.
     pub(crate) octomap_order: bool,
+    /// A coloured scan cast in Morton order: its points, kept to cast it again in OctoMap's
+    /// order should the tree find that the order can change its colours.
+    pub(crate) source: Option<Box<ScanSource>>,
     /// Points in the scan.
     pub(crate) points: usize,
     /// Points skipped: not finite, or outside the key range.
@@ -126,6 +129,45 @@ impl PreparedScan {
     /// Distinct voxels the scan updates as free.
     pub fn free_voxels(&self) -> usize {
         self.ups.len() - self.hits.len()
+    }
+}
+
+/// A coloured scan's points as cast, for [`ScanCaster::prepare_keyset_order`].
+#[derive(Debug, Clone, Default)]
+pub(crate) struct ScanSource {
+    /// The points in the map frame.
+    pts: Vec<[f32; 3]>,
+    /// The sensor.
+    origin: [f32; 3],
+    /// The points' colours.
+    colors: Option<Vec<[u8; 3]>>,
+    /// Maximum range, m.
+    max_range_m: Option<f64>,
+    /// The scan's key box ([`key_box`]).
+    window: (Key, Key),
+    /// (point, Morton code) of each point's hit cell, in the order the casting threads found
+    /// them.
+    hit_points: Vec<(usize, u64)>,
+}
+
+impl ScanSource {
+    /// The hit cells as OctoMap's occupied `KeySet` iterates them: inserted in the order of
+    /// their points.
+    pub(crate) fn hits_in_keyset_order(&self) -> Vec<Upd> {
+        let mut by_point = self.hit_points.clone();
+        by_point.sort_unstable_by_key(|h| h.0);
+        let mut occupied = KeySet::new();
+        occupied.set_window(self.window.0, self.window.1);
+        for &(_, code) in &by_point {
+            occupied.insert(super::math::unmorton(code));
+        }
+        occupied
+            .iter()
+            .map(|k| Upd {
+                code: morton(k),
+                hit: true,
+            })
+            .collect()
     }
 }
 
@@ -209,19 +251,61 @@ impl ScanCaster {
         } else {
             None
         };
+        let points = pts.len();
         let mut p = if self.colored {
-            match self.prepare_octomap_lanes(&pts, origin, colors, max_range_m, stop) {
-                Lanes::Done(p) => p,
-                Lanes::Stopped => return None,
-                Lanes::Unfit => {
-                    self.prepare_octomap_order(&pts, origin, colors, max_range_m, stop)?
+            // In Morton order with the lanes, the points kept for the tree to cast the scan
+            // again in OctoMap's order only if that order can change its colours
+            // ([`super::order`]); in OctoMap's order at once when the box does not suit the
+            // lanes.
+            match self.prepare_lanes(&pts, origin, Some(colors), max_range_m, stop) {
+                Lanes::Done(mut p) => {
+                    if let Some(src) = &mut p.source {
+                        src.pts = pts;
+                        src.origin = origin;
+                        src.colors = colors.map(<[_]>::to_vec);
+                        src.max_range_m = max_range_m;
+                        src.window = self.window;
+                    }
+                    p
                 }
+                Lanes::Stopped => return None,
+                Lanes::Unfit => self.prepare_octomap(&pts, origin, colors, max_range_m, stop)?,
             }
         } else {
             self.prepare_sorted(&pts, origin, max_range_m, stop)?
         };
-        p.points = pts.len();
+        p.points = points;
         Some(p)
+    }
+
+    /// A coloured scan cast in Morton order ([`ScanCaster::prepare`]) cast again, its updates
+    /// in the order OctoMap's `insertPointCloud` makes them.
+    pub(crate) fn prepare_keyset_order(&mut self, src: &ScanSource) -> PreparedScan {
+        self.window = key_box(&self.grid, src.origin, &src.pts);
+        let never = AtomicBool::new(false);
+        let colors = src.colors.as_deref();
+        let mut p = self
+            .prepare_octomap(&src.pts, src.origin, colors, src.max_range_m, &never)
+            .unwrap_or_default();
+        p.points = src.pts.len();
+        p
+    }
+
+    /// A coloured scan in OctoMap's order: with the lanes and a first-ray table, or the general
+    /// way when its box does not suit them; `None` when `stop` is set.
+    fn prepare_octomap(
+        &mut self,
+        pts: &[[f32; 3]],
+        origin: [f32; 3],
+        colors: Option<&[[u8; 3]]>,
+        max_range_m: Option<f64>,
+        stop: &AtomicBool,
+    ) -> Option<PreparedScan> {
+        match self.prepare_octomap_lanes(pts, origin, colors, max_range_m, stop) {
+            Lanes::Done(p) => Some(p),
+            Lanes::Stopped => None,
+            Lanes::Unfit => self.prepare_octomap_order(pts, origin, colors, max_range_m, stop),
+        }
     }
 
     /// The rays of `pts` (the points from index `first` of the scan): free cells into `free`,
@@ -293,7 +377,7 @@ impl ScanCaster {
         max_range_m: Option<f64>,
         stop: &AtomicBool,
     ) -> Option<PreparedScan> {
-        match self.prepare_lanes(pts, origin, max_range_m, stop) {
+        match self.prepare_lanes(pts, origin, None, max_range_m, stop) {
             Lanes::Done(p) => Some(p),
             Lanes::Stopped => None,
             Lanes::Unfit => self.prepare_cellset(pts, origin, max_range_m, stop),
@@ -409,13 +493,16 @@ impl ScanCaster {
         Some((low.map(|k| k - pad), high.map(|k| k + pad)))
     }
 
-    /// A plain scan cast with [`walk_lanes`] into bit tables of its key box, on up to `threads`
-    /// threads; [`Lanes::Unfit`] when the box is too large or at the key range's edge, or a ray
-    /// left it (the caller then casts the scan the general way).
+    /// A scan cast with [`walk_lanes`] into bit tables of its key box, on up to `threads`
+    /// threads, its updates in Morton order; [`Lanes::Unfit`] when the box is too large or at
+    /// the key range's edge, or a ray left it (the caller then casts the scan the general way).
+    /// `colors` is `Some` for a coloured scan (its colours, if it has any): each hit voxel then
+    /// takes its brightest point's colour.
     fn prepare_lanes(
         &mut self,
         pts: &[[f32; 3]],
         origin: [f32; 3],
+        colors: Option<Option<&[[u8; 3]]>>,
         max_range_m: Option<f64>,
         stop: &AtomicBool,
     ) -> Lanes {
@@ -442,16 +529,36 @@ impl ScanCaster {
             max_range_m,
             stop,
         };
-        let counts: Vec<Option<(usize, usize)>> = std::thread::scope(|sc| {
+        // One share: its counts, and a coloured scan's hits with their colours and points.
+        let cast = move |n: usize, f: &mut BoxBits, h: &mut BoxBits| match colors {
+            None => (this.cast_lanes(share(n), f, h), ColorHits::default()),
+            Some(colors) => {
+                let mut hits = ColorHits {
+                    bits: Some(h),
+                    colors,
+                    ..ColorHits::default()
+                };
+                let counts = this.cast_lanes(share(n), f, &mut hits);
+                (counts, ColorHits { bits: None, ..hits })
+            }
+        };
+        let (counts, parts): (Vec<_>, Vec<_>) = std::thread::scope(|sc| {
             let mut parts = boxes.iter_mut().enumerate();
             let first = parts.next();
             let handles: Vec<_> = parts
-                .map(|(n, (f, h))| sc.spawn(move || this.cast_lanes(share(n), f, h)))
+                .map(|(n, (f, h))| sc.spawn(move || cast(n, f, h)))
                 .collect();
-            let mut counts =
-                vec![first.map_or(Some((0, 0)), |(_, (f, h))| this.cast_lanes(share(0), f, h))];
-            counts.extend(handles.into_iter().map(|h| h.join().unwrap_or(None)));
-            counts
+            let mut parts = vec![
+                first.map_or((Some((0, 0)), ColorHits::default()), |(_, (f, h))| {
+                    cast(0, f, h)
+                }),
+            ];
+            parts.extend(
+                handles
+                    .into_iter()
+                    .map(|h| h.join().unwrap_or((None, ColorHits::default()))),
+            );
+            parts.into_iter().unzip()
         });
         let result = match counts.into_iter().collect::<Option<Vec<_>>>() {
             None => Lanes::Stopped,
@@ -466,13 +573,24 @@ impl ScanCaster {
                 let (mut ups, mut hit_cells) = (Vec::new(), Vec::new());
                 free.merged_codes(hits, |code, hit| {
                     ups.push(Upd { code, hit });
-                    if hit {
+                    if hit && colors.is_none() {
                         hit_cells.push((code, NO_COLOR));
                     }
                 });
+                let mut source = None;
+                if colors.is_some() {
+                    let mut src = ScanSource::default();
+                    for part in parts {
+                        hit_cells.extend(part.occ);
+                        src.hit_points.extend(part.points);
+                    }
+                    brightest_per_voxel(&mut hit_cells);
+                    source = Some(Box::new(src));
+                }
                 Lanes::Done(PreparedScan {
                     ups,
                     hits: hit_cells,
+                    source,
                     points_skipped: counts.iter().map(|c| c.0).sum(),
                     points_beyond_range: counts.iter().map(|c| c.1).sum(),
                     ..PreparedScan::default()
@@ -741,6 +859,32 @@ impl RayEnds for BoxBits {
     }
 }
 
+/// A coloured scan's hit cells cast in Morton order: the set, each hit with its colour, and
+/// each hit with its point (for the order OctoMap's occupied `KeySet` takes them in).
+#[derive(Default)]
+struct ColorHits<'a, 'b> {
+    bits: Option<&'b mut BoxBits>,
+    /// The scan's colours, by point.
+    colors: Option<&'a [[u8; 3]]>,
+    /// (Morton code, colour) of each hit.
+    occ: Vec<(u64, ColorSlot)>,
+    /// (point, Morton code) of each hit.
+    points: Vec<(usize, u64)>,
+}
+
+impl RayEnds for ColorHits<'_, '_> {
+    #[inline(always)]
+    fn hit(&mut self, point: usize, k: Key) {
+        if let Some(bits) = &mut self.bits {
+            bits.insert(k);
+        }
+        let code = morton(k);
+        let color = color_slot(self.colors.and_then(|c| c.get(point)).copied());
+        self.occ.push((code, color));
+        self.points.push((point, code));
+    }
+}
+
 /// A coloured scan's hit cells, in point order, each with its point's colour.
 struct ColorEnds<'a> {
     /// The scan's colours, by point.
@@ -944,8 +1088,25 @@ fn key_box(grid: &Grid, origin: [f32; 3], pts: &[[f32; 3]]) -> (Key, Key) {
 /// unset): `brightness_key` is a total order, so equal keys are equal colours and the unstable
 /// sort decides nothing.
 fn brightest_per_voxel(occ: &mut Vec<(u64, ColorSlot)>) {
-    occ.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(slot_order(b.1).cmp(&slot_order(a.1))));
-    occ.dedup_by_key(|e| e.0);
+    // Sorted by voxel alone (a plain integer key), then each voxel's run kept as its
+    // brightest colour: cheaper than comparing colours in the sort.
+    occ.sort_unstable_by_key(|e| e.0);
+    let mut kept = 0usize;
+    for i in 0..occ.len() {
+        let e = occ[i];
+        match kept.checked_sub(1).and_then(|k| occ.get_mut(k)) {
+            Some(last) if last.0 == e.0 => {
+                if slot_order(e.1) > slot_order(last.1) {
+                    last.1 = e.1;
+                }
+            }
+            _ => {
+                occ[kept] = e;
+                kept += 1;
+            }
+        }
+    }
+    occ.truncate(kept);
 }
 
 /// Merges ascending lists into one ascending list without duplicates.
@@ -1041,6 +1202,47 @@ mod tests {
         }
     }
 
+    /// A coloured scan cast in Morton order (on one and on three threads) holds the same
+    /// updates and brightest colours as the scan cast in OctoMap's order, and its source casts
+    /// it again in that order exactly; the hit cells in OctoMap's order are the occupied
+    /// `KeySet`'s.
+    #[test]
+    fn a_coloured_scan_in_morton_order_keeps_what_octomaps_order_needs() {
+        let stop = AtomicBool::new(false);
+        for (n, scan) in odd_scans(4).iter().enumerate() {
+            for (range, threads) in [(None, 1), (Some(2.5), 1), (None, 3)] {
+                let mut c = ScanCaster::new(0.1, true, threads);
+                let Some(fast) = c.prepare(scan, range, &stop) else {
+                    panic!("stopped")
+                };
+                let (pts, origin) = world_points(scan);
+                c.window = key_box(&c.grid, origin, &pts);
+                let colors = scan.colors.as_deref();
+                let want = c
+                    .prepare_octomap_order(&pts, origin, colors, range, &stop)
+                    .expect("not stopped");
+                let Some(src) = &fast.source else {
+                    // The point far away makes the box too large: OctoMap's order at once.
+                    assert_eq!(n, 4, "scan {n} unfit");
+                    assert!(fast.octomap_order);
+                    continue;
+                };
+                assert!(!fast.octomap_order);
+                let mut ups = want.ups.clone();
+                ups.sort_unstable_by_key(|u| u.code);
+                assert_eq!(fast.ups, ups, "scan {n}, range {range:?}");
+                assert_eq!(fast.hits, want.hits);
+                assert_eq!(fast.points_skipped, want.points_skipped);
+                assert_eq!(fast.points_beyond_range, want.points_beyond_range);
+                let again = c.prepare_keyset_order(src);
+                assert_eq!(again.ups, want.ups, "scan {n}, range {range:?}");
+                assert_eq!(again.hits, want.hits);
+                let hits: Vec<Upd> = want.ups.iter().filter(|u| u.hit).copied().collect();
+                assert_eq!(src.hits_in_keyset_order(), hits);
+            }
+        }
+    }
+
     /// A plain scan cast with the lanes (on one and on three threads) gives the updates of the
     /// general cast, with a maximum range or not, with points that are not finite; a scan with
     /// a point outside the key range goes the general way.
@@ -1120,18 +1322,18 @@ mod tests {
         let (pts, origin) = world_points(&scans[3]);
         c.window = key_box(&c.grid, origin, &pts);
         assert!(matches!(
-            c.prepare_lanes(&pts, origin, None, &stop),
+            c.prepare_lanes(&pts, origin, None, None, &stop),
             Lanes::Unfit
         ));
         let (pts, origin) = world_points(&scans[2]);
         c.window = key_box(&c.grid, origin, &pts);
         assert!(matches!(
-            c.prepare_lanes(&pts, origin, None, &stop),
+            c.prepare_lanes(&pts, origin, None, None, &stop),
             Lanes::Done(_)
         ));
         stop.store(true, Ordering::Relaxed);
         assert!(matches!(
-            c.prepare_lanes(&pts, origin, None, &stop),
+            c.prepare_lanes(&pts, origin, None, None, &stop),
             Lanes::Stopped
         ));
     }

@@ -35,6 +35,7 @@ pub mod graph;
 pub mod hashorder;
 mod lanes;
 pub mod math;
+mod order;
 pub mod region;
 pub mod synth;
 pub mod transfer;

@@ -106,6 +106,10 @@ pub struct ScanUpdate {
     pub occupied_voxels: usize,
     /// Voxels whose state changed, in Morton order.
     pub changes: Vec<Change>,
+    /// Whether a coloured tree applied the scan's updates, or its hit cells', voxel by voxel
+    /// in OctoMap's `KeySet` order (the order could change its colours), rather than in one
+    /// pass in Morton order.
+    pub keyset_order: bool,
 }
 
 /// What one scan's structural pass found besides the occupancy flips: voxels whose colour may
@@ -283,10 +287,12 @@ impl OcTree {
     }
 
     /// Applies a scan cast by [`ScanCaster::prepare`] (for a tree of this resolution): a plain
-    /// tree in one recursive pass over the cells in Morton order, a coloured tree cell by cell
-    /// in the order they were prepared in, each update OctoMap's `updateNode` (pruning the path
-    /// after it), then the colour calls. A scan prepared for the other kind of tree gives the
-    /// same log-odds (the order decides colours only).
+    /// tree in one recursive pass over the cells in Morton order. A coloured tree the same way
+    /// when the order of the updates cannot change its colours ([`super::order`]); else cell
+    /// by cell in OctoMap's order (the scan cast again in that order if it was cast in Morton
+    /// order), each update OctoMap's `updateNode` (pruning the path after it); then the colour
+    /// calls. A scan prepared for the other kind of tree gives the same log-odds (the order
+    /// decides colours only).
     pub fn apply_scan(&mut self, scan: &PreparedScan) -> ScanUpdate {
         let mut report = ScanUpdate {
             points: scan.points,
@@ -295,6 +301,7 @@ impl OcTree {
             free_voxels: scan.free_voxels(),
             occupied_voxels: scan.occupied_voxels(),
             changes: Vec::new(),
+            keyset_order: false,
         };
         if scan.ups.is_empty() {
             return report;
@@ -312,14 +319,77 @@ impl OcTree {
             report.changes = log.flips;
             return report;
         }
+        if let (false, Some(src)) = (scan.octomap_order, &scan.source) {
+            // OctoMap updates the free cells (its free `KeySet` less the hit cells), then the
+            // hit cells (its occupied `KeySet`): each part in Morton order when its order
+            // cannot matter. The hit cells' order is cheap to find (the points' end cells, in
+            // the points' order); the free cells' needs every ray walked again.
+            let (misses, hits): (Vec<Upd>, Vec<Upd>) = scan.ups.iter().partition(|u| !u.hit);
+            if super::order::order_can_matter(self, &misses) {
+                let again = self.caster_mut().prepare_keyset_order(src);
+                report.keyset_order = true;
+                report.changes = self.apply_in_order(&again, created, log);
+                return report;
+            }
+            let mut created = created;
+            if !misses.is_empty() {
+                self.apply(0, 0, 0, &misses, created, &mut log);
+                created = false;
+            }
+            if super::order::order_can_matter(self, &hits) {
+                report.keyset_order = true;
+                for u in &src.hits_in_keyset_order() {
+                    self.update_voxel(u, created, &mut log);
+                    created = false;
+                }
+            } else if !hits.is_empty() {
+                self.apply(0, 0, 0, &hits, created, &mut log);
+            }
+            log.flips.sort_unstable_by_key(|c| c.code);
+            report.changes = self.color_pass(&scan.hits, log);
+            return report;
+        }
+        report.keyset_order = scan.octomap_order;
+        report.changes = self.apply_in_order(scan, created, log);
+        report
+    }
+
+    /// Applies `ups` (no colour calls after them): voxel by voxel in their order, or, with
+    /// `one_pass`, in one recursive pass (`ups` then in Morton order); the changes.
+    #[cfg(test)]
+    pub(crate) fn apply_ups(&mut self, ups: &[Upd], one_pass: bool) -> Vec<Change> {
+        if ups.is_empty() {
+            return Vec::new();
+        }
+        let mut created = self.ensure_root();
+        let mut log = PassLog::default();
+        if one_pass {
+            self.apply(0, 0, 0, ups, created, &mut log);
+        } else {
+            for u in ups {
+                self.update_voxel(u, created, &mut log);
+                created = false;
+            }
+        }
+        log.flips.sort_unstable_by_key(|c| c.code);
+        self.color_pass(&[], log)
+    }
+
+    /// A coloured scan's updates voxel by voxel in the order `scan` holds them, then the colour
+    /// calls.
+    fn apply_in_order(
+        &mut self,
+        scan: &PreparedScan,
+        created: bool,
+        mut log: PassLog,
+    ) -> Vec<Change> {
         let mut created = created;
         for u in &scan.ups {
             self.update_voxel(u, created, &mut log);
             created = false;
         }
         log.flips.sort_unstable_by_key(|c| c.code);
-        report.changes = self.color_pass(&scan.hits, log);
-        report
+        self.color_pass(&scan.hits, log)
     }
 
     /// The colour calls after a scan's occupancy updates (`ColorOcTree`'s `search` and
