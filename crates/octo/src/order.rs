@@ -116,11 +116,9 @@ pub(crate) fn order_can_matter(tree: &OcTree, ups: &[Upd]) -> bool {
 
 /// The state before the scan of an existing node.
 fn before_of(tree: &OcTree, r: NodeRef) -> Before {
-    let v = tree.node(r);
-    if v.has_children() {
-        Before::Inner(r)
-    } else {
-        Before::Leaf(v.log_odds)
+    match tree.leaf_log_odds(r) {
+        Some(v) => Before::Leaf(v),
+        None => Before::Inner(r),
     }
 }
 
@@ -202,34 +200,35 @@ impl Pass<'_> {
             next_digit = d + 1;
         }
         let mut creates = matches!(before, Before::Absent);
+        let child_before = |i: usize| match before {
+            Before::Absent => Before::Absent,
+            Before::Leaf(a) => Before::Leaf(a),
+            Before::Inner(r) => match self.tree.child(r, i) {
+                None => Before::Absent,
+                Some(c) => before_of(self.tree, c),
+            },
+        };
+        // The children with updates first (each is checked below, whatever this node can
+        // do), then the others, looked at only while the children may still share a value.
         let mut shared: Option<Values> = None;
         let mut children = [Before::Absent; 8];
-        for (i, run) in runs.iter().enumerate() {
-            let child = match before {
-                Before::Absent => Before::Absent,
-                Before::Leaf(a) => Before::Leaf(a),
-                Before::Inner(r) => match self.tree.child(r, i) {
-                    None => Before::Absent,
-                    Some(c) => before_of(self.tree, c),
-                },
+        for (i, run) in runs.iter().enumerate().filter(|(_, run)| !run.is_empty()) {
+            children[i] = child_before(i);
+            let sub = self.node(children[i], depth + 1, run)?;
+            creates |= sub.creates;
+            shared = Some(shared.map_or(sub.values, |s| s.intersect(&sub.values)));
+        }
+        for (i, _) in runs.iter().enumerate().filter(|(_, run)| run.is_empty()) {
+            if shared.is_some_and(|s| s.len == 0) {
+                break;
+            }
+            // Untouched: a leaf stays one; an inner node is not prunable (the tree was pruned)
+            // and nothing below it changes; unknown space stays unknown.
+            let values = match child_before(i) {
+                Before::Leaf(a) => Values::one(a),
+                _ => Values::default(),
             };
-            children[i] = child;
-            let values = if run.is_empty() {
-                // Untouched: a leaf stays one; an inner node is not prunable (the tree was
-                // pruned) and nothing below it changes; unknown space stays unknown.
-                match child {
-                    Before::Leaf(a) => Values::one(a),
-                    _ => Values::default(),
-                }
-            } else {
-                let sub = self.node(child, depth + 1, run)?;
-                creates |= sub.creates;
-                sub.values
-            };
-            shared = Some(match shared {
-                None => values,
-                Some(s) => s.intersect(&values),
-            });
+            shared = Some(shared.map_or(values, |s| s.intersect(&values)));
         }
         let shared = shared.unwrap_or_default();
         for v in shared.iter() {

@@ -718,6 +718,12 @@ impl OcTree {
         }
     }
 
+    /// A leaf's log-odds; `None` for a node with children.
+    pub(crate) fn leaf_log_odds(&self, r: NodeRef) -> Option<f32> {
+        let b = &self.blocks[r.blk as usize];
+        (b.child[r.slot as usize] == NONE).then_some(b.value[r.slot as usize])
+    }
+
     /// Child `i` of a node, if it exists.
     pub fn child(&self, r: NodeRef, i: usize) -> Option<NodeRef> {
         let c = self.blocks[r.blk as usize].child[r.slot as usize];
