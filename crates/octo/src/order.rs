@@ -111,7 +111,12 @@ pub(crate) fn order_can_matter(tree: &OcTree, ups: &[Upd]) -> bool {
         None => Before::Absent,
         Some(r) => before_of(tree, r),
     };
-    Pass { tree }.node(before, 0, ups).is_err()
+    let pass = Pass {
+        tree,
+        hits: ups.iter().any(|u| u.hit),
+        misses: ups.iter().any(|u| !u.hit),
+    };
+    pass.node(before, 0, ups).is_err()
 }
 
 /// The state before the scan of an existing node.
@@ -124,6 +129,10 @@ fn before_of(tree: &OcTree, r: NodeRef) -> Before {
 
 struct Pass<'a> {
     tree: &'a OcTree,
+    /// Whether any update is a hit, and whether any is a miss (OctoMap applies the two
+    /// apart, so each phase has one kind only).
+    hits: bool,
+    misses: bool,
 }
 
 impl Pass<'_> {
@@ -149,24 +158,8 @@ impl Pass<'_> {
 
     /// The node at `depth` (state `before`) with updates `ups` below it, all sharing its path.
     fn node(&self, before: Before, depth: u32, ups: &[Upd]) -> Result<Subtree, MayMatter> {
-        if depth == TREE_DEPTH {
-            // A voxel is updated once per scan.
-            let [u] = ups else { return Err(MayMatter) };
-            return match before {
-                Before::Absent => Ok(Subtree {
-                    values: Values::one(self.updated(0.0, u)),
-                    creates: true,
-                }),
-                Before::Leaf(a) => {
-                    let mut values = Values::one(a);
-                    values.add(self.updated(a, u))?;
-                    Ok(Subtree {
-                        values,
-                        creates: false,
-                    })
-                }
-                Before::Inner(_) => Err(MayMatter),
-            };
+        if depth + 1 == TREE_DEPTH {
+            return self.voxels(before, ups);
         }
         if let Before::Leaf(a) = before
             && ups.iter().all(|u| self.at_clamp(a, u.hit))
@@ -211,10 +204,8 @@ impl Pass<'_> {
         // The children with updates first (each is checked below, whatever this node can
         // do), then the others, looked at only while the children may still share a value.
         let mut shared: Option<Values> = None;
-        let mut children = [Before::Absent; 8];
         for (i, run) in runs.iter().enumerate().filter(|(_, run)| !run.is_empty()) {
-            children[i] = child_before(i);
-            let sub = self.node(children[i], depth + 1, run)?;
+            let sub = self.node(child_before(i), depth + 1, run)?;
             creates |= sub.creates;
             shared = Some(shared.map_or(sub.values, |s| s.intersect(&sub.values)));
         }
@@ -232,7 +223,7 @@ impl Pass<'_> {
         }
         let shared = shared.unwrap_or_default();
         for v in shared.iter() {
-            let pending = (0..8).any(|i| self.may_wait(children[i], depth + 1, runs[i], v));
+            let pending = runs.iter().any(|run| self.may_wait(run, v));
             if pending && !self.one_color(before, creates) {
                 return Err(MayMatter);
             }
@@ -244,16 +235,93 @@ impl Pass<'_> {
         Ok(Subtree { values, creates })
     }
 
-    /// Whether a child at `depth` (state `before`, updates `run` below it) may be a leaf of
-    /// log-odds `v` while one of its updates, not clamped at `v`, is still to come.
-    fn may_wait(&self, before: Before, depth: u32, run: &[Upd], v: f32) -> bool {
-        let changes = |u: &Upd| !self.at_clamp(v, u.hit);
-        if depth == TREE_DEPTH {
-            // A voxel holds `v` with its update to come only if it held `v` before.
-            return matches!(before, Before::Leaf(a) if a.to_bits() == v.to_bits())
-                && run.iter().any(changes);
+    /// Whether an inner child with updates `run` below it may be a leaf of log-odds `v` while
+    /// one of its updates, not clamped at `v`, is still to come: some update of a kind the
+    /// scan has, not clamped at `v` (the run is not read: the pass would read every update
+    /// again at every level).
+    fn may_wait(&self, run: &[Upd], v: f32) -> bool {
+        !run.is_empty()
+            && ((self.hits && !self.at_clamp(v, true)) || (self.misses && !self.at_clamp(v, false)))
+    }
+
+    /// A node at depth 15 (state `before`), whose children are voxels, with updates `ups`
+    /// (each voxel once, in Morton order): the same test as [`Pass::node`]'s, the children's
+    /// values worked out in place (a voxel may hold its value before and after its update).
+    fn voxels(&self, before: Before, ups: &[Upd]) -> Result<Subtree, MayMatter> {
+        if let Before::Leaf(a) = before
+            && ups.iter().all(|u| self.at_clamp(a, u.hit))
+        {
+            return Ok(Subtree {
+                values: Values::one(a),
+                creates: false,
+            });
         }
-        run.iter().any(changes)
+        // Each voxel's value before the scan (`None`: unknown) and its update.
+        let mut pre = [None::<f32>; 8];
+        match before {
+            Before::Absent => {}
+            Before::Leaf(a) => pre = [Some(a); 8],
+            Before::Inner(r) => {
+                for (i, p) in pre.iter_mut().enumerate() {
+                    if let Some(c) = self.tree.child(r, i) {
+                        // A voxel has no children.
+                        *p = Some(self.tree.leaf_log_odds(c).ok_or(MayMatter)?);
+                    }
+                }
+            }
+        }
+        let mut up = [None::<Upd>; 8];
+        let mut next_digit = 0;
+        for u in ups {
+            let d = (u.code & 7) as usize;
+            if d < next_digit {
+                return Err(MayMatter);
+            }
+            up[d] = Some(*u);
+            next_digit = d + 1;
+        }
+        let creates = (0..8).any(|i| pre[i].is_none() && up[i].is_some());
+        let mut shared: Option<Values> = None;
+        for i in 0..8 {
+            let values = match (pre[i], up[i]) {
+                (None, None) => Values::default(),
+                (Some(a), None) => Values::one(a),
+                (None, Some(u)) => Values::one(self.updated(0.0, &u)),
+                (Some(a), Some(u)) => {
+                    let mut v = Values::one(a);
+                    v.add(self.updated(a, &u))?;
+                    v
+                }
+            };
+            let s = shared.map_or(values, |s| s.intersect(&values));
+            if s.len == 0 {
+                // No value all eight may share: this node is never pruned in the scan.
+                return Ok(Subtree {
+                    values: match before {
+                        Before::Leaf(a) => Values::one(a),
+                        _ => Values::default(),
+                    },
+                    creates,
+                });
+            }
+            shared = Some(s);
+        }
+        let shared = shared.unwrap_or_default();
+        for v in shared.iter() {
+            // A voxel holds `v` with its update to come only if it held `v` before.
+            let pending = (0..8).any(|i| {
+                pre[i].is_some_and(|a| a.to_bits() == v.to_bits())
+                    && up[i].is_some_and(|u| !self.at_clamp(v, u.hit))
+            });
+            if pending && !self.one_color(before, creates) {
+                return Err(MayMatter);
+            }
+        }
+        let mut values = shared;
+        if let Before::Leaf(a) = before {
+            values.add(a)?;
+        }
+        Ok(Subtree { values, creates })
     }
 
     /// Whether every node below a node (state `before`) has one colour throughout the scan, so

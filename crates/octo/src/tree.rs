@@ -345,7 +345,9 @@ impl OcTree {
             } else if !hits.is_empty() {
                 self.apply(0, 0, 0, &hits, created, &mut log);
             }
-            log.flips.sort_unstable_by_key(|c| c.code);
+            // Two ascending runs (the free cells', the hit cells' unless in `KeySet` order): the
+            // stable sort finds and merges them.
+            log.flips.sort_by_key(|c| c.code);
             report.changes = self.color_pass(&scan.hits, log);
             return report;
         }
@@ -402,11 +404,12 @@ impl OcTree {
             flips,
             mut recolored,
         } = log;
+        let mut walk = Descent::default();
         for &(code, c) in occ {
             if c[3] == 0 {
                 continue;
             }
-            let Some((r, depth)) = self.search(code, TREE_DEPTH) else {
+            let Some((r, depth)) = walk.search(self, code) else {
                 continue;
             };
             let old = self.color(r.blk, r.slot as usize);
@@ -420,10 +423,10 @@ impl OcTree {
         }
         recolored.sort_unstable();
         recolored.dedup();
-        let color_at = |t: &OcTree, code: u64| {
-            t.search(code, TREE_DEPTH)
-                .and_then(|(r, _)| t.node(r).color)
-        };
+        // The changes are looked up in ascending order too (colours changed, not structure).
+        let mut walk = Descent::default();
+        let mut color_at =
+            |t: &OcTree, code: u64| walk.search(t, code).and_then(|(r, _)| t.node(r).color);
         let mut out = Vec::with_capacity(flips.len() + recolored.len());
         let mut k = 0;
         for f in flips {
@@ -1005,6 +1008,51 @@ impl OcTree {
     }
 }
 
+/// [`OcTree::search`] for voxels mostly in ascending Morton order: each search starts from
+/// the deepest node the previous one shares with it, not from the root. Valid while the tree's
+/// structure does not change (colours and values may).
+#[derive(Default)]
+struct Descent {
+    /// The nodes of the previous search, by depth: `path[..len]`.
+    path: [Option<NodeRef>; TREE_DEPTH as usize + 1],
+    len: usize,
+    /// The previous voxel.
+    prev: u64,
+}
+
+impl Descent {
+    /// The node that holds voxel `code` and its depth, as [`OcTree::search`] gives them.
+    fn search(&mut self, t: &OcTree, code: u64) -> Option<(NodeRef, u32)> {
+        // Depths 0..=d hold the same nodes for both voxels when their digits above depth d
+        // agree: the highest differing bit is in the digit of depth d.
+        let diff = code ^ self.prev;
+        let shared = if diff == 0 {
+            TREE_DEPTH as usize
+        } else {
+            let top = 63 - diff.leading_zeros() as usize;
+            (TREE_DEPTH as usize - 1).saturating_sub(top / 3)
+        };
+        self.prev = code;
+        let start = shared.min(self.len.saturating_sub(1));
+        let (mut r, start) = match self.path[start].filter(|_| self.len > 0) {
+            Some(r) => (r, start),
+            None => (t.root()?, 0),
+        };
+        self.path[start] = Some(r);
+        self.len = start + 1;
+        for d in start..TREE_DEPTH as usize {
+            let digit = ((code >> (3 * (TREE_DEPTH as usize - 1 - d))) & 7) as usize;
+            if t.blocks[r.blk as usize].child[r.slot as usize] == NONE {
+                return Some((r, d as u32));
+            }
+            r = t.child(r, digit)?;
+            self.path[d + 1] = Some(r);
+            self.len = d + 2;
+        }
+        Some((r, TREE_DEPTH))
+    }
+}
+
 /// A node of the tree (a handle, valid until the tree changes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct NodeRef {
@@ -1222,6 +1270,45 @@ mod tests {
             }
         }
         assert_eq!(count, t.num_nodes());
+    }
+
+    /// A descent that starts where the previous one left off finds what a search from the root
+    /// finds, for voxels in ascending order (known, pruned, unknown) and in any order.
+    #[test]
+    fn a_descent_from_the_previous_path_finds_what_a_search_finds() {
+        let mut t = OcTree::new(0.2);
+        let mut rng = rovlink_base::rng::Rng::new(11, 0);
+        for _ in 0..5 {
+            let pts = (0..300)
+                .map(|_| {
+                    [
+                        (rng.uniform() * 6.0 - 3.0) as f32,
+                        (rng.uniform() * 6.0 - 3.0) as f32,
+                        (rng.uniform() * 2.0 - 1.0) as f32,
+                    ]
+                })
+                .collect();
+            t.insert_scan(&scan(pts), None);
+        }
+        let mut codes = Vec::new();
+        t.for_each_leaf(|code, _, _| codes.push(code));
+        let known = codes.len();
+        for i in 0..known {
+            // Neighbours of leaves (often in other nodes, or unknown), and far voxels.
+            codes.push(codes[i] ^ 1);
+            codes.push(codes[i] ^ (1 << 20));
+            codes.push((rng.uniform() * (1u64 << 48) as f64) as u64);
+        }
+        let check = |codes: &[u64]| {
+            let mut walk = Descent::default();
+            for &c in codes {
+                assert_eq!(walk.search(&t, c), t.search(c, TREE_DEPTH), "voxel {c:#x}");
+            }
+        };
+        check(&codes);
+        codes.sort_unstable();
+        check(&codes);
+        assert!(known > 100, "{known} leaves");
     }
 
     /// The naive model: one log-odds per voxel in a hash map, OctoMap's update rule applied to
