@@ -222,9 +222,24 @@ impl Pass<'_> {
             shared = Some(shared.map_or(values, |s| s.intersect(&values)));
         }
         let shared = shared.unwrap_or_default();
+        self.judge(before, creates, shared, |v| {
+            runs.iter().any(|run| self.may_wait(run, v))
+        })
+    }
+
+    /// The test at a node (state `before`) whose children may all be leaves of each value in
+    /// `shared`: for each, whether an update still to come (`pending`) can expand it again
+    /// with colours not all one. Else what the node may hold as a leaf: those values, and its
+    /// own if it is a pruned node.
+    fn judge(
+        &self,
+        before: Before,
+        creates: bool,
+        shared: Values,
+        pending: impl Fn(f32) -> bool,
+    ) -> Result<Subtree, MayMatter> {
         for v in shared.iter() {
-            let pending = runs.iter().any(|run| self.may_wait(run, v));
-            if pending && !self.one_color(before, creates) {
+            if pending(v) && !self.one_color(before, creates) {
                 return Err(MayMatter);
             }
         }
@@ -294,34 +309,19 @@ impl Pass<'_> {
                 }
             };
             let s = shared.map_or(values, |s| s.intersect(&values));
+            shared = Some(s);
             if s.len == 0 {
                 // No value all eight may share: this node is never pruned in the scan.
-                return Ok(Subtree {
-                    values: match before {
-                        Before::Leaf(a) => Values::one(a),
-                        _ => Values::default(),
-                    },
-                    creates,
-                });
+                break;
             }
-            shared = Some(s);
         }
-        let shared = shared.unwrap_or_default();
-        for v in shared.iter() {
-            // A voxel holds `v` with its update to come only if it held `v` before.
-            let pending = (0..8).any(|i| {
+        // A voxel holds `v` with its update to come only if it held `v` before.
+        self.judge(before, creates, shared.unwrap_or_default(), |v| {
+            (0..8).any(|i| {
                 pre[i].is_some_and(|a| a.to_bits() == v.to_bits())
                     && up[i].is_some_and(|u| !self.at_clamp(v, u.hit))
-            });
-            if pending && !self.one_color(before, creates) {
-                return Err(MayMatter);
-            }
-        }
-        let mut values = shared;
-        if let Before::Leaf(a) = before {
-            values.add(a)?;
-        }
-        Ok(Subtree { values, creates })
+            })
+        })
     }
 
     /// Whether every node below a node (state `before`) has one colour throughout the scan, so

@@ -1243,10 +1243,10 @@ mod tests {
         }
     }
 
-    #[test]
-    fn node_count_matches_a_walk() {
+    /// A tree of five scans of 300 random points from the origin.
+    fn random_tree(seed: u64) -> OcTree {
         let mut t = OcTree::new(0.2);
-        let mut rng = rovlink_base::rng::Rng::new(7, 0);
+        let mut rng = rovlink_base::rng::Rng::new(seed, 0);
         for _ in 0..5 {
             let pts = (0..300)
                 .map(|_| {
@@ -1259,6 +1259,12 @@ mod tests {
                 .collect();
             t.insert_scan(&scan(pts), None);
         }
+        t
+    }
+
+    #[test]
+    fn node_count_matches_a_walk() {
+        let t = random_tree(7);
         let mut count = 0;
         let mut stack = vec![t.root().unwrap()];
         while let Some(r) = stack.pop() {
@@ -1276,20 +1282,8 @@ mod tests {
     /// finds, for voxels in ascending order (known, pruned, unknown) and in any order.
     #[test]
     fn a_descent_from_the_previous_path_finds_what_a_search_finds() {
-        let mut t = OcTree::new(0.2);
-        let mut rng = rovlink_base::rng::Rng::new(11, 0);
-        for _ in 0..5 {
-            let pts = (0..300)
-                .map(|_| {
-                    [
-                        (rng.uniform() * 6.0 - 3.0) as f32,
-                        (rng.uniform() * 6.0 - 3.0) as f32,
-                        (rng.uniform() * 2.0 - 1.0) as f32,
-                    ]
-                })
-                .collect();
-            t.insert_scan(&scan(pts), None);
-        }
+        let t = random_tree(11);
+        let mut rng = rovlink_base::rng::Rng::new(12, 0);
         let mut codes = Vec::new();
         t.for_each_leaf(|code, _, _| codes.push(code));
         let known = codes.len();
