@@ -301,11 +301,8 @@ impl ScanCaster {
         max_range_m: Option<f64>,
         stop: &AtomicBool,
     ) -> Option<PreparedScan> {
-        match self.prepare_octomap_lanes(pts, origin, colors, max_range_m, stop) {
-            Lanes::Done(p) => Some(p),
-            Lanes::Stopped => None,
-            Lanes::Unfit => self.prepare_octomap_order(pts, origin, colors, max_range_m, stop),
-        }
+        self.prepare_octomap_lanes(pts, origin, colors, max_range_m, stop)
+            .or_general(|| self.prepare_octomap_order(pts, origin, colors, max_range_m, stop))
     }
 
     /// The rays of `pts` (the points from index `first` of the scan): free cells into `free`,
@@ -377,11 +374,8 @@ impl ScanCaster {
         max_range_m: Option<f64>,
         stop: &AtomicBool,
     ) -> Option<PreparedScan> {
-        match self.prepare_lanes(pts, origin, None, max_range_m, stop) {
-            Lanes::Done(p) => Some(p),
-            Lanes::Stopped => None,
-            Lanes::Unfit => self.prepare_cellset(pts, origin, max_range_m, stop),
-        }
+        self.prepare_lanes(pts, origin, None, max_range_m, stop)
+            .or_general(|| self.prepare_cellset(pts, origin, max_range_m, stop))
     }
 
     /// A plain scan cast ray by ray into [`CellSet`]s, for any key box.
@@ -1063,6 +1057,17 @@ enum Lanes {
     Stopped,
     /// The scan does not suit the bit tables: cast it the general way.
     Unfit,
+}
+
+impl Lanes {
+    /// The scan cast (`None`: stopped), cast by `general` when it did not suit the lanes.
+    fn or_general(self, general: impl FnOnce() -> Option<PreparedScan>) -> Option<PreparedScan> {
+        match self {
+            Lanes::Done(p) => Some(p),
+            Lanes::Stopped => None,
+            Lanes::Unfit => general(),
+        }
+    }
 }
 
 /// The box of keys (lowest, highest on each axis) holding `origin` and the finite `pts`, the

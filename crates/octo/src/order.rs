@@ -26,7 +26,7 @@
 //! Nothing here panics; the pass reads the tree only.
 
 use super::cast::Upd;
-use super::tree::{NodeRef, OcTree, TREE_DEPTH, WHITE};
+use super::tree::{NodeRef, OcTree, TREE_DEPTH, WHITE, digit_run};
 
 /// Most distinct values a node's set holds before the pass gives up and says the order may
 /// matter (under a pruned node every value is its value, after a hit or after a miss: 3).
@@ -138,22 +138,12 @@ struct Pass<'a> {
 impl Pass<'_> {
     /// OctoMap's early abort: an update of a node clamped in its direction changes nothing.
     fn at_clamp(&self, v: f32, hit: bool) -> bool {
-        let p = self.tree.params();
-        if hit {
-            v >= p.clamp_max_log
-        } else {
-            v <= p.clamp_min_log
-        }
+        self.tree.at_clamp(v, hit)
     }
 
-    /// A voxel's log-odds after update `u` from `v` (`updateNodeLogOdds` with its clamping).
+    /// A voxel's log-odds after update `u` from `v`, as the tree computes it.
     fn updated(&self, v: f32, u: &Upd) -> f32 {
-        if self.at_clamp(v, u.hit) {
-            return v;
-        }
-        let p = self.tree.params();
-        let nv = v + if u.hit { p.hit_log } else { p.miss_log };
-        nv.clamp(p.clamp_min_log, p.clamp_max_log)
+        self.tree.updated_log_odds(v, u.hit)
     }
 
     /// The node at `depth` (state `before`) with updates `ups` below it, all sharing its path.
@@ -170,23 +160,16 @@ impl Pass<'_> {
                 creates: false,
             });
         }
-        let shift = 3 * (TREE_DEPTH - 1 - depth);
-        let digit_of = |u: &Upd| ((u.code >> shift) & 7) as usize;
         let mut runs: [&[Upd]; 8] = [&[]; 8];
         let mut rest = ups;
         let mut next_digit = 0;
-        while let Some(first) = rest.first() {
-            let d = digit_of(first);
-            // Morton order: the digits ascend, each digit's updates in one run (found by
-            // bisection, as the tree's own pass finds them).
+        while !rest.is_empty() {
+            // Morton order: the digits ascend, each digit's updates in one run, found as the
+            // tree's own pass finds them.
+            let (d, n) = digit_run(rest, depth);
             if d < next_digit {
                 return Err(MayMatter);
             }
-            let n = if rest.last().is_some_and(|u| digit_of(u) == d) {
-                rest.len()
-            } else {
-                rest.partition_point(|u| digit_of(u) == d)
-            };
             let (run, tail) = rest.split_at(n);
             runs[d] = run;
             rest = tail;

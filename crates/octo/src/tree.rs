@@ -106,10 +106,6 @@ pub struct ScanUpdate {
     pub occupied_voxels: usize,
     /// Voxels whose state changed, in Morton order.
     pub changes: Vec<Change>,
-    /// Whether a coloured tree applied the scan's updates, or its hit cells', voxel by voxel
-    /// in OctoMap's `KeySet` order (the order could change its colours), rather than in one
-    /// pass in Morton order.
-    pub keyset_order: bool,
 }
 
 /// What one scan's structural pass found besides the occupancy flips: voxels whose colour may
@@ -301,7 +297,6 @@ impl OcTree {
             free_voxels: scan.free_voxels(),
             occupied_voxels: scan.occupied_voxels(),
             changes: Vec::new(),
-            keyset_order: false,
         };
         if scan.ups.is_empty() {
             return report;
@@ -327,7 +322,6 @@ impl OcTree {
             let (misses, hits): (Vec<Upd>, Vec<Upd>) = scan.ups.iter().partition(|u| !u.hit);
             if super::order::order_can_matter(self, &misses) {
                 let again = self.caster_mut().prepare_keyset_order(src);
-                report.keyset_order = true;
                 report.changes = self.apply_in_order(&again, created, log);
                 return report;
             }
@@ -337,11 +331,7 @@ impl OcTree {
                 created = false;
             }
             if super::order::order_can_matter(self, &hits) {
-                report.keyset_order = true;
-                for u in &src.hits_in_keyset_order() {
-                    self.update_voxel(u, created, &mut log);
-                    created = false;
-                }
+                self.update_voxels(&src.hits_in_keyset_order(), created, &mut log);
             } else if !hits.is_empty() {
                 self.apply(0, 0, 0, &hits, created, &mut log);
             }
@@ -351,7 +341,6 @@ impl OcTree {
             report.changes = self.color_pass(&scan.hits, log);
             return report;
         }
-        report.keyset_order = scan.octomap_order;
         report.changes = self.apply_in_order(scan, created, log);
         report
     }
@@ -363,15 +352,12 @@ impl OcTree {
         if ups.is_empty() {
             return Vec::new();
         }
-        let mut created = self.ensure_root();
+        let created = self.ensure_root();
         let mut log = PassLog::default();
         if one_pass {
             self.apply(0, 0, 0, ups, created, &mut log);
         } else {
-            for u in ups {
-                self.update_voxel(u, created, &mut log);
-                created = false;
-            }
+            self.update_voxels(ups, created, &mut log);
         }
         log.flips.sort_unstable_by_key(|c| c.code);
         self.color_pass(&[], log)
@@ -385,13 +371,19 @@ impl OcTree {
         created: bool,
         mut log: PassLog,
     ) -> Vec<Change> {
-        let mut created = created;
-        for u in &scan.ups {
-            self.update_voxel(u, created, &mut log);
-            created = false;
-        }
+        self.update_voxels(&scan.ups, created, &mut log);
         log.flips.sort_unstable_by_key(|c| c.code);
         self.color_pass(&scan.hits, log)
+    }
+
+    /// `ups` voxel by voxel in their order ([`OcTree::update_voxel`]); `created`: the root was
+    /// just created.
+    fn update_voxels(&mut self, ups: &[Upd], created: bool, log: &mut PassLog) {
+        let mut created = created;
+        for u in ups {
+            self.update_voxel(u, created, log);
+            created = false;
+        }
     }
 
     /// The colour calls after a scan's occupancy updates (`ColorOcTree`'s `search` and
@@ -502,11 +494,28 @@ impl OcTree {
     }
 
     /// OctoMap's early abort: a value already clamped in the update's direction stays as it is.
-    fn at_clamp(&self, v: f32, hit: bool) -> bool {
+    pub(crate) fn at_clamp(&self, v: f32, hit: bool) -> bool {
         if hit {
             v >= self.params.clamp_max_log
         } else {
             v <= self.params.clamp_min_log
+        }
+    }
+
+    /// A voxel's log-odds after a hit or a miss from `v` (`updateNodeLogOdds` with its
+    /// clamping; unchanged when already clamped in that direction).
+    pub(crate) fn updated_log_odds(&self, v: f32, hit: bool) -> f32 {
+        if self.at_clamp(v, hit) {
+            return v;
+        }
+        let p = self.params;
+        let nv = v + if hit { p.hit_log } else { p.miss_log };
+        if nv < p.clamp_min_log {
+            p.clamp_min_log
+        } else if nv > p.clamp_max_log {
+            p.clamp_max_log
+        } else {
+            nv
         }
     }
 
@@ -571,22 +580,9 @@ impl OcTree {
             }
         }
         let child_blk = self.children_block(blk, slot, !just_created);
-        let shift = 3 * (TREE_DEPTH - 1 - depth);
         let mut start = 0;
         while start < ups.len() {
-            let digit = ((ups[start].code >> shift) & 7) as usize;
-            // The updates are in Morton order, so this node's digits are ascending. Near the
-            // root the run of `digit` is the whole rest (one test); else it is found by a scan
-            // of a short rest, or by bisection of a long one.
-            let rest = &ups[start..];
-            let in_run = |u: &Upd| ((u.code >> shift) & 7) as usize == digit;
-            let run = if rest.last().is_some_and(in_run) {
-                rest.len()
-            } else if rest.len() <= SHORT_RUN_SCAN {
-                rest.iter().position(|u| !in_run(u)).unwrap_or(rest.len())
-            } else {
-                rest.partition_point(in_run)
-            };
+            let (digit, run) = digit_run(&ups[start..], depth);
             let end = start + run;
             let created = self.create_child(child_blk, digit);
             self.apply(child_blk, digit, depth + 1, &ups[start..end], created, log);
@@ -610,17 +606,8 @@ impl OcTree {
         log: &mut PassLog,
     ) {
         let v = self.blocks[blk as usize].value[slot];
-        let p = self.params;
         let was_occ = v >= 0.0;
-        let mut nv = v;
-        if !self.at_clamp(v, u.hit) {
-            nv = v + if u.hit { p.hit_log } else { p.miss_log };
-            if nv < p.clamp_min_log {
-                nv = p.clamp_min_log;
-            } else if nv > p.clamp_max_log {
-                nv = p.clamp_max_log;
-            }
-        }
+        let nv = self.updated_log_odds(v, u.hit);
         self.blocks[blk as usize].value[slot] = nv;
         let now_occ = nv >= 0.0;
         if just_created || was_occ != now_occ {
@@ -739,16 +726,30 @@ impl OcTree {
     /// The node that holds the voxel of Morton code `code` (depth-16 code) at `depth` or above
     /// (a pruned leaf), with its depth; `None` if that space is unknown.
     pub fn search(&self, code: u64, depth: u32) -> Option<(NodeRef, u32)> {
-        let mut r = self.root()?;
-        for d in 0..depth.min(TREE_DEPTH) {
+        self.descend(self.root()?, 0, code, depth, |_, _| {})
+    }
+
+    /// [`OcTree::search`] from node `r` at depth `from` on the way to voxel `code`: down to
+    /// `depth`, a pruned leaf, or unknown space (`None`); `visit` sees each node stepped into,
+    /// with its depth.
+    fn descend(
+        &self,
+        mut r: NodeRef,
+        from: u32,
+        code: u64,
+        depth: u32,
+        mut visit: impl FnMut(u32, NodeRef),
+    ) -> Option<(NodeRef, u32)> {
+        let depth = depth.min(TREE_DEPTH);
+        for d in from..depth {
             let digit = ((code >> (3 * (TREE_DEPTH - 1 - d))) & 7) as usize;
-            let c = self.blocks[r.blk as usize].child[r.slot as usize];
-            if c == NONE {
+            if self.blocks[r.blk as usize].child[r.slot as usize] == NONE {
                 return Some((r, d));
             }
             r = self.child(r, digit)?;
+            visit(d + 1, r);
         }
-        Some((r, depth.min(TREE_DEPTH)))
+        Some((r, depth))
     }
 
     /// Builds a tree from a pre-order node stream (the `.ot`/`.bt` readers): `visit` is called
@@ -1008,6 +1009,29 @@ impl OcTree {
     }
 }
 
+/// The digit at `depth` of the first of `rest` (updates in Morton order, all below one node at
+/// `depth`), and how many updates from the first share it.
+///
+/// The digits ascend, so the run is a prefix. Near the root it is the whole rest (one test);
+/// else it is found by a scan of a short rest, or by bisection of a long one.
+#[inline(always)]
+pub(crate) fn digit_run(rest: &[Upd], depth: u32) -> (usize, usize) {
+    let shift = 3 * (TREE_DEPTH - 1 - depth);
+    let digit_of = |u: &Upd| ((u.code >> shift) & 7) as usize;
+    let Some(digit) = rest.first().map(digit_of) else {
+        return (0, 0);
+    };
+    let in_run = |u: &Upd| digit_of(u) == digit;
+    let run = if rest.last().is_some_and(in_run) {
+        rest.len()
+    } else if rest.len() <= SHORT_RUN_SCAN {
+        rest.iter().position(|u| !in_run(u)).unwrap_or(rest.len())
+    } else {
+        rest.partition_point(in_run)
+    };
+    (digit, run)
+}
+
 /// [`OcTree::search`] for voxels mostly in ascending Morton order: each search starts from
 /// the deepest node the previous one shares with it, not from the root. Valid while the tree's
 /// structure does not change (colours and values may).
@@ -1034,22 +1058,17 @@ impl Descent {
         };
         self.prev = code;
         let start = shared.min(self.len.saturating_sub(1));
-        let (mut r, start) = match self.path[start].filter(|_| self.len > 0) {
+        let (r, start) = match self.path[start].filter(|_| self.len > 0) {
             Some(r) => (r, start),
             None => (t.root()?, 0),
         };
         self.path[start] = Some(r);
         self.len = start + 1;
-        for d in start..TREE_DEPTH as usize {
-            let digit = ((code >> (3 * (TREE_DEPTH as usize - 1 - d))) & 7) as usize;
-            if t.blocks[r.blk as usize].child[r.slot as usize] == NONE {
-                return Some((r, d as u32));
-            }
-            r = t.child(r, digit)?;
-            self.path[d + 1] = Some(r);
-            self.len = d + 2;
-        }
-        Some((r, TREE_DEPTH))
+        let (path, len) = (&mut self.path, &mut self.len);
+        t.descend(r, start as u32, code, TREE_DEPTH, |d, n| {
+            path[d as usize] = Some(n);
+            *len = d as usize + 1;
+        })
     }
 }
 
