@@ -103,7 +103,10 @@ pub(crate) struct Upd {
 /// A scan cast and ordered, ready for [`super::tree::OcTree::apply_scan`].
 #[derive(Debug, Clone, Default)]
 pub struct PreparedScan {
-    /// The updates, in the order the tree makes them.
+    /// The updates, in the order the tree makes them: in Morton order; a coloured scan's in
+    /// OctoMap's order ([`PreparedScan::octomap_order`]), or, cast in Morton order (with a
+    /// [`PreparedScan::source`]), its free cells then its hit cells (OctoMap's two phases),
+    /// each in Morton order.
     pub(crate) ups: Vec<Upd>,
     /// Each hit voxel once, in Morton order, with its brightest point's colour.
     pub(crate) hits: Vec<(u64, ColorSlot)>,
@@ -565,20 +568,31 @@ impl ScanCaster {
                     hits.union_with(h);
                 }
                 let (mut ups, mut hit_cells) = (Vec::new(), Vec::new());
-                free.merged_codes(hits, |code, hit| {
-                    ups.push(Upd { code, hit });
-                    if hit && colors.is_none() {
-                        hit_cells.push((code, NO_COLOR));
-                    }
-                });
                 let mut source = None;
-                if colors.is_some() {
+                if colors.is_none() {
+                    free.merged_codes(hits, |code, hit| {
+                        ups.push(Upd { code, hit });
+                        if hit {
+                            hit_cells.push((code, NO_COLOR));
+                        }
+                    });
+                } else {
+                    // The free cells, then the hit cells (OctoMap's two phases), each in
+                    // Morton order.
+                    free.merged_codes(hits, |code, hit| {
+                        if hit {
+                            hit_cells.push((code, NO_COLOR));
+                        } else {
+                            ups.push(Upd { code, hit });
+                        }
+                    });
+                    ups.extend(hit_cells.iter().map(|&(code, _)| Upd { code, hit: true }));
                     let mut src = ScanSource::default();
+                    let mut index = VoxelIndex::new(&hit_cells);
                     for part in parts {
-                        hit_cells.extend(part.occ);
+                        index.keep_brightest(&mut hit_cells, &part.occ);
                         src.hit_points.extend(part.points);
                     }
-                    brightest_per_voxel(&mut hit_cells);
                     source = Some(Box::new(src));
                 }
                 Lanes::Done(PreparedScan {
@@ -1114,6 +1128,59 @@ fn brightest_per_voxel(occ: &mut Vec<(u64, ColorSlot)>) {
     occ.truncate(kept);
 }
 
+/// Where each voxel of a list of distinct voxels is in it: an open-addressing table of
+/// positions, keyed by Morton code.
+struct VoxelIndex {
+    /// Positions in the list, plus one (0: empty), at each code's hash and the slots after it.
+    slots: Vec<u32>,
+    /// The table's size less one (a power of two less one).
+    mask: usize,
+}
+
+impl VoxelIndex {
+    /// The index of `cells` (distinct codes; fewer than `u32::MAX`).
+    fn new(cells: &[(u64, ColorSlot)]) -> Self {
+        let size = (2 * cells.len()).next_power_of_two().max(16);
+        let mut index = VoxelIndex {
+            slots: vec![0; size],
+            mask: size - 1,
+        };
+        for (i, &(code, _)) in cells.iter().enumerate() {
+            let mut h = index.hash(code);
+            while index.slots[h] != 0 {
+                h = (h + 1) & index.mask;
+            }
+            index.slots[h] = i as u32 + 1;
+        }
+        index
+    }
+
+    /// The table slot a code's search starts at.
+    #[inline(always)]
+    fn hash(&self, code: u64) -> usize {
+        (code.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 32) as usize & self.mask
+    }
+
+    /// Each hit of `occ` (a voxel of `cells`, and its point's colour) gives its voxel its
+    /// colour if it is brighter ([`slot_order`]) than the voxel's so far: the brightest colour
+    /// per voxel whatever the hits' order (as [`brightest_per_voxel`], without sorting them).
+    /// A hit whose voxel is not in `cells` (none is) is left out.
+    fn keep_brightest(&mut self, cells: &mut [(u64, ColorSlot)], occ: &[(u64, ColorSlot)]) {
+        for &(code, color) in occ {
+            let mut h = self.hash(code);
+            while let Some(i) = (self.slots[h] as usize).checked_sub(1) {
+                if let Some(cell) = cells.get_mut(i).filter(|c| c.0 == code) {
+                    if slot_order(color) > slot_order(cell.1) {
+                        cell.1 = color;
+                    }
+                    break;
+                }
+                h = (h + 1) & self.mask;
+            }
+        }
+    }
+}
+
 /// Merges ascending lists into one ascending list without duplicates.
 fn merge_sorted(mut lists: Vec<Vec<u64>>) -> Vec<u64> {
     while lists.len() > 1 {
@@ -1207,6 +1274,30 @@ mod tests {
         }
     }
 
+    proptest::proptest! {
+        /// The index keeps each voxel's brightest colour as sorting the hits does, whatever
+        /// the hits' order and split, with colliding codes, unset and tied colours.
+        #[test]
+        fn the_voxel_index_keeps_the_brightest_colour_as_sorting_does(
+            hits in proptest::collection::vec((0u64..300, 0usize..5), 1..600),
+            cut in 0usize..600,
+        ) {
+            let palette = [[10, 20, 30], [255, 255, 255], [200, 0, 0], [0, 200, 0], [10, 20, 30]];
+            let occ: Vec<(u64, ColorSlot)> = hits
+                .iter()
+                .map(|&(v, c)| (v << 9, color_slot(Some(palette[c]))))
+                .collect();
+            let mut want = occ.clone();
+            brightest_per_voxel(&mut want);
+            let mut cells: Vec<(u64, ColorSlot)> = want.iter().map(|&(c, _)| (c, NO_COLOR)).collect();
+            let (a, b) = occ.split_at(cut.min(occ.len()));
+            let mut index = VoxelIndex::new(&cells);
+            index.keep_brightest(&mut cells, b);
+            index.keep_brightest(&mut cells, a);
+            proptest::prop_assert_eq!(cells, want);
+        }
+    }
+
     /// A coloured scan cast in Morton order (on one and on three threads) holds the same
     /// updates and brightest colours as the scan cast in OctoMap's order, and its source casts
     /// it again in that order exactly; the hit cells in OctoMap's order are the occupied
@@ -1233,9 +1324,11 @@ mod tests {
                     continue;
                 };
                 assert!(!fast.octomap_order);
+                // The free cells, then the hit cells, each in Morton order.
                 let mut ups = want.ups.clone();
-                ups.sort_unstable_by_key(|u| u.code);
+                ups.sort_unstable_by_key(|u| (u.hit, u.code));
                 assert_eq!(fast.ups, ups, "scan {n}, range {range:?}");
+                assert_eq!(fast.free_voxels(), ups.iter().filter(|u| !u.hit).count());
                 assert_eq!(fast.hits, want.hits);
                 assert_eq!(fast.points_skipped, want.points_skipped);
                 assert_eq!(fast.points_beyond_range, want.points_beyond_range);

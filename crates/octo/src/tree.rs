@@ -304,7 +304,7 @@ impl OcTree {
         let created = self.ensure_root();
         let mut log = PassLog::default();
         if self.colors.is_none() {
-            if scan.octomap_order {
+            if scan.octomap_order || scan.source.is_some() {
                 let mut ups = scan.ups.clone();
                 ups.sort_unstable_by_key(|u| u.code);
                 self.apply(0, 0, 0, &ups, created, &mut log);
@@ -319,21 +319,21 @@ impl OcTree {
             // hit cells (its occupied `KeySet`): each part in Morton order when its order
             // cannot matter. The hit cells' order is cheap to find (the points' end cells, in
             // the points' order); the free cells' needs every ray walked again.
-            let (misses, hits): (Vec<Upd>, Vec<Upd>) = scan.ups.iter().partition(|u| !u.hit);
-            if super::order::order_can_matter(self, &misses) {
+            let (misses, hits) = scan.ups.split_at(scan.free_voxels());
+            if super::order::order_can_matter(self, misses) {
                 let again = self.caster_mut().prepare_keyset_order(src);
                 report.changes = self.apply_in_order(&again, created, log);
                 return report;
             }
             let mut created = created;
             if !misses.is_empty() {
-                self.apply(0, 0, 0, &misses, created, &mut log);
+                self.apply(0, 0, 0, misses, created, &mut log);
                 created = false;
             }
-            if super::order::order_can_matter(self, &hits) {
+            if super::order::order_can_matter(self, hits) {
                 self.update_voxels(&src.hits_in_keyset_order(), created, &mut log);
             } else if !hits.is_empty() {
-                self.apply(0, 0, 0, &hits, created, &mut log);
+                self.apply(0, 0, 0, hits, created, &mut log);
             }
             // Two ascending runs (the free cells', the hit cells' unless in `KeySet` order): the
             // stable sort finds and merges them.
