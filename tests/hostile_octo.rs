@@ -177,6 +177,11 @@ fn every_numeric_flag_at_bad_values_is_refused_with_its_range() {
             vec!["0", "65", "18446744073709551616"],
         ),
         (
+            build.to_vec(),
+            "--max-cells",
+            vec!["0", "1099511627777", "18446744073709551616"],
+        ),
+        (
             [&build[..], &link[..]].concat(),
             "--scan-period",
             vec!["1e6"],
@@ -241,11 +246,66 @@ fn every_numeric_flag_at_bad_values_is_refused_with_its_range() {
         ("--max-range", "100000"),
         ("--coarse-depth", "1"),
         ("--threads", "64"),
+        ("--max-cells", "1099511627776"),
     ] {
         let mut args = build.to_vec();
         args.extend([flag, value, "-q"]);
         ok(&octo(dir.path(), &args), &format!("{flag} {value}"));
     }
+}
+
+/// A resolution far too fine for the scans' range (0.1 mm over metres: hundreds of millions of
+/// cells a scan) is refused before any ray is cast, with one line naming the scan, its cells,
+/// --res and --max-cells, and no output: before, it took every byte of memory (24 GB) until
+/// the kernel killed it. On 1 and on 3 threads, coloured and plain (the live mapper's own test
+/// is `a_scan_over_the_cell_budget_is_an_error_and_leaves_the_map_as_it_was`); --max-cells below a sane scan's count refuses it as well, and above it builds.
+#[test]
+fn a_resolution_too_fine_for_the_range_is_refused_before_memory_runs_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(
+        &octo(d, &["synth", "--scans", "2", "-o", "s.graph"]),
+        "synth graph",
+    );
+    ok(
+        &octo(d, &["synth", "--scans", "2", "-o", "s.mcap"]),
+        "synth mcap",
+    );
+    for input in ["s.graph", "s.mcap"] {
+        for threads in ["1", "3"] {
+            let what = format!("{input} --res 0.0001 --threads {threads}");
+            let args = ["build", input, "--res", "0.0001", "--threads", threads];
+            let run = octo(d, &[&args[..], &["-o", "out", "--ot", "out.ot"]].concat());
+            refused(&run, "--max-cells", &what);
+            assert!(
+                run.stderr.contains("scan 0: ") && run.stderr.contains("--res 0.0001 m"),
+                "{what}: {:?}",
+                run.stderr
+            );
+            assert!(
+                !d.join("out").exists() && !d.join("out.ot").exists(),
+                "{what}: left output"
+            );
+        }
+    }
+    // The budget is the flag's: a sane scan's bound (about 8e5 cells at 0.1 m) over a low one.
+    let low = octo(d, &["build", "s.graph", "--max-cells", "1000", "-o", "out"]);
+    refused(&low, "more than the 1000 a scan may", "--max-cells 1000");
+    ok(
+        &octo(
+            d,
+            &[
+                "build",
+                "s.graph",
+                "--max-cells",
+                "5000000",
+                "-q",
+                "-o",
+                "out",
+            ],
+        ),
+        "--max-cells 5000000",
+    );
 }
 
 #[test]

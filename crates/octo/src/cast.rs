@@ -190,6 +190,19 @@ pub struct ScanCaster {
     /// A coloured scan's cells and the first ray that crossed each, when the scan's box is
     /// small enough.
     first_ray: FirstRay,
+    /// Most cells a scan's rays may cross ([`ScanCaster::set_max_cells`]).
+    max_cells: u64,
+}
+
+/// A scan whose rays may cross more cells than the caster's budget
+/// ([`ScanCaster::set_max_cells`]): casting it could exhaust memory.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("its rays may cross up to {cells} cells, more than the {max} a scan may")]
+pub struct TooManyCells {
+    /// The bound on the cells the scan's rays cross ([`ScanCaster::cells_bound`]).
+    pub cells: u64,
+    /// The budget.
+    pub max: u64,
 }
 
 impl std::fmt::Debug for ScanCaster {
@@ -220,7 +233,42 @@ impl ScanCaster {
             window: ([0; 3], [0; 3]),
             boxes: Vec::new(),
             first_ray: FirstRay::default(),
+            max_cells: u64::MAX,
         }
+    }
+
+    /// Sets the most cells one scan's rays may cross, counted before casting as
+    /// [`ScanCaster::cells_bound`] does: a scan over it is refused ([`TooManyCells`]) rather
+    /// than cast (its cell sets and the voxels it adds grow with that count). No limit unless
+    /// set.
+    pub fn set_max_cells(&mut self, max_cells: u64) {
+        self.max_cells = max_cells;
+    }
+
+    /// The most cells one scan's rays may cross ([`ScanCaster::set_max_cells`]).
+    pub fn max_cells(&self) -> u64 {
+        self.max_cells
+    }
+
+    /// An upper bound on the cells the rays of a scan (its points in the map frame, from
+    /// `origin`) cross, each ray cut at `max_range_m` as casting cuts it: a ray's walk takes at
+    /// most as many steps as its end cell's key differs from its start cell's along the three
+    /// axes, plus three (the walk's own bound), so it crosses at most that plus one cell, and
+    /// its end cell one more. Points that get no ray (not finite, or an end outside the key
+    /// range) count nothing.
+    pub fn cells_bound(&self, pts: &[[f32; 3]], origin: [f32; 3], max_range_m: Option<f64>) -> u64 {
+        let Some(ko) = self.grid.key_of(origin) else {
+            return 0;
+        };
+        pts.iter()
+            .filter_map(|&p| self.ray_end(p, origin, max_range_m)?.end_key)
+            .map(|ke| {
+                (0..3)
+                    .map(|i| u64::from(ko[i].abs_diff(ke[i])))
+                    .sum::<u64>()
+                    + 5
+            })
+            .sum()
     }
 
     /// Threads a scan is cast on, at most.
@@ -239,15 +287,38 @@ impl ScanCaster {
     }
 
     /// Casts `scan` as `graph2tree` does (`insertPointCloud` with the scan's pose, no lazy
-    /// evaluation, no discretisation), with an optional maximum range; `None` when `stop` is
-    /// set before its rays are cast (checked every few thousand points).
+    /// evaluation, no discretisation), with an optional maximum range; `Ok(None)` when `stop`
+    /// is set before its rays are cast (checked every few thousand points); [`TooManyCells`],
+    /// before any is cast, when its rays may cross more cells than the budget
+    /// ([`ScanCaster::set_max_cells`]).
     pub fn prepare(
         &mut self,
         scan: &Scan,
         max_range_m: Option<f64>,
         stop: &AtomicBool,
-    ) -> Option<PreparedScan> {
+    ) -> Result<Option<PreparedScan>, TooManyCells> {
         let (pts, origin) = world_points(scan);
+        if self.max_cells < u64::MAX {
+            let cells = self.cells_bound(&pts, origin, max_range_m);
+            if cells > self.max_cells {
+                return Err(TooManyCells {
+                    cells,
+                    max: self.max_cells,
+                });
+            }
+        }
+        Ok(self.prepare_points(scan, pts, origin, max_range_m, stop))
+    }
+
+    /// [`ScanCaster::prepare`]'s casting, of the scan's points in the map frame.
+    fn prepare_points(
+        &mut self,
+        scan: &Scan,
+        pts: Vec<[f32; 3]>,
+        origin: [f32; 3],
+        max_range_m: Option<f64>,
+        stop: &AtomicBool,
+    ) -> Option<PreparedScan> {
         self.window = key_box(&self.grid, origin, &pts);
         let colors = if self.colored {
             scan.colors.as_deref()
@@ -1275,6 +1346,41 @@ mod tests {
     }
 
     proptest::proptest! {
+        /// The cell bound is at least the cells a scan's rays cross (with and without a
+        /// maximum range, whatever the resolution), and the budget refuses a scan exactly when
+        /// the bound is over it, before casting.
+        #[test]
+        fn the_cell_bound_holds_and_the_budget_refuses_over_it(
+            pts in proptest::collection::vec(
+                proptest::array::uniform3(-30.0f32..30.0), 1..60),
+            origin in proptest::array::uniform3(-2.0f32..2.0),
+            res in proptest::sample::select(vec![0.05, 0.1, 0.37, 1.0]),
+            range in proptest::option::of(0.5f64..20.0),
+            colored in proptest::bool::ANY,
+        ) {
+            let scan = Scan {
+                colors: colored.then(|| vec![[10, 20, 30]; pts.len()]),
+                points: pts,
+                pose: crate::Pose {
+                    translation_m: origin,
+                    ..crate::Pose::IDENTITY
+                },
+            };
+            let stop = AtomicBool::new(false);
+            let mut c = ScanCaster::new(res, colored, 1);
+            let (world, o) = world_points(&scan);
+            let bound = c.cells_bound(&world, o, range);
+            let cast = c.prepare(&scan, range, &stop).ok().flatten().expect("cast");
+            proptest::prop_assert!(cast.ups.len() as u64 <= bound, "{} > {bound}", cast.ups.len());
+            c.set_max_cells(bound);
+            proptest::prop_assert!(c.prepare(&scan, range, &stop).is_ok());
+            c.set_max_cells(bound - 1);
+            proptest::prop_assert_eq!(
+                c.prepare(&scan, range, &stop).err(),
+                Some(TooManyCells { cells: bound, max: bound - 1 })
+            );
+        }
+
         /// The index keeps each voxel's brightest colour as sorting the hits does, whatever
         /// the hits' order and split, with colliding codes, unset and tied colours.
         #[test]
@@ -1308,7 +1414,7 @@ mod tests {
         for (n, scan) in odd_scans(4).iter().enumerate() {
             for (range, threads) in [(None, 1), (Some(2.5), 1), (None, 3)] {
                 let mut c = ScanCaster::new(0.1, true, threads);
-                let Some(fast) = c.prepare(scan, range, &stop) else {
+                let Ok(Some(fast)) = c.prepare(scan, range, &stop) else {
                     panic!("stopped")
                 };
                 let (pts, origin) = world_points(scan);
@@ -1359,7 +1465,11 @@ mod tests {
                 assert!(want.ups.len() > 1000);
                 for threads in [1, 3] {
                     let mut lanes = ScanCaster::new(0.1, false, threads);
-                    let got = lanes.prepare(scan, range, &stop).expect("not stopped");
+                    let got = lanes
+                        .prepare(scan, range, &stop)
+                        .ok()
+                        .flatten()
+                        .expect("not stopped");
                     assert_eq!(got.ups, want.ups, "{threads} threads, range {range:?}");
                     assert_eq!(got.hits, want.hits);
                     assert_eq!(got.points_skipped, want.points_skipped);

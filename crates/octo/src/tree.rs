@@ -245,11 +245,13 @@ impl OcTree {
     /// A caster for this tree's scans (its resolution, kind and threads), to cast them on
     /// another thread ([`ScanCaster::prepare`]) and apply them here ([`OcTree::apply_scan`]).
     pub fn caster(&self) -> ScanCaster {
-        ScanCaster::new(
+        let mut c = ScanCaster::new(
             self.resolution_m(),
             self.is_colored(),
             self.caster.threads(),
-        )
+        );
+        c.set_max_cells(self.caster.max_cells());
+        c
     }
 
     /// The tree's own caster (what [`insert_scan`](Self::insert_scan) casts with), its kind
@@ -278,7 +280,7 @@ impl OcTree {
         max_range_m: Option<f64>,
         stop: &AtomicBool,
     ) -> Option<ScanUpdate> {
-        let prepared = self.caster_mut().prepare(scan, max_range_m, stop)?;
+        let prepared = self.caster_mut().prepare(scan, max_range_m, stop).ok()??;
         Some(self.apply_scan(&prepared))
     }
 

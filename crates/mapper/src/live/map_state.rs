@@ -18,7 +18,7 @@ use rovlink_octo::region::{self, Selection};
 use rovlink_octo::tree::{OcTree, ScanUpdate};
 use rovlink_octo::{Pose, Scan};
 
-use crate::pipeline::{BuildConfig, check_roi};
+use crate::pipeline::{BuildConfig, PipelineError, check_roi};
 
 /// Bytes of a pose record: kind, scan, arrival time (f64 s since the Unix epoch), x, y, z and
 /// the quaternion w, x, y, z (f32).
@@ -125,23 +125,34 @@ impl MapState {
     }
 
     /// Inserts a scan as `build` does and makes its delta message (applied to the mirror);
-    /// `None` when `stop` ended its casting.
+    /// `None` when `stop` ended its casting; an error, the map unchanged, when its rays may
+    /// cross more cells than [`BuildConfig::max_cells_per_scan`].
     pub fn insert(
         &mut self,
         scan: &Scan,
         stop: &std::sync::atomic::AtomicBool,
-    ) -> Option<Inserted> {
+    ) -> Result<Option<Inserted>, PipelineError> {
         let (res, no_color) = (self.cfg.resolution_m, self.cfg.no_color);
+        let max_cells = self.cfg.max_cells_per_scan;
         let tree = self.tree.get_or_insert_with(|| {
             let mut t = OcTree::new(res);
             if scan.colors.is_some() && !no_color {
                 t.enable_color();
             }
+            t.caster_mut().set_max_cells(max_cells);
             t
         });
         let prepared = tree
             .caster_mut()
-            .prepare(scan, self.cfg.max_range_m, stop)?;
+            .prepare(scan, self.cfg.max_range_m, stop)
+            .map_err(|source| PipelineError::TooManyCells {
+                scan: self.scans,
+                resolution_m: res,
+                source,
+            })?;
+        let Some(prepared) = prepared else {
+            return Ok(None);
+        };
         let update = tree.apply_scan(&prepared);
         let d = self.sender.delta(tree, &update.changes);
         let message = delta::encode_delta(&self.spec, self.scans, &d);
@@ -150,7 +161,7 @@ impl MapState {
             delta: d,
         });
         self.scans += 1;
-        Some(Inserted { message, update })
+        Ok(Some(Inserted { message, update }))
     }
 
     /// The scan number messages made now carry: the last scan inserted.
@@ -308,6 +319,35 @@ mod tests {
         rx.unwrap()
     }
 
+    /// The live mapper refuses a scan over the cell budget as `build` does, before casting it:
+    /// an error naming the scan, the map and the scan count as they were.
+    #[test]
+    fn a_scan_over_the_cell_budget_is_an_error_and_leaves_the_map_as_it_was() {
+        let scans = survey(&SurveyParams {
+            scans: 1,
+            ..SurveyParams::default()
+        });
+        let stop = AtomicBool::new(false);
+        let cfg = BuildConfig {
+            max_cells_per_scan: 1000,
+            ..BuildConfig::default()
+        };
+        let mut m = MapState::new(&cfg).unwrap();
+        match m.insert(&scans[0], &stop) {
+            Err(PipelineError::TooManyCells {
+                scan: 0, source, ..
+            }) => {
+                assert_eq!(source.max, 1000);
+                assert!(source.cells > 1000, "{source:?}");
+            }
+            other => panic!("{:?}", other.map(|o| o.is_some())),
+        }
+        assert_eq!(m.scans, 0);
+        assert_eq!(m.tree().num_nodes(), 0);
+        let mut fine = MapState::new(&BuildConfig::default()).unwrap();
+        assert!(fine.insert(&scans[0], &stop).unwrap().is_some());
+    }
+
     #[test]
     fn every_answer_keeps_the_view_and_the_mirror_equal() {
         let params = SurveyParams {
@@ -330,7 +370,7 @@ mod tests {
             &|m| m.full(),
         ];
         for (k, scan) in scans.iter().enumerate() {
-            let done = m.insert(scan, &stop).unwrap();
+            let done = m.insert(scan, &stop).unwrap().unwrap();
             records.push(record(RECORD_MESSAGE, &done.message));
             if k % 2 == 1 {
                 match answers[k / 2 % answers.len()](&mut m) {

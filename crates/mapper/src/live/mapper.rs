@@ -260,7 +260,7 @@ fn serve(
         match event {
             MapperEvent::Scan(scan, at) => {
                 let first = *first_arrival.get_or_insert(at);
-                let Some(done) = state.insert(&scan, stop) else {
+                let Some(done) = state.insert(&scan, stop)? else {
                     run.interrupted = true;
                     return Ok(());
                 };

@@ -16,7 +16,7 @@ use super::reading::{Reading, count_skipped, read_inputs};
 use super::{BuildConfig, PipelineError};
 use rovlink_base::io::IoError;
 use rovlink_octo::Scan;
-use rovlink_octo::cast::{PreparedScan, ScanCaster};
+use rovlink_octo::cast::{PreparedScan, ScanCaster, TooManyCells};
 use rovlink_octo::delta::{self, Sender, ViewSpec};
 use rovlink_octo::tree::OcTree;
 use rovlink_octo::{files, transfer};
@@ -286,11 +286,14 @@ enum Event {
     /// From the reading thread, in the order read.
     Read(Reading),
     /// A scan cast (by its number; `None`: the stop flag ended its casting, or its thread
-    /// failed), and how long casting it took, s.
-    Cast(usize, Option<PreparedScan>, f64),
+    /// failed; an error: it would cross too many cells), and how long casting it took, s.
+    Cast(usize, Casting, f64),
     /// The reading ended: stopped (true) or done (false), or an input failed.
     Ended(Result<bool, PipelineError>),
 }
+
+/// What casting a scan gave ([`ScanCaster::prepare`]).
+type Casting = Result<Option<PreparedScan>, TooManyCells>;
 
 /// The threads that cast the next scans while the build's loop applies the last one: scans in,
 /// each taken by the first thread free, each cast scan sent back to the loop as an
@@ -299,7 +302,7 @@ struct CastThreads {
     /// The scans to cast, numbered.
     scans: mpsc::Sender<(usize, Scan)>,
     /// Scans cast before an earlier one, by number.
-    early: BTreeMap<usize, (Option<PreparedScan>, f64)>,
+    early: BTreeMap<usize, (Casting, f64)>,
     /// Scans sent so far.
     sent: usize,
     /// Cast scans applied (or dropped) so far: the number of the next one to apply.
@@ -341,7 +344,7 @@ impl CastThreads {
                     let failed = cast.is_err();
                     let cast_s = t0.elapsed().as_secs_f64();
                     if events
-                        .send(Event::Cast(i, cast.ok().flatten(), cast_s))
+                        .send(Event::Cast(i, cast.unwrap_or(Ok(None)), cast_s))
                         .is_err()
                         || failed
                     {
@@ -371,7 +374,7 @@ impl CastThreads {
     }
 
     /// The next scan to apply, in the order sent, if it is cast.
-    fn next_ready(&mut self) -> Option<(Option<PreparedScan>, f64)> {
+    fn next_ready(&mut self) -> Option<(Casting, f64)> {
         let next = self.early.remove(&self.applied)?;
         self.applied += 1;
         Some(next)
@@ -569,12 +572,14 @@ impl Run<'_, '_> {
             if scan.colors.is_some() && !cfg.no_color {
                 t.enable_color();
             }
+            t.caster_mut().set_max_cells(cfg.max_cells_per_scan);
             t
         });
         if self.threads <= 1 {
             let t0 = Instant::now();
             let prepared = tree.caster_mut().prepare(&scan, cfg.max_range_m, stop);
             let cast_s = t0.elapsed().as_secs_f64();
+            let prepared = cells_checked(cfg, self.report, prepared)?;
             let done = self
                 .out
                 .emit(tree, prepared, cast_s, self.report, hooks, self.known)?;
@@ -611,6 +616,7 @@ impl Run<'_, '_> {
                 self.report.interrupted = true;
                 return Ok(false);
             }
+            let prepared = cells_checked(self.cfg, self.report, prepared)?;
             if !self
                 .out
                 .emit(tree, prepared, cast_s, self.report, hooks, self.known)?
@@ -621,6 +627,20 @@ impl Run<'_, '_> {
         }
         Ok(true)
     }
+}
+
+/// A scan as cast, or the build's error when it would cross too many cells (the scan the
+/// next to go into the map).
+fn cells_checked(
+    cfg: &BuildConfig,
+    report: &BuildReport,
+    cast: Casting,
+) -> Result<Option<PreparedScan>, PipelineError> {
+    cast.map_err(|source| PipelineError::TooManyCells {
+        scan: report.scans,
+        resolution_m: cfg.resolution_m,
+        source,
+    })
 }
 
 /// One row of `--arrivals`: when a scan's message reached the operator over the link.

@@ -19,6 +19,11 @@ pub const MAX_RANGE_M: f64 = 1e5;
 pub const COORDINATE_MAX_M: f64 = 1e7;
 /// Most threads casting rays.
 pub const THREADS_MAX: usize = 64;
+/// The most cells one scan's rays may cross by default (`--max-cells`): 2^28, a few GiB of
+/// cell sets and new voxels at worst. A real sensor at a sane resolution stays far below it
+/// (12 288 rays of 20 m at 0.1 m: about 4 M); a resolution far too fine for the scans' range
+/// (0.1 mm over metres) would exhaust any machine's memory.
+pub const CELLS_PER_SCAN_DEFAULT: u64 = 1 << 28;
 /// Largest `--coarse-res` as a multiple of the resolution (coarse depth 1).
 pub const COARSE_FACTOR_MAX: f64 = 32768.0;
 
@@ -123,6 +128,10 @@ pub struct BuildConfig {
     pub color_updates: bool,
     /// Threads casting rays (1 ..= [`THREADS_MAX`]); `None`: the machine's cores, at most 8.
     pub threads: Option<usize>,
+    /// Most cells one scan's rays may cross (at least 1; counted before casting, as
+    /// [`rovlink_octo::cast::ScanCaster::cells_bound`]): a scan over it fails the build
+    /// ([`super::PipelineError::TooManyCells`]) rather than exhaust memory.
+    pub max_cells_per_scan: u64,
     /// How `ros2:TOPIC` inputs join the graph.
     pub ros2: super::ros2_input::Ros2Input,
     /// Read bags in one pass ([`rovlink_scans::recording::one_pass`]): only for a caller that
@@ -145,6 +154,7 @@ impl Default for BuildConfig {
             no_color: false,
             color_updates: false,
             threads: None,
+            max_cells_per_scan: CELLS_PER_SCAN_DEFAULT,
             ros2: super::ros2_input::Ros2Input::default(),
             one_pass_bags: false,
         }
@@ -173,6 +183,9 @@ impl BuildConfig {
                 format!("coordinates within +-{COORDINATE_MAX_M} m"),
                 format!("{o:?}"),
             ));
+        }
+        if self.max_cells_per_scan == 0 {
+            return Err(ConfigError::new("--max-cells", "at least 1 cell", 0));
         }
         if let Some(t) = self.threads
             && !(1..=THREADS_MAX).contains(&t)

@@ -32,9 +32,9 @@ pub use builder::{
 };
 pub use commands::{DumpFormat, apply, dump, full, read_stream, synth};
 pub use config::{
-    BuildConfig, COARSE_FACTOR_MAX, COORDINATE_MAX_M, Coarse, ConfigError, MAX_RANGE_M,
-    RESOLUTION_MAX_M, RESOLUTION_MIN_M, THREADS_MAX, check_range, check_roi, check_scan_period,
-    shown, view_spec,
+    BuildConfig, CELLS_PER_SCAN_DEFAULT, COARSE_FACTOR_MAX, COORDINATE_MAX_M, Coarse, ConfigError,
+    MAX_RANGE_M, RESOLUTION_MAX_M, RESOLUTION_MIN_M, THREADS_MAX, check_range, check_roi,
+    check_scan_period, shown, view_spec,
 };
 pub use inputs::{InputFormat, MAX_INPUT_BYTES, input_files, read_input, read_limited};
 pub use reading::{FOLLOW_POLL, Reading, count_skipped, read_inputs};
@@ -89,6 +89,19 @@ pub enum PipelineError {
         skipped: u64,
         /// Why the first one was.
         reason: String,
+    },
+    /// A scan whose rays may cross more cells than [`BuildConfig::max_cells_per_scan`].
+    #[error(
+        "scan {scan}: {source} (--max-cells) at --res {resolution_m} m: use a coarser --res, \
+         a --max-range, or a larger --max-cells"
+    )]
+    TooManyCells {
+        /// The scan's number (0: the first).
+        scan: u32,
+        /// The map's voxel edge, m.
+        resolution_m: f64,
+        /// The bound and the budget.
+        source: rovlink_octo::cast::TooManyCells,
     },
     /// Reading an input or writing an output failed.
     #[error(transparent)]

@@ -7,8 +7,8 @@ use rovlink_cli::value::{self, MAX_COUNT};
 use rovlink_link::device::DeviceSpec;
 use rovlink_mapper::pipeline::ros2_input::Ros2Input;
 use rovlink_mapper::pipeline::{
-    BuildConfig, COARSE_FACTOR_MAX, COORDINATE_MAX_M, Coarse, DumpFormat, InputFormat, MAX_RANGE_M,
-    RESOLUTION_MAX_M, RESOLUTION_MIN_M, THREADS_MAX,
+    BuildConfig, CELLS_PER_SCAN_DEFAULT, COARSE_FACTOR_MAX, COORDINATE_MAX_M, Coarse, DumpFormat,
+    InputFormat, MAX_RANGE_M, RESOLUTION_MAX_M, RESOLUTION_MIN_M, THREADS_MAX,
 };
 use rovlink_octo::delta::Roi;
 use rovlink_octo::{synth, transfer};
@@ -195,6 +195,17 @@ pub struct MapConfigArgs {
         min: 1, max: THREADS_MAX as u64, unit: "threads" }, allow_hyphen_values = true)]
     pub threads: Option<u64>,
 
+    /// Most cells one scan's rays may cross, counted before casting from the points'
+    /// distances to the sensor and --res (with --max-range): a scan over it stops the build
+    /// (exit 2, its cells named) rather than exhaust memory. The default, 2^28, is a few GiB of
+    /// cell sets and new voxels at worst; a real sensor at a sane resolution stays far below
+    /// it (12 288 rays of 20 m at 0.1 m: about 4 M), a resolution too fine for the range
+    /// (0.1 mm over metres) does not.
+    #[arg(long, value_name = "N", default_value_t = CELLS_PER_SCAN_DEFAULT,
+          value_parser = value::CountParser { min: 1, max: 1 << 40, unit: "cells" },
+          allow_hyphen_values = true)]
+    pub max_cells: u64,
+
     /// ros2: inputs: the DDS domain to join [default: ROS_DOMAIN_ID, else 0].
     #[arg(long, value_name = "ID", value_parser = value::count(0, rovlink_ros2::names::MAX_DOMAIN_ID as u64))]
     pub ros2_domain: Option<u64>,
@@ -243,6 +254,7 @@ impl MapConfigArgs {
             no_color: self.no_color,
             color_updates: self.color_updates,
             threads: self.threads.map(|t| t as usize),
+            max_cells_per_scan: self.max_cells,
             ros2: Ros2Input {
                 domain: self.ros2_domain.map(|d| d as u16),
                 reliability: rovlink_ros2::Reliability::from_name(&self.ros2_reliability)
