@@ -279,27 +279,40 @@ impl Pass<'_> {
             next_digit = d + 1;
         }
         let creates = (0..8).any(|i| pre[i].is_none() && up[i].is_some());
-        let mut shared: Option<Values> = None;
-        for i in 0..8 {
-            let values = match (pre[i], up[i]) {
-                (None, None) => Values::default(),
-                (Some(a), None) => Values::one(a),
-                (None, Some(u)) => Values::one(self.updated(0.0, &u)),
-                (Some(a), Some(u)) => {
-                    let mut v = Values::one(a);
-                    v.add(self.updated(a, &u))?;
-                    v
-                }
-            };
-            let s = shared.map_or(values, |s| s.intersect(&values));
-            shared = Some(s);
-            if s.len == 0 {
+        // The values all eight may share, as bits: those of the first voxel (at most two: its
+        // value before and after its update), kept while every other voxel may hold them.
+        // Plain integers in registers: building a set per voxel and intersecting sets went
+        // through memory, partly written and then read whole (a stall per voxel).
+        let may_hold = |i: usize| -> [Option<u32>; 2] {
+            match (pre[i], up[i]) {
+                (None, None) => [None, None],
+                (Some(a), None) => [Some(a.to_bits()), None],
+                (None, Some(u)) => [Some(self.updated(0.0, &u).to_bits()), None],
+                (Some(a), Some(u)) => [Some(a.to_bits()), Some(self.updated(a, &u).to_bits())],
+            }
+        };
+        let mut shared = may_hold(0);
+        if shared[0] == shared[1] {
+            shared[1] = None;
+        }
+        for i in 1..8 {
+            if shared == [None, None] {
                 // No value all eight may share: this node is never pruned in the scan.
                 break;
             }
+            let held = may_hold(i);
+            for c in &mut shared {
+                if c.is_some() && !held.contains(c) {
+                    *c = None;
+                }
+            }
+        }
+        let mut values = Values::default();
+        for v in shared.into_iter().flatten() {
+            values.add(f32::from_bits(v))?;
         }
         // A voxel holds `v` with its update to come only if it held `v` before.
-        self.judge(before, creates, shared.unwrap_or_default(), |v| {
+        self.judge(before, creates, values, |v| {
             (0..8).any(|i| {
                 pre[i].is_some_and(|a| a.to_bits() == v.to_bits())
                     && up[i].is_some_and(|u| !self.at_clamp(v, u.hit))
