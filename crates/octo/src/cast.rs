@@ -155,11 +155,12 @@ pub(crate) struct ScanSource {
 
 impl ScanSource {
     /// The hit cells as OctoMap's occupied `KeySet` iterates them: inserted in the order of
-    /// their points.
-    pub(crate) fn hits_in_keyset_order(&self) -> Vec<Upd> {
+    /// their points. `occupied` is scratch (emptied first, its memory kept from call to call:
+    /// a fresh set's table of the scan's box is a few hundred kB to allocate and clear).
+    pub(crate) fn hits_in_keyset_order(&self, occupied: &mut KeySet) -> Vec<Upd> {
         let mut by_point = self.hit_points.clone();
+        // One casting thread finds them in point order already: then this only checks.
         by_point.sort_unstable_by_key(|h| h.0);
-        let mut occupied = KeySet::new();
         occupied.set_window(self.window.0, self.window.1);
         for &(_, code) in &by_point {
             occupied.insert(super::math::unmorton(code));
@@ -381,6 +382,12 @@ impl ScanCaster {
             .unwrap_or_default();
         p.points = src.pts.len();
         p
+    }
+
+    /// The hit cells of a coloured scan cast in Morton order, in OctoMap's occupied `KeySet`'s
+    /// order ([`ScanSource::hits_in_keyset_order`]), with this caster's scratch set.
+    pub(crate) fn hits_in_keyset_order(&mut self, src: &ScanSource) -> Vec<Upd> {
+        src.hits_in_keyset_order(&mut self.free_keys)
     }
 
     /// A coloured scan in OctoMap's order: with the lanes and a first-ray table, or the general
@@ -1461,7 +1468,10 @@ mod tests {
                 assert_eq!(again.ups, want.ups, "scan {n}, range {range:?}");
                 assert_eq!(again.hits, want.hits);
                 let hits: Vec<Upd> = want.ups.iter().filter(|u| u.hit).copied().collect();
-                assert_eq!(src.hits_in_keyset_order(), hits);
+                let mut scratch = KeySet::new();
+                assert_eq!(src.hits_in_keyset_order(&mut scratch), hits);
+                // The scratch set again, holding the last scan's cells: the same order.
+                assert_eq!(src.hits_in_keyset_order(&mut scratch), hits);
             }
         }
     }

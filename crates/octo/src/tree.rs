@@ -333,7 +333,8 @@ impl OcTree {
                 created = false;
             }
             if super::order::order_can_matter(self, hits) {
-                self.update_voxels(&src.hits_in_keyset_order(), created, &mut log);
+                let hits = self.caster_mut().hits_in_keyset_order(src);
+                self.update_voxels(&hits, created, &mut log);
             } else if !hits.is_empty() {
                 self.apply(0, 0, 0, hits, created, &mut log);
             }
