@@ -380,11 +380,12 @@ impl OcTree {
     }
 
     /// `ups` voxel by voxel in their order ([`OcTree::update_voxel`]); `created`: the root was
-    /// just created.
+    /// just created. Each voxel's descent starts where its path leaves the previous voxel's.
     fn update_voxels(&mut self, ups: &[Upd], created: bool, log: &mut PassLog) {
         let mut created = created;
+        let mut path = VoxelPath::default();
         for u in ups {
-            self.update_voxel(u, created, log);
+            self.update_voxel(u, created, log, &mut path);
             created = false;
         }
     }
@@ -656,34 +657,64 @@ impl OcTree {
     /// nodes and creating missing ones, the voxel updated, then back up, each node pruned if it
     /// can be, else set to the maximum of its children. The way up stops at the first node that
     /// neither collapsed nor changed value: nothing above it can change.
-    fn update_voxel(&mut self, u: &Upd, root_created: bool, log: &mut PassLog) {
-        // Per depth: the node (block, slot), and its value before, `None` if it is new.
-        let mut path = [(0u32, 0usize, None::<f32>); TREE_DEPTH as usize + 1];
-        let (mut blk, mut slot, mut just_created) = (0u32, 0usize, root_created);
-        path[0] = (0, 0, (!root_created).then(|| self.blocks[0].value[0]));
-        for depth in 0..TREE_DEPTH {
+    ///
+    /// The way down starts at the deepest node `path` (the previous voxel's) shares with this
+    /// voxel and still holds: the nodes above it are inner nodes the way down would only pass
+    /// through (neither clamped leaves nor new), so starting there changes nothing.
+    fn update_voxel(
+        &mut self,
+        u: &Upd,
+        root_created: bool,
+        log: &mut PassLog,
+        path: &mut VoxelPath,
+    ) {
+        let start = if root_created {
+            0
+        } else {
+            path.valid.min(shared_depth(path.code, u.code))
+        };
+        // Per depth: the value before, `None` if the node is new.
+        let mut before = [None::<f32>; TREE_DEPTH as usize + 1];
+        for (d, b) in before.iter_mut().enumerate().take(start as usize + 1) {
+            let (blk, slot) = path.nodes[d];
+            *b = Some(self.blocks[blk as usize].value[slot]);
+        }
+        if root_created {
+            before[0] = None;
+        }
+        path.code = u.code;
+        let (mut blk, mut slot) = path.nodes[start as usize];
+        let mut just_created = root_created;
+        for depth in start..TREE_DEPTH {
             if self.blocks[blk as usize].child[slot] == NONE && !just_created {
                 let v = self.blocks[blk as usize].value[slot];
                 if self.at_clamp(v, u.hit) {
+                    path.valid = depth;
                     return;
                 }
             }
             let cb = self.children_block(blk, slot, !just_created);
             let digit = ((u.code >> (3 * (TREE_DEPTH - 1 - depth))) & 7) as usize;
             just_created = self.create_child(cb, digit);
-            let before = (!just_created).then(|| self.blocks[cb as usize].value[digit]);
+            before[depth as usize + 1] =
+                (!just_created).then(|| self.blocks[cb as usize].value[digit]);
             (blk, slot) = (cb, digit);
-            path[depth as usize + 1] = (blk, slot, before);
+            path.nodes[depth as usize + 1] = (blk, slot);
         }
+        path.valid = TREE_DEPTH;
         self.update_leaf(blk, slot, u, just_created, log);
         for depth in (0..TREE_DEPTH).rev() {
-            let (b, s, before) = path[depth as usize];
+            let (b, s) = path.nodes[depth as usize];
             let cb = self.blocks[b as usize].child[s];
             if self.prune_logged(b, s, cb, depth, u.code, log) {
+                // The nodes below are gone: the path holds down to this one, now a leaf.
+                path.valid = depth;
                 continue;
             }
             self.set_max(b, s, cb);
-            if before.is_some_and(|v| v.to_bits() == self.blocks[b as usize].value[s].to_bits()) {
+            if before[depth as usize]
+                .is_some_and(|v| v.to_bits() == self.blocks[b as usize].value[s].to_bits())
+            {
                 break;
             }
         }
@@ -1012,6 +1043,36 @@ impl OcTree {
     }
 }
 
+/// The path of the last voxel [`OcTree::update_voxel`] updated: per depth, the node (block,
+/// slot), root first; the nodes down to depth `valid` are still the tree's (the one at `valid`
+/// may have become a leaf), those below may be gone.
+#[derive(Clone, Copy)]
+struct VoxelPath {
+    nodes: [(u32, usize); TREE_DEPTH as usize + 1],
+    /// The voxel.
+    code: u64,
+    valid: u32,
+}
+
+impl Default for VoxelPath {
+    /// The root only.
+    fn default() -> Self {
+        VoxelPath {
+            nodes: [(0, 0); TREE_DEPTH as usize + 1],
+            code: 0,
+            valid: 0,
+        }
+    }
+}
+
+/// How many levels below the root two voxels' paths share: the depth of their deepest common
+/// node (16 for the same voxel).
+fn shared_depth(a: u64, b: u64) -> u32 {
+    // A code is 16 digits of 3 bits: 48 bits, the 16 above them zero.
+    let differing_bits = 64 - (a ^ b).leading_zeros();
+    TREE_DEPTH - differing_bits.div_ceil(3)
+}
+
 /// The digit at `depth` of the first of `rest` (updates in Morton order, all below one node at
 /// `depth`), and how many updates from the first share it.
 ///
@@ -1325,6 +1386,91 @@ mod tests {
         codes.sort_unstable();
         check(&codes);
         assert!(known > 100, "{known} leaves");
+    }
+
+    /// Voxel updates whose descent starts from the previous voxel's path change a coloured
+    /// tree as descents from the root do (the same .ot, flips and recoloured voxels), through
+    /// rounds of hits and misses in shuffled orders, some voxels twice, that clamp, prune and
+    /// expand nodes.
+    #[test]
+    fn voxel_updates_from_the_previous_path_change_the_tree_as_from_the_root() {
+        for seed in 0..4 {
+            let mut rng = rovlink_base::rng::Rng::new(seed, 1);
+            let mut t = OcTree::new(0.2);
+            t.enable_color();
+            for _ in 0..3 {
+                let points: Vec<[f32; 3]> = (0..200)
+                    .map(|_| {
+                        [
+                            (rng.uniform() * 2.0 - 1.0) as f32,
+                            (rng.uniform() * 2.0 - 1.0) as f32,
+                            (rng.uniform() - 0.5) as f32,
+                        ]
+                    })
+                    .collect();
+                let colors = (0..points.len())
+                    .map(|i| [(i * 37 % 251) as u8, (i * 11 % 241) as u8, 9])
+                    .collect();
+                t.insert_scan(
+                    &Scan {
+                        points,
+                        colors: Some(colors),
+                        pose: Pose::IDENTITY,
+                    },
+                    None,
+                );
+            }
+            let mut codes = Vec::new();
+            t.for_each_leaf(|code, _, _| codes.push(code));
+            let leaves = codes.len();
+            for i in 0..leaves {
+                // Every sibling (so that nodes can prune), and a neighbour's.
+                let c = codes[i];
+                codes.extend((0..8).map(|j| c & !7 | j));
+                codes.push(c ^ 0o70);
+            }
+            codes.sort_unstable();
+            codes.dedup();
+            let mut prunes = 0;
+            for round in 0..12 {
+                // Hits until they clamp (pruning), then misses (expanding again), then hits.
+                let hit = round != 1 && round != 9;
+                // Some voxels twice (update_voxels takes any list), so that a node pruned by
+                // one update is expanded again by a later one below it.
+                let mut list = codes.clone();
+                list.extend(codes.iter().filter(|_| rng.uniform() < 0.3));
+                for i in (1..list.len()).rev() {
+                    list.swap(i, (rng.uniform() * (i + 1) as f64) as usize % (i + 1));
+                }
+                let ups: Vec<Upd> = list
+                    .iter()
+                    .map(|&code| Upd {
+                        code,
+                        // Mixed at first, then whole rounds of one kind (clamping).
+                        hit: hit ^ (round < 3 && rng.uniform() < 0.1),
+                    })
+                    .collect();
+                let (mut a, mut b) = (t.clone(), t.clone());
+                let (mut la, mut lb) = (PassLog::default(), PassLog::default());
+                a.update_voxels(&ups, false, &mut la);
+                for u in &ups {
+                    b.update_voxel(u, false, &mut lb, &mut VoxelPath::default());
+                }
+                assert_eq!(
+                    crate::files::write_ot(&a),
+                    crate::files::write_ot(&b),
+                    "seed {seed} round {round}"
+                );
+                assert_eq!(la.flips, lb.flips);
+                assert_eq!(la.recolored, lb.recolored);
+                prunes += usize::from(a.num_nodes() < t.num_nodes());
+                t = a;
+            }
+            assert!(
+                leaves > 100 && prunes > 0,
+                "seed {seed}: {leaves} leaves, {prunes} prunes"
+            );
+        }
     }
 
     /// The naive model: one log-odds per voxel in a hash map, OctoMap's update rule applied to
