@@ -16,7 +16,7 @@
 //! Allocation is bounded by the input: every node read consumes at least one byte.
 
 use super::ParseError;
-use super::tree::{NodeRef, OcTree, TREE_DEPTH, WHITE};
+use super::tree::{NodeRef, NodeView, OcTree, TREE_DEPTH, WHITE};
 
 /// First line of a `.ot` file.
 pub const OT_HEADER: &str = "# Octomap OcTree file";
@@ -88,6 +88,91 @@ pub fn write_ot(tree: &OcTree) -> Vec<u8> {
     out
 }
 
+/// [`write_ot`] on up to `threads` threads: the subtrees [`OT_SPLIT_DEPTH`] levels below the
+/// root are written apart, each by the first thread free, and joined under the records above
+/// them. The same bytes as [`write_ot`].
+pub fn write_ot_threads(tree: &OcTree, threads: usize) -> Vec<u8> {
+    let Some(root) = tree.root().filter(|_| threads > 1) else {
+        return write_ot(tree);
+    };
+    let mut jobs = Vec::new();
+    split_nodes(tree, root, 0, &mut jobs);
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let (jobs, next) = (&jobs, &next);
+    let mut parts: Vec<Option<(Vec<u8>, [u8; 3])>> = vec![None; jobs.len()];
+    std::thread::scope(|sc| {
+        let workers: Vec<_> = (0..threads.min(jobs.len()))
+            .map(|_| {
+                sc.spawn(move || {
+                    let mut done = Vec::new();
+                    loop {
+                        let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(&r) = jobs.get(k) else { break done };
+                        let mut bytes = Vec::new();
+                        let color = write_ot_node(tree, r, &mut bytes);
+                        done.push((k, bytes, color));
+                    }
+                })
+            })
+            .collect();
+        for w in workers {
+            // A worker only writes into its own buffers: it does not fail.
+            for (k, bytes, color) in w.join().unwrap_or_default() {
+                parts[k] = Some((bytes, color));
+            }
+        }
+    });
+    let mut out = header(
+        OT_HEADER,
+        tree_type(tree),
+        tree.num_nodes(),
+        tree.resolution_m(),
+    );
+    out.reserve(tree.num_nodes() * if tree.is_colored() { 8 } else { 5 });
+    let mut parts = parts.into_iter();
+    write_ot_top(tree, root, 0, &mut parts, &mut out);
+    out
+}
+
+/// The depth whose subtrees [`write_ot_threads`] writes apart (up to 64 of them).
+const OT_SPLIT_DEPTH: u32 = 2;
+
+/// The nodes at [`OT_SPLIT_DEPTH`] below node `r` (at `depth`), in pre-order.
+fn split_nodes(tree: &OcTree, r: NodeRef, depth: u32, out: &mut Vec<NodeRef>) {
+    if depth == OT_SPLIT_DEPTH {
+        out.push(r);
+        return;
+    }
+    for i in 0..8 {
+        if let Some(c) = tree.child(r, i) {
+            split_nodes(tree, c, depth + 1, out);
+        }
+    }
+}
+
+/// [`write_ot_node`] above [`OT_SPLIT_DEPTH`], taking the subtrees there, in pre-order, from
+/// `parts` (a missing one, which [`write_ot_threads`] never leaves, is written here).
+fn write_ot_top(
+    tree: &OcTree,
+    r: NodeRef,
+    depth: u32,
+    parts: &mut impl Iterator<Item = Option<(Vec<u8>, [u8; 3])>>,
+    out: &mut Vec<u8>,
+) -> [u8; 3] {
+    if depth == OT_SPLIT_DEPTH {
+        return match parts.next().flatten() {
+            Some((bytes, color)) => {
+                out.extend_from_slice(&bytes);
+                color
+            }
+            None => write_ot_node(tree, r, out),
+        };
+    }
+    write_ot_with(tree, r, out, |out, c| {
+        write_ot_top(tree, c, depth + 1, parts, out)
+    })
+}
+
 /// The size of the `.ot` file of a tree, without writing it.
 pub fn ot_size(tree: &OcTree) -> usize {
     let per_node = if tree.is_colored() { 8 } else { 5 };
@@ -110,37 +195,73 @@ pub fn ot_size(tree: &OcTree) -> usize {
 /// each node is visited once, where computing each inner node's mean afresh visited every node
 /// once per ancestor.
 fn write_ot_node(tree: &OcTree, r: NodeRef, out: &mut Vec<u8>) -> [u8; 3] {
+    write_ot_with(tree, r, out, |out, c| write_ot_node(tree, c, out))
+}
+
+/// Node `r`'s record, then each child's subtree as `child` writes it (returning the colour
+/// the child is written with), then an inner node's mean colour filled in; the colour `r` is
+/// written with.
+#[inline(always)]
+fn write_ot_with(
+    tree: &OcTree,
+    r: NodeRef,
+    out: &mut Vec<u8>,
+    mut child: impl FnMut(&mut Vec<u8>, NodeRef) -> [u8; 3],
+) -> [u8; 3] {
+    let (color_at, v) = write_ot_record(tree, r, out);
+    if !v.has_children() {
+        return v.color.unwrap_or(WHITE);
+    }
+    let mut mean = MeanColor::default();
+    for i in 0..8 {
+        if let Some(c) = tree.child(r, i) {
+            mean.add(child(out, c));
+        }
+    }
+    mean.fill(tree, out, color_at)
+}
+
+/// Node `r`'s own `.ot` record (its colour, in a coloured tree, its own: an inner node's is
+/// filled in later); where its colour is in `out`, and the node.
+fn write_ot_record(tree: &OcTree, r: NodeRef, out: &mut Vec<u8>) -> (usize, NodeView) {
     let v = tree.node(r);
     out.extend_from_slice(&v.log_odds.to_le_bytes());
     let color_at = out.len();
-    let own = v.color.unwrap_or(WHITE);
     if tree.is_colored() {
-        out.extend_from_slice(&own);
+        out.extend_from_slice(&v.color.unwrap_or(WHITE));
     }
     out.push(v.child_mask());
-    if !v.has_children() {
-        return own;
-    }
-    let (mut sum, mut n) = ([0u32; 3], 0u32);
-    for i in 0..8 {
-        if let Some(c) = tree.child(r, i) {
-            let col = write_ot_node(tree, c, out);
-            if col != WHITE {
-                for k in 0..3 {
-                    sum[k] += col[k] as u32;
-                }
-                n += 1;
+    (color_at, v)
+}
+
+/// The mean of a node's children's set colours (`getAverageChildColor`), white when none is.
+#[derive(Default)]
+struct MeanColor {
+    sum: [u32; 3],
+    n: u32,
+}
+
+impl MeanColor {
+    fn add(&mut self, color: [u8; 3]) {
+        if color != WHITE {
+            for (sum, c) in self.sum.iter_mut().zip(color) {
+                *sum += u32::from(c);
             }
+            self.n += 1;
         }
     }
-    let mean = match n {
-        0 => WHITE,
-        _ => sum.map(|s| (s / n) as u8),
-    };
-    if tree.is_colored() {
-        out[color_at..color_at + 3].copy_from_slice(&mean);
+
+    /// The mean, written at `color_at` in `out` for a coloured tree.
+    fn fill(&self, tree: &OcTree, out: &mut [u8], color_at: usize) -> [u8; 3] {
+        let mean = match self.n {
+            0 => WHITE,
+            n => self.sum.map(|s| (s / n) as u8),
+        };
+        if tree.is_colored() {
+            out[color_at..color_at + 3].copy_from_slice(&mean);
+        }
+        mean
     }
-    mean
 }
 
 /// The `.bt` file of a tree, as `graph2tree` writes it: a maximum-likelihood copy, pruned twice
@@ -456,6 +577,61 @@ fn bt_node(
 mod tests {
     use super::*;
     use crate::{Pose, Scan};
+
+    /// Written on several threads, a `.ot` is the one-thread `.ot` byte for byte: coloured and
+    /// plain, empty, a lone root, leaves above the split depth, and a survey's map.
+    #[test]
+    fn a_ot_on_threads_is_the_one_thread_ot() {
+        let mut trees = vec![OcTree::new(0.1)];
+        let mut lone = OcTree::new(0.1);
+        lone.insert_scan(
+            &Scan {
+                points: vec![[0.05, 0.05, 0.05]],
+                colors: None,
+                pose: Pose::IDENTITY,
+            },
+            None,
+        );
+        trees.push(lone);
+        // A root whose children are leaves (above the split depth), read from a `.ot`: its
+        // first child a leaf, its second inner with one leaf child.
+        let mut small = header(OT_HEADER, "ColorOcTree", 4, 0.1);
+        for (v, color, mask) in [
+            (0.5f32, [1u8, 2, 3], 0b11u8),
+            (0.4, [9, 9, 9], 0),
+            (0.5, [4, 5, 6], 1),
+            (0.5, [4, 5, 6], 0),
+        ] {
+            small.extend_from_slice(&v.to_le_bytes());
+            small.extend_from_slice(&color);
+            small.push(mask);
+        }
+        trees.push(read_map(&small).expect("the small .ot reads"));
+        for colored in [false, true] {
+            for res in [0.1, 400.0] {
+                let mut t = OcTree::new(res);
+                if colored {
+                    t.enable_color();
+                }
+                for scan in crate::synth::survey(&crate::synth::SurveyParams {
+                    scans: 3,
+                    ..Default::default()
+                }) {
+                    t.insert_scan(&scan, None);
+                }
+                trees.push(t);
+            }
+        }
+        for (k, t) in trees.iter().enumerate() {
+            let one = write_ot(t);
+            for threads in [1, 2, 3, 8] {
+                assert!(
+                    write_ot_threads(t, threads) == one,
+                    "tree {k}, {threads} threads"
+                );
+            }
+        }
+    }
 
     #[test]
     fn g6_matches_cpp() {

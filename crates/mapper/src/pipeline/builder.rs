@@ -407,9 +407,7 @@ pub fn build(
 ) -> Result<Built, PipelineError> {
     let spec = cfg.validate()?;
     let started = Instant::now();
-    let threads = cfg
-        .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get().min(8)));
+    let threads = cfg.thread_count();
     let mut sender = Sender::new(spec);
     sender.set_color_updates(cfg.color_updates);
     let header = delta::encode_header(&spec);

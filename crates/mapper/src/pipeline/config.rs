@@ -162,6 +162,13 @@ impl Default for BuildConfig {
 }
 
 impl BuildConfig {
+    /// The threads a build casts on: [`BuildConfig::threads`], else the machine's cores, at
+    /// most 8.
+    pub fn thread_count(&self) -> usize {
+        self.threads
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get().min(8)))
+    }
+
     /// Checks every number; returns the view the stream will carry.
     pub fn validate(&self) -> Result<ViewSpec, ConfigError> {
         let spec = view_spec(self.resolution_m, self.coarse, self.roi)?;
