@@ -16,6 +16,7 @@
 //! Allocation is bounded by the input: every node read consumes at least one byte.
 
 use super::ParseError;
+use super::math::MeanColor;
 use super::tree::{NodeRef, NodeView, OcTree, TREE_DEPTH, WHITE};
 
 /// First line of a `.ot` file.
@@ -72,16 +73,26 @@ pub fn tree_type(tree: &OcTree) -> &'static str {
     }
 }
 
-/// The `.ot` file of a tree (`ColorOcTree` when the tree keeps colours).
-pub fn write_ot(tree: &OcTree) -> Vec<u8> {
-    let per_node = if tree.is_colored() { 8 } else { 5 };
+/// Bytes of a node's `.ot` record: log-odds, a coloured tree's r, g, b, the child mask.
+fn ot_record_bytes(tree: &OcTree) -> usize {
+    if tree.is_colored() { 8 } else { 5 }
+}
+
+/// A tree's `.ot` header, with room for its nodes' records.
+fn ot_start(tree: &OcTree) -> Vec<u8> {
     let mut out = header(
         OT_HEADER,
         tree_type(tree),
         tree.num_nodes(),
         tree.resolution_m(),
     );
-    out.reserve(tree.num_nodes() * per_node);
+    out.reserve(tree.num_nodes() * ot_record_bytes(tree));
+    out
+}
+
+/// The `.ot` file of a tree (`ColorOcTree` when the tree keeps colours).
+pub fn write_ot(tree: &OcTree) -> Vec<u8> {
+    let mut out = ot_start(tree);
     if let Some(root) = tree.root() {
         write_ot_node(tree, root, &mut out);
     }
@@ -122,13 +133,7 @@ pub fn write_ot_threads(tree: &OcTree, threads: usize) -> Vec<u8> {
             }
         }
     });
-    let mut out = header(
-        OT_HEADER,
-        tree_type(tree),
-        tree.num_nodes(),
-        tree.resolution_m(),
-    );
-    out.reserve(tree.num_nodes() * if tree.is_colored() { 8 } else { 5 });
+    let mut out = ot_start(tree);
     let mut parts = parts.into_iter();
     write_ot_top(tree, root, 0, &mut parts, &mut out);
     out
@@ -175,7 +180,6 @@ fn write_ot_top(
 
 /// The size of the `.ot` file of a tree, without writing it.
 pub fn ot_size(tree: &OcTree) -> usize {
-    let per_node = if tree.is_colored() { 8 } else { 5 };
     header(
         OT_HEADER,
         tree_type(tree),
@@ -183,7 +187,7 @@ pub fn ot_size(tree: &OcTree) -> usize {
         tree.resolution_m(),
     )
     .len()
-        + tree.num_nodes() * per_node
+        + tree.num_nodes() * ot_record_bytes(tree)
 }
 
 /// Writes node `r` and its subtree in pre-order; returns the colour the node is written with
@@ -218,7 +222,11 @@ fn write_ot_with(
             mean.add(child(out, c));
         }
     }
-    mean.fill(tree, out, color_at)
+    let mean = mean.mean().unwrap_or(WHITE);
+    if tree.is_colored() {
+        out[color_at..color_at + 3].copy_from_slice(&mean);
+    }
+    mean
 }
 
 /// Node `r`'s own `.ot` record (its colour, in a coloured tree, its own: an inner node's is
@@ -232,36 +240,6 @@ fn write_ot_record(tree: &OcTree, r: NodeRef, out: &mut Vec<u8>) -> (usize, Node
     }
     out.push(v.child_mask());
     (color_at, v)
-}
-
-/// The mean of a node's children's set colours (`getAverageChildColor`), white when none is.
-#[derive(Default)]
-struct MeanColor {
-    sum: [u32; 3],
-    n: u32,
-}
-
-impl MeanColor {
-    fn add(&mut self, color: [u8; 3]) {
-        if color != WHITE {
-            for (sum, c) in self.sum.iter_mut().zip(color) {
-                *sum += u32::from(c);
-            }
-            self.n += 1;
-        }
-    }
-
-    /// The mean, written at `color_at` in `out` for a coloured tree.
-    fn fill(&self, tree: &OcTree, out: &mut [u8], color_at: usize) -> [u8; 3] {
-        let mean = match self.n {
-            0 => WHITE,
-            n => self.sum.map(|s| (s / n) as u8),
-        };
-        if tree.is_colored() {
-            out[color_at..color_at + 3].copy_from_slice(&mean);
-        }
-        mean
-    }
 }
 
 /// The `.bt` file of a tree, as `graph2tree` writes it: a maximum-likelihood copy, pruned twice

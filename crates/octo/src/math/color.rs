@@ -41,15 +41,33 @@ pub(crate) fn brighter(a: ColorSlot, b: ColorSlot) -> bool {
 
 /// `getAverageChildColor`: the integer mean, per channel, of the set colours; none if none is.
 pub(crate) fn mean_color(colors: &[ColorSlot]) -> ColorSlot {
-    let (mut sum, mut n) = ([0u32; 3], 0u32);
+    let mut mean = MeanColor::default();
     for c in colors.iter().filter(|c| c[3] == 1) {
-        for k in 0..3 {
-            sum[k] += c[k] as u32;
+        mean.add([c[0], c[1], c[2]]);
+    }
+    color_slot(mean.mean())
+}
+
+/// [`mean_color`] taken a colour at a time: white ("no colour") is left out.
+#[derive(Default)]
+pub(crate) struct MeanColor {
+    sum: [u32; 3],
+    n: u32,
+}
+
+impl MeanColor {
+    /// Adds a colour (none if white).
+    pub(crate) fn add(&mut self, color: [u8; 3]) {
+        if color != WHITE {
+            for (sum, c) in self.sum.iter_mut().zip(color) {
+                *sum += u32::from(c);
+            }
+            self.n += 1;
         }
-        n += 1;
     }
-    if n == 0 {
-        return NO_COLOR;
+
+    /// The integer mean, per channel, of the colours added; `None` if none was.
+    pub(crate) fn mean(&self) -> Option<[u8; 3]> {
+        (self.n > 0).then(|| self.sum.map(|s| (s / self.n) as u8))
     }
-    color_slot(Some(sum.map(|s| (s / n) as u8)))
 }

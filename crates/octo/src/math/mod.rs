@@ -23,7 +23,7 @@ mod pose;
 mod ray;
 
 pub use color::{ColorSlot, WHITE, brightness_key, luma};
-pub(crate) use color::{NO_COLOR, brighter, color_slot, mean_color, slot_order};
+pub(crate) use color::{MeanColor, NO_COLOR, brighter, color_slot, mean_color, slot_order};
 pub use grid::Grid;
 pub use key::{KEY_CENTER, Key, TREE_DEPTH, morton, unmorton};
 pub(crate) use key::{local_morton, push_voxels};
