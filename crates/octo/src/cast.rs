@@ -625,10 +625,9 @@ impl ScanCaster {
         // One share: its counts, and a coloured scan's hits with their colours and points.
         let cast = move |n: usize, f: &mut BoxBits, h: &mut BoxBits| match colors {
             None => (this.cast_lanes(share(n), f, h), ColorHits::default()),
-            Some(colors) => {
+            Some(_) => {
                 let mut hits = ColorHits {
                     bits: Some(h),
-                    colors,
                     ..ColorHits::default()
                 };
                 let counts = this.cast_lanes(share(n), f, &mut hits);
@@ -685,8 +684,12 @@ impl ScanCaster {
                     ups.extend(hit_cells.iter().map(|&(code, _)| Upd { code, hit: true }));
                     let mut src = ScanSource::default();
                     let mut index = VoxelIndex::new(&hit_cells);
+                    let color_of = |point: usize| {
+                        color_slot(colors.flatten().and_then(|c| c.get(point)).copied())
+                    };
                     for part in parts {
-                        index.keep_brightest(&mut hit_cells, &part.occ);
+                        let occ = part.points.iter().map(|&(p, code)| (code, color_of(p)));
+                        index.keep_brightest(&mut hit_cells, occ);
                         src.hit_points.extend(part.points);
                     }
                     source = Some(Box::new(src));
@@ -963,29 +966,22 @@ impl RayEnds for BoxBits {
     }
 }
 
-/// A coloured scan's hit cells cast in Morton order: the set, each hit with its colour, and
-/// each hit with its point (for the order OctoMap's occupied `KeySet` takes them in).
+/// A coloured scan's hit cells cast in Morton order: the set, and each hit with its point (its
+/// colour, and the order OctoMap's occupied `KeySet` takes the hits in).
 #[derive(Default)]
-struct ColorHits<'a, 'b> {
+struct ColorHits<'b> {
     bits: Option<&'b mut BoxBits>,
-    /// The scan's colours, by point.
-    colors: Option<&'a [[u8; 3]]>,
-    /// (Morton code, colour) of each hit.
-    occ: Vec<(u64, ColorSlot)>,
     /// (point, Morton code) of each hit.
     points: Vec<(usize, u64)>,
 }
 
-impl RayEnds for ColorHits<'_, '_> {
+impl RayEnds for ColorHits<'_> {
     #[inline(always)]
     fn hit(&mut self, point: usize, k: Key) {
         if let Some(bits) = &mut self.bits {
             bits.insert(k);
         }
-        let code = morton(k);
-        let color = color_slot(self.colors.and_then(|c| c.get(point)).copied());
-        self.occ.push((code, color));
-        self.points.push((point, code));
+        self.points.push((point, morton(k)));
     }
 }
 
@@ -1261,8 +1257,12 @@ impl VoxelIndex {
     /// colour if it is brighter ([`slot_order`]) than the voxel's so far: the brightest colour
     /// per voxel whatever the hits' order (as [`brightest_per_voxel`], without sorting them).
     /// A hit whose voxel is not in `cells` (none is) is left out.
-    fn keep_brightest(&mut self, cells: &mut [(u64, ColorSlot)], occ: &[(u64, ColorSlot)]) {
-        for &(code, color) in occ {
+    fn keep_brightest(
+        &mut self,
+        cells: &mut [(u64, ColorSlot)],
+        occ: impl IntoIterator<Item = (u64, ColorSlot)>,
+    ) {
+        for (code, color) in occ {
             let mut h = self.hash(code);
             while let Some(i) = (self.slots[h] as usize).checked_sub(1) {
                 if let Some(cell) = cells.get_mut(i).filter(|c| c.0 == code) {
@@ -1424,8 +1424,8 @@ mod tests {
             let mut cells: Vec<(u64, ColorSlot)> = want.iter().map(|&(c, _)| (c, NO_COLOR)).collect();
             let (a, b) = occ.split_at(cut.min(occ.len()));
             let mut index = VoxelIndex::new(&cells);
-            index.keep_brightest(&mut cells, b);
-            index.keep_brightest(&mut cells, a);
+            index.keep_brightest(&mut cells, b.iter().copied());
+            index.keep_brightest(&mut cells, a.iter().copied());
             proptest::prop_assert_eq!(cells, want);
         }
     }

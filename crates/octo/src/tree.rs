@@ -1068,9 +1068,9 @@ impl Default for VoxelPath {
 /// How many levels below the root two voxels' paths share: the depth of their deepest common
 /// node (16 for the same voxel).
 fn shared_depth(a: u64, b: u64) -> u32 {
-    // A code is 16 digits of 3 bits: 48 bits, the 16 above them zero.
+    // A code is 16 digits of 3 bits: 48 bits, the 16 above them zero (beyond them: the root).
     let differing_bits = 64 - (a ^ b).leading_zeros();
-    TREE_DEPTH - differing_bits.div_ceil(3)
+    TREE_DEPTH.saturating_sub(differing_bits.div_ceil(3))
 }
 
 /// The digit at `depth` of the first of `rest` (updates in Morton order, all below one node at
@@ -1111,15 +1111,7 @@ struct Descent {
 impl Descent {
     /// The node that holds voxel `code` and its depth, as [`OcTree::search`] gives them.
     fn search(&mut self, t: &OcTree, code: u64) -> Option<(NodeRef, u32)> {
-        // Depths 0..=d hold the same nodes for both voxels when their digits above depth d
-        // agree: the highest differing bit is in the digit of depth d.
-        let diff = code ^ self.prev;
-        let shared = if diff == 0 {
-            TREE_DEPTH as usize
-        } else {
-            let top = 63 - diff.leading_zeros() as usize;
-            (TREE_DEPTH as usize - 1).saturating_sub(top / 3)
-        };
+        let shared = shared_depth(code, self.prev) as usize;
         self.prev = code;
         let start = shared.min(self.len.saturating_sub(1));
         let (r, start) = match self.path[start].filter(|_| self.len > 0) {
