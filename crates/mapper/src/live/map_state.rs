@@ -132,25 +132,9 @@ impl MapState {
         scan: &Scan,
         stop: &std::sync::atomic::AtomicBool,
     ) -> Result<Option<Inserted>, PipelineError> {
-        let (res, no_color) = (self.cfg.resolution_m, self.cfg.no_color);
-        let max_cells = self.cfg.max_cells_per_scan;
-        let tree = self.tree.get_or_insert_with(|| {
-            let mut t = OcTree::new(res);
-            if scan.colors.is_some() && !no_color {
-                t.enable_color();
-            }
-            t.caster_mut().set_max_cells(max_cells);
-            t
-        });
-        let prepared = tree
-            .caster_mut()
-            .prepare(scan, self.cfg.max_range_m, stop)
-            .map_err(|source| PipelineError::TooManyCells {
-                scan: self.scans,
-                resolution_m: res,
-                source,
-            })?;
-        let Some(prepared) = prepared else {
+        let tree = self.tree.get_or_insert_with(|| self.cfg.new_tree(scan));
+        let prepared = tree.caster_mut().prepare(scan, self.cfg.max_range_m, stop);
+        let Some(prepared) = self.cfg.cells_checked(self.scans, prepared)? else {
             return Ok(None);
         };
         let update = tree.apply_scan(&prepared);

@@ -564,20 +564,13 @@ impl Run<'_, '_> {
         scope: &'scope std::thread::Scope<'scope, '_>,
     ) -> Result<bool, PipelineError> {
         let cfg = self.cfg;
-        let tree = self.tree.get_or_insert_with(|| {
-            // Its own caster casts only on one thread: more threads cast scans apart.
-            let mut t = OcTree::new(cfg.resolution_m);
-            if scan.colors.is_some() && !cfg.no_color {
-                t.enable_color();
-            }
-            t.caster_mut().set_max_cells(cfg.max_cells_per_scan);
-            t
-        });
+        // Its own caster casts only on one thread: more threads cast scans apart.
+        let tree = self.tree.get_or_insert_with(|| cfg.new_tree(&scan));
         if self.threads <= 1 {
             let t0 = Instant::now();
             let prepared = tree.caster_mut().prepare(&scan, cfg.max_range_m, stop);
             let cast_s = t0.elapsed().as_secs_f64();
-            let prepared = cells_checked(cfg, self.report, prepared)?;
+            let prepared = cfg.cells_checked(self.report.scans, prepared)?;
             let done = self
                 .out
                 .emit(tree, prepared, cast_s, self.report, hooks, self.known)?;
@@ -614,7 +607,7 @@ impl Run<'_, '_> {
                 self.report.interrupted = true;
                 return Ok(false);
             }
-            let prepared = cells_checked(self.cfg, self.report, prepared)?;
+            let prepared = self.cfg.cells_checked(self.report.scans, prepared)?;
             if !self
                 .out
                 .emit(tree, prepared, cast_s, self.report, hooks, self.known)?
@@ -625,20 +618,6 @@ impl Run<'_, '_> {
         }
         Ok(true)
     }
-}
-
-/// A scan as cast, or the build's error when it would cross too many cells (the scan the
-/// next to go into the map).
-fn cells_checked(
-    cfg: &BuildConfig,
-    report: &BuildReport,
-    cast: Casting,
-) -> Result<Option<PreparedScan>, PipelineError> {
-    cast.map_err(|source| PipelineError::TooManyCells {
-        scan: report.scans,
-        resolution_m: cfg.resolution_m,
-        source,
-    })
 }
 
 /// One row of `--arrivals`: when a scan's message reached the operator over the link.

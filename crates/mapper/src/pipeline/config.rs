@@ -4,9 +4,10 @@
 //! ([`view_spec`]: resolution, coarse depth, region of interest).
 
 use super::InputFormat;
+use rovlink_octo::cast::{PreparedScan, TooManyCells};
 pub use rovlink_octo::checks::{ConfigError, check_range, check_scan_period, shown};
 use rovlink_octo::delta::{Roi, ViewSpec};
-use rovlink_octo::tree::TREE_DEPTH;
+use rovlink_octo::tree::{OcTree, TREE_DEPTH};
 use rovlink_scans::cloud::McapOptions;
 
 /// Finest voxel edge accepted, m (0.1 mm).
@@ -167,6 +168,32 @@ impl BuildConfig {
     pub fn thread_count(&self) -> usize {
         self.threads
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get().min(8)))
+    }
+
+    /// The map a build makes of scans starting with `first`: a `ColorOcTree` when it has
+    /// colours (unless [`BuildConfig::no_color`]), its caster bound to
+    /// [`BuildConfig::max_cells_per_scan`].
+    pub fn new_tree(&self, first: &rovlink_octo::Scan) -> OcTree {
+        let mut t = OcTree::new(self.resolution_m);
+        if first.colors.is_some() && !self.no_color {
+            t.enable_color();
+        }
+        t.caster_mut().set_max_cells(self.max_cells_per_scan);
+        t
+    }
+
+    /// A scan as cast ([`rovlink_octo::cast::ScanCaster::prepare`]), scan number `scan` of
+    /// the build: an error naming it when it would cross too many cells.
+    pub fn cells_checked(
+        &self,
+        scan: u32,
+        cast: Result<Option<PreparedScan>, TooManyCells>,
+    ) -> Result<Option<PreparedScan>, super::PipelineError> {
+        cast.map_err(|source| super::PipelineError::TooManyCells {
+            scan,
+            resolution_m: self.resolution_m,
+            source,
+        })
     }
 
     /// Checks every number; returns the view the stream will carry.
