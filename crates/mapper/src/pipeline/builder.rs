@@ -283,8 +283,10 @@ const STOP_POLL: Duration = Duration::from_millis(20);
 
 /// What the build's loop waits for: something read, a scan cast, or the reading's end.
 enum Event {
-    /// From the reading thread, in the order read.
+    /// From the reading thread, in the order read (scans go to the [`ScanQueue`]).
     Read(Reading),
+    /// The reading thread put one more scan into the [`ScanQueue`].
+    Queued,
     /// A scan cast (by its number; `None`: the stop flag ended its casting, or its thread
     /// failed; an error: it would cross too many cells), and how long casting it took, s.
     Cast(usize, Casting, f64),
@@ -295,89 +297,98 @@ enum Event {
 /// What casting a scan gave ([`ScanCaster::prepare`]).
 type Casting = Result<Option<PreparedScan>, TooManyCells>;
 
-/// The threads that cast the next scans while the build's loop applies the last one: scans in,
-/// each taken by the first thread free, each cast scan sent back to the loop as an
-/// [`Event::Cast`] as soon as it is done.
-struct CastThreads {
-    /// The scans to cast, numbered.
-    scans: mpsc::Sender<(usize, Scan)>,
+/// The scans read and not yet cast, numbered in the order read. The reading thread puts them
+/// in; the first thread free takes each: a casting thread, or the build's loop when no cast
+/// scan waits to go into the map ([`Run::cast_here`]).
+type ScanQueue = Arc<Mutex<mpsc::Receiver<(usize, Scan)>>>;
+
+/// The scans between the reading and the map: queued, cast (in any order) and applied (in
+/// the order read).
+struct InFlight {
+    /// The scans read and not yet taken by a thread.
+    queue: ScanQueue,
     /// Scans cast before an earlier one, by number.
     early: BTreeMap<usize, (Casting, f64)>,
-    /// Scans sent so far.
-    sent: usize,
+    /// Scans queued so far.
+    queued: usize,
     /// Cast scans applied (or dropped) so far: the number of the next one to apply.
     applied: usize,
+    /// Whether the casting threads are started (with the map, at the first scan).
+    spawned: bool,
 }
 
-impl CastThreads {
-    /// `n` casting threads in `scope`, each with a copy of `caster` (casting a scan on one
-    /// thread), stopping inside a scan when `stop` is set, each cast scan sent to `events`.
-    fn spawn<'scope>(
-        n: usize,
-        caster: &ScanCaster,
-        max_range_m: Option<f64>,
-        stop: &'scope AtomicBool,
-        events: &mpsc::Sender<Event>,
-        scope: &'scope std::thread::Scope<'scope, '_>,
-    ) -> Self {
-        let (scans, scans_in) = mpsc::channel::<(usize, Scan)>();
-        let scans_in = Arc::new(Mutex::new(scans_in));
-        for _ in 0..n.max(1) {
-            let mut c = caster.clone();
-            c.set_threads(1);
-            let (scans_in, events) = (Arc::clone(&scans_in), events.clone());
-            scope.spawn(move || {
-                loop {
-                    // Another thread failing while it waited leaves the lock poisoned: the
-                    // queue is still whole.
-                    let next = match scans_in.lock() {
-                        Ok(q) => q.recv(),
-                        Err(poisoned) => poisoned.into_inner().recv(),
-                    };
-                    let Ok((i, scan)) = next else { break };
-                    let t0 = Instant::now();
-                    // A failure inside casting (a bug: casting does not panic on any input)
-                    // loses this scan only; the loop then ends the build as stopped.
-                    let cast = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                        c.prepare(&scan, max_range_m, stop)
-                    }));
-                    let failed = cast.is_err();
-                    let cast_s = t0.elapsed().as_secs_f64();
-                    if events
-                        .send(Event::Cast(i, cast.unwrap_or(Ok(None)), cast_s))
-                        .is_err()
-                        || failed
-                    {
-                        break;
-                    }
-                }
-            });
-        }
-        CastThreads {
-            scans,
-            early: BTreeMap::new(),
-            sent: 0,
-            applied: 0,
+impl InFlight {
+    /// Scans queued and not yet applied.
+    fn count(&self) -> usize {
+        self.queued - self.applied
+    }
+
+    /// The next scan queued that no casting thread has taken, if there is one and the queue
+    /// is not in a casting thread's hands (one waiting there for a scan holds it while the
+    /// queue is empty).
+    fn take(&self) -> Option<(usize, Scan)> {
+        match self.queue.try_lock() {
+            Ok(q) => q.try_recv().ok(),
+            Err(std::sync::TryLockError::Poisoned(q)) => q.into_inner().try_recv().ok(),
+            Err(std::sync::TryLockError::WouldBlock) => None,
         }
     }
 
-    /// Scans sent and not yet applied.
-    fn in_flight(&self) -> usize {
-        self.sent - self.applied
+    /// Keeps a scan cast (by any thread) until it is next to apply.
+    fn cast(&mut self, i: usize, cast: Casting, cast_s: f64) {
+        self.early.insert(i, (cast, cast_s));
     }
 
-    /// Sends the next scan to be cast; false if the threads are gone.
-    fn send(&mut self, scan: Scan) -> bool {
-        let ok = self.scans.send((self.sent, scan)).is_ok();
-        self.sent += ok as usize;
-        ok
-    }
-
-    /// The next scan to apply, in the order sent, if it is cast.
+    /// The next scan to apply, in the order read, if it is cast.
     fn next_ready(&mut self) -> Option<(Casting, f64)> {
         let next = self.early.remove(&self.applied)?;
         self.applied += 1;
         Some(next)
+    }
+}
+
+/// Starts `n` casting threads in `scope`, each with a copy of `caster` (casting a scan on one
+/// thread): each takes scans from `queue`, stops inside a scan when `stop` is set, and sends
+/// each cast scan to `events` as soon as it is done.
+fn spawn_casters<'scope>(
+    n: usize,
+    caster: &ScanCaster,
+    max_range_m: Option<f64>,
+    queue: &ScanQueue,
+    stop: &'scope AtomicBool,
+    events: &mpsc::Sender<Event>,
+    scope: &'scope std::thread::Scope<'scope, '_>,
+) {
+    for _ in 0..n {
+        let mut c = caster.clone();
+        c.set_threads(1);
+        let (queue, events) = (Arc::clone(queue), events.clone());
+        scope.spawn(move || {
+            loop {
+                // Another thread failing while it waited leaves the lock poisoned: the queue
+                // is still whole.
+                let next = match queue.lock() {
+                    Ok(q) => q.recv(),
+                    Err(poisoned) => poisoned.into_inner().recv(),
+                };
+                let Ok((i, scan)) = next else { break };
+                let t0 = Instant::now();
+                // A failure inside casting (a bug: casting does not panic on any input) loses
+                // this scan only; the loop then ends the build as stopped.
+                let cast = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    c.prepare(&scan, max_range_m, stop)
+                }));
+                let failed = cast.is_err();
+                let cast_s = t0.elapsed().as_secs_f64();
+                if events
+                    .send(Event::Cast(i, cast.unwrap_or(Ok(None)), cast_s))
+                    .is_err()
+                    || failed
+                {
+                    break;
+                }
+            }
+        });
     }
 }
 
@@ -388,10 +399,11 @@ impl CastThreads {
 ///
 /// The inputs are read on a thread of their own ([`super::read_inputs`]), a few scans ahead of
 /// the map, so that reading, decompressing and decoding overlap the map's work. With more than
-/// one thread ([`BuildConfig::threads`]), the next scans are cast on that many threads, a scan
-/// each, while the previous scan goes into the map: the map and the stream are the same as with
-/// one thread, byte for byte, and each scan goes into the map and the stream as soon as it is
-/// read and cast, whatever comes after it (a live input may be quiet for a long time).
+/// one thread ([`BuildConfig::threads`]), the scans are cast on that many threads, a scan each:
+/// this one (when no cast scan waits to go into the map) and one fewer of their own. The map
+/// and the stream are the same as with one thread, byte for byte, and each scan goes into the
+/// map and the stream as soon as it is read and cast, whatever comes after it (a live input
+/// may be quiet for a long time).
 ///
 /// When `hooks.stop` is set the build ends before the next scan (or inside a scan, before it
 /// changes the map): the stream then holds whole messages for every scan in the map, and
@@ -431,6 +443,7 @@ pub fn build(
     let quit = &quit;
     std::thread::scope(|scope| {
         let (events_tx, events) = mpsc::channel::<Event>();
+        let (scans_tx, scans) = mpsc::channel::<(usize, Scan)>();
         // A token per scan read ahead of the map, given back as each goes in.
         let ahead = threads.max(1) * SCANS_AHEAD_PER_THREAD;
         let (tokens_back, tokens) = mpsc::sync_channel::<()>(ahead);
@@ -439,11 +452,16 @@ pub fn build(
         }
         let tx = events_tx.clone();
         scope.spawn(move || {
+            let mut read = 0;
             let mut send = |r: Reading| {
-                if matches!(r, Reading::Scan(_)) && tokens.recv().is_err() {
+                let Reading::Scan(scan) = r else {
+                    return tx.send(Event::Read(r)).is_ok();
+                };
+                if tokens.recv().is_err() || scans_tx.send((read, scan)).is_err() {
                     return false;
                 }
-                tx.send(Event::Read(r)).is_ok()
+                read += 1;
+                tx.send(Event::Queued).is_ok()
             };
             let ended = read_inputs(inputs, cfg, false, quit, &mut send);
             let _ = tx.send(Event::Ended(ended));
@@ -454,7 +472,13 @@ pub fn build(
             out: &mut out,
             tree: &mut tree,
             report: &mut report,
-            caster: None,
+            scans: InFlight {
+                queue: Arc::new(Mutex::new(scans)),
+                early: BTreeMap::new(),
+                queued: 0,
+                applied: 0,
+                spawned: false,
+            },
             known: 0,
             tokens_back,
         };
@@ -468,15 +492,15 @@ pub fn build(
     Ok(Built { tree, report })
 }
 
-/// The build's loop and what it keeps: scans read go to the casting threads (or are cast
-/// here, with one thread), cast scans go into the map in the order read.
+/// The build's loop and what it keeps: scans read are cast by the first thread free (this
+/// one among them), cast scans go into the map in the order read.
 struct Run<'r, 'w> {
     cfg: &'r BuildConfig,
     threads: usize,
     out: &'r mut Emitter<'w>,
     tree: &'r mut Option<OcTree>,
     report: &'r mut BuildReport,
-    caster: Option<CastThreads>,
+    scans: InFlight,
     /// Scans the inputs opened so far say they have.
     known: u64,
     /// Gives the reading a token back for each scan that went into the map.
@@ -485,7 +509,7 @@ struct Run<'r, 'w> {
 
 impl Run<'_, '_> {
     /// Takes events until the reading ended and every scan read is in the map, the stop flag
-    /// is set, or something fails.
+    /// is set, or something fails. With nothing to take in, a queued scan is cast here.
     fn serve<'scope>(
         &mut self,
         events: &mpsc::Receiver<Event>,
@@ -500,21 +524,27 @@ impl Run<'_, '_> {
                 self.report.interrupted = true;
                 return Ok(());
             }
-            let in_flight = self.caster.as_ref().map_or(0, CastThreads::in_flight);
-            if in_flight == 0
+            if self.scans.count() == 0
                 && let Some(end) = ended.take()
             {
                 // A live input ends only when stopped.
                 self.report.interrupted |= end? || stop.load(Ordering::Relaxed);
                 return Ok(());
             }
-            let event = match events.recv_timeout(STOP_POLL) {
+            let event = match events.try_recv() {
                 Ok(event) => event,
-                Err(mpsc::RecvTimeoutError::Timeout) => continue,
-                Err(mpsc::RecvTimeoutError::Disconnected) => {
-                    self.report.interrupted = true;
-                    return Ok(());
-                }
+                Err(_) => match self.cast_here(events_tx, stop, hooks, scope)? {
+                    Some(true) => continue,
+                    Some(false) => return Ok(()),
+                    None => match events.recv_timeout(STOP_POLL) {
+                        Ok(event) => event,
+                        Err(mpsc::RecvTimeoutError::Timeout) => continue,
+                        Err(mpsc::RecvTimeoutError::Disconnected) => {
+                            self.report.interrupted = true;
+                            return Ok(());
+                        }
+                    },
+                },
             };
             let go_on = match event {
                 Event::Ended(end) => {
@@ -536,14 +566,14 @@ impl Run<'_, '_> {
                     self.report.notes.extend(notes);
                     true
                 }
-                Event::Read(Reading::Scan(scan)) => {
-                    self.take(scan, events_tx, stop, hooks, scope)?
+                // Scans come through the queue.
+                Event::Read(Reading::Scan(_)) => true,
+                Event::Queued => {
+                    self.scans.queued += 1;
+                    true
                 }
                 Event::Cast(i, prepared, cast_s) => {
-                    let Some(c) = self.caster.as_mut() else {
-                        continue;
-                    };
-                    c.early.insert(i, (prepared, cast_s));
+                    self.scans.cast(i, prepared, cast_s);
                     self.apply_ready(hooks)?
                 }
             };
@@ -553,56 +583,48 @@ impl Run<'_, '_> {
         }
     }
 
-    /// A scan read: cast here and put into the map (one thread), or sent to the casting
-    /// threads; false if the build stopped.
-    fn take<'scope>(
+    /// Casts here the next queued scan that no casting thread has taken, then puts every cast
+    /// scan next in order into the map: `None` when there was none to cast, else false if the
+    /// build stopped. The first scan makes the map (coloured or not) and starts the casting
+    /// threads, one fewer than the build's threads.
+    fn cast_here<'scope>(
         &mut self,
-        scan: Scan,
         events_tx: &mpsc::Sender<Event>,
         stop: &'scope AtomicBool,
         hooks: &mut Hooks<'_>,
         scope: &'scope std::thread::Scope<'scope, '_>,
-    ) -> Result<bool, PipelineError> {
+    ) -> Result<Option<bool>, PipelineError> {
+        let Some((i, scan)) = self.scans.take() else {
+            return Ok(None);
+        };
         let cfg = self.cfg;
-        // Its own caster casts only on one thread: more threads cast scans apart.
         let tree = self.tree.get_or_insert_with(|| cfg.new_tree(&scan));
-        if self.threads <= 1 {
-            let t0 = Instant::now();
-            let prepared = tree.caster_mut().prepare(&scan, cfg.max_range_m, stop);
-            let cast_s = t0.elapsed().as_secs_f64();
-            let prepared = cfg.cells_checked(self.report.scans, prepared)?;
-            let done = self
-                .out
-                .emit(tree, prepared, cast_s, self.report, hooks, self.known)?;
-            let _ = self.tokens_back.try_send(());
-            return Ok(done);
-        }
-        let c = match &mut self.caster {
-            Some(c) => c,
-            None => self.caster.insert(CastThreads::spawn(
-                self.threads,
+        if !self.scans.spawned {
+            self.scans.spawned = true;
+            spawn_casters(
+                self.threads.saturating_sub(1),
                 &tree.caster(),
                 cfg.max_range_m,
+                &self.scans.queue,
                 stop,
                 events_tx,
                 scope,
-            )),
-        };
-        if !c.send(scan) {
-            // The casting threads are gone: the scan is lost, the build stops.
-            self.report.interrupted = true;
-            return Ok(false);
+            );
         }
-        Ok(true)
+        let t0 = Instant::now();
+        // Its own caster casts only on one thread: the others cast scans apart.
+        let prepared = tree.caster_mut().prepare(&scan, cfg.max_range_m, stop);
+        self.scans.cast(i, prepared, t0.elapsed().as_secs_f64());
+        self.apply_ready(hooks).map(Some)
     }
 
     /// Every cast scan next in order goes into the map, its message written; false if the
     /// build stopped.
     fn apply_ready(&mut self, hooks: &mut Hooks<'_>) -> Result<bool, PipelineError> {
-        let (Some(c), Some(tree)) = (self.caster.as_mut(), self.tree.as_mut()) else {
+        let Some(tree) = self.tree.as_mut() else {
             return Ok(true);
         };
-        while let Some((prepared, cast_s)) = c.next_ready() {
+        while let Some((prepared, cast_s)) = self.scans.next_ready() {
             if hooks.stop.load(Ordering::Relaxed) {
                 self.report.interrupted = true;
                 return Ok(false);
