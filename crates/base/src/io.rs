@@ -451,6 +451,22 @@ impl AtomicFile {
         self.commit_with(text.as_bytes())
     }
 
+    /// Flushes and syncs what was written so far, without committing: a later
+    /// [`AtomicFile::commit`] then finds little or nothing left to sync.
+    pub fn sync(&mut self) -> Result<(), IoError> {
+        let write_err = |source| IoError::Write {
+            name: self.target.display().to_string(),
+            source,
+        };
+        if let Some(writer) = &mut self.writer {
+            writer.flush().map_err(write_err)?;
+            if self.temp.is_some() {
+                writer.get_ref().sync_all().map_err(write_err)?;
+            }
+        }
+        Ok(())
+    }
+
     /// Flushes, syncs and renames the file into place.
     pub fn commit(mut self) -> Result<(), IoError> {
         let name = self.target.display().to_string();
@@ -556,6 +572,15 @@ impl Output {
             name: self.name(),
             source,
         })
+    }
+
+    /// Flushes standard output, or flushes and syncs the file without committing it
+    /// ([`AtomicFile::sync`]).
+    pub fn sync(&mut self) -> Result<(), IoError> {
+        match self {
+            Output::Stdout(_) => self.flush_named(),
+            Output::File(f) => f.sync(),
+        }
     }
 
     /// Flushes standard output, or commits the file.
@@ -733,6 +758,27 @@ mod tests {
         g.write_all(b"partial").unwrap();
         drop(g);
         assert_eq!(std::fs::read(&target).unwrap(), b"abc");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn a_synced_file_still_appears_only_on_commit_and_whole() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("out.bin");
+        let mut f = Output::open(Some(&target), true).unwrap();
+        f.write_bytes(b"abc").unwrap();
+        f.sync().unwrap();
+        assert!(!target.exists());
+        f.write_bytes(b"def").unwrap();
+        f.finish().unwrap();
+        assert_eq!(std::fs::read(&target).unwrap(), b"abcdef");
+        // Synced, then dropped unfinished: no file, no temporary.
+        let other = dir.path().join("other.bin");
+        let mut g = Output::open(Some(&other), true).unwrap();
+        g.write_bytes(b"partial").unwrap();
+        g.sync().unwrap();
+        drop(g);
+        assert!(!other.exists());
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
     }
 

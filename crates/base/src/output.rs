@@ -76,6 +76,19 @@ impl Dest {
         out.write_bytes(bytes)?;
         out.finish()
     }
+
+    /// Writes `pieces` one after the other as the whole output and commits it: the file
+    /// whole, or no file.
+    pub fn write_pieces<'a>(
+        &self,
+        pieces: impl IntoIterator<Item = &'a [u8]>,
+    ) -> Result<(), IoError> {
+        let mut out = self.open()?;
+        for piece in pieces {
+            out.write_bytes(piece)?;
+        }
+        out.finish()
+    }
 }
 
 /// The identity of an existing file: device and inode.

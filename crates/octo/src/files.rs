@@ -99,12 +99,48 @@ pub fn write_ot(tree: &OcTree) -> Vec<u8> {
     out
 }
 
+/// A `.ot` file in pieces ([`write_ot_threads`]): the header and the records above the
+/// subtrees written apart, with each subtree's records to splice in at its place. Written out
+/// piece by piece, not joined into one buffer first.
+#[derive(Debug, Default)]
+pub struct OtPieces {
+    /// The header and the records above the split.
+    top: Vec<u8>,
+    /// Where in `top` each subtree goes (ascending), and its records.
+    splices: Vec<(usize, Vec<u8>)>,
+}
+
+impl OtPieces {
+    /// The file's bytes in order, piece by piece.
+    pub fn pieces(&self) -> impl Iterator<Item = &[u8]> {
+        let mut at = 0;
+        self.splices
+            .iter()
+            .flat_map(move |(pos, part)| {
+                let before = &self.top[at..*pos];
+                at = *pos;
+                [before, part.as_slice()]
+            })
+            .chain(std::iter::once_with(move || {
+                &self.top[self.splices.last().map_or(0, |s| s.0)..]
+            }))
+    }
+
+    /// The whole file in one buffer.
+    pub fn joined(&self) -> Vec<u8> {
+        self.pieces().flatten().copied().collect()
+    }
+}
+
 /// [`write_ot`] on up to `threads` threads: the subtrees [`OT_SPLIT_DEPTH`] levels below the
-/// root are written apart, each by the first thread free, and joined under the records above
-/// them. The same bytes as [`write_ot`].
-pub fn write_ot_threads(tree: &OcTree, threads: usize) -> Vec<u8> {
+/// root are written apart, each by the first thread free, to be spliced in under the records
+/// above them. The same bytes as [`write_ot`], in pieces.
+pub fn write_ot_threads(tree: &OcTree, threads: usize) -> OtPieces {
     let Some(root) = tree.root().filter(|_| threads > 1) else {
-        return write_ot(tree);
+        return OtPieces {
+            top: write_ot(tree),
+            splices: Vec::new(),
+        };
     };
     let mut jobs = Vec::new();
     split_nodes(tree, root, 0, &mut jobs);
@@ -133,9 +169,17 @@ pub fn write_ot_threads(tree: &OcTree, threads: usize) -> Vec<u8> {
             }
         }
     });
-    let mut out = ot_start(tree);
+    let mut out = OtPieces {
+        top: header(
+            OT_HEADER,
+            tree_type(tree),
+            tree.num_nodes(),
+            tree.resolution_m(),
+        ),
+        splices: Vec::with_capacity(jobs.len()),
+    };
     let mut parts = parts.into_iter();
-    write_ot_top(tree, root, 0, &mut parts, &mut out);
+    write_ot_top(tree, root, 0, &mut parts, &mut out.top, &mut out.splices);
     out
 }
 
@@ -156,25 +200,28 @@ fn split_nodes(tree: &OcTree, r: NodeRef, depth: u32, out: &mut Vec<NodeRef>) {
 }
 
 /// [`write_ot_node`] above [`OT_SPLIT_DEPTH`], taking the subtrees there, in pre-order, from
-/// `parts` (a missing one, which [`write_ot_threads`] never leaves, is written here).
+/// `parts` to splice in (a missing one, which [`write_ot_threads`] never leaves, is written
+/// here).
 fn write_ot_top(
     tree: &OcTree,
     r: NodeRef,
     depth: u32,
     parts: &mut impl Iterator<Item = Option<(Vec<u8>, [u8; 3])>>,
-    out: &mut Vec<u8>,
+    top: &mut Vec<u8>,
+    splices: &mut Vec<(usize, Vec<u8>)>,
 ) -> [u8; 3] {
     if depth == OT_SPLIT_DEPTH {
         return match parts.next().flatten() {
             Some((bytes, color)) => {
-                out.extend_from_slice(&bytes);
+                splices.push((top.len(), bytes));
                 color
             }
-            None => write_ot_node(tree, r, out),
+            None => write_ot_node(tree, r, top),
         };
     }
-    write_ot_with(tree, r, out, |out, c| {
-        write_ot_top(tree, c, depth + 1, parts, out)
+    // The records above the split are all in `top`: an inner node's colour is filled in there.
+    write_ot_with(tree, r, top, |top, c| {
+        write_ot_top(tree, c, depth + 1, parts, top, splices)
     })
 }
 
@@ -604,7 +651,7 @@ mod tests {
             let one = write_ot(t);
             for threads in [1, 2, 3, 8] {
                 assert!(
-                    write_ot_threads(t, threads) == one,
+                    write_ot_threads(t, threads).joined() == one,
                     "tree {k}, {threads} threads"
                 );
             }

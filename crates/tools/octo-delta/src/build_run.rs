@@ -72,18 +72,28 @@ pub fn build(a: &BuildArgs) -> Result<u8> {
             // Every output holds what was done, also when a signal stopped the build. The two
             // map files are serialised and committed (written, synced, renamed) side by side;
             // the stream is committed once both are in place, so a failed map leaves no stream.
-            // The .ot on the build's threads (the same bytes), the .bt beside it.
+            // The .ot on the build's threads (the same bytes), the .bt beside it; the stream
+            // synced meanwhile (its commit, after theirs, then only renames it).
             let threads = cfg.thread_count();
             std::thread::scope(|s| -> Result<()> {
                 let tree = &built.tree;
+                let out = &mut out;
+                let stream_sync = s.spawn(move || out.sync());
                 let ot_job = ot.as_ref().map(|d| {
-                    s.spawn(move || d.write_whole(&files::write_ot_threads(tree, threads)))
+                    s.spawn(move || {
+                        let pieces = files::write_ot_threads(tree, threads);
+                        d.write_pieces(pieces.pieces())
+                    })
                 });
                 let bt_done = bt.as_ref().map(|d| d.write_whole(&files::write_bt(tree)));
                 let ot_done =
                     ot_job.map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
+                let synced = stream_sync
+                    .join()
+                    .unwrap_or_else(|p| std::panic::resume_unwind(p));
                 bt_done.transpose()?;
                 ot_done.transpose()?;
+                synced?;
                 Ok(())
             })?;
             out.finish()?;
