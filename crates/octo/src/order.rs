@@ -104,8 +104,61 @@ struct Subtree {
 /// some order other than OctoMap's could give other colours than OctoMap's order gives. False
 /// only when no order of the updates prunes a node of mixed colours and then expands it again.
 pub(crate) fn order_can_matter(tree: &OcTree, ups: &[Upd]) -> bool {
+    !matches!(order_risk(tree, ups), Risk::Nowhere)
+}
+
+/// Where the order of a phase's updates can change the map.
+#[derive(Debug, PartialEq)]
+pub(crate) enum Risk {
+    /// Nowhere: every order gives OctoMap's map.
+    Nowhere,
+    /// Only inside these subtrees (disjoint, in Morton order). Every order gives OctoMap's map
+    /// as long as the updates inside each subtree keep OctoMap's order among themselves.
+    Within(Vec<Region>),
+    /// Anywhere, or the pass cannot tell.
+    Whole,
+}
+
+/// A node's subtree: the node's depth and the leading `3 * depth` bits of its voxels' Morton
+/// codes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Region {
+    depth: u32,
+    prefix: u64,
+}
+
+impl Region {
+    /// The subtree at `depth` that holds voxel `code`.
+    fn of(code: u64, depth: u32) -> Self {
+        Region {
+            depth,
+            prefix: code >> (3 * (TREE_DEPTH - depth)),
+        }
+    }
+
+    /// Whether voxel `code` is inside.
+    pub(crate) fn contains(&self, code: u64) -> bool {
+        code >> (3 * (TREE_DEPTH - self.depth)) == self.prefix
+    }
+
+    /// The first voxel's code inside.
+    fn start(&self) -> u64 {
+        self.prefix << (3 * (TREE_DEPTH - self.depth))
+    }
+}
+
+/// Whether voxel `code` is inside one of `regions` (disjoint, in Morton order).
+pub(crate) fn inside(regions: &[Region], code: u64) -> bool {
+    let after = regions.partition_point(|r| r.start() <= code);
+    after > 0 && regions[after - 1].contains(code)
+}
+
+/// [`order_can_matter`], told apart: where in the tree the order of `ups` can matter. A node
+/// whose test fails keeps the subtree's order; the nodes above it are judged as before, since
+/// what a node may hold does not depend on its colours.
+pub(crate) fn order_risk(tree: &OcTree, ups: &[Upd]) -> Risk {
     if ups.is_empty() || !tree.is_colored() {
-        return false;
+        return Risk::Nowhere;
     }
     let before = match tree.root() {
         None => Before::Absent,
@@ -115,8 +168,17 @@ pub(crate) fn order_can_matter(tree: &OcTree, ups: &[Upd]) -> bool {
         tree,
         hits: ups.iter().any(|u| u.hit),
         misses: ups.iter().any(|u| !u.hit),
+        risky: std::cell::RefCell::new(Vec::new()),
     };
-    pass.node(before, 0, ups).is_err()
+    if pass.node(before, 0, ups).is_err() {
+        return Risk::Whole;
+    }
+    let risky = pass.risky.into_inner();
+    match risky.first() {
+        None => Risk::Nowhere,
+        Some(r) if r.depth == 0 => Risk::Whole,
+        Some(_) => Risk::Within(risky),
+    }
 }
 
 /// The state before the scan of an existing node.
@@ -133,6 +195,9 @@ struct Pass<'a> {
     /// apart, so each phase has one kind only).
     hits: bool,
     misses: bool,
+    /// The subtrees whose updates' order may matter, found so far: disjoint, in Morton order
+    /// (the pass visits the nodes in that order, each after the nodes below it).
+    risky: std::cell::RefCell<Vec<Region>>,
 }
 
 impl Pass<'_> {
@@ -205,26 +270,31 @@ impl Pass<'_> {
             shared = Some(shared.map_or(values, |s| s.intersect(&values)));
         }
         let shared = shared.unwrap_or_default();
-        self.judge(before, creates, shared, |v| {
+        let here = Region::of(ups[0].code, depth);
+        self.judge(here, before, creates, shared, |v| {
             runs.iter().any(|run| self.may_wait(run, v))
         })
     }
 
-    /// The test at a node (state `before`) whose children may all be leaves of each value in
-    /// `shared`: for each, whether an update still to come (`pending`) can expand it again
-    /// with colours not all one. Else what the node may hold as a leaf: those values, and its
-    /// own if it is a pruned node.
+    /// The test at node `here` (state `before`) whose children may all be leaves of each
+    /// value in `shared`: for each, whether an update still to come (`pending`) can expand it
+    /// again with colours not all one; if so the node's subtree is risky (and takes in the
+    /// risky subtrees found below it). What the node may hold as a leaf: those values, and
+    /// its own if it is a pruned node.
     fn judge(
         &self,
+        here: Region,
         before: Before,
         creates: bool,
         shared: Values,
         pending: impl Fn(f32) -> bool,
     ) -> Result<Subtree, MayMatter> {
-        for v in shared.iter() {
-            if pending(v) && !self.one_color(before, creates) {
-                return Err(MayMatter);
+        if shared.iter().any(&pending) && !self.one_color(before, creates) {
+            let mut risky = self.risky.borrow_mut();
+            while risky.last().is_some_and(|r| here.contains(r.start())) {
+                risky.pop();
             }
+            risky.push(here);
         }
         let mut values = shared;
         if let Before::Leaf(a) = before {
@@ -312,7 +382,8 @@ impl Pass<'_> {
             values.add(f32::from_bits(v))?;
         }
         // A voxel holds `v` with its update to come only if it held `v` before.
-        self.judge(before, creates, values, |v| {
+        let here = Region::of(ups[0].code, TREE_DEPTH - 1);
+        self.judge(here, before, creates, values, |v| {
             (0..8).any(|i| {
                 pre[i].is_some_and(|a| a.to_bits() == v.to_bits())
                     && up[i].is_some_and(|u| !self.at_clamp(v, u.hit))
@@ -464,6 +535,12 @@ mod tests {
         let ((ot_a, _), (ot_b, _)) = both_ways(&t, &ups);
         assert_ne!(ot_a, ot_b, "the two orders should give other colours here");
         assert!(order_can_matter(&t, &sorted(&ups)));
+        // The first depth-15 node holds the risk (the cube's first node at depth 14 is not
+        // pruned: its other children are unknown).
+        assert_eq!(
+            order_risk(&t, &sorted(&ups)),
+            Risk::Within(vec![Region::of(code_of(child(0)), TREE_DEPTH - 1)])
+        );
         // Either update alone: nothing to expand again.
         assert!(!order_can_matter(&t, &ups[..1]));
         assert!(!order_can_matter(&t, &ups[1..]));
@@ -524,6 +601,83 @@ mod tests {
                 t.apply_ups(&phase, false);
             }
         }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(400))]
+
+        /// When the pass finds that the order may matter only inside some subtrees, the
+        /// updates outside them in one pass and those inside voxel by voxel, in the phase's
+        /// order among themselves, give the tree and changes of the whole phase in that order.
+        #[test]
+        fn only_the_risky_subtrees_need_the_order(
+            before in prop::collection::vec(scan_strategy(), 0..30),
+            scan in scan_strategy(),
+            shuffles in prop::collection::vec(any::<u64>(), 3),
+        ) {
+            let mut t = tree_after(&before);
+            let (misses, hits) = split(&scan);
+            for phase in [misses, hits] {
+                if let Risk::Within(risky) = order_risk(&t, &sorted(&phase)) {
+                    for seed in &shuffles {
+                        let mut order = phase.clone();
+                        shuffle(&mut order, *seed);
+                        prop_assert_eq!(within_and_whole(&t, &order, &risky).0, true);
+                    }
+                }
+                t.apply_ups(&phase, false);
+            }
+        }
+    }
+
+    /// Whether `order` applied as [`Risk::Within`] `risky` lets a scan apply it gives the tree
+    /// and changes of `order` voxel by voxel; and whether that differs from one Morton pass.
+    fn within_and_whole(t: &OcTree, order: &[Upd], risky: &[Region]) -> (bool, bool) {
+        let (mut a, mut b) = (t.clone(), t.clone());
+        let ca = a.apply_ups(order, false);
+        let cb = b.apply_ups_within(&sorted(order), order, risky);
+        let (_, morton) = both_ways(t, order);
+        let whole = (write_ot(&a), ca);
+        ((write_ot(&b), cb) == whole, morton != whole)
+    }
+
+    /// Risky subtrees are found where the order matters, and applying the rest in one pass
+    /// keeps OctoMap's map: over many random cases, phases where one Morton pass would give
+    /// another tree are applied right with only their risky subtrees in order.
+    #[test]
+    fn risky_subtrees_carry_every_order_that_matters() {
+        use proptest::strategy::ValueTree;
+        use proptest::test_runner::TestRunner;
+        let mut runner = TestRunner::deterministic();
+        let cases = (
+            prop::collection::vec(scan_strategy(), 0..30),
+            scan_strategy(),
+            any::<u64>(),
+        );
+        let (mut within, mut rescued) = (0, 0);
+        for _ in 0..3000 {
+            let Ok(tree) = cases.new_tree(&mut runner) else {
+                continue;
+            };
+            let (before, scan, seed) = tree.current();
+            let mut t = tree_after(&before);
+            let (misses, hits) = split(&scan);
+            for phase in [misses, hits] {
+                if let Risk::Within(risky) = order_risk(&t, &sorted(&phase)) {
+                    let mut order = phase.clone();
+                    shuffle(&mut order, seed | 1);
+                    let (same, morton_differs) = within_and_whole(&t, &order, &risky);
+                    assert!(same, "the risky subtrees did not carry the order");
+                    within += 1;
+                    rescued += usize::from(morton_differs);
+                }
+                t.apply_ups(&phase, false);
+            }
+        }
+        assert!(
+            within >= 50 && rescued >= 3,
+            "{within} phases risky in part, {rescued} where one pass would differ: too tame"
+        );
     }
 
     /// The pass is neither vacuous nor blind: over many random cases it clears phases of

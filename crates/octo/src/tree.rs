@@ -48,6 +48,7 @@ use super::Scan;
 use super::cast::Upd;
 pub use super::cast::{PreparedScan, ScanCaster};
 use super::math::{Grid, NO_COLOR, brighter, color_slot, mean_color, push_voxels};
+use super::order::{Region, Risk, inside};
 
 pub use super::math::{
     ColorSlot, KEY_CENTER, Key, Params, TREE_DEPTH, WHITE, brightness_key, logodds, luma, morton,
@@ -332,13 +333,22 @@ impl OcTree {
                 self.apply(0, 0, 0, misses, created, &mut log);
                 created = false;
             }
-            if super::order::order_can_matter(self, hits) {
-                let hits = self.caster_mut().hits_in_keyset_order(src);
-                self.update_voxels(&hits, created, &mut log);
-            } else if !hits.is_empty() {
-                self.apply(0, 0, 0, hits, created, &mut log);
+            match super::order::order_risk(self, hits) {
+                Risk::Nowhere => {
+                    if !hits.is_empty() {
+                        self.apply(0, 0, 0, hits, created, &mut log);
+                    }
+                }
+                Risk::Whole => {
+                    let hits = self.caster_mut().hits_in_keyset_order(src);
+                    self.update_voxels(&hits, created, &mut log);
+                }
+                Risk::Within(risky) => {
+                    let ordered = self.caster_mut().hits_in_keyset_order(src);
+                    self.apply_within(hits, ordered, &risky, created, &mut log);
+                }
             }
-            // Two ascending runs (the free cells', the hit cells' unless in `KeySet` order): the
+            // Ascending runs (the free cells', the hit cells' unless in `KeySet` order): the
             // stable sort finds and merges them.
             log.flips.sort_by_key(|c| c.code);
             report.changes = self.color_pass(&scan.hits, log);
@@ -362,6 +372,52 @@ impl OcTree {
         } else {
             self.update_voxels(ups, created, &mut log);
         }
+        log.flips.sort_unstable_by_key(|c| c.code);
+        self.color_pass(&[], log)
+    }
+
+    /// A phase whose order may matter only inside the subtrees `risky` ([`Risk::Within`]):
+    /// its updates outside them (of `sorted`, the phase in Morton order) in one pass, then those
+    /// inside voxel by voxel in the order `ordered` (the whole phase in OctoMap's order) holds
+    /// them.
+    fn apply_within(
+        &mut self,
+        sorted: &[Upd],
+        mut ordered: Vec<Upd>,
+        risky: &[Region],
+        created: bool,
+        log: &mut PassLog,
+    ) {
+        let outside: Vec<Upd> = sorted
+            .iter()
+            .filter(|u| !inside(risky, u.code))
+            .copied()
+            .collect();
+        let mut created = created;
+        if !outside.is_empty() {
+            self.apply(0, 0, 0, &outside, created, log);
+            created = false;
+        }
+        ordered.retain(|u| inside(risky, u.code));
+        self.update_voxels(&ordered, created, log);
+    }
+
+    /// [`OcTree::apply_ups`] of a phase whose order may matter only inside `risky`, as a scan
+    /// applies it: `sorted` (the phase in Morton order) outside them in one pass, inside in the
+    /// order `ordered` holds them.
+    #[cfg(test)]
+    pub(crate) fn apply_ups_within(
+        &mut self,
+        sorted: &[Upd],
+        ordered: &[Upd],
+        risky: &[Region],
+    ) -> Vec<Change> {
+        if sorted.is_empty() {
+            return Vec::new();
+        }
+        let created = self.ensure_root();
+        let mut log = PassLog::default();
+        self.apply_within(sorted, ordered.to_vec(), risky, created, &mut log);
         log.flips.sort_unstable_by_key(|c| c.code);
         self.color_pass(&[], log)
     }
