@@ -580,9 +580,12 @@ mod tests {
         #![proptest_config(ProptestConfig::with_cases(400))]
 
         /// When the pass says the order cannot matter, every order of a phase's updates
-        /// (the free cells', then the hit cells') gives the one-pass tree and changes.
+        /// (the free cells', then the hit cells') gives the one-pass tree and changes. When
+        /// it says the order may matter only inside some subtrees, the updates outside them in
+        /// one pass and those inside voxel by voxel, in the phase's order among themselves,
+        /// give the tree and changes of the whole phase in that order.
         #[test]
-        fn no_order_matters_when_the_pass_says_so(
+        fn every_order_the_pass_allows_gives_the_same_tree(
             before in prop::collection::vec(scan_strategy(), 0..30),
             scan in scan_strategy(),
             shuffles in prop::collection::vec(any::<u64>(), 3),
@@ -590,39 +593,19 @@ mod tests {
             let mut t = tree_after(&before);
             let (misses, hits) = split(&scan);
             for phase in [misses, hits] {
-                if !order_can_matter(&t, &sorted(&phase)) {
-                    for seed in &shuffles {
-                        let mut order = phase.clone();
-                        shuffle(&mut order, *seed);
-                        let (a, b) = both_ways(&t, &order);
-                        prop_assert_eq!(a, b);
-                    }
-                }
-                t.apply_ups(&phase, false);
-            }
-        }
-    }
-
-    proptest! {
-        #![proptest_config(ProptestConfig::with_cases(400))]
-
-        /// When the pass finds that the order may matter only inside some subtrees, the
-        /// updates outside them in one pass and those inside voxel by voxel, in the phase's
-        /// order among themselves, give the tree and changes of the whole phase in that order.
-        #[test]
-        fn only_the_risky_subtrees_need_the_order(
-            before in prop::collection::vec(scan_strategy(), 0..30),
-            scan in scan_strategy(),
-            shuffles in prop::collection::vec(any::<u64>(), 3),
-        ) {
-            let mut t = tree_after(&before);
-            let (misses, hits) = split(&scan);
-            for phase in [misses, hits] {
-                if let Risk::Within(risky) = order_risk(&t, &sorted(&phase)) {
-                    for seed in &shuffles {
-                        let mut order = phase.clone();
-                        shuffle(&mut order, *seed);
-                        prop_assert_eq!(within_and_whole(&t, &order, &risky).0, true);
+                let risk = order_risk(&t, &sorted(&phase));
+                for seed in &shuffles {
+                    let mut order = phase.clone();
+                    shuffle(&mut order, *seed);
+                    match &risk {
+                        Risk::Nowhere => {
+                            let (a, b) = both_ways(&t, &order);
+                            prop_assert_eq!(a, b);
+                        }
+                        Risk::Within(risky) => {
+                            prop_assert!(within_and_whole(&t, &order, risky).0);
+                        }
+                        Risk::Whole => {}
                     }
                 }
                 t.apply_ups(&phase, false);
@@ -641,11 +624,9 @@ mod tests {
         ((write_ot(&b), cb) == whole, morton != whole)
     }
 
-    /// Risky subtrees are found where the order matters, and applying the rest in one pass
-    /// keeps OctoMap's map: over many random cases, phases where one Morton pass would give
-    /// another tree are applied right with only their risky subtrees in order.
-    #[test]
-    fn risky_subtrees_carry_every_order_that_matters() {
+    /// Each phase (the free cells', then the hit cells') of 3000 seeded random cases: `f`
+    /// sees the tree before it, the phase and a shuffled order of it; then the phase goes in.
+    fn seeded_phases(mut f: impl FnMut(&OcTree, &[Upd], &[Upd])) {
         use proptest::strategy::ValueTree;
         use proptest::test_runner::TestRunner;
         let mut runner = TestRunner::deterministic();
@@ -654,7 +635,6 @@ mod tests {
             scan_strategy(),
             any::<u64>(),
         );
-        let (mut within, mut rescued) = (0, 0);
         for _ in 0..3000 {
             let Ok(tree) = cases.new_tree(&mut runner) else {
                 continue;
@@ -663,17 +643,28 @@ mod tests {
             let mut t = tree_after(&before);
             let (misses, hits) = split(&scan);
             for phase in [misses, hits] {
-                if let Risk::Within(risky) = order_risk(&t, &sorted(&phase)) {
-                    let mut order = phase.clone();
-                    shuffle(&mut order, seed | 1);
-                    let (same, morton_differs) = within_and_whole(&t, &order, &risky);
-                    assert!(same, "the risky subtrees did not carry the order");
-                    within += 1;
-                    rescued += usize::from(morton_differs);
-                }
+                let mut order = phase.clone();
+                shuffle(&mut order, seed | 1);
+                f(&t, &phase, &order);
                 t.apply_ups(&phase, false);
             }
         }
+    }
+
+    /// Risky subtrees are found where the order matters, and applying the rest in one pass
+    /// keeps OctoMap's map: over many random cases, phases where one Morton pass would give
+    /// another tree are applied right with only their risky subtrees in order.
+    #[test]
+    fn risky_subtrees_carry_every_order_that_matters() {
+        let (mut within, mut rescued) = (0, 0);
+        seeded_phases(|t, phase, order| {
+            if let Risk::Within(risky) = order_risk(t, &sorted(phase)) {
+                let (same, morton_differs) = within_and_whole(t, order, &risky);
+                assert!(same, "the risky subtrees did not carry the order");
+                within += 1;
+                rescued += usize::from(morton_differs);
+            }
+        });
         assert!(
             within >= 50 && rescued >= 3,
             "{within} phases risky in part, {rescued} where one pass would differ: too tame"
@@ -684,39 +675,20 @@ mod tests {
     /// several updates, and orders that do give other trees occur, each in a phase it flagged.
     #[test]
     fn the_pass_clears_most_phases_and_flags_every_order_that_matters() {
-        use proptest::strategy::ValueTree;
-        use proptest::test_runner::TestRunner;
-        let mut runner = TestRunner::deterministic();
-        let cases = (
-            prop::collection::vec(scan_strategy(), 0..30),
-            scan_strategy(),
-            any::<u64>(),
-        );
         let (mut cleared, mut flagged, mut differing) = (0, 0, 0);
-        for _ in 0..3000 {
-            let Ok(tree) = cases.new_tree(&mut runner) else {
-                continue;
-            };
-            let (before, scan, seed) = tree.current();
-            let mut t = tree_after(&before);
-            let (misses, hits) = split(&scan);
-            for phase in [misses, hits] {
-                let may = order_can_matter(&t, &sorted(&phase));
-                let mut order = phase.clone();
-                shuffle(&mut order, seed | 1);
-                let (a, b) = both_ways(&t, &order);
-                if a != b {
-                    assert!(may, "an order that matters was not flagged");
-                    differing += 1;
-                }
-                if may {
-                    flagged += 1;
-                } else if phase.len() >= 2 {
-                    cleared += 1;
-                }
-                t.apply_ups(&phase, false);
+        seeded_phases(|t, phase, order| {
+            let may = order_can_matter(t, &sorted(phase));
+            let (a, b) = both_ways(t, order);
+            if a != b {
+                assert!(may, "an order that matters was not flagged");
+                differing += 1;
             }
-        }
+            if may {
+                flagged += 1;
+            } else if phase.len() >= 2 {
+                cleared += 1;
+            }
+        });
         assert!(
             differing >= 5,
             "{differing} orders that matter: the cases are too tame"
