@@ -264,10 +264,8 @@ fn write_ot_with(
         return v.color.unwrap_or(WHITE);
     }
     let mut mean = MeanColor::default();
-    for i in 0..8 {
-        if let Some(c) = tree.child(r, i) {
-            mean.add(child(out, c));
-        }
+    for c in tree.children_of(&v) {
+        mean.add(child(out, c));
     }
     let mean = mean.mean().unwrap_or(WHITE);
     if tree.is_colored() {
@@ -280,12 +278,14 @@ fn write_ot_with(
 /// filled in later); where its colour is in `out`, and the node.
 fn write_ot_record(tree: &OcTree, r: NodeRef, out: &mut Vec<u8>) -> (usize, NodeView) {
     let v = tree.node(r);
-    out.extend_from_slice(&v.log_odds.to_le_bytes());
-    let color_at = out.len();
+    let color_at = out.len() + 4;
+    let [a, b, c, d] = v.log_odds.to_le_bytes();
     if tree.is_colored() {
-        out.extend_from_slice(&v.color.unwrap_or(WHITE));
+        let [r, g, bl] = v.color.unwrap_or(WHITE);
+        out.extend_from_slice(&[a, b, c, d, r, g, bl, v.child_mask()]);
+    } else {
+        out.extend_from_slice(&[a, b, c, d, v.child_mask()]);
     }
-    out.push(v.child_mask());
     (color_at, v)
 }
 

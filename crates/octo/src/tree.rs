@@ -781,6 +781,19 @@ impl OcTree {
         (self.blocks[0].mask & 1 != 0).then_some(NodeRef { blk: 0, slot: 0 })
     }
 
+    /// The children of a node seen as `v` ([`OcTree::node`]), in child order: what
+    /// [`OcTree::child`] gives for each of the eight, without reading the node again.
+    pub(crate) fn children_of(&self, v: &NodeView) -> impl Iterator<Item = NodeRef> + use<> {
+        let (blk, mut mask) = (v.children, v.child_mask());
+        std::iter::from_fn(move || {
+            (mask != 0).then(|| {
+                let slot = mask.trailing_zeros() as u8;
+                mask &= mask - 1;
+                NodeRef { blk, slot }
+            })
+        })
+    }
+
     /// A node's value, colour and children.
     pub fn node(&self, r: NodeRef) -> NodeView {
         let b = &self.blocks[r.blk as usize];
