@@ -347,6 +347,21 @@ impl InFlight {
     }
 }
 
+/// Casts `scan` with `c`, and how long that took, s. A failure inside casting (a bug: casting
+/// does not panic on any input) is an `Err`: that scan is lost, and the build ends as stopped.
+fn cast_caught(
+    c: &mut ScanCaster,
+    scan: &Scan,
+    max_range_m: Option<f64>,
+    stop: &AtomicBool,
+) -> (std::thread::Result<Casting>, f64) {
+    let t0 = Instant::now();
+    let cast = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        c.prepare(scan, max_range_m, stop)
+    }));
+    (cast, t0.elapsed().as_secs_f64())
+}
+
 /// Starts `n` casting threads in `scope`, each with a copy of `caster` (casting a scan on one
 /// thread): each takes scans from `queue`, stops inside a scan when `stop` is set, and sends
 /// each cast scan to `events` as soon as it is done.
@@ -372,14 +387,8 @@ fn spawn_casters<'scope>(
                     Err(poisoned) => poisoned.into_inner().recv(),
                 };
                 let Ok((i, scan)) = next else { break };
-                let t0 = Instant::now();
-                // A failure inside casting (a bug: casting does not panic on any input) loses
-                // this scan only; the loop then ends the build as stopped.
-                let cast = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                    c.prepare(&scan, max_range_m, stop)
-                }));
+                let (cast, cast_s) = cast_caught(&mut c, &scan, max_range_m, stop);
                 let failed = cast.is_err();
-                let cast_s = t0.elapsed().as_secs_f64();
                 if events
                     .send(Event::Cast(i, cast.unwrap_or(Ok(None)), cast_s))
                     .is_err()
@@ -611,10 +620,11 @@ impl Run<'_, '_> {
                 scope,
             );
         }
-        let t0 = Instant::now();
         // Its own caster casts only on one thread: the others cast scans apart.
-        let prepared = tree.caster_mut().prepare(&scan, cfg.max_range_m, stop);
-        self.scans.cast(i, prepared, t0.elapsed().as_secs_f64());
+        // A failed scan (`None`) ends the build as stopped when its turn comes, with every
+        // scan before it in the map.
+        let (cast, cast_s) = cast_caught(tree.caster_mut(), &scan, cfg.max_range_m, stop);
+        self.scans.cast(i, cast.unwrap_or(Ok(None)), cast_s);
         self.apply_ready(hooks).map(Some)
     }
 
