@@ -626,9 +626,10 @@ impl ScanCaster {
         let cast = move |n: usize, f: &mut BoxBits, h: &mut BoxBits| match colors {
             None => (this.cast_lanes(share(n), f, h), ColorHits::default()),
             Some(_) => {
+                // A hit a point at most: the share's points, room made once.
                 let mut hits = ColorHits {
                     bits: Some(h),
-                    ..ColorHits::default()
+                    points: Vec::with_capacity(pts.len().div_ceil(threads)),
                 };
                 let counts = this.cast_lanes(share(n), f, &mut hits);
                 (counts, ColorHits { bits: None, ..hits })
@@ -662,7 +663,10 @@ impl ScanCaster {
                     free.union_with(f);
                     hits.union_with(h);
                 }
-                let (mut ups, mut hit_cells) = (Vec::new(), Vec::new());
+                // Room for the cells once, as many as the tables hold.
+                let (free_n, hit_n) = (free.len(), hits.len());
+                let mut ups = Vec::with_capacity(free_n + hit_n);
+                let mut hit_cells = Vec::with_capacity(hit_n);
                 let mut source = None;
                 if colors.is_none() {
                     free.merged_codes(hits, |code, hit| {

@@ -153,7 +153,13 @@ impl Sender {
 
     /// The delta of one scan: `changes` from [`OcTree::insert_scan`] (in Morton order) on `tree`.
     pub fn delta(&mut self, tree: &OcTree, changes: &[Change]) -> Delta {
-        let mut d = Delta::default();
+        // Room for the fine lists once (all of them when everything is inside the ROI).
+        let occupied = changes.iter().filter(|c| c.occupied).count();
+        let mut d = Delta {
+            fine_occupied: Vec::with_capacity(occupied),
+            fine_free: Vec::with_capacity(changes.len() - occupied),
+            ..Delta::default()
+        };
         let shift = self.spec.coarse_shift();
         let mut last_coarse = None;
         let mut last_in = true;

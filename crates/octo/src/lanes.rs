@@ -155,6 +155,11 @@ impl BoxBits {
         !self.words.is_empty() && self.layout.cell(k).is_some()
     }
 
+    /// How many cells the set holds.
+    pub(crate) fn len(&self) -> usize {
+        self.words.iter().map(|w| w.count_ones() as usize).sum()
+    }
+
     /// Whether a key outside the box was inserted since the last reset (the set is then
     /// incomplete: it dropped that key).
     pub(crate) fn missed(&self) -> bool {

@@ -305,7 +305,11 @@ impl OcTree {
             return report;
         }
         let created = self.ensure_root();
-        let mut log = PassLog::default();
+        let mut log = PassLog {
+            // Most of a scan's voxels change (new space): room for all, made once.
+            flips: Vec::with_capacity(scan.ups.len()),
+            recolored: Vec::new(),
+        };
         if self.colors.is_none() {
             if scan.octomap_order || scan.source.is_some() {
                 let mut ups = scan.ups.clone();
