@@ -707,6 +707,9 @@ struct Walk {
     body: Vec<u8>,
     /// The current chunk's records, decompressed; reused between chunks.
     records: Vec<u8>,
+    /// Small records read past (message indexes), apart from `body`: shrunk to one of them,
+    /// `body` would be zeroed whole again for the next chunk.
+    skipped: Vec<u8>,
     done: bool,
     /// What a collecting walk found.
     found: Found,
@@ -720,6 +723,7 @@ impl Walk {
             chunk: None,
             body: Vec::new(),
             records: Vec::new(),
+            skipped: Vec::new(),
             done: false,
             found: Found::default(),
         }
@@ -858,8 +862,8 @@ impl Walk {
                 _ if len <= SKIP_BY_READING => {
                     // Small records (message indexes, after every chunk) are read past, which
                     // keeps the read buffer; the next `read_at` seeks within it.
-                    self.body.resize(len as usize, 0);
-                    file.read_at(at, &mut self.body).map_err(at_file)?;
+                    self.skipped.resize(len as usize, 0);
+                    file.read_at(at, &mut self.skipped).map_err(at_file)?;
                 }
                 _ => {}
             }
