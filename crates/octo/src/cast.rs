@@ -158,11 +158,18 @@ impl ScanSource {
     /// their points. `occupied` is scratch (emptied first, its memory kept from call to call:
     /// a fresh set's table of the scan's box is a few hundred kB to allocate and clear).
     pub(crate) fn hits_in_keyset_order(&self, occupied: &mut KeySet) -> Vec<Upd> {
-        let mut by_point = self.hit_points.clone();
-        // One casting thread finds them in point order already: then this only checks.
-        by_point.sort_unstable_by_key(|h| h.0);
+        // One casting thread finds them in point order already: then they are not copied.
+        let sorted;
+        let by_point = if self.hit_points.is_sorted_by_key(|h| h.0) {
+            &self.hit_points
+        } else {
+            let mut v = self.hit_points.clone();
+            v.sort_unstable_by_key(|h| h.0);
+            sorted = v;
+            &sorted
+        };
         occupied.set_window(self.window.0, self.window.1);
-        for &(_, code) in &by_point {
+        for &(_, code) in by_point {
             occupied.insert(super::math::unmorton(code));
         }
         occupied
@@ -694,7 +701,12 @@ impl ScanCaster {
                     for part in parts {
                         let occ = part.points.iter().map(|&(p, code)| (code, color_of(p)));
                         index.keep_brightest(&mut hit_cells, occ);
-                        src.hit_points.extend(part.points);
+                        // One share (a scan cast on one thread): its points, not a copy.
+                        if src.hit_points.is_empty() {
+                            src.hit_points = part.points;
+                        } else {
+                            src.hit_points.extend(part.points);
+                        }
                     }
                     source = Some(Box::new(src));
                 }
