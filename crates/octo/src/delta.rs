@@ -530,8 +530,18 @@ fn rice_bits(v: u32, k: u32) -> u64 {
 /// MSB first, zero-padded to a byte.
 fn encode_colors(colors: &[[u8; 3]], out: &mut Vec<u8>) {
     let res = residuals(colors);
+    // Each parameter's cost from the residuals' histogram (a residual is 0..=255), not from
+    // the residuals again for each of the nine.
+    let mut histogram = [0u64; 256];
+    for &v in &res {
+        histogram[(v & 0xff) as usize] += 1;
+    }
     let k = (0..=RAW_K)
-        .min_by_key(|&k| res.iter().map(|&v| rice_bits(v, k)).sum::<u64>())
+        .min_by_key(|&k| {
+            (0..256u32)
+                .map(|v| histogram[v as usize] * rice_bits(v, k))
+                .sum::<u64>()
+        })
         .unwrap_or(0);
     out.push(k as u8);
     let (mut acc, mut n) = (0u64, 0u32);
