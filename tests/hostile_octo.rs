@@ -55,12 +55,8 @@ fn a_scan() -> Scan {
     }
 }
 
-/// Valid inputs of every kind in `dir`: clouds, a survey (.graph and .mcap), a stream, maps.
-fn fixtures(dir: &Path) -> Vec<PathBuf> {
-    let scan = a_scan();
-    std::fs::write(dir.join("c.pcd"), write_pcd(&scan, PcdData::Binary)).unwrap();
-    std::fs::write(dir.join("c.ply"), write_ply(&scan)).unwrap();
-    std::fs::write(dir.join("c.xyz"), write_xyz(&scan)).unwrap();
+/// A 2-scan survey in `dir`, as `s.graph` and as `s.mcap`.
+fn surveys(dir: &Path) {
     ok(
         &octo(dir, &["synth", "--scans", "2", "-o", "s.graph"]),
         "synth graph",
@@ -69,6 +65,15 @@ fn fixtures(dir: &Path) -> Vec<PathBuf> {
         &octo(dir, &["synth", "--scans", "2", "-o", "s.mcap"]),
         "synth mcap",
     );
+}
+
+/// Valid inputs of every kind in `dir`: clouds, a survey (.graph and .mcap), a stream, maps.
+fn fixtures(dir: &Path) -> Vec<PathBuf> {
+    let scan = a_scan();
+    std::fs::write(dir.join("c.pcd"), write_pcd(&scan, PcdData::Binary)).unwrap();
+    std::fs::write(dir.join("c.ply"), write_ply(&scan)).unwrap();
+    std::fs::write(dir.join("c.xyz"), write_xyz(&scan)).unwrap();
+    surveys(dir);
     ok(
         &octo(
             dir,
@@ -258,19 +263,13 @@ fn every_numeric_flag_at_bad_values_is_refused_with_its_range() {
 /// cells a scan) is refused before any ray is cast, with one line naming the scan, its cells,
 /// --res and --max-cells, and no output: before, it took every byte of memory (24 GB) until
 /// the kernel killed it. On 1 and on 3 threads, coloured and plain (the live mapper's own test
-/// is `a_scan_over_the_cell_budget_is_an_error_and_leaves_the_map_as_it_was`); --max-cells below a sane scan's count refuses it as well, and above it builds.
+/// is `a_scan_over_the_cell_budget_is_an_error_and_leaves_the_map_as_it_was`); --max-cells
+/// below a sane scan's count refuses it as well, and above it builds.
 #[test]
 fn a_resolution_too_fine_for_the_range_is_refused_before_memory_runs_out() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    ok(
-        &octo(d, &["synth", "--scans", "2", "-o", "s.graph"]),
-        "synth graph",
-    );
-    ok(
-        &octo(d, &["synth", "--scans", "2", "-o", "s.mcap"]),
-        "synth mcap",
-    );
+    surveys(d);
     for input in ["s.graph", "s.mcap"] {
         for threads in ["1", "3"] {
             let what = format!("{input} --res 0.0001 --threads {threads}");

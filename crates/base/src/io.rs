@@ -469,19 +469,14 @@ impl AtomicFile {
 
     /// Flushes, syncs and renames the file into place.
     pub fn commit(mut self) -> Result<(), IoError> {
-        let name = self.target.display().to_string();
-        let write_err = |source| IoError::Write {
-            name: name.clone(),
-            source,
-        };
-        if let Some(writer) = self.writer.take() {
-            let file = writer.into_inner().map_err(|e| write_err(e.into_error()))?;
-            if self.temp.is_some() {
-                file.sync_all().map_err(write_err)?;
-            }
-        }
+        self.sync()?;
+        // Closed (its buffer is flushed already) before the rename.
+        drop(self.writer.take());
         if let Some(temp) = &self.temp {
-            std::fs::rename(temp, &self.dest).map_err(write_err)?;
+            std::fs::rename(temp, &self.dest).map_err(|source| IoError::Write {
+                name: self.target.display().to_string(),
+                source,
+            })?;
         }
         self.committed = true;
         Ok(())

@@ -72,9 +72,7 @@ impl Dest {
 
     /// Writes `bytes` as the whole output and commits it: the file whole, or no file.
     pub fn write_whole(&self, bytes: &[u8]) -> Result<(), IoError> {
-        let mut out = self.open()?;
-        out.write_bytes(bytes)?;
-        out.finish()
+        self.write_pieces([bytes])
     }
 
     /// Writes `pieces` one after the other as the whole output and commits it: the file

@@ -159,17 +159,12 @@ impl ScanSource {
     /// a fresh set's table of the scan's box is a few hundred kB to allocate and clear).
     pub(crate) fn hits_in_keyset_order(&self, occupied: &mut KeySet) -> Vec<Upd> {
         // One casting thread finds them in point order already: then they are not copied.
-        let sorted;
-        let by_point = if self.hit_points.is_sorted_by_key(|h| h.0) {
-            &self.hit_points
-        } else {
-            let mut v = self.hit_points.clone();
-            v.sort_unstable_by_key(|h| h.0);
-            sorted = v;
-            &sorted
-        };
+        let mut by_point = std::borrow::Cow::Borrowed(&self.hit_points[..]);
+        if !by_point.is_sorted_by_key(|h| h.0) {
+            by_point.to_mut().sort_unstable_by_key(|h| h.0);
+        }
         occupied.set_window(self.window.0, self.window.1);
-        for &(_, code) in by_point {
+        for &(_, code) in by_point.iter() {
             occupied.insert(super::math::unmorton(code));
         }
         occupied

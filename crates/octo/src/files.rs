@@ -78,14 +78,19 @@ fn ot_record_bytes(tree: &OcTree) -> usize {
     if tree.is_colored() { 8 } else { 5 }
 }
 
-/// A tree's `.ot` header, with room for its nodes' records.
-fn ot_start(tree: &OcTree) -> Vec<u8> {
-    let mut out = header(
+/// A tree's `.ot` header.
+fn ot_header(tree: &OcTree) -> Vec<u8> {
+    header(
         OT_HEADER,
         tree_type(tree),
         tree.num_nodes(),
         tree.resolution_m(),
-    );
+    )
+}
+
+/// A tree's `.ot` header, with room for its nodes' records.
+fn ot_start(tree: &OcTree) -> Vec<u8> {
+    let mut out = ot_header(tree);
     out.reserve(tree.num_nodes() * ot_record_bytes(tree));
     out
 }
@@ -170,12 +175,7 @@ pub fn write_ot_threads(tree: &OcTree, threads: usize) -> OtPieces {
         }
     });
     let mut out = OtPieces {
-        top: header(
-            OT_HEADER,
-            tree_type(tree),
-            tree.num_nodes(),
-            tree.resolution_m(),
-        ),
+        top: ot_header(tree),
         splices: Vec::with_capacity(jobs.len()),
     };
     let mut parts = parts.into_iter();
@@ -227,14 +227,7 @@ fn write_ot_top(
 
 /// The size of the `.ot` file of a tree, without writing it.
 pub fn ot_size(tree: &OcTree) -> usize {
-    header(
-        OT_HEADER,
-        tree_type(tree),
-        tree.num_nodes(),
-        tree.resolution_m(),
-    )
-    .len()
-        + tree.num_nodes() * ot_record_bytes(tree)
+    ot_header(tree).len() + tree.num_nodes() * ot_record_bytes(tree)
 }
 
 /// Writes node `r` and its subtree in pre-order; returns the colour the node is written with

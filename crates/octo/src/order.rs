@@ -128,22 +128,27 @@ pub(crate) struct Region {
 }
 
 impl Region {
+    /// The bits of a voxel's code below a node at `depth`.
+    fn shift(depth: u32) -> u32 {
+        3 * (TREE_DEPTH - depth)
+    }
+
     /// The subtree at `depth` that holds voxel `code`.
     fn of(code: u64, depth: u32) -> Self {
         Region {
             depth,
-            prefix: code >> (3 * (TREE_DEPTH - depth)),
+            prefix: code >> Self::shift(depth),
         }
     }
 
     /// Whether voxel `code` is inside.
     pub(crate) fn contains(&self, code: u64) -> bool {
-        code >> (3 * (TREE_DEPTH - self.depth)) == self.prefix
+        code >> Self::shift(self.depth) == self.prefix
     }
 
     /// The first voxel's code inside.
     fn start(&self) -> u64 {
-        self.prefix << (3 * (TREE_DEPTH - self.depth))
+        self.prefix << Self::shift(self.depth)
     }
 }
 

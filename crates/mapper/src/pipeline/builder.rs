@@ -313,8 +313,6 @@ struct InFlight {
     queued: usize,
     /// Cast scans applied (or dropped) so far: the number of the next one to apply.
     applied: usize,
-    /// Whether the casting threads are started (with the map, at the first scan).
-    spawned: bool,
 }
 
 impl InFlight {
@@ -486,7 +484,6 @@ pub fn build(
                 early: BTreeMap::new(),
                 queued: 0,
                 applied: 0,
-                spawned: false,
             },
             known: 0,
             tokens_back,
@@ -607,9 +604,9 @@ impl Run<'_, '_> {
             return Ok(None);
         };
         let cfg = self.cfg;
+        let first = self.tree.is_none();
         let tree = self.tree.get_or_insert_with(|| cfg.new_tree(&scan));
-        if !self.scans.spawned {
-            self.scans.spawned = true;
+        if first {
             spawn_casters(
                 self.threads.saturating_sub(1),
                 &tree.caster(),
