@@ -285,8 +285,9 @@ const STOP_POLL: Duration = Duration::from_millis(20);
 enum Event {
     /// From the reading thread, in the order read (scans go to the [`ScanQueue`]).
     Read(Reading),
-    /// The reading thread put one more scan into the [`ScanQueue`].
-    Queued,
+    /// The reading thread put scan number `i` into the [`ScanQueue`]. A thread may take the
+    /// scan, and its cast may come, before this does.
+    Queued(usize),
     /// A scan cast (by its number; `None`: the stop flag ended its casting, or its thread
     /// failed; an error: it would cross too many cells), and how long casting it took, s.
     Cast(usize, Casting, f64),
@@ -309,7 +310,8 @@ struct InFlight {
     queue: ScanQueue,
     /// Scans cast before an earlier one, by number.
     early: BTreeMap<usize, (Casting, f64)>,
-    /// Scans queued so far.
+    /// Scans known to be queued so far: one more than the highest number seen, in an
+    /// [`Event::Queued`] or in a cast, whichever came first.
     queued: usize,
     /// Cast scans applied (or dropped) so far: the number of the next one to apply.
     applied: usize,
@@ -319,6 +321,11 @@ impl InFlight {
     /// Scans queued and not yet applied.
     fn count(&self) -> usize {
         self.queued - self.applied
+    }
+
+    /// Scan `i` is queued (it may have been seen already).
+    fn seen(&mut self, i: usize) {
+        self.queued = self.queued.max(i + 1);
     }
 
     /// The next scan queued that no casting thread has taken, if there is one and the queue
@@ -334,6 +341,8 @@ impl InFlight {
 
     /// Keeps a scan cast (by any thread) until it is next to apply.
     fn cast(&mut self, i: usize, cast: Casting, cast_s: f64) {
+        // Cast, hence queued, though its `Event::Queued` may still be on its way.
+        self.seen(i);
         self.early.insert(i, (cast, cast_s));
     }
 
@@ -464,11 +473,12 @@ pub fn build(
                 let Reading::Scan(scan) = r else {
                     return tx.send(Event::Read(r)).is_ok();
                 };
-                if tokens.recv().is_err() || scans_tx.send((read, scan)).is_err() {
+                let i = read;
+                if tokens.recv().is_err() || scans_tx.send((i, scan)).is_err() {
                     return false;
                 }
                 read += 1;
-                tx.send(Event::Queued).is_ok()
+                tx.send(Event::Queued(i)).is_ok()
             };
             let ended = read_inputs(inputs, cfg, false, quit, &mut send);
             let _ = tx.send(Event::Ended(ended));
@@ -574,8 +584,8 @@ impl Run<'_, '_> {
                 }
                 // Scans come through the queue.
                 Event::Read(Reading::Scan(_)) => true,
-                Event::Queued => {
-                    self.scans.queued += 1;
+                Event::Queued(i) => {
+                    self.scans.seen(i);
                     true
                 }
                 Event::Cast(i, prepared, cast_s) => {
@@ -706,6 +716,32 @@ mod tests {
         let p = dir.join(name);
         std::fs::write(&p, text).unwrap();
         p
+    }
+
+    /// A scan taken from the queue and cast before the reading's `Event::Queued` for it
+    /// arrives (the loop casts between the reading's two sends) counts as queued: the scans in
+    /// flight never go below zero (a panic in a debug build before), and the late event
+    /// changes nothing.
+    #[test]
+    fn a_scan_cast_before_its_queued_event_is_counted_once() {
+        let (_tx, rx) = mpsc::channel::<(usize, Scan)>();
+        let mut f = InFlight {
+            queue: Arc::new(Mutex::new(rx)),
+            early: BTreeMap::new(),
+            queued: 0,
+            applied: 0,
+        };
+        f.cast(0, Ok(None), 0.0);
+        assert_eq!(f.count(), 1);
+        assert!(f.next_ready().is_some());
+        assert_eq!(f.count(), 0);
+        f.seen(0);
+        assert_eq!(f.count(), 0);
+        // Scan 2 cast before scan 1: both in flight, and nothing to apply yet.
+        f.cast(2, Ok(None), 0.0);
+        f.seen(1);
+        assert_eq!(f.count(), 2);
+        assert!(f.next_ready().is_none());
     }
 
     #[test]
