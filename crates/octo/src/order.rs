@@ -14,7 +14,9 @@
 //! one read-only pass over the tree along the scan's updates in Morton order, and says no only
 //! when no order of the updates can give one. Then the scan can be applied in any order, in
 //! particular the plain tree's one recursive pass in Morton order, with OctoMap's result. When
-//! it says yes (or cannot tell), the scan is applied in OctoMap's own order.
+//! it says yes (or cannot tell), the scan is applied in OctoMap's own order; [`order_risk`]
+//! also says where, so that a phase whose risk lies inside a few subtrees goes in one pass
+//! outside them and in OctoMap's order inside them ([`Risk::Within`]).
 //!
 //! The test per node: each child gets the set of log-odds it may hold as a leaf at some moment
 //! of the scan (a voxel: before and after its update; a pruned node: its value, or what its
