@@ -23,7 +23,7 @@
 //! casts the scan the general way) rather than written out of bounds.
 
 use super::hashorder::KeySet;
-use super::lanes::{BoxLayout, LANES, LaneSink};
+use super::lanes::{BoxLayout, LANES, LaneSink, unpack};
 use super::math::Key;
 
 /// A lane without a walk.
@@ -201,25 +201,36 @@ impl LaneSink for FirstRay {
         self.add(self.lane_walk[self.current], k);
     }
 
+    /// A walk ending outside the box sets [`FirstRay::missed`]: one of its cells may have
+    /// been outside, and put in the wrong slot.
+    #[inline(always)]
+    fn end_lane(&mut self, key: u64) {
+        self.missed |= self.layout.outside(key);
+    }
+
     /// The lanes' cell numbers computed side by side, then each cell's first walk lowered to
     /// its lane's walk with a select (a cell seen for the first time, rare, is also listed).
     #[inline(always)]
-    fn insert_lanes(&mut self, kx: &[u16; LANES], ky: &[u16; LANES], kz: &[u16; LANES], keep: u32) {
+    fn insert_lanes(&mut self, keys: &[u64; LANES], keep: u32) {
         for l in 0..LANES {
             self.lane_cells[l] += keep >> l & 1;
         }
-        let (cells, taken, outside) = self.layout.lane_cells(kx, ky, kz, keep);
-        self.missed |= outside;
+        let cells = self.layout.lane_cells(keys, keep);
         for l in 0..LANES {
-            if taken >> l & 1 == 0 {
+            if keep >> l & 1 == 0 {
                 continue;
             }
             let Some(f) = self.first.get_mut(cells[l] as usize) else {
                 self.missed = true;
                 continue;
             };
-            let k = [kx[l], ky[l], kz[l]];
-            lower_first(f, self.lane_walk[l], &mut self.seen, cells[l], k);
+            lower_first(
+                f,
+                self.lane_walk[l],
+                &mut self.seen,
+                cells[l],
+                unpack(keys[l]),
+            );
         }
     }
 }

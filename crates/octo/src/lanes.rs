@@ -14,6 +14,11 @@
 //! Morton order, so that draining the set in Morton order sorts only the words that hold a
 //! cell.
 //!
+//! A lane's key is one integer ([`pack`]: 21 bits an axis), so that a step is one add, the end
+//! test one comparison, and every quantity of a lane is 64 bits wide, as its `f64`s are: the
+//! compiler then keeps each quantity of four lanes in one AVX2 register, with no packing or
+//! unpacking between widths.
+//!
 //! Nothing here panics: a key outside the box is reported (the caller falls back to the
 //! general [`super::cellset::CellSet`]) rather than written out of bounds.
 
@@ -28,7 +33,7 @@ pub(crate) const OVERSHOOT_CELLS: u16 = 4;
 /// Most words (64 cells each) a [`BoxBits`] holds (2 MiB: a box of 256 x 256 x 256 cells).
 const BOX_WORDS_MAX: u64 = 1 << 18;
 
-/// Morton code of each cell inside a word's 4 x 4 x 4 cells, indexed by `x | y << 2 | z << 4`.
+/// The Morton code inside a word's 4 x 4 x 4 cells of each cell's bit (`x | y << 2 | z << 4`).
 const LOCAL: [u8; 64] = {
     let mut t = [0u8; 64];
     let mut i = 0;
@@ -39,15 +44,81 @@ const LOCAL: [u8; 64] = {
     t
 };
 
+/// A word's bits moved to their cells' Morton order inside the word ([`LOCAL`]), a byte at a
+/// time: entry `[b][v]` holds the Morton bits of the cells of byte `b`'s set bits `v`.
+static TO_MORTON: [[u64; 256]; 8] = {
+    let mut t = [[0u64; 256]; 8];
+    let mut b = 0;
+    while b < 8 {
+        let mut v = 0;
+        while v < 256 {
+            let mut m = 0u64;
+            let mut j = 0;
+            while j < 8 {
+                if v >> j & 1 == 1 {
+                    m |= 1 << LOCAL[8 * b + j];
+                }
+                j += 1;
+            }
+            t[b][v] = m;
+            v += 1;
+        }
+        b += 1;
+    }
+    t
+};
+
+/// Word `w`'s bits in Morton order: bit `m` set when the cell whose Morton code inside the
+/// word is `m` is in `w`.
+#[inline]
+fn to_morton(w: u64) -> u64 {
+    (0..8).fold(0, |acc, b| {
+        acc | TO_MORTON[b][(w >> (8 * b) & 0xff) as usize]
+    })
+}
+
+/// Bits of each axis in a packed key ([`pack`]).
+const FIELD_BITS: u32 = 21;
+
+/// One axis's bits of a packed key, shifted down.
+const FIELD: u64 = (1 << FIELD_BITS) - 1;
+
+/// Key `k` as one integer, `x | y << 21 | z << 42`: a step along an axis is one add, and two
+/// keys are equal when their integers are. A walk that stays in its scan's key box (every
+/// lanes walk does, or the box reports it) never carries between the axes, whose keys are at
+/// most 16 bits.
+#[inline(always)]
+pub(crate) fn pack(k: Key) -> u64 {
+    k[0] as u64 | (k[1] as u64) << FIELD_BITS | (k[2] as u64) << (2 * FIELD_BITS)
+}
+
+/// The key of a packed key ([`pack`]).
+#[inline(always)]
+pub(crate) fn unpack(p: u64) -> Key {
+    [0, 1, 2].map(|i| (p >> (i as u32 * FIELD_BITS) & FIELD) as u16)
+}
+
 /// How a key box's cells are numbered ([`BoxBits`]' bits, [`super::firstray::FirstRay`]'s
-/// slots): a word of 64 per 4 x 4 x 4 cells, numbered in Morton order inside it; a power of
-/// two of words along each axis, x fastest, so that a cell's number is found with shifts.
+/// slots): a word of 64 per 4 x 4 x 4 cells, `x | y << 2 | z << 4` inside it (the low two
+/// bits of each key); a power of two of words along each axis, x fastest, so that a cell's
+/// number is found with shifts and masks.
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct BoxLayout {
     /// Lowest key of the box on each axis, a multiple of 4.
     pub(crate) low: [u16; 3],
     /// Log2 of the words along each axis.
     pub(crate) shift: [u32; 3],
+    /// `low`, packed ([`pack`]).
+    low_packed: u64,
+    /// The bits of a packed key less `low_packed` that are set only outside the box: on each
+    /// axis those from `shift + 2` up (a key past the box's high side sets one; one below its
+    /// low side borrows, setting the field's top bit), and the top bit.
+    outside: u64,
+    /// How far a packed key less `low_packed` goes down on each axis for that axis's part of
+    /// the word number (its key over 4, shifted up by the lower axes' shifts).
+    word_down: [u32; 3],
+    /// Each axis's part of the word number, after `word_down`.
+    word_mask: [u64; 3],
 }
 
 impl BoxLayout {
@@ -63,59 +134,71 @@ impl BoxLayout {
         if high.iter().zip(&low).any(|(h, l)| h < l) || words > BOX_WORDS_MAX {
             return None;
         }
-        Some((BoxLayout { low: lo, shift }, words as usize))
+        // Below: how a packed key's bits map to the cell's number. A box is at most 2^16 + 8
+        // cells an axis (shift at most 15), so the field's top bit (20) is never a key's.
+        let up = [0, shift[0], shift[0] + shift[1]];
+        let field_low = |i: usize| i as u32 * FIELD_BITS;
+        let outside = (0..3).fold(1u64 << 63, |acc, i| {
+            acc | (FIELD & !((4u64 << shift[i]) - 1)) << field_low(i)
+        });
+        let layout = BoxLayout {
+            low: lo,
+            shift,
+            low_packed: pack(lo),
+            outside,
+            word_down: [0, 1, 2].map(|i| field_low(i) + 2 - up[i]),
+            word_mask: [0, 1, 2].map(|i| ((1u64 << shift[i]) - 1) << up[i]),
+        };
+        Some((layout, words as usize))
+    }
+
+    /// Whether packed key `key` ([`pack`]) is outside the box.
+    #[inline(always)]
+    pub(crate) fn outside(&self, key: u64) -> bool {
+        key.wrapping_sub(self.low_packed) & self.outside != 0
+    }
+
+    /// The cell of packed key `key` ([`pack`]), a key inside the box: its word and its bit in
+    /// the word. A key outside the box gives some cell of the box (the masks keep the word
+    /// inside it): the caller tells apart with [`BoxLayout::outside`]. No branch, no table, a
+    /// few operations: the lanes compute it side by side.
+    #[inline(always)]
+    fn parts(&self, key: u64) -> (u64, u64) {
+        let rel = key.wrapping_sub(self.low_packed);
+        // x0 x1 y0 y1 z0 z1: bits 0, 1, 21, 22, 42, 43 of `rel`.
+        let local = (rel & 3) | (rel >> 19 & 12) | (rel >> 38 & 48);
+        let [dx, dy, dz] = self.word_down;
+        let [mx, my, mz] = self.word_mask;
+        let word = (rel >> dx & mx) | (rel >> dy & my) | (rel >> dz & mz);
+        (word, local)
     }
 
     /// The numbers of the cells of the lanes whose bit is set in `keep` (lane `l`'s cell being
-    /// `[kx[l], ky[l], kz[l]]`), side by side without a branch; the lanes whose cell is in the
-    /// box, as bits, and whether a kept lane's cell is outside it. A lane not taken has number 0.
+    /// `keys[l]`, packed), side by side without a branch; a lane not kept has number 0. A
+    /// lane's key outside the box gives some cell of the box ([`BoxLayout::parts`]).
     #[inline(always)]
-    pub(crate) fn lane_cells(
-        &self,
-        kx: &[u16; LANES],
-        ky: &[u16; LANES],
-        kz: &[u16; LANES],
-        keep: u32,
-    ) -> ([u32; LANES], u32, bool) {
-        let [sx, sy, sz] = self.shift;
-        let [lx, ly, lz] = self.low;
+    pub(crate) fn lane_cells(&self, keys: &[u64; LANES], keep: u32) -> [u32; LANES] {
         let mut cells = [0u32; LANES];
-        let (mut taken, mut outside) = (0u32, 0u32);
         for l in 0..LANES {
-            let x = kx[l].wrapping_sub(lx) as u32;
-            let y = ky[l].wrapping_sub(ly) as u32;
-            let z = kz[l].wrapping_sub(lz) as u32;
-            let kept = keep >> l & 1;
-            let out = ((x >> (sx + 2)) | (y >> (sy + 2)) | (z >> (sz + 2)) != 0) as u32;
-            let take = kept & !out;
-            let local =
-                (x & 1) | (y & 1) << 1 | (z & 1) << 2 | (x & 2) << 2 | (y & 2) << 3 | (z & 2) << 4;
-            let word = (x >> 2) | (y >> 2) << sx | (z >> 2) << (sx + sy);
-            cells[l] = (word << 6 | local) & take.wrapping_neg();
-            taken |= take << l;
-            outside |= kept & out;
+            let (word, local) = self.parts(keys[l]);
+            let take = (keep >> l & 1) as u64;
+            cells[l] = ((word << 6 | local) & take.wrapping_neg()) as u32;
         }
-        (cells, taken, outside != 0)
+        cells
     }
 
     /// Cell `k`'s number (its word times 64 plus its bit); `None` outside the box.
     #[inline(always)]
     pub(crate) fn cell(&self, k: Key) -> Option<usize> {
-        let x = k[0].wrapping_sub(self.low[0]) as usize;
-        let y = k[1].wrapping_sub(self.low[1]) as usize;
-        let z = k[2].wrapping_sub(self.low[2]) as usize;
-        let [sx, sy, sz] = self.shift;
-        if (x >> (sx + 2)) | (y >> (sy + 2)) | (z >> (sz + 2)) != 0 {
-            return None;
-        }
-        let word = (x >> 2) | (y >> 2) << sx | (z >> 2) << (sx + sy);
-        Some(word << 6 | LOCAL[(x & 3) | (y & 3) << 2 | (z & 3) << 4] as usize)
+        let key = pack(k);
+        let (word, local) = self.parts(key);
+        (!self.outside(key)).then_some((word << 6 | local) as usize)
     }
 }
 
-/// A set of the cells of one key box, a bit each: a word (64 bits) per 4 x 4 x 4 cells, its
-/// bits in Morton order; a power of two of words along each axis, so that a cell's word is
-/// found with shifts.
+/// A set of the cells of one key box, a bit each, numbered as [`BoxLayout`] says: a word (64
+/// bits) per 4 x 4 x 4 cells; a power of two of words along each axis, so that a cell's word
+/// is found with shifts.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct BoxBits {
     /// Where each cell's bit is.
@@ -211,8 +294,8 @@ impl BoxBits {
     /// order into `out(code, hit)`, a cell in both once, as hit.
     pub(crate) fn merged_codes(&self, hits: &BoxBits, mut out: impl FnMut(u64, bool)) {
         for (base, i) in self.words_in_order(Some(hits)) {
-            let hit = hits.words.get(i).copied().unwrap_or(0);
-            let mut word = self.words[i] | hit;
+            let hit = to_morton(hits.words.get(i).copied().unwrap_or(0));
+            let mut word = to_morton(self.words[i]) | hit;
             while word != 0 {
                 let bit = word.trailing_zeros();
                 out(base | bit as u64, hit >> bit & 1 == 1);
@@ -238,13 +321,23 @@ pub(crate) trait LaneSink {
     /// Adds one cell.
     fn insert(&mut self, k: Key);
 
-    /// Adds the cell of every lane whose bit is set in `keep`, lane `l`'s cell being
-    /// `[kx[l], ky[l], kz[l]]`.
+    /// The walk in lane `lane` ended, its key at `key` (packed): the cell after its last one
+    /// (or its last, when the walks run out). Each axis's key only ever steps one way, so every
+    /// cell the walk gave [`LaneSink::insert_lanes`] lies between its first cell and `key` on
+    /// each axis: if both are inside a box, so are they all. A sink that cannot hold cells
+    /// outside its box checks `key` here rather than every cell (its first is checked on
+    /// [`LaneSink::insert`]).
     #[inline(always)]
-    fn insert_lanes(&mut self, kx: &[u16; LANES], ky: &[u16; LANES], kz: &[u16; LANES], keep: u32) {
-        for l in 0..LANES {
+    fn end_lane(&mut self, _key: u64) {}
+
+    /// Adds the cell of every lane whose bit is set in `keep`, lane `l`'s cell being
+    /// `keys[l]`, packed ([`pack`]). A sink with a box may put a cell outside it anywhere in
+    /// the box, provided the walk's end ([`LaneSink::end_lane`]) then tells it was outside.
+    #[inline(always)]
+    fn insert_lanes(&mut self, keys: &[u64; LANES], keep: u32) {
+        for (l, &key) in keys.iter().enumerate() {
             if keep >> l & 1 == 1 {
-                self.insert([kx[l], ky[l], kz[l]]);
+                self.insert(unpack(key));
             }
         }
     }
@@ -256,34 +349,31 @@ impl LaneSink for BoxBits {
         BoxBits::insert(self, k);
     }
 
+    /// A walk ending outside the box sets [`BoxBits::missed`]: one of its cells may have been
+    /// outside, and put in the wrong word.
+    #[inline(always)]
+    fn end_lane(&mut self, key: u64) {
+        self.missed |= self.layout.outside(key);
+    }
+
     /// The lanes' words and bits computed side by side (no branch, no table: the compiler
     /// turns the first loop into a few vector operations), then or-ed into the words one lane
-    /// after the other, so that two lanes in the same word both land. A lane not kept, or
-    /// outside the box, ors nothing (bit mask 0) into word 0; one outside the box sets
-    /// [`BoxBits::missed`].
+    /// after the other, so that two lanes in the same word both land. A lane not kept ors
+    /// nothing (bit mask 0) into word 0. A cell outside the box is not looked for here: it
+    /// lands in some word of the box, and [`LaneSink::end_lane`] reports its walk.
     #[inline(always)]
-    fn insert_lanes(&mut self, kx: &[u16; LANES], ky: &[u16; LANES], kz: &[u16; LANES], keep: u32) {
-        let [sx, sy, sz] = self.layout.shift;
-        let [lx, ly, lz] = self.layout.low;
-        let mut word = [0u32; LANES];
+    fn insert_lanes(&mut self, keys: &[u64; LANES], keep: u32) {
+        let mut word = [0u64; LANES];
         let mut bits = [0u64; LANES];
-        let mut outside = 0u32;
         for l in 0..LANES {
-            let x = kx[l].wrapping_sub(lx) as u32;
-            let y = ky[l].wrapping_sub(ly) as u32;
-            let z = kz[l].wrapping_sub(lz) as u32;
-            let kept = keep >> l & 1;
-            let out = ((x >> (sx + 2)) | (y >> (sy + 2)) | (z >> (sz + 2)) != 0) as u32;
-            let take = kept & !out;
-            let local =
-                (x & 1) | (y & 1) << 1 | (z & 1) << 2 | (x & 2) << 2 | (y & 2) << 3 | (z & 2) << 4;
-            word[l] = ((x >> 2) | (y >> 2) << sx | (z >> 2) << (sx + sy)) & take.wrapping_neg();
-            bits[l] = (take as u64) << local;
-            outside |= kept & out;
+            let (w, local) = self.layout.parts(keys[l]);
+            let take = (keep >> l & 1) as u64;
+            word[l] = w & take.wrapping_neg();
+            bits[l] = take << local;
         }
-        // Every word index is inside the table (the box test above), unless the table is
+        // Every word index is inside the table (the masks of `parts`), unless the table is
         // empty (a box too large, which the caller does not walk into).
-        self.missed |= outside != 0 || self.words.is_empty();
+        self.missed |= self.words.is_empty();
         for l in 0..LANES {
             if let Some(w) = self.words.get_mut(word[l] as usize) {
                 *w |= bits[l];
@@ -299,7 +389,13 @@ impl LaneSink for Vec<Key> {
     }
 }
 
-/// [`LANES`] walks side by side, one array per quantity.
+/// [`LANES`] walks side by side, one array per quantity, each 64 bits a lane.
+///
+/// A lane's keys are kept packed ([`pack`]) and mirrored on each axis its walk steps down
+/// (that axis's bits complemented, `FIELD - k`), so that every walk steps up on every axis:
+/// a step adds the same constant to any lane (1, `1 << 21` or `1 << 42`), and no lane needs
+/// its own steps. The walk's bound is a step number (`deadline`) against a count shared by
+/// all lanes (`now`), not a count of its own written back every step.
 struct Lanes {
     tx: [f64; LANES],
     ty: [f64; LANES],
@@ -308,16 +404,18 @@ struct Lanes {
     dy: [f64; LANES],
     dz: [f64; LANES],
     length: [f64; LANES],
-    kx: [u16; LANES],
-    ky: [u16; LANES],
-    kz: [u16; LANES],
-    sx: [u16; LANES],
-    sy: [u16; LANES],
-    sz: [u16; LANES],
-    ex: [u16; LANES],
-    ey: [u16; LANES],
-    ez: [u16; LANES],
-    left: [u32; LANES],
+    /// The current cell, packed and mirrored.
+    key: [u64; LANES],
+    /// The bits that mirror the key: [`FIELD`] on each axis the walk steps down.
+    flip: [u64; LANES],
+    /// The current cell, packed (`key ^ flip`): what the sink gets.
+    cell: [u64; LANES],
+    /// The end's cell, packed and mirrored.
+    end: [u64; LANES],
+    /// The value of `now` at which the walk has used up its steps.
+    deadline: [u64; LANES],
+    /// Steps the lanes have taken.
+    now: u64,
 }
 
 impl Lanes {
@@ -331,16 +429,12 @@ impl Lanes {
             dy: [0.0; LANES],
             dz: [0.0; LANES],
             length: [0.0; LANES],
-            kx: [0; LANES],
-            ky: [0; LANES],
-            kz: [0; LANES],
-            sx: [0; LANES],
-            sy: [0; LANES],
-            sz: [0; LANES],
-            ex: [0; LANES],
-            ey: [0; LANES],
-            ez: [0; LANES],
-            left: [0; LANES],
+            key: [0; LANES],
+            flip: [0; LANES],
+            cell: [0; LANES],
+            end: [0; LANES],
+            deadline: [0; LANES],
+            now: 0,
         }
     }
 
@@ -348,29 +442,53 @@ impl Lanes {
     fn load(&mut self, l: usize, w: &RayWalk) {
         [self.tx[l], self.ty[l], self.tz[l]] = w.t_max;
         [self.dx[l], self.dy[l], self.dz[l]] = w.t_delta;
-        [self.kx[l], self.ky[l], self.kz[l]] = w.key;
-        [self.sx[l], self.sy[l], self.sz[l]] = w.step;
-        [self.ex[l], self.ey[l], self.ez[l]] = w.end;
+        // An axis the ray does not move along (step 0) is never stepped (its ray parameter
+        // is f64::MAX, never the least of the three), so it needs no mirroring.
+        let flip = (0..3).fold(0, |acc, i| {
+            acc | if w.step[i] == u16::MAX {
+                FIELD << (i as u32 * FIELD_BITS)
+            } else {
+                0
+            }
+        });
+        self.flip[l] = flip;
+        self.cell[l] = pack(w.key);
+        self.key[l] = self.cell[l] ^ flip;
+        self.end[l] = pack(w.end) ^ flip;
         self.length[l] = w.length;
-        self.left[l] = w.steps_left;
+        self.deadline[l] = self.now + w.steps_left as u64;
     }
 
+    /// Lane `l`'s walk, to go on one step at a time. Its key is unpacked: a key outside the
+    /// scan's box (which a packed key may not hold) is reported by the box at the walk's end
+    /// ([`LaneSink::end_lane`]), and the scan is then cast again the general way. An axis not
+    /// mirrored steps up: if the ray does not move along it, it is never stepped.
     fn walk(&self, l: usize) -> RayWalk {
+        let flip = self.flip[l];
+        let step = |i: u32| {
+            if flip >> (i * FIELD_BITS) & 1 == 1 {
+                u16::MAX
+            } else {
+                1
+            }
+        };
         RayWalk {
             t_max: [self.tx[l], self.ty[l], self.tz[l]],
             t_delta: [self.dx[l], self.dy[l], self.dz[l]],
-            step: [self.sx[l], self.sy[l], self.sz[l]],
-            key: [self.kx[l], self.ky[l], self.kz[l]],
-            end: [self.ex[l], self.ey[l], self.ez[l]],
+            step: [step(0), step(1), step(2)],
+            key: unpack(self.cell[l]),
+            end: unpack(self.end[l] ^ flip),
             length: self.length[l],
-            steps_left: self.left[l],
+            steps_left: self.deadline[l].saturating_sub(self.now) as u32,
         }
     }
 
     /// One step of every lane, as [`RayWalk::step`] takes it; the lanes whose walk ended, as
-    /// bits. A lane that goes on has its new cell in `kx`, `ky`, `kz`.
+    /// bits. A lane that goes on has its new cell in `cell`.
     #[inline(always)]
     fn step(&mut self) -> u32 {
+        self.now += 1;
+        let now = self.now;
         let mut ended = 0u32;
         for l in 0..LANES {
             let (tx, ty, tz) = (self.tx[l], self.ty[l], self.tz[l]);
@@ -384,21 +502,17 @@ impl Lanes {
             let ntx = tx + f64::from_bits(self.dx[l].to_bits() & fx);
             let nty = ty + f64::from_bits(self.dy[l].to_bits() & fy);
             let ntz = tz + f64::from_bits(self.dz[l].to_bits() & fz);
-            let kx = self.kx[l].wrapping_add(self.sx[l] & fx as u16);
-            let ky = self.ky[l].wrapping_add(self.sy[l] & fy as u16);
-            let kz = self.kz[l].wrapping_add(self.sz[l] & fz as u16);
+            let step = (fx & 1) | (fy & 1 << FIELD_BITS) | (fz & 1 << (2 * FIELD_BITS));
+            let key = self.key[l].wrapping_add(step);
             self.tx[l] = ntx;
             self.ty[l] = nty;
             self.tz[l] = ntz;
-            self.kx[l] = kx;
-            self.ky[l] = ky;
-            self.kz[l] = kz;
-            let reached = (kx == self.ex[l]) & (ky == self.ey[l]) & (kz == self.ez[l]);
+            self.key[l] = key;
+            self.cell[l] = key ^ self.flip[l];
+            let reached = key == self.end[l];
             let m = if nty < ntx { nty } else { ntx };
             let dist = if ntz < m { ntz } else { m };
-            let left = self.left[l].wrapping_sub(1);
-            self.left[l] = left;
-            let end = reached | (dist > self.length[l]) | (left == 0);
+            let end = reached | (dist > self.length[l]) | (now == self.deadline[l]);
             ended |= (end as u32) << l;
         }
         ended
@@ -429,11 +543,12 @@ pub(crate) fn walk_lanes(walks: &mut impl Iterator<Item = RayWalk>, out: &mut im
     let all = (1u32 << LANES) - 1;
     while live == all {
         let ended = lanes.step();
-        out.insert_lanes(&lanes.kx, &lanes.ky, &lanes.kz, !ended & all);
+        out.insert_lanes(&lanes.cell, !ended & all);
         let mut e = ended;
         while e != 0 {
             let l = e.trailing_zeros() as usize;
             e &= e - 1;
+            out.end_lane(lanes.cell[l]);
             match walks.next() {
                 Some(w) => {
                     out.begin(l);
@@ -447,6 +562,7 @@ pub(crate) fn walk_lanes(walks: &mut impl Iterator<Item = RayWalk>, out: &mut im
     // Out of rays: the walks still going finish one by one.
     for l in 0..LANES {
         if live & (1 << l) != 0 {
+            out.end_lane(lanes.cell[l]);
             out.resume(l);
             let mut w = lanes.walk(l);
             while let Some(k) = w.step() {
@@ -506,6 +622,47 @@ mod tests {
                 assert_eq!(got, one, "{n} rays from {origin:?}");
             }
             assert!(one_by_one(&walks).len() > 10 * walks.len());
+        }
+    }
+
+    /// Walks that leave the box are reported, though the box looks only at each walk's end
+    /// (every axis steps one way): rays inside it, and rays out of it along each axis and
+    /// direction, as many as fill the lanes and more.
+    #[test]
+    fn a_walk_that_leaves_the_box_is_reported_at_its_end() {
+        let grid = Grid::new(0.1);
+        let origin = [0.05f32, -0.3, 2.0];
+        let ko = grid.key_of(origin).expect("in range");
+        let (low, high) = (ko.map(|k| k - 20), ko.map(|k| k + 20));
+        for end in [
+            [1.0f32, 0.3, 1.8],
+            [-0.9, -1.2, 2.6],
+            [9.0, 0.3, 1.8],
+            [-9.0, 0.3, 1.8],
+            [0.2, 8.0, 2.5],
+            [0.2, -8.0, 2.5],
+            [0.2, 0.1, 11.0],
+            [0.2, 0.1, -7.0],
+        ] {
+            let RayStart::Walk(w) = grid.ray_start(origin, end) else {
+                panic!("a walk to {end:?}");
+            };
+            let mut cells = vec![w.key];
+            let mut one = w;
+            while let Some(k) = one.step() {
+                cells.push(k);
+            }
+            for n in [1, LANES, 3 * LANES + 1] {
+                let mut set = BoxBits::new(low, high).expect("small box");
+                walk_lanes(&mut std::iter::repeat_n(w, n), &mut set);
+                let outside = cells.iter().any(|&k| !set.covers(k));
+                let end_key = grid.key_of(end).expect("in range");
+                assert!(outside || set.covers(end_key), "{end:?}: pick an end inside");
+                assert_eq!(set.missed(), outside, "{n} rays to {end:?}");
+                if !outside {
+                    assert_eq!(set.len(), cells.len(), "{n} rays to {end:?}");
+                }
+            }
         }
     }
 
