@@ -125,7 +125,7 @@ impl BoxLayout {
     /// The layout of the cells from `low` to `high` (inclusive, each axis) and its number of
     /// words; `None` if the box is empty or too large (more than [`BOX_WORDS_MAX`] words).
     pub(crate) fn fit(low: Key, high: Key) -> Option<(BoxLayout, usize)> {
-        let lo = low.map(|k| k & !3);
+        let mut lo = low.map(|k| k & !3);
         let shift = [0, 1, 2].map(|i| {
             let words = (high[i].saturating_sub(lo[i]) as u32 >> 2) + 1;
             words.next_power_of_two().trailing_zeros()
@@ -134,8 +134,18 @@ impl BoxLayout {
         if high.iter().zip(&low).any(|(h, l)| h < l) || words > BOX_WORDS_MAX {
             return None;
         }
-        // Below: how a packed key's bits map to the cell's number. A box is at most 2^16 + 8
-        // cells an axis (shift at most 15), so the field's top bit (20) is never a key's.
+        // The box stays inside the key range: moved down when its power-of-two size would take
+        // it past key 65535 (it is at most the range's 65 536 cells). A walk's key then leaves
+        // the box before it could wrap (OctoMap's keys are 16-bit and wrap; a packed key does
+        // not), and the box reports it.
+        for i in 0..3 {
+            let cells = 4u32 << shift[i];
+            if lo[i] as u32 + cells > 1 << 16 {
+                lo[i] = u16::try_from((1u32 << 16).checked_sub(cells)?).ok()?;
+            }
+        }
+        // Below: how a packed key's bits map to the cell's number. A box is at most 2^16 cells
+        // an axis (shift at most 14), so the field's top bit (20) is never a key's.
         let up = [0, shift[0], shift[0] + shift[1]];
         let field_low = |i: usize| i as u32 * FIELD_BITS;
         let outside = (0..3).fold(1u64 << 63, |acc, i| {
@@ -625,6 +635,36 @@ mod tests {
         }
     }
 
+    /// A box never reaches past the key range, where OctoMap's 16-bit keys wrap and packed
+    /// keys do not: one at the range's high end is moved down (still covering what it was
+    /// asked to), and the keys before 0 and after 65535 are outside.
+    #[test]
+    fn a_box_stays_inside_the_key_range() {
+        // 12 cells from 65524 take 4 words, 16 cells: 65524 + 16 is past the range.
+        let (layout, words) = BoxLayout::fit([65524, 10, 300], [65535, 90, 301]).expect("fits");
+        assert_eq!(words, 4 * 32);
+        let top = 65535;
+        for k in [[65524, 10, 300], [top, 90, 301], [65520, 8, 300]] {
+            assert!(!layout.outside(pack(k)), "{k:?} inside");
+        }
+        assert!(
+            layout.outside(pack([top, 90, 300]) + 1),
+            "the key after 65535"
+        );
+        assert!(layout.outside(pack([65519, 10, 300])));
+        let (layout, _) = BoxLayout::fit([4, 4, 4], [65531, 4, 4]).expect("moved down");
+        assert_eq!(layout.low[0], 0);
+        let (layout, _) = BoxLayout::fit([0, 0, 0], [65535, 3, 3]).expect("the whole range");
+        assert!(
+            layout.outside(pack([0, 0, 0]).wrapping_sub(1)),
+            "the key before 0"
+        );
+        assert!(
+            layout.outside(pack([65535, 0, 0]) + 1),
+            "the key after 65535"
+        );
+    }
+
     /// Walks that leave the box are reported, though the box looks only at each walk's end
     /// (every axis steps one way): rays inside it, and rays out of it along each axis and
     /// direction, as many as fill the lanes and more.
@@ -657,7 +697,10 @@ mod tests {
                 walk_lanes(&mut std::iter::repeat_n(w, n), &mut set);
                 let outside = cells.iter().any(|&k| !set.covers(k));
                 let end_key = grid.key_of(end).expect("in range");
-                assert!(outside || set.covers(end_key), "{end:?}: pick an end inside");
+                assert!(
+                    outside || set.covers(end_key),
+                    "{end:?}: pick an end inside"
+                );
                 assert_eq!(set.missed(), outside, "{n} rays to {end:?}");
                 if !outside {
                     assert_eq!(set.len(), cells.len(), "{n} rays to {end:?}");
