@@ -416,7 +416,8 @@ fn spawn_casters<'scope>(
 /// The inputs are read on a thread of their own ([`super::read_inputs`]), a few scans ahead of
 /// the map, so that reading, decompressing and decoding overlap the map's work. With more than
 /// one thread ([`BuildConfig::threads`]), the scans are cast on that many threads, a scan each:
-/// this one (when no cast scan waits to go into the map) and one fewer of their own. The map
+/// this one (when no cast scan waits to go into the map) and one fewer of their own; the last
+/// scan, once the reading has ended, on all of them, its rays shared. The map
 /// and the stream are the same as with one thread, byte for byte, and each scan goes into the
 /// map and the stream as soon as it is read and cast, whatever comes after it (a live input
 /// may be quiet for a long time).
@@ -549,7 +550,7 @@ impl Run<'_, '_> {
             }
             let event = match events.try_recv() {
                 Ok(event) => event,
-                Err(_) => match self.cast_here(events_tx, stop, hooks, scope)? {
+                Err(_) => match self.cast_here(events_tx, stop, hooks, scope, ended.is_some())? {
                     Some(true) => continue,
                     Some(false) => return Ok(()),
                     None => match events.recv_timeout(STOP_POLL) {
@@ -602,13 +603,15 @@ impl Run<'_, '_> {
     /// Casts here the next queued scan that no casting thread has taken, then puts every cast
     /// scan next in order into the map: `None` when there was none to cast, else false if the
     /// build stopped. The first scan makes the map (coloured or not) and starts the casting
-    /// threads, one fewer than the build's threads.
+    /// threads, one fewer than the build's threads. The last scan, once the reading has
+    /// ended, is cast on all the build's threads: no scan is left for the casting threads.
     fn cast_here<'scope>(
         &mut self,
         events_tx: &mpsc::Sender<Event>,
         stop: &'scope AtomicBool,
         hooks: &mut Hooks<'_>,
         scope: &'scope std::thread::Scope<'scope, '_>,
+        reading_ended: bool,
     ) -> Result<Option<bool>, PipelineError> {
         let Some((i, scan)) = self.scans.take() else {
             return Ok(None);
@@ -627,10 +630,16 @@ impl Run<'_, '_> {
                 scope,
             );
         }
-        // Its own caster casts only on one thread: the others cast scans apart.
-        // A failed scan (`None`) ends the build as stopped when its turn comes, with every
-        // scan before it in the map.
-        let (cast, cast_s) = cast_caught(tree.caster_mut(), &scan, cfg.max_range_m, stop);
+        // Its own caster casts on one thread, the others casting scans apart; the last scan
+        // read, the reading over, has its rays shared by all of them (the same cells, in the
+        // same order: the casting threads are idle or finishing the scan before it). A failed
+        // scan (`None`) ends the build as stopped when its turn comes, with every scan before
+        // it in the map.
+        let last = reading_ended && i + 1 == self.scans.queued;
+        let caster = tree.caster_mut();
+        caster.set_threads(if last { self.threads } else { 1 });
+        let (cast, cast_s) = cast_caught(caster, &scan, cfg.max_range_m, stop);
+        caster.set_threads(1);
         self.scans.cast(i, cast.unwrap_or(Ok(None)), cast_s);
         self.apply_ready(hooks).map(Some)
     }

@@ -187,8 +187,9 @@ pub struct MapConfigArgs {
     #[arg(long, conflicts_with = "no_color")]
     pub color_updates: bool,
 
-    /// Threads casting scans' rays, a scan each; one of them also puts the cast scans into
-    /// the map, in order [default: the machine's cores, at most 8]. The inputs are read on a
+    /// Threads casting scans' rays, a scan each (the last one's rays shared by all); one of
+    /// them also puts the cast scans into the map, in order [default: the machine's cores, at
+    /// most 8]. The inputs are read on a
     /// thread of their own, a few scans ahead; the stream is the same at any count, each
     /// scan's message written as soon as the scan is whole.
     #[arg(long, value_name = "N", value_parser = value::CountParser {
