@@ -309,6 +309,10 @@ fn requests_are_answered_or_refused_and_the_stock_foxglove_client_sees_the_map()
     // the mapper (one of a kind per resend timeout).
     view.wait_count("refused by the mapper", 1);
     view.wait_count("accepted by the mapper", 5);
+    // An answer travels after its reply (replies go first): the first four accepted (the ROI
+    // move, the map in a box, the whole map, the coarse depth) applied before the view stops.
+    // Stopping it at the fifth reply instead lost the coarse depth's answer on a busy machine.
+    view.wait_count("answered:", 4);
     view.signal(nix::sys::signal::Signal::SIGTERM);
     mapper.signal(nix::sys::signal::Signal::SIGTERM);
     let (code, said) = view.finish();

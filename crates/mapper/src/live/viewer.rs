@@ -410,6 +410,11 @@ impl Viewer {
             if let Some(r) = self.requests.iter_mut().find(|r| answers(r)) {
                 r.applied_s = Some(now.as_secs_f64());
                 r.answer_bytes = Some(body.len());
+                let id = r.id;
+                self.log(
+                    LogKind::Info,
+                    format!("request {id} answered: its {kind} message applied"),
+                );
             }
         }
     }
