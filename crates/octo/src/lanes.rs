@@ -10,9 +10,9 @@
 //! out is interleaved, which a set does not see.
 //!
 //! The cells go into a [`BoxBits`]: one bit per cell of the scan's key box (padded by the few
-//! cells a walk may overshoot its end), a 64-bit word per 4 x 4 x 4 cells with its bits in
-//! Morton order, so that draining the set in Morton order sorts only the words that hold a
-//! cell.
+//! cells a walk may overshoot its end), a 64-bit word per 4 x 4 x 4 cells, so that draining the
+//! set in Morton order sorts only the words that hold a cell (each word's bits are put in
+//! Morton order as it is drained).
 //!
 //! A lane's key is one integer ([`pack`]: 21 bits an axis), so that a step is one add, the end
 //! test one comparison, and every quantity of a lane is 64 bits wide, as its `f64`s are: the
@@ -215,7 +215,7 @@ pub(crate) struct BoxBits {
     layout: BoxLayout,
     /// The words, x fastest.
     words: Vec<u64>,
-    /// Whether a key outside the box was inserted (and dropped).
+    /// Whether a key outside the box came (dropped, or put in some cell of the box).
     missed: bool,
 }
 
@@ -253,8 +253,9 @@ impl BoxBits {
         self.words.iter().map(|w| w.count_ones() as usize).sum()
     }
 
-    /// Whether a key outside the box was inserted since the last reset (the set is then
-    /// incomplete: it dropped that key).
+    /// Whether a key outside the box came since the last reset: a cell inserted one by one
+    /// is dropped, a lane's cell may have gone into some cell of the box
+    /// ([`LaneSink::end_lane`]). The set is then wrong, and the scan is cast the general way.
     pub(crate) fn missed(&self) -> bool {
         self.missed
     }

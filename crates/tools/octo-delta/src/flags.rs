@@ -189,9 +189,8 @@ pub struct MapConfigArgs {
 
     /// Threads casting scans' rays, a scan each (the last one's rays shared by all); one of
     /// them also puts the cast scans into the map, in order [default: the machine's cores, at
-    /// most 8]. The inputs are read on a
-    /// thread of their own, a few scans ahead; the stream is the same at any count, each
-    /// scan's message written as soon as the scan is whole.
+    /// most 8]. The inputs are read on a thread of their own, a few scans ahead; the stream is
+    /// the same at any count, each scan's message written as soon as the scan is whole.
     #[arg(long, value_name = "N", value_parser = value::CountParser {
         min: 1, max: THREADS_MAX as u64, unit: "threads" }, allow_hyphen_values = true)]
     pub threads: Option<u64>,
